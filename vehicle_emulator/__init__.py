@@ -1,0 +1,5 @@
+"""A PX4-like quadrotor emulator that speaks MAVLink 2 over UDP (see docs/emulator.md)."""
+
+from vehicle_emulator import jitcache as _jitcache
+
+_jitcache.configure()

@@ -1,0 +1,220 @@
+"""Compiled closed-loop kernels of `gcs sim`: the law against the nominal model, chunk by chunk.
+
+Two kernels share the law (gcs.control.law) and the physics (vehicle_emulator.physics):
+
+* `run_sampled`: what a flight computer does. The law runs every `ctrl_every` plant steps on the
+  sampled state, its outputs are held (zero-order hold) while the plant is integrated by RK4, and
+  its own states (mhat, rhohat) are integrated by forward Euler over the control period.
+* `run_oracle`: the verification mode of spec section 4: the law is evaluated inside every RK4
+  stage with the exact u', u'' of spec 2.9, which use the TRUE masses; tests only.
+
+Both advance the state arrays in place and write log rows every `log_every` plant steps, so
+the Python caller can run a long flight in chunks and show progress between them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from gcs.control.derivatives import force_derivatives, levant_advance
+from gcs.control.formation import reference_velocity
+from gcs.control.geometry import is_nonsingular
+from gcs.control.law import DERIVATIVE_LEVANT, attitude_stage, position_stage
+from vehicle_emulator.physics import derivatives as plant_derivatives
+from vehicle_emulator.physics import orthonormalise, rk4_step
+
+MODE_ACTUATORS = 0  #: the paper's torque (26) is applied directly
+MODE_RATES = 1  #: the body-rate command is tracked by an idealised onboard rate loop
+
+#: Indices of the per-sample log columns written by the kernels (per vehicle).
+LOG_FIELDS = (
+    "px", "py", "pz", "vx", "vy", "vz", "attitude_error", "omega_error", "mass_estimate",
+    "mass_true", "jx", "jy", "jz", "thrust", "ux", "uy", "uz",
+)
+N_LOG = len(LOG_FIELDS)
+
+
+@njit(cache=True)
+def _acceleration(rotation, thrust_n, mass_kg, g):
+    """World acceleration -g e3 + T R e3 / m of every vehicle (what an IMU + attitude gives)."""
+    n = rotation.shape[0]
+    acc = np.empty((n, 3))
+    for i in range(n):
+        for k in range(3):
+            acc[i, k] = thrust_n[i] * rotation[i, k, 2] / mass_kg[i]
+        acc[i, 2] -= g
+    return acc
+
+
+@njit(cache=True)
+def _write_log(log, row, p, v, tr_err, we, kappa, mass, rhohat, thrust_n, u):
+    n = p.shape[0]
+    for i in range(n):
+        for k in range(3):
+            log[row, i, k] = p[i, k]
+            log[row, i, 3 + k] = v[i, k]
+            log[row, i, 10 + k] = rhohat[i, k]
+            log[row, i, 14 + k] = u[i, k]
+        log[row, i, 6] = tr_err[i]
+        log[row, i, 7] = np.sqrt(we[i, 0] ** 2 + we[i, 1] ** 2 + we[i, 2] ** 2)
+        log[row, i, 8] = kappa[i]
+        log[row, i, 9] = mass[i]
+        log[row, i, 13] = thrust_n[i]
+
+
+@njit(cache=True)
+def _apply_mass_drops(step, drop_step, drop_factor, mass):
+    for i in range(mass.shape[0]):
+        if drop_step[i] == step:
+            mass[i] *= drop_factor[i]
+
+
+@njit(cache=True)
+def run_sampled(
+    first_step, n_steps, dt_s, ctrl_every, log_every,
+    p, v, rot, w, mass, inertia, drop_step, drop_factor,
+    mhat, rhohat, nominal_mass, adjacency, offsets, ref_c, ref_a, ref_w, ref_ph,
+    gains, adaptive, derivative, levant_state, u_prev, levant_l, levant_h,
+    mode, rate_loop_gain, thrust_hold, torque_hold, rate_cmd, diag, log, log_row0,
+):
+    """Advance plant and law by `n_steps` plant steps from step index `first_step`.
+
+    `diag` (n, 6) carries the last tick's (attitude error, |omega^e|, kappa, ux, uy, uz) between
+    chunks. Returns the minimum u_z seen and the count of singular command forces.
+    """
+    n = p.shape[0]
+    ctrl_dt = ctrl_every * dt_s
+    min_uz = np.inf
+    singular = 0
+    tr_err = diag[:, 0].copy()
+    we = np.zeros((n, 3))
+    we[:, 0] = diag[:, 1]
+    kappa = diag[:, 2].copy()
+    u = diag[:, 3:6].copy()
+    for step in range(first_step, first_step + n_steps):
+        _apply_mass_drops(step, drop_step, drop_factor, mass)
+        t = step * dt_s
+        if step % ctrl_every == 0:
+            ref = reference_velocity(t, ref_c, ref_a, ref_w, ref_ph)
+            u, a, s, ve, ph, kappa, t_n, mhat_rate = position_stage(
+                p, v, rot, mhat, nominal_mass, adjacency, offsets, ref, gains, adaptive
+            )
+            ok = is_nonsingular(u)
+            for i in range(n):
+                if not ok[i]:
+                    singular += 1
+                min_uz = min(min_uz, u[i, 2])
+            if singular > 0:
+                return min_uz, singular
+            if derivative == DERIVATIVE_LEVANT:
+                if step == 0:
+                    for i in range(n):
+                        for k in range(3):
+                            levant_state[i, k, 0] = u[i, k]
+                            levant_state[i, k, 1] = 0.0
+                            levant_state[i, k, 2] = 0.0
+                else:
+                    levant_advance(levant_state, u_prev, u, ctrl_dt, levant_h, levant_l)
+                u_prev[:, :] = u
+                du = levant_state[:, :, 1].copy()
+                ddu = levant_state[:, :, 2].copy()
+            else:
+                # Measured acceleration: the plant's specific force under the held thrust.
+                acc = _acceleration(rot, thrust_hold, mass, gains.gravity_mps2)
+                du, ddu = force_derivatives(
+                    v, acc, rot, w, u, a, s, ve, ph, kappa, mhat, mhat_rate, 1.0 / kappa,
+                    adjacency, ref, gains, adaptive,
+                )
+            rc, wc, dwc, tau, rho_rate, omega_cmd, eps, tr_err, we = attitude_stage(
+                rot, w, u, du, ddu, rhohat, gains, adaptive
+            )
+            thrust_hold[:] = t_n
+            torque_hold[:, :] = tau
+            rate_cmd[:, :] = omega_cmd
+            for i in range(n):
+                mhat[i] += ctrl_dt * mhat_rate[i]
+                for k in range(3):
+                    rhohat[i, k] += ctrl_dt * rho_rate[i, k]
+        if mode == MODE_RATES:
+            # Idealised onboard rate loop at the plant rate: first-order tracking of the rate
+            # command with gyroscopic compensation, as a well-tuned autopilot would do.
+            for i in range(n):
+                jx, jy, jz = inertia[i, 0], inertia[i, 1], inertia[i, 2]
+                wx, wy, wz = w[i, 0], w[i, 1], w[i, 2]
+                torque_hold[i, 0] = jx * rate_loop_gain * (rate_cmd[i, 0] - wx) + (jz - jy) * wy * wz
+                torque_hold[i, 1] = jy * rate_loop_gain * (rate_cmd[i, 1] - wy) + (jx - jz) * wz * wx
+                torque_hold[i, 2] = jz * rate_loop_gain * (rate_cmd[i, 2] - wz) + (jy - jx) * wx * wy
+        if step % log_every == 0:
+            _write_log(log, log_row0 + (step - first_step) // log_every, p, v, tr_err, we, kappa,
+                       mass, rhohat, thrust_hold, u)
+        rk4_step(p, v, rot, w, thrust_hold, torque_hold, mass, inertia, dt_s)
+    for i in range(n):
+        diag[i, 0] = tr_err[i]
+        diag[i, 1] = np.sqrt(we[i, 0] ** 2 + we[i, 1] ** 2 + we[i, 2] ** 2)
+        diag[i, 2] = kappa[i]
+        for k in range(3):
+            diag[i, 3 + k] = u[i, k]
+    return min_uz, singular
+
+
+@njit(cache=True)
+def _oracle_rates(
+    t, p, v, rot, w, mhat, rhohat, mass, inertia, nominal_mass, adjacency, offsets,
+    ref_c, ref_a, ref_w, ref_ph, gains, adaptive,
+):
+    """Closed-loop vector field with the exact u', u'' (spec 2.9). Returns the state
+    derivatives and the law's diagnostics at this state."""
+    ref = reference_velocity(t, ref_c, ref_a, ref_w, ref_ph)
+    u, a, s, ve, ph, kappa, t_n, mhat_rate = position_stage(
+        p, v, rot, mhat, nominal_mass, adjacency, offsets, ref, gains, adaptive
+    )
+    acc = _acceleration(rot, t_n, mass, gains.gravity_mps2)
+    du, ddu = force_derivatives(
+        v, acc, rot, w, u, a, s, ve, ph, kappa, mhat, mhat_rate, 1.0 / mass, adjacency, ref,
+        gains, adaptive,
+    )
+    rc, wc, dwc, tau, rho_rate, omega_cmd, eps, tr_err, we = attitude_stage(
+        rot, w, u, du, ddu, rhohat, gains, adaptive
+    )
+    dp, dv, drot, dw = plant_derivatives(p, v, rot, w, t_n, tau, mass, inertia)
+    return dp, dv, drot, dw, mhat_rate, rho_rate, u, kappa, t_n, tr_err, we
+
+
+@njit(cache=True)
+def run_oracle(
+    first_step, n_steps, dt_s, log_every,
+    p, v, rot, w, mass, inertia, drop_step, drop_factor,
+    mhat, rhohat, nominal_mass, adjacency, offsets, ref_c, ref_a, ref_w, ref_ph,
+    gains, adaptive, log, log_row0,
+):
+    """Classic RK4 on the full closed-loop state (p, v, R, omega, mhat, rhohat) with the law
+    evaluated in every stage (exact derivatives, true masses). Returns the minimum u_z."""
+    min_uz = np.inf
+    for step in range(first_step, first_step + n_steps):
+        _apply_mass_drops(step, drop_step, drop_factor, mass)
+        t = step * dt_s
+        args = (mass, inertia, nominal_mass, adjacency, offsets, ref_c, ref_a, ref_w, ref_ph,
+                gains, adaptive)
+        k1 = _oracle_rates(t, p, v, rot, w, mhat, rhohat, *args)
+        for i in range(p.shape[0]):
+            min_uz = min(min_uz, k1[6][i, 2])
+        if step % log_every == 0:
+            _write_log(log, log_row0 + (step - first_step) // log_every, p, v, k1[9], k1[10],
+                       k1[7], mass, rhohat, k1[8], k1[6])
+        h = 0.5 * dt_s
+        k2 = _oracle_rates(t + h, p + h * k1[0], v + h * k1[1], rot + h * k1[2], w + h * k1[3],
+                           mhat + h * k1[4], rhohat + h * k1[5], *args)
+        k3 = _oracle_rates(t + h, p + h * k2[0], v + h * k2[1], rot + h * k2[2], w + h * k2[3],
+                           mhat + h * k2[4], rhohat + h * k2[5], *args)
+        k4 = _oracle_rates(t + dt_s, p + dt_s * k3[0], v + dt_s * k3[1], rot + dt_s * k3[2],
+                           w + dt_s * k3[3], mhat + dt_s * k3[4], rhohat + dt_s * k3[5], *args)
+        c = dt_s / 6.0
+        p += c * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
+        v += c * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
+        rot += c * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2])
+        w += c * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3])
+        mhat += c * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4])
+        rhohat += c * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5])
+        orthonormalise(rot)
+    return min_uz
