@@ -106,7 +106,12 @@ def simulate(
     rot = np.array([rotation_from_rpy(*vc.initial.attitude_rpy_rad) for vc in vehicles])
     w = np.array([vc.initial.body_rates_radps for vc in vehicles], dtype=float)
     mhat = np.array([vc.estimates.mhat for vc in vehicles], dtype=float)
-    rhohat = np.array([vc.estimates.inertia_kgm2 for vc in vehicles], dtype=float)
+    adaptive = law == "adaptive"
+    # The baseline flies with known (nominal) parameters: its inertia estimate stays frozen there.
+    rhohat = np.array(
+        [vc.estimates.inertia_kgm2 if adaptive else vc.baseline_inertia_kgm2 for vc in vehicles],
+        dtype=float,
+    )
     nominal = np.array(
         [vc.nominal_mass_kg if vc.nominal_mass_kg is not None else math.nan for vc in vehicles]
     )
@@ -124,7 +129,6 @@ def simulate(
             drop_step[i] = int(round(fault.at_s * plant_hz))
             drop_factor[i] = 1.0 - fault.fraction
     gains = law_gains(team)
-    adaptive = law == "adaptive"
 
     n_log = n_steps // log_every + 1
     log = np.full((n_log, n, N_LOG), np.nan)

@@ -1,0 +1,1168 @@
+"""Team configuration: YAML file -> validated, frozen dataclasses (positions ENU metres, z up).
+
+Every problem raises ConfigError with one line "<file>: <key path>: <problem>" (plus "(line N)"
+when the value came from a YAML file). The schema is documented in docs/configuration.md; the
+paper's Scenario I is configs/square4.yaml.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import numbers
+import os
+import re
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, NoReturn
+
+import numpy as np
+import yaml
+
+GRAVITY_MPS2 = 9.81
+THRUST_MARGIN = 1.2  # max collective thrust must be >= THRUST_MARGIN * m g when a plant is given
+LAWS = ("adaptive", "baseline")
+MODES = ("rates", "actuators")
+DERIVATIVE_METHODS = ("model", "levant")
+FAULT_KINDS = ("mass_drop", "link_loss", "packet_loss", "motor_efficiency")
+
+Vec3 = tuple[float, float, float]
+ZERO3: Vec3 = (0.0, 0.0, 0.0)
+
+
+class ConfigError(ValueError):
+    """A bad team config. str(e) is one line: "<file>: <key path>: <problem>[ (line N)]".
+
+    ConfigError(message) with a single argument is accepted too; then only str(e) is meaningful.
+    """
+
+    def __init__(
+        self,
+        source: str,
+        path: str | None = None,
+        problem: str | None = None,
+        line: int | None = None,
+    ) -> None:
+        if path is None or problem is None:
+            message = source
+        else:
+            message = f"{source}: {path}: {problem}" + (f" (line {line})" if line else "")
+        super().__init__(" ".join(message.splitlines()))
+        self.source, self.path, self.problem, self.line = source, path, problem, line
+
+
+# --------------------------------------------------------------------------------------------
+# The configuration, as dataclasses. Frames: ENU world (x east, y north, z up), FLU body.
+
+
+@dataclass(frozen=True, slots=True)
+class Gains:
+    """Gains of the paper's law (Section V; k_eps: attitude feedback of the rates mode [1/s])."""
+
+    c_p: float
+    alpha_p: float
+    alpha_m: float
+    sigma_a: float
+    alpha_eps: float
+    alpha_omega: float
+    c_eps: float
+    alpha_rho: float
+    k_eps: float
+
+
+@dataclass(frozen=True, slots=True)
+class DerivativeConfig:
+    """How u' and u'' are obtained: "model" (from the state and estimates) or "levant" (28)."""
+
+    method: str
+    levant_lipschitz: float = 1e4
+    levant_substep_s: float = 1e-4
+
+
+@dataclass(frozen=True, slots=True)
+class ControllerConfig:
+    law: str  # "adaptive" | "baseline"
+    mode: str  # "rates" (thrust + body rates) | "actuators" (thrust + torque, eq. 26)
+    gains: Gains
+    derivative: DerivativeConfig
+
+
+@dataclass(frozen=True, slots=True)
+class Cosine:
+    """amplitude * cos(2 pi t / period_s + phase_rad), amplitude in m/s."""
+
+    amplitude: float
+    period_s: float
+    phase_rad: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class AxisReference:
+    constant: float = 0.0
+    cosines: tuple[Cosine, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class ReferenceVelocity:
+    """v_r(t) [m/s, ENU] = constant + sum amplitude cos(omega t + phase), per axis."""
+
+    x: AxisReference
+    y: AxisReference
+    z: AxisReference
+
+    def max_abs_acceleration_z(self) -> float:
+        """varrho = sum |amp| 2 pi / period_s over z [m/s^2]: sup|v_r,z'| (exact for one cosine)."""
+        return sum(abs(c.amplitude) * 2.0 * math.pi / c.period_s for c in self.z.cosines)
+
+    def as_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(constant (3,), amplitude (3,K), omega_radps (3,K), phase_rad (3,K)), zero-padded."""
+        axes = (self.x, self.y, self.z)
+        k = max(len(a.cosines) for a in axes)
+        amplitude, omega, phase = np.zeros((3, k)), np.zeros((3, k)), np.zeros((3, k))
+        for r, axis in enumerate(axes):
+            for c, cos in enumerate(axis.cosines):
+                amplitude[r, c] = cos.amplitude
+                omega[r, c] = 2.0 * math.pi / cos.period_s
+                phase[r, c] = cos.phase_rad
+        return np.array([a.constant for a in axes]), amplitude, omega, phase
+
+    def evaluate(self, t_s: float, order: int = 0) -> np.ndarray:
+        """The order-th time derivative of v_r at t_s, shape (3,), ENU [m/s^(1+order)]."""
+        constant, amplitude, omega, phase = self.as_arrays()
+        terms = amplitude * omega**order * np.cos(omega * t_s + phase + order * math.pi / 2.0)
+        return terms.sum(axis=1) + (constant if order == 0 else 0.0)
+
+
+@dataclass(frozen=True, slots=True)
+class Edge:
+    """Undirected edge between vehicle ids i and j with weight a_ij = a_ji."""
+
+    i: int
+    j: int
+    weight: float = 1.0
+
+
+@dataclass(frozen=True, slots=True)
+class GraphConfig:
+    edges: tuple[Edge, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class SimConfig:
+    plant_rate_hz: float = 1000.0
+    controller_rate_hz: float = 1000.0
+
+    @property
+    def plant_dt_s(self) -> float:
+        return 1.0 / self.plant_rate_hz
+
+    @property
+    def controller_dt_s(self) -> float:
+        return 1.0 / self.controller_rate_hz
+
+    @property
+    def plant_steps_per_tick(self) -> int:
+        return round(self.plant_rate_hz / self.controller_rate_hz)
+
+
+@dataclass(frozen=True, slots=True)
+class MissionConfig:
+    duration_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class Airframe:
+    """Quadrotor geometry of eq. (51): d_i = arm_length_m, C_i = anti_torque_m."""
+
+    arm_length_m: float
+    anti_torque_m: float
+    rotor_thrust_max_n: float
+    motor_time_constant_s: float = 0.0  # first-order rotor lag in the emulator; 0: none
+
+    @property
+    def max_thrust_n(self) -> float:
+        return 4.0 * self.rotor_thrust_max_n
+
+
+@dataclass(frozen=True, slots=True)
+class PlantParams:
+    """True parameters: for the simulated plant and emulator only, never for the controller."""
+
+    mass_kg: float
+    inertia_kgm2: Vec3  # diag(Jx, Jy, Jz), body frame
+
+
+@dataclass(frozen=True, slots=True)
+class InitialState:
+    position_enu_m: Vec3
+    velocity_enu_mps: Vec3 = ZERO3
+    attitude_rpy_rad: Vec3 = ZERO3
+    body_rates_radps: Vec3 = ZERO3
+
+
+@dataclass(frozen=True, slots=True)
+class Estimates:
+    """Initial adaptive states: mhat = mhat_i(0) of (24) (NOT a mass: alpha_m mhat/phi is)."""
+
+    mhat: float
+    inertia_kgm2: Vec3  # rhohat(0) = Jhat(0) diagonal
+    mass_bound_kg: float | None = None  # mbar_i of Proposition 2
+
+
+@dataclass(frozen=True, slots=True)
+class LinkConfig:
+    """GCS side of a vehicle's MAVLink UDP link (local_port 0: any free port)."""
+
+    local_port: int
+    remote_host: str
+    remote_port: int
+
+    @classmethod
+    def px4_sitl(cls, sysid: int) -> LinkConfig:
+        """PX4 SITL instance sysid-1: GCS listens on 14540+i, vehicle listens on 14580+i."""
+        return cls(14540 + sysid - 1, "127.0.0.1", 14580 + sysid - 1)
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleConfig:
+    id: int
+    sysid: int
+    offset_enu_m: Vec3  # theta_i, so theta_ij = theta_i - theta_j
+    initial: InitialState
+    estimates: Estimates
+    airframe: Airframe
+    link: LinkConfig
+    plant: PlantParams | None = None
+    nominal_mass_kg: float | None = None  # the non-adaptive baseline's mass
+    # The baseline's frozen inertia (Jhat is not adapted); None: the initial estimate.
+    nominal_inertia_kgm2: Vec3 | None = None
+
+    @property
+    def baseline_inertia_kgm2(self) -> Vec3:
+        """The inertia the non-adaptive baseline uses: nominal_inertia_kgm2, else estimates."""
+        if self.nominal_inertia_kgm2 is not None:
+            return self.nominal_inertia_kgm2
+        return self.estimates.inertia_kgm2
+
+    @property
+    def mass_bound_kg(self) -> float | None:
+        """mbar_i for Proposition 2: estimates.mass_bound_kg, else the plant mass, else None."""
+        if self.estimates.mass_bound_kg is not None:
+            return self.estimates.mass_bound_kg
+        return self.plant.mass_kg if self.plant is not None else None
+
+
+# Faults: each kind is its own dataclass with kind, vehicle (an id) and at_s (s from the formation
+# start) first. The emulator (vehicle_emulator/team.py) reads the same keys.
+
+
+@dataclass(frozen=True, slots=True)
+class FaultConfig:
+    """Mass drop: at at_s the plant loses `fraction` of its mass (kind "mass_drop")."""
+
+    kind: str
+    vehicle: int
+    at_s: float
+    fraction: float
+
+    def summary(self) -> str:
+        return (
+            f"vehicle {self.vehicle} loses {self.fraction:.0%} of its mass at t = {self.at_s:g} s"
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class LinkLossFault:
+    """At at_s the vehicle's MAVLink link goes down for duration_s (kind "link_loss")."""
+
+    kind: str
+    vehicle: int
+    at_s: float
+    duration_s: float
+
+    def summary(self) -> str:
+        return f"vehicle {self.vehicle} link down for {self.duration_s:g} s at t = {self.at_s:g} s"
+
+
+@dataclass(frozen=True, slots=True)
+class PacketLossFault:
+    """From at_s each packet is lost with `probability` and delayed by latency_ms."""
+
+    kind: str
+    vehicle: int
+    at_s: float
+    probability: float
+    latency_ms: float = 0.0
+
+    def summary(self) -> str:
+        return (
+            f"vehicle {self.vehicle} loses {self.probability:.0%} of packets, "
+            f"+{self.latency_ms:g} ms latency, from t = {self.at_s:g} s"
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class MotorEfficiencyFault:
+    """From at_s rotor `motor` (1..4) gives `efficiency` (0..1) of its commanded thrust."""
+
+    kind: str
+    vehicle: int
+    at_s: float
+    motor: int
+    efficiency: float
+
+    def summary(self) -> str:
+        return (
+            f"vehicle {self.vehicle} motor {self.motor} at {self.efficiency:.0%} efficiency "
+            f"from t = {self.at_s:g} s"
+        )
+
+
+Fault = FaultConfig | LinkLossFault | PacketLossFault | MotorEfficiencyFault
+
+
+@dataclass(frozen=True, slots=True)
+class TeamConfig:
+    name: str
+    source_path: str
+    mission: MissionConfig
+    controller: ControllerConfig
+    reference_velocity: ReferenceVelocity
+    graph: GraphConfig
+    sim: SimConfig
+    vehicles: tuple[VehicleConfig, ...]
+    faults: tuple[Fault, ...] = ()
+
+    @property
+    def n(self) -> int:
+        return len(self.vehicles)
+
+    def ids(self) -> tuple[int, ...]:
+        return tuple(v.id for v in self.vehicles)
+
+    def sysids(self) -> tuple[int, ...]:
+        return tuple(v.sysid for v in self.vehicles)
+
+    def index_of(self, vehicle_id: int) -> int:
+        """Row of vehicle_id in every (n, ...) array; KeyError if there is no such vehicle."""
+        for k, v in enumerate(self.vehicles):
+            if v.id == vehicle_id:
+                return k
+        raise KeyError(f"no vehicle with id {vehicle_id}; ids are {self.ids()}")
+
+    def vehicle(self, vehicle_id: int) -> VehicleConfig:
+        return self.vehicles[self.index_of(vehicle_id)]
+
+    def adjacency(self) -> np.ndarray:
+        """(n, n) symmetric weights a_ij, rows and columns in vehicle order."""
+        a = np.zeros((self.n, self.n))
+        for e in self.graph.edges:
+            i, j = self.index_of(e.i), self.index_of(e.j)
+            a[i, j] = a[j, i] = e.weight
+        return a
+
+    def laplacian(self) -> np.ndarray:
+        """L = D - A, (n, n)."""
+        a = self.adjacency()
+        return np.diag(a.sum(axis=1)) - a
+
+    def _rows(self, get: Callable[[VehicleConfig], Any]) -> np.ndarray:
+        return np.array([get(v) for v in self.vehicles], dtype=float)
+
+    def offsets_enu_m(self) -> np.ndarray:
+        return self._rows(lambda v: v.offset_enu_m).reshape(self.n, 3)
+
+    def initial_positions_enu_m(self) -> np.ndarray:
+        return self._rows(lambda v: v.initial.position_enu_m).reshape(self.n, 3)
+
+    def initial_velocities_enu_mps(self) -> np.ndarray:
+        return self._rows(lambda v: v.initial.velocity_enu_mps).reshape(self.n, 3)
+
+    def initial_attitudes_rpy_rad(self) -> np.ndarray:
+        return self._rows(lambda v: v.initial.attitude_rpy_rad).reshape(self.n, 3)
+
+    def initial_body_rates_radps(self) -> np.ndarray:
+        return self._rows(lambda v: v.initial.body_rates_radps).reshape(self.n, 3)
+
+    def initial_mhat(self) -> np.ndarray:
+        """(n,) mhat_i(0) of (24)."""
+        return self._rows(lambda v: v.estimates.mhat)
+
+    def initial_inertia_estimates_kgm2(self) -> np.ndarray:
+        return self._rows(lambda v: v.estimates.inertia_kgm2).reshape(self.n, 3)
+
+    def max_thrusts_n(self) -> np.ndarray:
+        return self._rows(lambda v: v.airframe.max_thrust_n)
+
+    def has_plants(self) -> bool:
+        return all(v.plant is not None for v in self.vehicles)
+
+    def _need(self, key: str, get: Callable[[VehicleConfig], Any], why: str) -> np.ndarray:
+        for k, v in enumerate(self.vehicles):
+            if get(v) is None:
+                raise ConfigError(
+                    self.source_path,
+                    f"vehicles[{k}].{key}",
+                    f"missing: {why} (vehicle {v.id}, sysid {v.sysid})",
+                )
+        return self._rows(get)
+
+    def true_masses_kg(self) -> np.ndarray:
+        """(n,) plant masses; ConfigError if a vehicle has no plant."""
+        return self._need(
+            "plant", lambda v: v.plant and v.plant.mass_kg, "the true mass is needed, give a plant"
+        )
+
+    def true_inertias_kgm2(self) -> np.ndarray:
+        get = lambda v: v.plant and v.plant.inertia_kgm2  # noqa: E731
+        return self._need("plant", get, "the true inertia is needed, give a plant").reshape(
+            self.n, 3
+        )
+
+    def nominal_masses_kg(self) -> np.ndarray:
+        return self._need(
+            "nominal_mass_kg", lambda v: v.nominal_mass_kg, "the baseline law needs nominal_mass_kg"
+        )
+
+    def with_law(self, law: str) -> TeamConfig:
+        """The same team flown with another law ("adaptive" | "baseline"), checked."""
+        if law not in LAWS:
+            raise ConfigError(
+                self.source_path, "controller.law", f"expected one of {_choices(LAWS)}, got {law!r}"
+            )
+        team = dataclasses.replace(self, controller=dataclasses.replace(self.controller, law=law))
+        if law == "baseline":
+            team.nominal_masses_kg()
+        return team
+
+
+def initial_phi(vehicle: VehicleConfig, gains: Gains) -> float:
+    """phi_i(0) = 2 + (1/(3 sigma_a)) sum_k sat(v_i,k(0)), sat(x) = sigma_a tanh(x / sigma_a).
+
+    (= 2 + sum_k tanh(v_i,k(0)) / 3 for the paper's sigma_a = 1; the law's sat in
+    gcs/control/position.py.)
+    """
+    s = gains.sigma_a
+    return 2.0 + sum(s * math.tanh(x / s) for x in vehicle.initial.velocity_enu_mps) / (3.0 * s)
+
+
+def proposition2_min_mhat(vehicle: VehicleConfig, gains: Gains) -> float | None:
+    """(phi_i(0) - 1) mbar_i / alpha_m, the least mhat_i(0) of Proposition 2; None: no mbar_i."""
+    mbar = vehicle.mass_bound_kg
+    return None if mbar is None else (initial_phi(vehicle, gains) - 1.0) * mbar / gains.alpha_m
+
+
+# --------------------------------------------------------------------------------------------
+# YAML: safe loading that keeps line numbers, rejects duplicate keys and reads 1e4 as a number.
+
+
+class _YamlMap(dict):
+    __slots__ = ("lines",)
+
+
+class _YamlSeq(list):
+    __slots__ = ("lines",)
+
+
+class _Loader(yaml.SafeLoader):
+    """yaml.SafeLoader (nothing but plain data) that records the line of every key and item."""
+
+
+# pyyaml follows YAML 1.1, which reads 1e4 and 1.0e4 as strings; here they are numbers (YAML 1.2).
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."),
+)
+
+
+def _construct_map(loader: _Loader, node: yaml.MappingNode) -> _YamlMap:
+    loader.flatten_mapping(node)
+    out = _YamlMap()
+    out.lines = {}
+    for key_node, value_node in node.value:
+        key = loader.construct_object(key_node, deep=True)
+        if not isinstance(key, str | int | float | bool | None):
+            raise yaml.constructor.ConstructorError(
+                None, None, "a key must be a plain scalar", key_node.start_mark
+            )
+        if key in out:
+            raise yaml.constructor.ConstructorError(
+                None,
+                None,
+                f"duplicate key {key!r} (first on line {out.lines[key]})",
+                key_node.start_mark,
+            )
+        out[key] = loader.construct_object(value_node, deep=True)
+        out.lines[key] = key_node.start_mark.line + 1
+    return out
+
+
+def _construct_seq(loader: _Loader, node: yaml.SequenceNode) -> _YamlSeq:
+    out = _YamlSeq(loader.construct_object(child, deep=True) for child in node.value)
+    out.lines = {k: child.start_mark.line + 1 for k, child in enumerate(node.value)}
+    return out
+
+
+_Loader.add_constructor("tag:yaml.org,2002:map", _construct_map)
+_Loader.add_constructor("tag:yaml.org,2002:seq", _construct_seq)
+
+
+def _parse_yaml(text: str, source: str) -> Any:
+    try:
+        return yaml.load(text, Loader=_Loader)  # _Loader is a SafeLoader: plain data only
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "(top level)"
+        problem = " ".join(p for p in (exc.context, exc.problem) if p) or "syntax error"
+        err = ConfigError(source, where, f"invalid YAML: {problem}")
+        err.line = mark.line + 1 if mark else None
+        raise err from None
+    except yaml.YAMLError as exc:
+        raise ConfigError(source, "(top level)", f"invalid YAML: {exc}") from None
+
+
+# --------------------------------------------------------------------------------------------
+# Reading: a value with its key path; each read either returns a checked value or raises.
+
+_MISSING: Any = object()
+
+
+def _choices(options: Sequence[str]) -> str:
+    return ", ".join(repr(o) for o in options)
+
+
+def _kind(value: Any) -> str:
+    if value is _MISSING:
+        return "nothing"
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return f"bool {value}"
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list | tuple):
+        return f"a list of {len(value)} item{'' if len(value) == 1 else 's'}"
+    text = repr(value)
+    text = text if len(text) <= 40 else text[:37] + "..."
+    return f"{'string' if isinstance(value, str) else type(value).__name__} {text}"
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
+
+
+def _interval(gt: float | None, ge: float | None, lt: float | None, le: float | None) -> str:
+    lo = f"({gt:g}" if gt is not None else f"[{ge:g}" if ge is not None else None
+    hi = f"{lt:g})" if lt is not None else f"{le:g}]" if le is not None else None
+    if lo and hi:
+        return f"a value in {lo}, {hi}"
+    if lo:
+        return f"{'>' if lo[0] == '(' else '>='} {lo[1:]}"
+    return f"{'<' if hi[-1] == ')' else '<='} {hi[:-1]}"
+
+
+class _Node:
+    __slots__ = ("source", "path", "value", "line")
+
+    def __init__(self, source: str, path: str, value: Any, line: int | None) -> None:
+        self.source, self.path, self.value, self.line = source, path, value, line
+
+    def fail(self, problem: str) -> NoReturn:
+        raise ConfigError(self.source, self.path or "(top level)", problem, self.line)
+
+    @property
+    def absent(self) -> bool:
+        """Key not given, or given as null (null on an optional key means its default)."""
+        return self.value is _MISSING or self.value is None
+
+    def _sub(self, key: Any, label: str) -> _Node:
+        container = self.value if isinstance(self.value, dict | list | tuple) else {}
+        lines = getattr(container, "lines", {})
+        if isinstance(container, dict):
+            value = container.get(key, _MISSING)
+        elif isinstance(key, int) and 0 <= key < len(container):
+            value = container[key]
+        else:
+            value = _MISSING
+        return _Node(self.source, label, value, lines.get(key, self.line))
+
+    def child(self, dotted: str) -> _Node:
+        node = self
+        for key in dotted.split("."):
+            node = node._sub(key, f"{node.path}.{key}" if node.path else str(key))
+        return node
+
+    def item(self, k: int) -> _Node:
+        return self._sub(k, f"{self.path}[{k}]")
+
+    def keys(self, required: str, optional: str = "") -> _Node:
+        """Check a mapping: all of `required` present, nothing outside required + optional."""
+        req, allowed = required.split(), required.split() + optional.split()
+        if not isinstance(self.value, dict):
+            self.fail(f"expected a mapping with keys {', '.join(allowed)}, got {_kind(self.value)}")
+        for key in self.value:
+            if key not in allowed:
+                close = difflib.get_close_matches(str(key), allowed, n=1)
+                hint = f"did you mean {close[0]!r}? " if close else ""
+                self._sub(key, f"{self.path}.{key}" if self.path else str(key)).fail(
+                    f"unknown key; {hint}allowed keys: {', '.join(allowed)}"
+                )
+        for key in req:
+            if key not in self.value:
+                self.child(key).fail("required key is missing")
+        return self
+
+    def items(self, what: str, *, min_len: int = 0) -> list[_Node]:
+        """Check a list; a missing optional list is empty."""
+        if self.absent and min_len == 0:
+            return []
+        if not isinstance(self.value, list | tuple) or len(self.value) < min_len:
+            self.fail(
+                f"expected a list of {what}{f' (at least {min_len})' if min_len else ''}, "
+                f"got {_kind(self.value)}"
+            )
+        return [self.item(k) for k in range(len(self.value))]
+
+    def number(
+        self,
+        default: Any = _MISSING,
+        *,
+        gt: float | None = None,
+        ge: float | None = None,
+        lt: float | None = None,
+        le: float | None = None,
+    ) -> Any:
+        """A finite float within the bounds; `default` when absent (required if no default)."""
+        if self.absent and default is not _MISSING:
+            return default
+        if self.value is _MISSING:
+            self.fail("required key is missing")
+        if not _is_number(self.value):
+            self.fail(f"expected a number, got {_kind(self.value)}")
+        try:
+            x = float(self.value)
+        except OverflowError:
+            self.fail(f"expected a finite number, got {_kind(self.value)}")
+        if not math.isfinite(x):
+            self.fail(f"expected a finite number, got {x!r}")
+        if (
+            (gt is not None and not x > gt)
+            or (ge is not None and not x >= ge)
+            or (lt is not None and not x < lt)
+            or (le is not None and not x <= le)
+        ):
+            self.fail(f"expected {_interval(gt, ge, lt, le)}, got {x!r}")
+        return x
+
+    def integer(
+        self, default: Any = _MISSING, *, ge: int | None = None, le: int | None = None
+    ) -> Any:
+        if self.absent and default is not _MISSING:
+            return default
+        if self.value is _MISSING:
+            self.fail("required key is missing")
+        if not isinstance(self.value, numbers.Integral) or isinstance(self.value, bool | np.bool_):
+            self.fail(f"expected an integer, got {_kind(self.value)}")
+        x = int(self.value)
+        if (ge is not None and x < ge) or (le is not None and x > le):
+            self.fail(f"expected {_interval(None, ge, None, le)}, got {x}")
+        return x
+
+    def string(self, default: Any = _MISSING, choices: Sequence[str] = ()) -> Any:
+        if self.absent and default is not _MISSING:
+            return default
+        if self.value is _MISSING:
+            self.fail("required key is missing")
+        if choices and self.value not in choices:
+            self.fail(f"expected one of {_choices(choices)}, got {_kind(self.value)}")
+        if not isinstance(self.value, str) or not self.value.strip():
+            self.fail(f"expected a non-empty string, got {_kind(self.value)}")
+        return self.value
+
+    def vec3(self, default: Any = _MISSING, *, gt: float | None = None) -> Any:
+        if self.absent and default is not _MISSING:
+            return default
+        if self.value is _MISSING:
+            self.fail("required key is missing")
+        if not isinstance(self.value, list | tuple) or len(self.value) != 3:
+            self.fail(f"expected a list of 3 numbers, got {_kind(self.value)}")
+        return tuple(self.item(k).number(gt=gt) for k in range(3))
+
+
+# --------------------------------------------------------------------------------------------
+# Sections.
+
+
+def _controller(node: _Node) -> ControllerConfig:
+    node.keys("law mode gains", "derivative")
+    names = [f.name for f in dataclasses.fields(Gains)]
+    g = node.child("gains").keys(" ".join(names))
+    gains = Gains(**{name: g.child(name).number(gt=0.0) for name in names})
+    d = node.child("derivative")
+    if not d.absent:
+        d.keys("", "method levant_lipschitz levant_substep_s")
+    derivative = DerivativeConfig(
+        d.child("method").string("model", DERIVATIVE_METHODS),
+        d.child("levant_lipschitz").number(1e4, gt=0.0),
+        d.child("levant_substep_s").number(1e-4, gt=0.0),
+    )
+    return ControllerConfig(
+        node.child("law").string(choices=LAWS),
+        node.child("mode").string(choices=MODES),
+        gains,
+        derivative,
+    )
+
+
+def _axis(node: _Node) -> AxisReference:
+    node.keys("", "constant cosines")
+    cosines = []
+    for c in node.child("cosines").items("cosines {amplitude, period_s, phase_rad}"):
+        c.keys("amplitude period_s", "phase_rad")
+        cosines.append(
+            Cosine(
+                c.child("amplitude").number(),
+                c.child("period_s").number(gt=0.0),
+                c.child("phase_rad").number(0.0),
+            )
+        )
+    return AxisReference(node.child("constant").number(0.0), tuple(cosines))
+
+
+def _vehicle(node: _Node, gains: Gains) -> VehicleConfig:
+    node.keys("id sysid offset_enu_m initial estimates airframe", "link plant nominal_mass_kg nominal_inertia_kgm2")
+    vehicle_id = node.child("id").integer(ge=1)
+    sysid = node.child("sysid").integer(ge=1, le=255)
+    ini = node.child("initial").keys(
+        "position_enu_m", "velocity_enu_mps attitude_rpy_rad body_rates_radps"
+    )
+    est = node.child("estimates").keys("mhat inertia_kgm2", "mass_bound_kg")
+    air = node.child("airframe").keys(
+        "arm_length_m anti_torque_m rotor_thrust_max_n", "motor_time_constant_s"
+    )
+    link, default_link = node.child("link"), LinkConfig.px4_sitl(sysid)
+    if not link.absent:
+        link.keys("", "local_port remote_host remote_port")
+    plant = node.child("plant")
+    if not plant.absent:
+        plant.keys("mass_kg inertia_kgm2")
+    vehicle = VehicleConfig(
+        id=vehicle_id,
+        sysid=sysid,
+        offset_enu_m=node.child("offset_enu_m").vec3(),
+        initial=InitialState(
+            *(
+                ini.child(k).vec3(ZERO3 if k != "position_enu_m" else _MISSING)
+                for k in (
+                    "position_enu_m",
+                    "velocity_enu_mps",
+                    "attitude_rpy_rad",
+                    "body_rates_radps",
+                )
+            )
+        ),
+        estimates=Estimates(
+            est.child("mhat").number(gt=0.0),
+            est.child("inertia_kgm2").vec3(gt=0.0),
+            est.child("mass_bound_kg").number(None, gt=0.0),
+        ),
+        airframe=Airframe(
+            *(
+                air.child(k).number(gt=0.0)
+                for k in ("arm_length_m", "anti_torque_m", "rotor_thrust_max_n")
+            ),
+            air.child("motor_time_constant_s").number(0.0, ge=0.0),
+        ),
+        link=LinkConfig(
+            link.child("local_port").integer(default_link.local_port, ge=0, le=65535),
+            link.child("remote_host").string(default_link.remote_host),
+            link.child("remote_port").integer(default_link.remote_port, ge=1, le=65535),
+        ),
+        plant=None
+        if plant.absent
+        else PlantParams(
+            plant.child("mass_kg").number(gt=0.0), plant.child("inertia_kgm2").vec3(gt=0.0)
+        ),
+        nominal_mass_kg=node.child("nominal_mass_kg").number(None, gt=0.0),
+        nominal_inertia_kgm2=node.child("nominal_inertia_kgm2").vec3(None, gt=0.0),
+    )
+    who = f"vehicle {vehicle.id}, sysid {sysid}"
+    if vehicle.plant is not None:
+        m = vehicle.plant.mass_kg
+        if vehicle.estimates.mass_bound_kg is not None and vehicle.estimates.mass_bound_kg < m:
+            est.child("mass_bound_kg").fail(
+                f"expected >= plant.mass_kg {m!r}, got {vehicle.estimates.mass_bound_kg!r} ({who})"
+            )
+        need = THRUST_MARGIN * m * GRAVITY_MPS2
+        if vehicle.airframe.max_thrust_n < need:
+            air.child("rotor_thrust_max_n").fail(
+                f"max collective thrust 4 * {vehicle.airframe.rotor_thrust_max_n:g} = "
+                f"{vehicle.airframe.max_thrust_n:g} N is below {THRUST_MARGIN:g} m g = "
+                f"{THRUST_MARGIN:g} * {m:g} * {GRAVITY_MPS2:g} = {need:.4g} N; "
+                f"need rotor_thrust_max_n >= {need / 4:.4g} ({who})"
+            )
+    least = proposition2_min_mhat(vehicle, gains)
+    if least is not None and vehicle.estimates.mhat < least * (1.0 - 1e-12):
+        source = "mass_bound_kg" if vehicle.estimates.mass_bound_kg is not None else "plant mass"
+        est.child("mhat").fail(
+            f"Proposition 2 needs mhat(0) >= (phi(0) - 1) mbar / alpha_m = "
+            f"({initial_phi(vehicle, gains):.6g} - 1) * {vehicle.mass_bound_kg:g} / "
+            f"{gains.alpha_m:g} = {least:.6g} (mbar = {source}), got {vehicle.estimates.mhat!r} "
+            f"({who})"
+        )
+    return vehicle
+
+
+def _unique(nodes: list[_Node], key: str, values: list[Any], what: str) -> None:
+    seen: dict[Any, int] = {}
+    for k, value in enumerate(values):
+        if value is None:
+            continue
+        if value in seen:
+            nodes[k].child(key).fail(f"duplicate {what} {value} (also vehicles[{seen[value]}])")
+        seen[value] = k
+
+
+def _graph(node: _Node, ids: list[int]) -> GraphConfig:
+    node.keys("edges")
+    edges: list[Edge] = []
+    seen: dict[frozenset[int], int] = {}
+    for e in node.child("edges").items("edges [i, j] or [i, j, weight]"):
+        if isinstance(e.value, dict):
+            e.keys("i j", "weight")
+            ends, weight = [e.child("i"), e.child("j")], e.child("weight").number(1.0, gt=0.0)
+        elif isinstance(e.value, list | tuple) and len(e.value) in (2, 3):
+            ends = [e.item(0), e.item(1)]
+            weight = e.item(2).number(gt=0.0) if len(e.value) == 3 else 1.0
+        else:
+            e.fail(f"expected an edge [i, j] or [i, j, weight], got {_kind(e.value)}")
+        i, j = (end.integer() for end in ends)
+        for end, vid in zip(ends, (i, j), strict=True):
+            if vid not in ids:
+                end.fail(f"unknown vehicle id {vid}; ids are {', '.join(map(str, ids))}")
+        if i == j:
+            e.fail(f"self loop on vehicle {i}")
+        k = seen.setdefault(frozenset((i, j)), len(edges))
+        if k != len(edges):
+            e.fail(f"duplicate edge {i}-{j} (also graph.edges[{k}])")
+        edges.append(Edge(i, j, weight))
+    reached, frontier = {ids[0]}, [ids[0]]
+    while frontier:
+        here = frontier.pop()
+        for edge in edges:
+            for a, b in ((edge.i, edge.j), (edge.j, edge.i)):
+                if a == here and b not in reached:
+                    reached.add(b)
+                    frontier.append(b)
+    unreached = [vid for vid in ids if vid not in reached]
+    if unreached:
+        node.child("edges").fail(
+            f"the graph is disconnected (Assumption 2): vehicle{'s' * (len(unreached) > 1)} "
+            f"{', '.join(map(str, unreached))} cannot be reached from vehicle {ids[0]}"
+        )
+    return GraphConfig(tuple(edges))
+
+
+def _fault(node: _Node, ids: list[int], duration_s: float) -> Fault:
+    """Common keys kind, vehicle, at_s, then the kind's own keys (table below)."""
+    if not isinstance(node.value, dict):
+        node.fail(f"expected a mapping with keys kind, vehicle, at_s, ..., got {_kind(node.value)}")
+    kind = node.child("kind").string(choices=FAULT_KINDS)
+    cls, required, optional, read = _FAULT_KINDS[kind]
+    node.keys("kind vehicle at_s " + required, optional)
+    vehicle = node.child("vehicle").integer()
+    if vehicle not in ids:
+        node.child("vehicle").fail(
+            f"unknown vehicle id {vehicle}; ids are {', '.join(map(str, ids))}"
+        )
+    at_s = node.child("at_s").number(ge=0.0, le=duration_s)
+    return cls(kind, vehicle, at_s, *read(node))
+
+
+# kind -> (dataclass, required keys, optional keys, reader of the kind's own fields). A new kind
+# adds its dataclass to Fault, a row here and its name to FAULT_KINDS.
+_FAULT_KINDS: dict[str, tuple[type, str, str, Callable[[_Node], tuple[Any, ...]]]] = {
+    "mass_drop": (
+        FaultConfig,
+        "fraction",
+        "",
+        lambda n: (n.child("fraction").number(gt=0.0, lt=1.0),),
+    ),
+    "link_loss": (
+        LinkLossFault,
+        "duration_s",
+        "",
+        lambda n: (n.child("duration_s").number(gt=0.0),),
+    ),
+    "packet_loss": (
+        PacketLossFault,
+        "probability",
+        "latency_ms",
+        lambda n: (
+            n.child("probability").number(ge=0.0, le=1.0),
+            n.child("latency_ms").number(0.0, ge=0.0, le=10000.0),
+        ),
+    ),
+    "motor_efficiency": (
+        MotorEfficiencyFault,
+        "motor efficiency",
+        "",
+        lambda n: (
+            n.child("motor").integer(ge=1, le=4),
+            n.child("efficiency").number(ge=0.0, le=1.0),
+        ),
+    ),
+}
+
+
+def _team(root: _Node) -> TeamConfig:
+    root.keys("name mission controller reference_velocity graph vehicles", "sim faults")
+    name = root.child("name").string()
+    mission = MissionConfig(
+        root.child("mission").keys("duration_s").child("duration_s").number(gt=0.0)
+    )
+    sim_node = root.child("sim")
+    if not sim_node.absent:
+        sim_node.keys("", "plant_rate_hz controller_rate_hz")
+    sim = SimConfig(
+        sim_node.child("plant_rate_hz").number(1000.0, gt=0.0),
+        sim_node.child("controller_rate_hz").number(1000.0, gt=0.0),
+    )
+    ratio = sim.plant_rate_hz / sim.controller_rate_hz
+    if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-9 * ratio:
+        sim_node.child("controller_rate_hz").fail(
+            f"must divide plant_rate_hz {sim.plant_rate_hz:g} (an integer number of plant steps "
+            f"per control tick), got {sim.controller_rate_hz:g} (ratio {ratio:.6g})"
+        )
+    ctrl_node = root.child("controller")
+    controller = _controller(ctrl_node)
+    d = controller.derivative
+    if d.method == "levant" and d.levant_substep_s > sim.controller_dt_s:
+        ctrl_node.child("derivative.levant_substep_s").fail(
+            f"expected <= the control period 1/{sim.controller_rate_hz:g} Hz = "
+            f"{sim.controller_dt_s:g} s, got {d.levant_substep_s!r}"
+        )
+    ref_node = root.child("reference_velocity").keys("x y z")
+    reference = ReferenceVelocity(*(_axis(ref_node.child(a)) for a in "xyz"))
+    gains, varrho = controller.gains, reference.max_abs_acceleration_z()
+    bound = (GRAVITY_MPS2 - varrho) / (2.0 * gains.sigma_a)
+    if not gains.alpha_p < bound:
+        ctrl_node.child("gains.alpha_p").fail(
+            f"needs alpha_p < (g - varrho)/(2 sigma_a) = ({GRAVITY_MPS2:g} - {varrho:.6g})/"
+            f"(2 * {gains.sigma_a:g}) = {bound:.6g} with varrho = sup|v_r,z'|, "
+            f"got {gains.alpha_p!r}"
+        )
+
+    nodes = root.child("vehicles").items("vehicles", min_len=1)
+    vehicles = tuple(_vehicle(node, gains) for node in nodes)
+    _unique(nodes, "id", [v.id for v in vehicles], "vehicle id")
+    _unique(nodes, "sysid", [v.sysid for v in vehicles], "sysid")
+    _unique(nodes, "link.local_port", [v.link.local_port or None for v in vehicles], "local port")
+    _unique(
+        nodes,
+        "link.remote_port",
+        [(v.link.remote_host, v.link.remote_port) for v in vehicles],
+        "remote endpoint",
+    )
+    _unique(nodes, "offset_enu_m", [v.offset_enu_m for v in vehicles], "offset (collision)")
+    _unique(
+        nodes,
+        "initial.position_enu_m",
+        [v.initial.position_enu_m for v in vehicles],
+        "initial position (collision)",
+    )
+    if controller.law == "baseline":
+        for node, v in zip(nodes, vehicles, strict=True):
+            if v.nominal_mass_kg is None:
+                node.child("nominal_mass_kg").fail(
+                    f"required by the baseline law (vehicle {v.id}, sysid {v.sysid})"
+                )
+    ids = [v.id for v in vehicles]
+    graph = _graph(root.child("graph"), ids)
+
+    faults = [_fault(f, ids, mission.duration_s) for f in root.child("faults").items("faults")]
+    return TeamConfig(
+        name, root.source, mission, controller, reference, graph, sim, vehicles, tuple(faults)
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# Public entry points.
+
+
+def team_from_dict(data: Any, source: str = "<dict>") -> TeamConfig:
+    """Validate an already-parsed config (a dict as yaml.safe_load gives it)."""
+    return _team(_Node(source, "", data, None))
+
+
+def team_from_yaml(text: str, source: str = "<string>") -> TeamConfig:
+    """Parse and validate YAML text."""
+    data = _parse_yaml(text, source)
+    if not isinstance(data, dict):
+        got = "an empty document" if data is None else _kind(data)
+        raise ConfigError(source, "(top level)", f"expected a mapping of sections, got {got}", 1)
+    return team_from_dict(data, source)
+
+
+def load_team(path: str | os.PathLike[str]) -> TeamConfig:
+    """Read and validate a team config file; every problem raises ConfigError."""
+    source = os.fspath(path)
+    try:
+        text = Path(source).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(source, "(file)", f"cannot read: {exc}") from None
+    return team_from_yaml(text, source)
+
+
+def team_to_dict(team: TeamConfig) -> dict[str, Any]:
+    """Plain data that team_from_dict reads back to an equal TeamConfig (None fields left out)."""
+
+    def plain(x: Any) -> Any:
+        if dataclasses.is_dataclass(x):
+            return {
+                f.name: plain(getattr(x, f.name))
+                for f in dataclasses.fields(x)
+                if getattr(x, f.name) is not None
+            }
+        return [plain(v) for v in x] if isinstance(x, tuple) else x
+
+    data = plain(team)
+    del data["source_path"]
+    return data
+
+
+# --------------------------------------------------------------------------------------------
+# describe(): what `gcs check` prints.
+
+
+def _v3(v: Sequence[float]) -> str:
+    return "(" + ", ".join(f"{x:g}" for x in v) + ")"
+
+
+def _ok(ok: bool) -> str:
+    return "OK" if ok else "NOT MET"
+
+
+def describe(team: TeamConfig) -> str:
+    """Multi-line summary of what the config says, with the sufficient conditions evaluated."""
+    c, g, sim = team.controller, team.controller.gains, team.sim
+    mode = {"rates": "thrust + body rates", "actuators": "thrust + torque (26)"}[c.mode]
+    deriv = c.derivative.method + (
+        f" (L = {c.derivative.levant_lipschitz:g}, substep {c.derivative.levant_substep_s:g} s)"
+        if c.derivative.method == "levant"
+        else ""
+    )
+    out = [
+        f"team {team.name!r} ({team.source_path}): {team.n} vehicles, "
+        f"mission {team.mission.duration_s:g} s",
+        f"controller: {c.law} law, {c.mode} mode ({mode}), derivatives: {deriv}",
+        "gains: " + ", ".join(f"{f.name} {getattr(g, f.name):g}" for f in dataclasses.fields(g)),
+        f"sim: plant {sim.plant_rate_hz:g} Hz, controller {sim.controller_rate_hz:g} Hz "
+        f"({sim.plant_steps_per_tick} plant step(s) per tick)",
+        "reference velocity v_r(t) [m/s, ENU]:",
+    ]
+    for name in "xyz":
+        axis = getattr(team.reference_velocity, name)
+        terms = [f"{axis.constant:g}"] + [
+            f"{k.amplitude:g} cos(2 pi t/{k.period_s:g}"
+            + (f" + {k.phase_rad:g}" if k.phase_rad else "")
+            + ")"
+            for k in axis.cosines
+        ]
+        out.append(f"  {name}: " + " + ".join(terms))
+    lam = np.sort(np.linalg.eigvalsh(team.laplacian()))
+    out.append(
+        f"graph: {len(team.graph.edges)} undirected edge(s) "
+        + ", ".join(
+            f"{e.i}-{e.j}" + (f" (w {e.weight:g})" if e.weight != 1.0 else "")
+            for e in team.graph.edges
+        )
+        + (f"; connected, lambda_2(L) = {lam[1]:.4g}" if team.n > 1 else "")
+    )
+    out.append("vehicles (ENU m, z up):")
+    for v in team.vehicles:
+        plant = (
+            f"plant {v.plant.mass_kg:g} kg, J {_v3(v.plant.inertia_kgm2)} kg m^2"
+            if v.plant
+            else "no plant (true mass unknown)"
+        )
+        nominal = f", nominal {v.nominal_mass_kg:g} kg" if v.nominal_mass_kg else ""
+        out += [
+            f"  vehicle {v.id} (sysid {v.sysid}): offset {_v3(v.offset_enu_m)}, start "
+            f"{_v3(v.initial.position_enu_m)}, mhat(0) {v.estimates.mhat:g}, Jhat(0) "
+            f"{_v3(v.estimates.inertia_kgm2)}",
+            f"      max thrust {v.airframe.max_thrust_n:g} N, arm {v.airframe.arm_length_m:g}"
+            f" m; link udp :{v.link.local_port} -> {v.link.remote_host}:{v.link.remote_port};"
+            f" {plant}{nominal}",
+        ]
+    out.append("faults:" + ("" if team.faults else " none"))
+    for f in team.faults:
+        plant = team.vehicle(f.vehicle).plant
+        mass = (
+            f" ({plant.mass_kg:g} -> {plant.mass_kg * (1 - f.fraction):.4g} kg)"
+            if isinstance(f, FaultConfig) and plant
+            else ""
+        )
+        out.append(f"  {f.kind}: {f.summary()}{mass}")
+
+    varrho = team.reference_velocity.max_abs_acceleration_z()
+    bound = (GRAVITY_MPS2 - varrho) / (2.0 * g.sigma_a)
+    out += [
+        "sufficient conditions:",
+        f"  alpha_p < (g - varrho)/(2 sigma_a): {g.alpha_p:g} < ({GRAVITY_MPS2:g} - "
+        f"{varrho:.4g})/(2 * {g.sigma_a:g}) = {bound:.4g}: {_ok(g.alpha_p < bound)}, "
+        f"margin {bound - g.alpha_p:.4g}",
+        "  Proposition 2, mhat(0) >= (phi(0) - 1) mbar / alpha_m:",
+    ]
+    for v in team.vehicles:
+        least = proposition2_min_mhat(v, g)
+        out.append(
+            f"    vehicle {v.id}: skipped (no mass_bound_kg, no plant)"
+            if least is None
+            else f"    vehicle {v.id}: {v.estimates.mhat:g} >= ({initial_phi(v, g):.4g} - 1)"
+            f" * {v.mass_bound_kg:g} / {g.alpha_m:g} = {least:.4g}: "
+            f"{_ok(v.estimates.mhat >= least)}, margin {v.estimates.mhat - least:.4g}"
+        )
+    out.append(f"  thrust, 4 rotor_thrust_max_n >= {THRUST_MARGIN:g} m g:")
+    for v in team.vehicles:
+        if v.plant is None:
+            out.append(f"    vehicle {v.id}: skipped (no plant)")
+            continue
+        hover, top = v.plant.mass_kg * GRAVITY_MPS2, v.airframe.max_thrust_n
+        out.append(
+            f"    vehicle {v.id}: {top:g} N >= "
+            f"{THRUST_MARGIN * hover:.4g} N: {_ok(top >= THRUST_MARGIN * hover)},"
+            f" {v.airframe.max_thrust_n / hover:.3g} x hover"
+        )
+    out.append(
+        "  Proposition 1 (torque law (26)), c_eps < min{sqrt(a_eps/(2 Jbar)), "
+        "a_om/(2 sqrt3 Jbar), 4 a_eps a_om/(a_om^2 + 8 sqrt3 a_eps Jbar)}:"
+    )
+    s3 = math.sqrt(3.0)
+    for v in team.vehicles:
+        if v.plant is None:
+            out.append(f"    vehicle {v.id}: skipped (no plant, Jbar unknown)")
+            continue
+        jbar, ae, ao = max(v.plant.inertia_kgm2), g.alpha_eps, g.alpha_omega
+        b = (
+            math.sqrt(ae / (2 * jbar)),
+            ao / (2 * s3 * jbar),
+            4 * ae * ao / (ao**2 + 8 * s3 * ae * jbar),
+        )
+        out.append(
+            f"    vehicle {v.id} (Jbar {jbar:g}): {g.c_eps:g} < min{_v3(round(x, 4) for x in b)}"
+            f" = {min(b):.4g}: {_ok(g.c_eps < min(b))}"
+        )
+    if c.mode == "actuators":
+        out.append(
+            f"  torque held 1/{sim.controller_rate_hz:g} s: |1 - alpha_omega h / J_min| < 1"
+            " (rough discrete-time stability of the rate loop):"
+        )
+        for v in team.vehicles:
+            if v.plant is not None:
+                factor = 1 - g.alpha_omega * sim.controller_dt_s / min(v.plant.inertia_kgm2)
+                out.append(f"    vehicle {v.id}: {factor:.3g}: {_ok(abs(factor) < 1)}")
+    return "\n".join(out)

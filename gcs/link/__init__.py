@@ -1,0 +1,30 @@
+"""MAVLink link layers: sans-IO codec, asyncio UDP endpoint, per-vehicle proxy, .tlog writer."""
+
+from gcs.link.codec import CodecStats, MavlinkCodec
+from gcs.link.commands import CommandRejectedError, CommandTimeoutError
+from gcs.link.config import VehicleLinkConfig, check_unique_sysids
+from gcs.link.enums import LinkState, MavResult
+from gcs.link.proxy import LinkStats, SetpointError, VehicleProxy
+from gcs.link.telemetry import Clock, MonotonicClock, VehicleState
+from gcs.link.tlog import TlogWriter
+from gcs.link.udp import LinkClosedError, UdpEndpoint
+
+__all__ = [
+    "Clock",
+    "CodecStats",
+    "CommandRejectedError",
+    "CommandTimeoutError",
+    "LinkClosedError",
+    "LinkState",
+    "LinkStats",
+    "MavResult",
+    "MavlinkCodec",
+    "MonotonicClock",
+    "SetpointError",
+    "TlogWriter",
+    "UdpEndpoint",
+    "VehicleLinkConfig",
+    "VehicleProxy",
+    "VehicleState",
+    "check_unique_sysids",
+]

@@ -1,0 +1,104 @@
+"""Per-vehicle link settings (addresses, ids, timeouts, signing) and team-level id checks."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, replace
+from typing import Any
+
+from gcs.link.codec import GCS_COMPID, GCS_SYSID
+
+PX4_SITL_GCS_PORT_BASE = 14540  # the GCS listens here (+ instance)
+PX4_SITL_VEHICLE_PORT_BASE = 14580  # the vehicle listens here (+ instance)
+#: PX4 SITL instances above 9 all send to 14549, so one GCS port per vehicle cannot work.
+PX4_SITL_MAX_INSTANCE = 9
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleLinkConfig:
+    """How the GCS talks to one vehicle. Ports are UDP on ``local_host``/``remote_host``.
+
+    ``remote_port=None`` requires ``learn_remote=True``: the GCS then answers whoever sent the
+    first valid packet carrying this vehicle's sysid.
+    """
+
+    vehicle_id: int  # the team file's vehicle id, used in every message about this vehicle
+    sysid: int
+    local_port: int  # 0: any free port (tests)
+    remote_port: int | None = None
+    remote_host: str = "127.0.0.1"
+    local_host: str = "127.0.0.1"
+    compid: int = 1  # MAV_COMP_ID_AUTOPILOT1
+    learn_remote: bool = False
+    gcs_sysid: int = GCS_SYSID
+    gcs_compid: int = GCS_COMPID
+    heartbeat_period_s: float = 1.0  # GCS HEARTBEAT period
+    link_timeout_s: float = 0.5  # no message at all for this long -> LOST
+    heartbeat_timeout_s: float = 3.0  # no HEARTBEAT for this long -> LOST
+    signing_key: bytes | None = None  # 32 bytes enables MAVLink 2 signing on this link
+    signing_link_id: int = 0
+    allow_unsigned: bool = False  # with a key: also accept unsigned packets
+
+    def __post_init__(self) -> None:
+        where = f"vehicle {self.vehicle_id} link"
+        _check(1 <= self.sysid <= 255, f"{where}: sysid: expected 1..255, got {self.sysid}")
+        _check(self.sysid != self.gcs_sysid,
+               f"{where}: sysid: {self.sysid} equals the GCS sysid {self.gcs_sysid}")
+        _check(0 <= self.compid <= 255, f"{where}: compid: expected 0..255, got {self.compid}")
+        _check(0 <= self.local_port <= 65535,
+               f"{where}: local_port: expected 0..65535, got {self.local_port}")
+        if self.remote_port is None:
+            _check(self.learn_remote,
+                   f"{where}: remote_port: missing (set it, or set learn_remote: true)")
+        else:
+            _check(1 <= self.remote_port <= 65535,
+                   f"{where}: remote_port: expected 1..65535, got {self.remote_port}")
+        for key in ("heartbeat_period_s", "link_timeout_s", "heartbeat_timeout_s"):
+            value = getattr(self, key)
+            _check(value > 0.0, f"{where}: {key}: expected > 0, got {value}")
+        if self.signing_key is not None:
+            _check(len(self.signing_key) == 32,
+                   f"{where}: signing_key: expected 32 bytes, got {len(self.signing_key)}")
+
+    @property
+    def remote(self) -> tuple[str, int] | None:
+        return None if self.remote_port is None else (self.remote_host, self.remote_port)
+
+    @property
+    def name(self) -> str:
+        """'vehicle 2 (sysid 3)', the prefix of every message about this vehicle."""
+        return f"vehicle {self.vehicle_id} (sysid {self.sysid})"
+
+    @classmethod
+    def px4_sitl(cls, instance: int, **overrides: Any) -> VehicleLinkConfig:
+        """PX4 SITL instance i's offboard link: GCS 14540+i, vehicle 14580+i, sysid = id = i+1."""
+        if not 0 <= instance <= PX4_SITL_MAX_INSTANCE:
+            raise ValueError(
+                f"PX4 SITL instance {instance}: instances above {PX4_SITL_MAX_INSTANCE} all send "
+                f"to port {PX4_SITL_GCS_PORT_BASE + PX4_SITL_MAX_INSTANCE}; give explicit ports"
+            )
+        base = cls(vehicle_id=instance + 1, sysid=instance + 1,
+                   local_port=PX4_SITL_GCS_PORT_BASE + instance,
+                   remote_port=PX4_SITL_VEHICLE_PORT_BASE + instance)
+        return replace(base, **overrides)
+
+
+def check_unique_sysids(configs: Iterable[VehicleLinkConfig]) -> None:
+    """Raise ValueError naming every duplicated sysid or local port (ground stations merge them)."""
+    by_sysid: dict[int, list[int]] = {}
+    by_port: dict[tuple[str, int], list[int]] = {}
+    for c in configs:
+        by_sysid.setdefault(c.sysid, []).append(c.vehicle_id)
+        if c.local_port != 0:
+            by_port.setdefault((c.local_host, c.local_port), []).append(c.vehicle_id)
+    problems = [f"sysid {s} used by vehicles {v}" for s, v in by_sysid.items() if len(v) > 1]
+    problems += [
+        f"local port {a[1]} used by vehicles {v}" for a, v in by_port.items() if len(v) > 1
+    ]
+    if problems:
+        raise ValueError("team links: " + "; ".join(problems))
+
+
+def _check(ok: bool, message: str) -> None:
+    if not ok:
+        raise ValueError(message)

@@ -1,0 +1,416 @@
+"""Per-vehicle proxy: telemetry cache, acknowledged commands, setpoint senders, GCS heartbeat."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, fields
+from types import TracebackType
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from gcs import frames
+from gcs.link.codec import CodecStats, MavlinkCodec, MAVLinkMessage
+from gcs.link.commands import CommandChannel, CommandRejectedError, CommandStats, command_label
+from gcs.link.config import VehicleLinkConfig
+from gcs.link.enums import (
+    LinkState,
+    MavAutopilot,
+    MavCmd,
+    MavModeFlag,
+    MavResult,
+    MavState,
+    MavType,
+)
+from gcs.link.telemetry import (
+    Clock,
+    MonotonicClock,
+    Received,
+    SequenceStats,
+    SequenceTracker,
+    TelemetryCache,
+    TypeStats,
+    VehicleState,
+    build_state,
+)
+from gcs.link.tlog import TlogWriter
+from gcs.link.udp import Address, LinkClosedError, UdpEndpoint, UdpStats
+
+logger = logging.getLogger(__name__)
+
+TYPE_MASK_RATES_THRUST = 128  # ATTITUDE_IGNORE: body rates + thrust
+TYPE_MASK_ATTITUDE_THRUST = 7  # roll/pitch/yaw rates ignored: attitude + thrust
+FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 forcing arm/disarm (PX4; ArduPilot disarm)
+_IDENTITY_Q = (1.0, 0.0, 0.0, 0.0)
+
+
+class SetpointError(ValueError):
+    """A setpoint with NaN/inf or the wrong shape; nothing was sent."""
+
+
+@dataclass(frozen=True, slots=True)
+class ProxyCounters:
+    """Proxy-level counters (codec, socket and sequence statistics are separate)."""
+
+    messages_accepted: int = 0
+    foreign_sysid: int = 0  # valid messages from another sysid (ignored)
+    other_component: int = 0  # valid messages from our sysid, another compid (ignored)
+    setpoints_sent: int = 0
+    setpoints_rejected: int = 0  # NaN/inf/shape errors (raised)
+    thrust_clamped: int = 0  # thrust outside 0..1, clamped
+    torque_clamped: int = 0  # actuator torque outside -1..1, clamped
+    link_lost_events: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class LinkStats:
+    """Everything counted on one vehicle link."""
+
+    proxy: ProxyCounters
+    codec: CodecStats
+    udp: UdpStats
+    commands: CommandStats
+    sequence: SequenceStats
+    by_type: dict[str, TypeStats]
+
+
+class VehicleProxy:
+    """One vehicle seen through its MAVLink link: owns the codec, the UDP endpoint and two tasks
+    (GCS HEARTBEAT, link monitor). Lifetime: ``async with VehicleProxy(cfg) as vehicle:``.
+
+    Only messages from ``config.sysid``/``config.compid`` update the cache; others are counted and
+    ignored, and a vehicle HEARTBEAT with another sysid is reported as a sysid mismatch. Receive
+    times come from the injected ``clock``; ack timeouts use the event loop's clock.
+    """
+
+    def __init__(self, config: VehicleLinkConfig, *, clock: Clock | None = None,
+                 tlog: TlogWriter | None = None) -> None:
+        self.config = config
+        self.name = config.name
+        self._clock: Clock = clock if clock is not None else MonotonicClock()
+        self._tlog = tlog
+        self._codec = MavlinkCodec(config.gcs_sysid, config.gcs_compid)
+        if config.signing_key is not None:
+            self._codec.setup_signing(config.signing_key, link_id=config.signing_link_id,
+                                      allow_unsigned=config.allow_unsigned)
+        self._endpoint = UdpEndpoint(
+            config.local_port, config.remote, local_host=config.local_host,
+            learn_remote=config.learn_remote, on_datagram=self._on_datagram, name=self.name)
+        self._cache = TelemetryCache()
+        self._seq = SequenceTracker()
+        self._n: dict[str, int] = {f.name: 0 for f in fields(ProxyCounters)}
+        self._commands = CommandChannel(self.name, config.gcs_sysid, self._send_command)
+        self._waiters: list[tuple[str, Callable[[MAVLinkMessage], bool], asyncio.Future[Received]]]
+        self._waiters = []
+        self._tasks: list[asyncio.Task[None]] = []
+        self._t0_s = self._clock.now_s()
+        self._link_state = LinkState.WAITING
+        self.sysid_mismatch: int | None = None  # sysid of a foreign vehicle HEARTBEAT, if any
+
+    # --- lifetime --------------------------------------------------------------------------------
+
+    async def __aenter__(self) -> VehicleProxy:
+        """Bind the socket and start the owned tasks; returns when bound (first HEARTBEAT sent)."""
+        await self._endpoint.open()
+        self._t0_s = self._clock.now_s()
+        self._send_heartbeat()
+        self._tasks = [
+            asyncio.create_task(self._heartbeat_loop(), name=f"{self.name} heartbeat"),
+            asyncio.create_task(self._monitor_loop(), name=f"{self.name} link monitor"),
+        ]
+        for task in self._tasks:
+            task.add_done_callback(self._on_task_done)
+        return self
+
+    async def __aexit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                        tb: TracebackType | None) -> None:
+        """Cancel and await the owned tasks, fail pending waits, close the socket."""
+        for task in self._tasks:
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+        self._tasks = []
+        for _, _, fut in self._waiters:
+            if not fut.done():
+                fut.set_exception(LinkClosedError(f"{self.name}: link closed while waiting"))
+        self._waiters.clear()
+        self._endpoint.close()
+
+    def _on_task_done(self, task: asyncio.Task[None]) -> None:
+        if not task.cancelled() and task.exception() is not None:
+            logger.error("%s: task %s failed", self.name, task.get_name(),
+                         exc_info=task.exception())
+
+    # --- state -----------------------------------------------------------------------------------
+
+    @property
+    def local_address(self) -> Address:
+        return self._endpoint.local_address
+
+    @property
+    def remote(self) -> Address | None:
+        return self._endpoint.remote
+
+    def latest(self, kind: str) -> Received | None:
+        """Latest accepted message of type ``kind`` (e.g. 'ATTITUDE') with its receive time."""
+        return self._cache.latest(kind)
+
+    def state(self) -> VehicleState:
+        """Snapshot of the latest telemetry in ENU/FLU with receive times; returns immediately."""
+        return build_state(self._cache, self.config.sysid, self._clock.now_s())
+
+    def link_state(self) -> LinkState:
+        """WAITING before the first message, LOST if silent longer than the configured timeouts."""
+        last_any = self._cache.last_any_rx_s
+        if last_any == -math.inf:
+            return LinkState.WAITING
+        now = self._clock.now_s()
+        hb = self._cache.latest("HEARTBEAT")
+        hb_rx = hb.rx_time_s if hb is not None else self._t0_s
+        if (now - last_any > self.config.link_timeout_s
+                or now - hb_rx > self.config.heartbeat_timeout_s):
+            return LinkState.LOST
+        return LinkState.ALIVE
+
+    def stats(self) -> LinkStats:
+        return LinkStats(ProxyCounters(**self._n), self._codec.stats(), self._endpoint.stats(),
+                         self._commands.stats(), self._seq.stats(), self._cache.type_stats())
+
+    async def wait_message(self, kind: str, timeout_s: float,
+                           predicate: Callable[[MAVLinkMessage], bool] | None = None) -> Received:
+        """Wait for the next accepted message of type ``kind`` matching ``predicate``; returns when
+        it arrives, raises TimeoutError naming the vehicle after ``timeout_s``."""
+        fut: asyncio.Future[Received] = asyncio.get_running_loop().create_future()
+        entry = (kind, predicate or (lambda _m: True), fut)
+        self._waiters.append(entry)
+        try:
+            async with asyncio.timeout(timeout_s):
+                return await fut
+        except TimeoutError:
+            raise TimeoutError(f"{self.name}: no {kind} within {timeout_s} s") from None
+        finally:
+            if entry in self._waiters:
+                self._waiters.remove(entry)
+
+    async def wait_heartbeat(self, timeout_s: float) -> Received:
+        """Latest HEARTBEAT if any, else wait for one (TimeoutError after timeout_s)."""
+        hb = self._cache.latest("HEARTBEAT")
+        return hb if hb is not None else await self.wait_message("HEARTBEAT", timeout_s)
+
+    # --- receive path ----------------------------------------------------------------------------
+
+    def _on_datagram(self, data: bytes, addr: Address) -> None:
+        now_s = self._clock.now_s()
+        cfg = self.config
+        for msg in self._codec.feed(data):
+            if self._tlog is not None:
+                self._tlog.write(bytes(msg.get_msgbuf()))
+            src_sys, src_comp = msg.get_srcSystem(), msg.get_srcComponent()
+            if src_sys != cfg.sysid:
+                self._n["foreign_sysid"] += 1
+                if msg.get_type() == "HEARTBEAT" and msg.type != MavType.GCS:
+                    self._report_mismatch(src_sys, src_comp, addr)
+                continue
+            if src_comp != cfg.compid:
+                self._n["other_component"] += 1
+                continue
+            if self._endpoint.remote is None:
+                self._endpoint.set_remote(addr)
+            self._n["messages_accepted"] += 1
+            self._seq.update(msg.get_seq())
+            self._cache.update(msg, now_s)
+            if msg.get_type() == "COMMAND_ACK":
+                self._commands.on_ack(msg)
+            if self._waiters:
+                self._wake_waiters(msg, now_s)
+
+    def _report_mismatch(self, src_sys: int, src_comp: int, addr: Address) -> None:
+        if self.sysid_mismatch != src_sys:
+            logger.error(
+                "%s: HEARTBEAT from sysid %d (compid %d) at %s:%d, expected sysid %d; check the "
+                "team file. Messages from sysid %d are ignored.", self.name, src_sys, src_comp,
+                addr[0], addr[1], self.config.sysid, src_sys)
+        self.sysid_mismatch = src_sys
+
+    def _wake_waiters(self, msg: MAVLinkMessage, now_s: float) -> None:
+        kind = msg.get_type()
+        for entry in list(self._waiters):
+            want, pred, fut = entry
+            if want == kind and not fut.done() and pred(msg):
+                fut.set_result(Received(msg, now_s))
+                self._waiters.remove(entry)
+
+    # --- commands --------------------------------------------------------------------------------
+
+    async def command_long(self, command: int, params: Sequence[float] = (), *,
+                           timeout_s: float = 0.5, retries: int = 2) -> MavResult:
+        """Send COMMAND_LONG, return the MAV_RESULT of its COMMAND_ACK (returns when done).
+
+        The ACK is registered before sending; each of at most ``retries`` resends follows a
+        ``timeout_s`` without ACK and increments ``confirmation``; raises CommandTimeoutError
+        naming vehicle and command after the last (details: CommandChannel.command_long)."""
+        return await self._commands.command_long(command, params, timeout_s=timeout_s,
+                                                 retries=retries)
+
+    def _send_command(self, command: int, confirmation: int, params: Sequence[float]) -> None:
+        self._send(self._codec.mav.command_long_encode(
+            self.config.sysid, self.config.compid, command, confirmation, *params))
+
+    async def _checked(self, command: MavCmd, params: Sequence[float], check: bool,
+                       timeout_s: float, retries: int) -> MavResult:
+        result = await self.command_long(command, params, timeout_s=timeout_s, retries=retries)
+        if check and result != MavResult.ACCEPTED:
+            raise CommandRejectedError(
+                f"{self.name}: {command_label(command)} answered {result.name}", command, result)
+        return result
+
+    async def arm(self, *, force: bool = False, check: bool = True, timeout_s: float = 0.5,
+                  retries: int = 2) -> MavResult:
+        """Arm (COMPONENT_ARM_DISARM 400); returns when acknowledged. ``check``: raise
+        CommandRejectedError unless ACCEPTED (same for every helper below)."""
+        return await self._checked(MavCmd.COMPONENT_ARM_DISARM,
+                                   [1.0, FORCE_MAGIC if force else 0.0], check, timeout_s, retries)
+
+    async def disarm(self, *, force: bool = False, check: bool = True, timeout_s: float = 0.5,
+                     retries: int = 2) -> MavResult:
+        """Disarm (force: also in the air, param2 = 21196); returns when acknowledged."""
+        return await self._checked(MavCmd.COMPONENT_ARM_DISARM,
+                                   [0.0, FORCE_MAGIC if force else 0.0], check, timeout_s, retries)
+
+    async def set_mode_px4(self, main_mode: int, sub_mode: int = 0, *, check: bool = True,
+                           timeout_s: float = 0.5, retries: int = 2) -> MavResult:
+        """PX4 mode via DO_SET_MODE (176): param1 = CUSTOM_MODE_ENABLED (+ SAFETY_ARMED if the
+        latest HEARTBEAT says armed), param2 = main mode, param3 = sub mode; returns when acked."""
+        base = MavModeFlag.CUSTOM_MODE_ENABLED | (MavModeFlag.SAFETY_ARMED if self.state().armed
+                                                  else 0)
+        return await self._checked(MavCmd.DO_SET_MODE, [float(base), main_mode, sub_mode], check,
+                                   timeout_s, retries)
+
+    async def set_mode_ardupilot(self, mode: int, *, check: bool = True, timeout_s: float = 0.5,
+                                 retries: int = 2) -> MavResult:
+        """ArduPilot mode number (e.g. GUIDED 4) via DO_SET_MODE; returns when acknowledged."""
+        return await self._checked(MavCmd.DO_SET_MODE,
+                                   [float(MavModeFlag.CUSTOM_MODE_ENABLED), mode], check,
+                                   timeout_s, retries)
+
+    async def takeoff(self, altitude_m: float = math.nan, *, check: bool = True,
+                      timeout_s: float = 0.5, retries: int = 2) -> MavResult:
+        """NAV_TAKEOFF (22) with param7 = altitude (PX4: AMSL, NaN = MIS_TAKEOFF_ALT; ArduPilot:
+        relative to home); returns when acknowledged (not when the vehicle reached it)."""
+        return await self._checked(MavCmd.NAV_TAKEOFF, [0, 0, 0, math.nan, math.nan, math.nan,
+                                                        altitude_m], check, timeout_s, retries)
+
+    async def land(self, *, check: bool = True, timeout_s: float = 0.5,
+                   retries: int = 2) -> MavResult:
+        """NAV_LAND (21) here (lat/lon/yaw NaN); returns when acknowledged, not when landed."""
+        return await self._checked(MavCmd.NAV_LAND, [0, 0, 0, math.nan, math.nan, math.nan, 0],
+                                   check, timeout_s, retries)
+
+    async def set_message_interval(self, msg_id: int, rate_hz: float, *, check: bool = True,
+                                   timeout_s: float = 0.5, retries: int = 2) -> MavResult:
+        """SET_MESSAGE_INTERVAL (511): rate_hz > 0 sets 1e6/rate_hz us, 0 disables the stream;
+        returns when acknowledged."""
+        if not math.isfinite(rate_hz) or rate_hz < 0:
+            raise ValueError(f"{self.name}: message {msg_id} rate_hz: expected >= 0, got {rate_hz}")
+        interval_us = -1.0 if rate_hz == 0 else 1e6 / rate_hz
+        return await self._checked(MavCmd.SET_MESSAGE_INTERVAL, [msg_id, interval_us], check,
+                                   timeout_s, retries)
+
+    # --- setpoints (each returns immediately; NaN/inf raise SetpointError, range is clamped) -----
+
+    def send_rates_thrust(self, rates_flu_radps: ArrayLike, thrust_norm: float) -> None:
+        """SET_ATTITUDE_TARGET, type_mask 128: body rates (FLU, rad/s -> sent as FRD) and
+        collective thrust (0..1, clamped and counted); returns immediately."""
+        rates_frd = frames.frd_from_flu(self._finite(rates_flu_radps, (3,), "rates_flu_radps"))
+        thrust = self._clamp(thrust_norm, 0.0, 1.0, "thrust_norm", "thrust_clamped")
+        self._send(self._codec.mav.set_attitude_target_encode(
+            self._time_boot_ms(), self.config.sysid, self.config.compid, TYPE_MASK_RATES_THRUST,
+            _IDENTITY_Q, *(float(x) for x in rates_frd), thrust))
+        self._n["setpoints_sent"] += 1
+
+    def send_attitude_thrust(self, rotation_enu_flu: ArrayLike, thrust_norm: float) -> None:
+        """SET_ATTITUDE_TARGET, type_mask 7: attitude R_enu_flu (sent as the quaternion of
+        R_ned_frd) and collective thrust (0..1, clamped and counted); returns immediately."""
+        r = self._finite(rotation_enu_flu, (3, 3), "rotation_enu_flu")
+        if not bool(frames.is_rotation(r, tol=1e-4)):
+            self._n["setpoints_rejected"] += 1
+            raise SetpointError(f"{self.name}: rotation_enu_flu is not a rotation matrix: {r}")
+        q = frames.mavlink_quat_from_rotation_enu_flu(r)
+        thrust = self._clamp(thrust_norm, 0.0, 1.0, "thrust_norm", "thrust_clamped")
+        self._send(self._codec.mav.set_attitude_target_encode(
+            self._time_boot_ms(), self.config.sysid, self.config.compid,
+            TYPE_MASK_ATTITUDE_THRUST, [float(x) for x in q], 0.0, 0.0, 0.0, thrust))
+        self._n["setpoints_sent"] += 1
+
+    def send_actuator_controls(self, torque_flu_norm: ArrayLike, thrust_norm: float) -> None:
+        """SET_ACTUATOR_CONTROL_TARGET group 0: roll/pitch/yaw torque (FLU, -1..1 -> sent as FRD)
+        and thrust (0..1), each clamped and counted; returns immediately. PX4 >= 1.14 ignores it."""
+        torque = self._finite(torque_flu_norm, (3,), "torque_flu_norm")
+        clipped = np.clip(torque, -1.0, 1.0)
+        if np.any(clipped != torque):
+            self._n["torque_clamped"] += 1
+        torque_frd = frames.frd_from_flu(clipped)
+        thrust = self._clamp(thrust_norm, 0.0, 1.0, "thrust_norm", "thrust_clamped")
+        controls = [float(x) for x in torque_frd] + [thrust, 0.0, 0.0, 0.0, 0.0]
+        self._send(self._codec.mav.set_actuator_control_target_encode(
+            self._time_boot_ms() * 1000, 0, self.config.sysid, self.config.compid, controls))
+        self._n["setpoints_sent"] += 1
+
+    def _finite(self, value: ArrayLike, shape: tuple[int, ...], what: str) -> np.ndarray:
+        arr = np.asarray(value, dtype=np.float64)
+        if arr.shape != shape or not np.all(np.isfinite(arr)):
+            self._n["setpoints_rejected"] += 1
+            raise SetpointError(f"{self.name}: {what}: expected finite shape {shape}, got {arr!r}")
+        return arr
+
+    def _clamp(self, value: float, low: float, high: float, what: str, counter: str) -> float:
+        v = float(value)
+        if not math.isfinite(v):
+            self._n["setpoints_rejected"] += 1
+            raise SetpointError(f"{self.name}: {what}: expected finite, got {v}")
+        if v < low or v > high:
+            self._n[counter] += 1
+            return min(max(v, low), high)
+        return v
+
+    # --- send path and owned tasks ---------------------------------------------------------------
+
+    def _time_boot_ms(self) -> int:
+        return int((self._clock.now_s() - self._t0_s) * 1000.0) & 0xFFFFFFFF
+
+    def _send(self, msg: MAVLinkMessage) -> bool:
+        data = self._codec.encode(msg)
+        if self._tlog is not None:
+            self._tlog.write(data)
+        return self._endpoint.send(data)
+
+    async def _heartbeat_loop(self) -> None:
+        loop = asyncio.get_running_loop()
+        period = self.config.heartbeat_period_s
+        next_s = loop.time()
+        while True:
+            next_s = max(next_s + period, loop.time())
+            await asyncio.sleep(next_s - loop.time())
+            self._send_heartbeat()
+
+    def _send_heartbeat(self) -> None:
+        self._send(self._codec.mav.heartbeat_encode(
+            MavType.GCS, MavAutopilot.INVALID, 0, 0, MavState.ACTIVE))
+
+    async def _monitor_loop(self) -> None:
+        period = min(self.config.link_timeout_s, self.config.heartbeat_timeout_s) / 4.0
+        while True:
+            state = self.link_state()
+            if state != self._link_state:
+                if state == LinkState.LOST:
+                    self._n["link_lost_events"] += 1
+                    logger.warning("%s: link lost (no message for > %.2f s or no HEARTBEAT for "
+                                   "> %.2f s)", self.name, self.config.link_timeout_s,
+                                   self.config.heartbeat_timeout_s)
+                else:
+                    logger.info("%s: link %s", self.name, state.value)
+                self._link_state = state
+            await asyncio.sleep(period)
+

@@ -1,0 +1,119 @@
+"""COMMAND_LONG/ACK channel without sockets: registration order, retries, timeout, IN_PROGRESS."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable, Coroutine, Sequence
+from typing import Any
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from gcs.link.commands import CommandChannel, CommandTimeoutError, command_label
+from gcs.link.enums import MavCmd, MavResult
+
+VEHICLE = mavlink.MAVLink(None, 1, 1)
+ARM = MavCmd.COMPONENT_ARM_DISARM
+
+
+def run(coro: Coroutine[Any, Any, Any], timeout_s: float = 5.0) -> Any:
+    async def bounded() -> Any:
+        async with asyncio.timeout(timeout_s):
+            return await coro
+    return asyncio.run(bounded())
+
+
+def ack(command: int, result: int, target_system: int = 255) -> mavlink.MAVLink_message:
+    return VEHICLE.command_ack_encode(command, result, 0, 0, target_system, 190)
+
+
+class Vehicle:
+    """Records every COMMAND_LONG and answers from inside send() as its policy says."""
+
+    def __init__(self, policy: Callable[[int, int], Sequence[int]]) -> None:
+        self.sent: list[tuple[int, int, list[float]]] = []
+        self.policy = policy  # (command, confirmation) -> results to ack with, in order
+        self.channel = CommandChannel("vehicle 0 (sysid 1)", 255, self.send)
+
+    def send(self, command: int, confirmation: int, params: Sequence[float]) -> None:
+        self.sent.append((command, confirmation, list(params)))
+        for result in self.policy(command, confirmation):
+            self.channel.on_ack(ack(command, result))
+
+
+def test_ack_is_registered_before_sending() -> None:
+    # GIVEN a vehicle that ACKs synchronously, inside the send call
+    vehicle = Vehicle(lambda c, n: [MavResult.ACCEPTED])
+    # WHEN arming THEN the ACK is matched (it would be "unexpected" if registered after sending)
+    result = run(vehicle.channel.command_long(ARM, [1.0]))
+    assert result == MavResult.ACCEPTED
+    assert vehicle.sent == [(ARM, 0, [1.0, 0, 0, 0, 0, 0, 0])]
+    assert vehicle.channel.stats().acks_unexpected == 0
+
+
+def test_lost_first_ack_is_retried_with_confirmation_incremented() -> None:
+    vehicle = Vehicle(lambda c, n: [] if n == 0 else [MavResult.DENIED])
+    result = run(vehicle.channel.command_long(ARM, [1.0], timeout_s=0.05, retries=2))
+    assert result == MavResult.DENIED
+    assert [n for _, n, _ in vehicle.sent] == [0, 1]
+    assert vehicle.channel.stats().retries == 1
+
+
+def test_no_ack_raises_timeout_naming_vehicle_and_command() -> None:
+    vehicle = Vehicle(lambda c, n: [])
+    with pytest.raises(CommandTimeoutError, match=(
+            r"vehicle 0 \(sysid 1\): MAV_CMD_COMPONENT_ARM_DISARM \(400\) got no COMMAND_ACK "
+            r"in 3 attempts of 0\.03 s")):
+        run(vehicle.channel.command_long(ARM, [1.0], timeout_s=0.03, retries=2))
+    assert [n for _, n, _ in vehicle.sent] == [0, 1, 2]
+    stats = vehicle.channel.stats()
+    assert (stats.sent, stats.retries, stats.timeouts) == (3, 2, 1)
+    assert isinstance(CommandTimeoutError("x"), TimeoutError)
+
+
+def test_in_progress_is_not_final_and_is_not_resent() -> None:
+    # GIVEN a vehicle that answers IN_PROGRESS, then ACCEPTED a little later
+    async def scenario() -> tuple[MavResult, Vehicle]:
+        vehicle = Vehicle(lambda c, n: [MavResult.IN_PROGRESS])
+        loop = asyncio.get_running_loop()
+        loop.call_later(0.08, vehicle.channel.on_ack, ack(ARM, MavResult.ACCEPTED))
+        result = await vehicle.channel.command_long(ARM, [1.0], timeout_s=0.05, retries=3)
+        return result, vehicle
+    result, vehicle = run(scenario())
+    # THEN the final result is returned and the command was sent once
+    assert result == MavResult.ACCEPTED
+    assert len(vehicle.sent) == 1
+
+
+def test_acks_for_other_gcs_and_unexpected_acks_are_counted() -> None:
+    vehicle = Vehicle(lambda c, n: [])
+    vehicle.channel.on_ack(ack(ARM, MavResult.ACCEPTED, target_system=245))
+    vehicle.channel.on_ack(ack(ARM, MavResult.ACCEPTED))
+    stats = vehicle.channel.stats()
+    assert (stats.acks_for_others, stats.acks_unexpected) == (1, 1)
+
+
+def test_same_command_is_serialised_and_each_call_gets_its_own_ack() -> None:
+    async def scenario() -> list[MavResult]:
+        results = iter([MavResult.ACCEPTED, MavResult.TEMPORARILY_REJECTED])
+        vehicle = Vehicle(lambda c, n: [])
+        loop = asyncio.get_running_loop()
+
+        def answer_later(command: int, confirmation: int, params: Sequence[float]) -> None:
+            vehicle.sent.append((command, confirmation, list(params)))
+            loop.call_soon(vehicle.channel.on_ack, ack(command, next(results)))
+
+        vehicle.channel._send = answer_later
+        return list(await asyncio.gather(vehicle.channel.command_long(ARM, [1.0]),
+                                         vehicle.channel.command_long(ARM, [1.0])))
+    assert run(scenario()) == [MavResult.ACCEPTED, MavResult.TEMPORARILY_REJECTED]
+
+
+def test_bad_arguments() -> None:
+    vehicle = Vehicle(lambda c, n: [])
+    with pytest.raises(ValueError, match="COMMAND_LONG takes 7 params, got 8"):
+        run(vehicle.channel.command_long(ARM, [0.0] * 8))
+    with pytest.raises(ValueError, match="need retries >= 0 and timeout_s > 0"):
+        run(vehicle.channel.command_long(ARM, [], timeout_s=0.0))
+    assert command_label(176) == "MAV_CMD_DO_SET_MODE (176)"
+    assert command_label(31000) == "MAV_CMD 31000"
