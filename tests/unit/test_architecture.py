@@ -1,0 +1,50 @@
+"""Layer boundaries: the pure layers do no I/O and read no clock; the emulator never imports gcs."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+IMPURE = {"asyncio", "socket", "time", "pymavlink", "mavsdk", "select", "threading", "subprocess"}
+PURE_MODULES = sorted((ROOT / "gcs" / "control").glob("*.py")) + [
+    ROOT / "vehicle_emulator" / "physics.py",
+]
+
+
+def imported_roots(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text(), filename=str(path))
+    roots: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            roots |= {alias.name.split(".")[0] for alias in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            roots.add(node.module.split(".")[0])
+            if node.module.startswith("gcs.") and not node.module.startswith("gcs.control"):
+                roots.add(node.module)
+    return roots
+
+
+@pytest.mark.parametrize("path", PURE_MODULES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_pure_layers_do_no_io(path):
+    found = imported_roots(path)
+    assert not found & IMPURE, f"{path.name} imports {sorted(found & IMPURE)}"
+    assert not {m for m in found if m.startswith("gcs.")}, f"{path.name} reaches outside gcs.control"
+
+
+def test_emulator_never_imports_gcs():
+    offenders = [
+        str(p.relative_to(ROOT))
+        for p in (ROOT / "vehicle_emulator").rglob("*.py")
+        if "gcs" in imported_roots(p)
+    ]
+    assert offenders == []
+
+
+def test_the_boundary_check_can_fail(tmp_path):
+    # GIVEN a module that reads the clock THEN the import walk sees it
+    bad = tmp_path / "bad.py"
+    bad.write_text("import numpy as np\nfrom time import monotonic\n")
+    assert "time" in imported_roots(bad)

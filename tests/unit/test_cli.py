@@ -1,0 +1,84 @@
+"""Smoke tests of every `gcs` command that needs no vehicle: sim, check, plot, and their errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from gcs.cli import main
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+
+
+def test_sim_writes_report_timeseries_and_figures(tmp_path, capsys):
+    # GIVEN Scenario I WHEN simulated for 3 s
+    code = main(["sim", "--team", str(CONFIGS / "square4.yaml"), "--out", str(tmp_path), "--duration-s", "3", "--quiet"])
+    # THEN it succeeds, prints the summary and writes the records
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "formation error" in out and "UAV" in out
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["schema"] == "formation-flight-report/1" and report["source"] == "sim"
+    assert report["t_s"][-1] == pytest.approx(3.0)
+    assert len(report["mass_estimate_kg"][0]) == 4
+    assert (tmp_path / "timeseries.csv").stat().st_size > 10_000
+    for name in ("fig2_formation.png", "fig6_mass_estimates.png", "fig7_inertia_estimates.png"):
+        assert (tmp_path / name).stat().st_size > 10_000
+
+
+def test_sim_both_controllers_writes_the_comparison_and_plot_redraws_it(tmp_path, capsys):
+    # GIVEN the mass-drop scenario, both laws, 2 s
+    code = main(["sim", "--team", str(CONFIGS / "square4_massdrop.yaml"), "--controller", "both",
+                 "--out", str(tmp_path / "run"), "--duration-s", "2", "--quiet"])
+    assert code == 0
+    for part in ("adaptive", "baseline"):
+        assert json.loads((tmp_path / "run" / part / "report.json").read_text())["controller"] == part
+    assert (tmp_path / "run" / "fig8_adaptive_z.png").is_file()
+    assert (tmp_path / "run" / "fig9_baseline_z.png").is_file()
+    # WHEN the figures are redrawn elsewhere from the time series alone
+    assert main(["plot", str(tmp_path / "run"), "--out", str(tmp_path / "redraw")]) == 0
+    # THEN the same figure files appear
+    assert (tmp_path / "redraw" / "fig9_baseline_z.png").stat().st_size > 10_000
+    assert (tmp_path / "redraw" / "adaptive" / "fig2_formation.png").is_file()
+    capsys.readouterr()
+
+
+def test_plot_of_a_directory_without_records_fails_clearly(tmp_path, capsys):
+    assert main(["plot", str(tmp_path)]) == 2
+    assert "holds no timeseries.csv" in capsys.readouterr().err
+
+
+def test_check_prints_what_it_understood(capsys):
+    assert main(["check", "--team", str(CONFIGS / "square4.yaml")]) == 0
+    out = capsys.readouterr().out
+    assert "square4" in out and "4 vehicles" in out
+
+
+def test_bad_config_is_one_clear_line_and_exit_2(tmp_path, capsys):
+    # GIVEN a config with a negative mass
+    text = (CONFIGS / "square4.yaml").read_text().replace("      mass_kg: 0.35", "      mass_kg: -0.35", 1)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(text)
+    # WHEN checked or simulated THEN the command fails with one line naming the key path
+    for argv in (["check", "--team", str(bad)], ["sim", "--team", str(bad), "--out", str(tmp_path)]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1
+        assert "vehicles[2].plant.mass_kg" in err and "-0.35" in err
+
+
+def test_missing_config_file_is_reported(tmp_path, capsys):
+    assert main(["check", "--team", str(tmp_path / "nope.yaml")]) == 2
+    assert "nope.yaml" in capsys.readouterr().err
+
+
+def test_console_script_is_installed_and_runs():
+    # GIVEN the installed entry point WHEN asked for help THEN it lists the commands
+    exe = Path(sys.executable).with_name("gcs")
+    result = subprocess.run([str(exe), "--help"], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0
+    assert all(word in result.stdout for word in ("sim", "check", "plot"))
