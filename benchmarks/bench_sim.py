@@ -82,6 +82,19 @@ def main() -> int:
         "|---|---|---|---|---|---|",
     ]
     body += [f"| {r[0]} | {r[1]:.2f} | {r[2]:.3f} | {r[3]:.3f} | {r[4]:.0f} | {r[5]:.2f} |" for r in rows]
+    body += [
+        "",
+        "Target: 60 s of Scenario I in <= 6 s wall (the plain-numpy reference of the spec needs 69 s).",
+        "What limits it: the plant RK4 step costs about 1 us for four vehicles (see the 100 Hz row,",
+        "where the law runs one step in ten); the rest is the law, evaluated every millisecond. Each",
+        "compiled stage allocates its small (n, 3) result arrays, about forty per tick, and that",
+        "allocation, not arithmetic, dominates a 4-vehicle tick. What makes it 100x real time and",
+        "beyond: compiling the whole closed loop (law + plant) into one numba function per chunk of",
+        "one simulated second, so Python is entered 60 times per run instead of 60,000 (done), and",
+        "caching the machine code on disk so later runs skip the compile (done). Further headroom,",
+        "if ever needed: preallocated work arrays passed into the stages, and running the law at the",
+        "rate the vehicle would (100-250 Hz in rates mode), which is already 8x cheaper.",
+    ]
     if args.write:
         update_section(args.write, HEADING, "\n".join(body))
         print(f"updated {args.write}")
