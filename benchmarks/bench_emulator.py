@@ -1,0 +1,229 @@
+"""Benchmark of vehicle-emu: a 100-vehicle ``--fleet`` on one core, and 4 separate processes.
+
+Each emulator runs for ``--duration`` simulated seconds in real time (1 kHz physics, PX4
+telemetry rates) and writes its own pacing figures (``--stats-json``): CPU time / wall time,
+lateness of each loop tick against its schedule, simulated time dropped because the loop fell
+behind (0 means real time was held). A receiver process on 127.0.0.1 counts the datagrams and
+bytes that arrive and decodes a sample of them, so the figures are for telemetry actually sent.
+
+    .venv/bin/python benchmarks/bench_emulator.py [--vehicles 100] [--duration 20] [--out FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _team_yaml(n: int, path: Path, remote_base: int) -> None:
+    vehicles = []
+    for i in range(n):
+        vehicles.append(
+            {
+                "id": i + 1,
+                "sysid": i + 1,
+                "initial": {"position_enu_m": [float(i % 10) * 3.0, float(i // 10) * 3.0, 10.0]},
+                "airframe": {
+                    "arm_length_m": 0.2,
+                    "anti_torque_m": 0.016,
+                    "rotor_thrust_max_n": 6.0,
+                },
+                "plant": {"mass_kg": 0.85, "inertia_kgm2": [0.04856, 0.04856, 0.08801]},
+                "link": {"remote": f"127.0.0.1:{remote_base + i}"},
+            }
+        )
+    path.write_text(yaml.safe_dump({"name": f"bench{n}", "vehicles": vehicles}))
+
+
+def _receiver(ports: list[int], duration_s: float, queue: mp.Queue) -> None:
+    """Count datagrams/bytes on ``ports``; decode every 50th datagram with pymavlink."""
+    import selectors
+
+    from pymavlink.dialects.v20 import common as mavlink
+
+    sel = selectors.DefaultSelector()
+    socks = []
+    for p in ports:
+        s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+        s.bind(("127.0.0.1", p))
+        s.setblocking(False)
+        sel.register(s, selectors.EVENT_READ)
+        socks.append(s)
+    queue.put("ready")
+    mav = mavlink.MAVLink(None)
+    mav.robust_parsing = True
+    datagrams = nbytes = decoded = bad = 0
+    end = time.monotonic() + duration_s
+    while time.monotonic() < end:
+        for key, _ in sel.select(timeout=0.1):
+            while True:
+                try:
+                    data = key.fileobj.recv(65536)
+                except BlockingIOError:
+                    break
+                datagrams += 1
+                nbytes += len(data)
+                if datagrams % 50 == 0:
+                    for m in mav.parse_buffer(data) or []:
+                        if m.get_type() == "BAD_DATA":
+                            bad += 1
+                        else:
+                            decoded += 1
+    queue.put(
+        {"datagrams": datagrams, "bytes": nbytes, "sample_decoded": decoded, "sample_bad": bad}
+    )
+
+
+def _free_block(n: int) -> int:
+    import random
+
+    for _ in range(100):
+        base = random.randrange(20000, 60000 - n)
+        socks = []
+        try:
+            for k in range(n):
+                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                socks.append(s)
+                s.bind(("127.0.0.1", base + k))
+            return base
+        except OSError:
+            continue
+        finally:
+            for s in socks:
+                s.close()
+    raise OSError("no free port block")
+
+
+def _emu_cmd(args: list[str], cpu: int | None) -> list[str]:
+    prog = (
+        "import os, sys\n"
+        f"cpu = {cpu!r}\n"
+        "if cpu is not None: os.sched_setaffinity(0, {cpu})\n"
+        "from vehicle_emulator.cli import main\n"
+        "sys.exit(main(sys.argv[1:]))\n"
+    )
+    return [sys.executable, "-c", prog, *args]
+
+
+def run_fleet(n: int, duration_s: float, workdir: Path) -> dict:
+    remote_base = _free_block(n)
+    bind_base = _free_block(n)
+    team = workdir / f"bench{n}.yaml"
+    _team_yaml(n, team, remote_base)
+    stats = workdir / "fleet.json"
+    q: mp.Queue = mp.Queue()
+    rx = mp.Process(
+        target=_receiver, args=(list(range(remote_base, remote_base + n)), duration_s + 15.0, q)
+    )
+    rx.start()
+    assert q.get(timeout=30) == "ready"
+    cmd = _emu_cmd(
+        [
+            "--fleet",
+            "--team",
+            str(team),
+            "--bind-base",
+            str(bind_base),
+            "--duration",
+            str(duration_s),
+            "--stats-json",
+            str(stats),
+            "--log-level",
+            "WARNING",
+        ],
+        cpu=0,
+    )
+    t0 = time.monotonic()
+    subprocess.run(cmd, check=True, timeout=duration_s + 120)
+    wall = time.monotonic() - t0
+    rx.join(duration_s + 30)
+    received = q.get(timeout=5)
+    result = json.loads(stats.read_text())
+    result["process_wall_s"] = wall
+    result["received"] = received
+    return result
+
+
+def run_separate(k: int, duration_s: float, workdir: Path) -> list[dict]:
+    remote_base = _free_block(k)
+    q: mp.Queue = mp.Queue()
+    rx = mp.Process(
+        target=_receiver, args=(list(range(remote_base, remote_base + k)), duration_s + 15.0, q)
+    )
+    rx.start()
+    assert q.get(timeout=30) == "ready"
+    procs = []
+    for i in range(k):
+        stats = workdir / f"sep{i + 1}.json"
+        cmd = _emu_cmd(
+            [
+                "--id",
+                str(i + 1),
+                "--in-air",
+                "--bind",
+                f"127.0.0.1:{_free_block(1)}",
+                "--remote",
+                f"127.0.0.1:{remote_base + i}",
+                "--duration",
+                str(duration_s),
+                "--stats-json",
+                str(stats),
+                "--log-level",
+                "WARNING",
+            ],
+            cpu=None,
+        )
+        procs.append((subprocess.Popen(cmd), stats))
+    out = []
+    for p, stats in procs:
+        p.wait(duration_s + 120)
+        out.append(json.loads(stats.read_text()))
+    rx.join(duration_s + 30)
+    out.append({"received": q.get(timeout=5)})
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--vehicles", type=int, default=100)
+    ap.add_argument("--separate", type=int, default=4)
+    ap.add_argument("--duration", type=float, default=20.0)
+    ap.add_argument("--out", help="write the JSON results here")
+    args = ap.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        fleet = run_fleet(args.vehicles, args.duration, work)
+        separate = run_separate(args.separate, args.duration, work)
+    result = {"cpu_count": os.cpu_count(), "fleet": fleet, "separate": separate}
+    text = json.dumps(result, indent=1)
+    if args.out:
+        Path(args.out).write_text(text)
+    print(text)
+    f = fleet
+    n = args.vehicles
+    print(
+        f"\nfleet of {n}: cpu {f['cpu_fraction']:.0%} of one core, sim/wall "
+        f"{f['sim_s'] / f['wall_s']:.3f}, dropped {f['dropped_sim_s']:.3f} s, tick lateness "
+        f"mean {f['late_mean_ms']:.2f} ms p99 {f['late_p99_ms']:.2f} ms max "
+        f"{f['late_max_ms']:.1f} ms, telemetry {f['telemetry_msgs'] / f['sim_s'] / n:.0f} "
+        f"msg/s/vehicle, received {f['received']['datagrams'] / f['sim_s']:.0f} datagrams/s",
+        file=sys.stderr,
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,118 @@
+"""vehicle-emu command line: help, fleet mode on real UDP, team-file errors, clean exit."""
+
+from __future__ import annotations
+
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from vehicle_emulator.testing import clients_on_port_block, free_udp_port
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
+
+ROOT = Path(__file__).resolve().parents[2]
+EMU = [sys.executable, "-m", "vehicle_emulator.cli"]
+
+
+def test_console_script_help():
+    exe = shutil.which("vehicle-emu") or str(Path(sys.executable).parent / "vehicle-emu")
+    out = subprocess.run([exe, "--help"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0
+    assert "--fleet" in out.stdout and "--team" in out.stdout
+
+
+def test_fleet_runs_every_vehicle_on_its_own_endpoint_and_exits_cleanly(tmp_path):
+    # GIVEN the Scenario I team (4 vehicles in the air) as one --fleet process
+    clients = clients_on_port_block(4)
+    remote_base = clients[0].port
+    bind_base = free_udp_port()
+    log = open(tmp_path / "fleet.log", "w")
+    proc = subprocess.Popen(
+        [
+            *EMU,
+            "--fleet",
+            "--team",
+            str(ROOT / "configs/square4.yaml"),
+            "--bind-base",
+            str(bind_base),
+            "--remote-base",
+            str(remote_base),
+        ],
+        stdout=log,
+        stderr=log,
+    )
+    try:
+        # THEN each vehicle speaks from its own sysid to its own remote port, armed in Hold
+        for k, c in enumerate(clients):
+            hb = c.wait("HEARTBEAT", 60)
+            assert hb.get_srcSystem() == k + 1 and hb.base_mode & 128
+            assert hb.custom_mode == (4 << 16) | (3 << 24)
+        # the initial positions of the team file, ENU -> NED
+        pos = clients[0].wait("LOCAL_POSITION_NED", 3)
+        assert (pos.x, pos.y, pos.z) == pytest.approx((4.0, 4.0, -9.0), abs=0.05)
+        # and every vehicle answers commands on its own port
+        for c in clients:
+            assert c.command(176, 1 | 128, 3, 0) == 0
+        # WHEN SIGTERM THEN a clean exit
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(10) == 0
+        assert time.monotonic() - t0 < 5
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        log.close()
+        for c in clients:
+            c.close()
+    assert "Traceback" not in (tmp_path / "fleet.log").read_text()
+
+
+def test_sigint_stops_a_single_vehicle_cleanly(tmp_path):
+    port = free_udp_port()
+    proc = subprocess.Popen(
+        [
+            *EMU,
+            "--id",
+            "2",
+            "--bind",
+            f"127.0.0.1:{free_udp_port()}",
+            "--remote",
+            f"127.0.0.1:{port}",
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    from vehicle_emulator.testing import MavClient
+
+    client = MavClient(port, target_system=2)
+    try:
+        client.wait("HEARTBEAT", 60)
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(10) == 0
+        assert "stopped after" in proc.stderr.read()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        client.close()
+
+
+def test_bad_team_file_names_the_key(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("vehicles:\n  - id: 1\n    plant: {mass_kg: -1.0}\n")
+    out = subprocess.run(
+        [*EMU, "--id", "1", "--team", str(bad)], capture_output=True, text=True, timeout=60
+    )
+    assert out.returncode == 2
+    assert "vehicles[0].plant.mass_kg: expected > 0, got -1.0" in out.stderr
+    out = subprocess.run(
+        [*EMU, "--id", "9", "--team", str(ROOT / "configs/square4.yaml")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode != 0 and "no vehicle with id 9" in out.stderr

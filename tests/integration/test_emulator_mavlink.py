@@ -1,0 +1,296 @@
+"""vehicle-emu as a separate process over real UDP on 127.0.0.1, driven by pymavlink (issue 3)."""
+
+from __future__ import annotations
+
+import math
+import re
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink
+
+from vehicle_emulator.testing import (
+    MavClient,
+    SetpointStreamer,
+    custom_main_mode,
+    custom_sub_mode,
+    free_udp_port,
+    hover_thrust,
+    rates_setpoint,
+    run_emulator,
+)
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
+
+UAV1_MASS_KG, UAV1_FMAX_N = 0.85, 6.0  # Table I UAV 1, the default airframe of --id 1
+OFFBOARD, POSCTL, AUTO = 6, 3, 4
+ACCEPTED, TEMP_REJECTED, DENIED, UNSUPPORTED = 0, 1, 2, 3
+
+
+def _start(args: list[str], tmp_path: Path):
+    port = free_udp_port()
+    client = MavClient(port)
+    ctx = run_emulator(args, remote_port=port, log_dir=str(tmp_path))
+    return client, ctx
+
+
+@pytest.fixture
+def ground_vehicle(tmp_path):
+    client, ctx = _start(["--id", "1"], tmp_path)
+    with ctx as emu:
+        client.wait("HEARTBEAT", 60)
+        yield client, emu
+    client.close()
+
+
+@pytest.fixture
+def air_vehicle(tmp_path):
+    client, ctx = _start(["--id", "1", "--in-air"], tmp_path)
+    with ctx as emu:
+        client.wait("HEARTBEAT", 60)
+        yield client, emu
+    client.close()
+
+
+def _altitude_m(client: MavClient) -> float:
+    return -client.wait("LOCAL_POSITION_NED", 2.0).z
+
+
+def _hover_stream(client: MavClient, roll_rate=lambda: 0.0) -> SetpointStreamer:
+    thrust = hover_thrust(UAV1_MASS_KG, UAV1_FMAX_N)
+    return SetpointStreamer(client, lambda: rates_setpoint(1, roll_rate(), 0.0, 0.0, thrust))
+
+
+def test_heartbeat_identifies_px4_quadrotor_with_custom_mode(ground_vehicle):
+    # GIVEN a vehicle on the ground WHEN its heartbeat arrives THEN it is a PX4 quadrotor in Hold
+    client, _ = ground_vehicle
+    hb = client.wait("HEARTBEAT", 3)
+    assert (hb.autopilot, hb.type) == (12, 2)
+    assert hb.base_mode & 1 and not hb.base_mode & 128
+    assert (custom_main_mode(hb.custom_mode), custom_sub_mode(hb.custom_mode)) == (AUTO, 3)
+    # WHEN switched to Position mode THEN custom_mode reads main mode 3 (3 << 16)
+    assert client.command(176, 1, POSCTL, 0) == ACCEPTED
+    client.wait("HEARTBEAT", 3, lambda m: m.custom_mode == POSCTL << 16)
+    # and manual modes are refused without RC
+    assert client.command(176, 1, 1, 0) == DENIED
+
+
+def test_arming_acks_and_command_rules(ground_vehicle):
+    client, _ = ground_vehicle
+    assert client.command(400, 1) == ACCEPTED
+    client.wait("HEARTBEAT", 3, lambda m: m.base_mode & 128)
+    assert client.command(400, 0) == ACCEPTED
+    client.wait("HEARTBEAT", 3, lambda m: not m.base_mode & 128)
+    assert client.command(400, 7) == DENIED  # nonsense param1
+    assert client.command(31000) == UNSUPPORTED  # every COMMAND_LONG gets an ACK
+    # a command for another system gets no ACK
+    client.send(mavlink.MAVLink_command_long_message(7, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0))
+    with pytest.raises(TimeoutError):
+        client.wait("COMMAND_ACK", 1.0)
+
+
+def test_offboard_needs_a_setpoint_stream_for_more_than_1s(air_vehicle):
+    client, _ = air_vehicle
+    # GIVEN no setpoints WHEN OFFBOARD is requested THEN TEMPORARILY_REJECTED
+    assert client.command(176, 1 | 128, OFFBOARD, 0) == TEMP_REJECTED
+    with _hover_stream(client):
+        # a stream of 0.3 s is not enough
+        client.collect(0.3)
+        assert client.command(176, 1 | 128, OFFBOARD, 0) == TEMP_REJECTED
+        client.collect(1.2)
+        assert client.command(176, 1 | 128, OFFBOARD, 0) == ACCEPTED
+        hb = client.wait("HEARTBEAT", 3, lambda m: m.custom_mode == 393216)
+        assert hb.base_mode & 128
+
+
+def test_rates_and_thrust_hold_hover_and_track_a_body_rate(air_vehicle):
+    client, _ = air_vehicle
+    cmd = {"roll": 0.0}
+    with _hover_stream(client, lambda: cmd["roll"]):
+        client.collect(1.3)
+        assert client.command(176, 1 | 128, OFFBOARD, 0) == ACCEPTED
+        z0 = _altitude_m(client)
+        # hover: 2 s at hover thrust and zero rates keeps the altitude
+        pos = client.collect(2.0, "LOCAL_POSITION_NED")
+        assert len(pos) > 40
+        assert max(abs(-p.z - z0) for p in pos) < 0.1
+        assert max(abs(p.vz) for p in pos) < 0.1
+        # a commanded roll rate of 0.5 rad/s is tracked (ATTITUDE.rollspeed, FRD)
+        cmd["roll"] = 0.5
+        client.collect(0.3)
+        att = client.collect(0.3, "ATTITUDE")
+        cmd["roll"] = -0.5
+        client.collect(0.3)
+        back = client.collect(0.3, "ATTITUDE")
+        cmd["roll"] = 0.0
+        assert att and back
+        assert all(abs(a.rollspeed - 0.5) < 0.05 for a in att)
+        assert all(abs(a.rollspeed + 0.5) < 0.05 for a in back)
+
+
+@pytest.mark.parametrize("action, expect_mode", [(0, POSCTL << 16), (4, (AUTO << 16) | (6 << 24))])
+def test_setpoint_loss_runs_the_loss_action_in_time(air_vehicle, action, expect_mode):
+    client, _ = air_vehicle
+    assert client.set_param("COM_OBL_RC_ACT", action, ptype=6).param_type == 6
+    stream = _hover_stream(client)
+    with stream:
+        client.collect(1.3)
+        assert client.command(176, 1 | 128, OFFBOARD, 0) == ACCEPTED
+        client.wait("HEARTBEAT", 3, lambda m: m.custom_mode == 393216)
+        z0 = _altitude_m(client)
+    t_stop = time.monotonic()
+    # WHEN the stream stops THEN the loss action starts within COM_OF_LOSS_T (1 s) + 0.5 s
+    text = client.wait("STATUSTEXT", 3, lambda m: "offboard setpoints lost" in m.text)
+    assert time.monotonic() - t_stop < 1.5
+    hb = client.wait("HEARTBEAT", 3)
+    assert hb.custom_mode == expect_mode, text.text
+    if action == 0:
+        # position hold: the altitude stays
+        pos = client.collect(3.0, "LOCAL_POSITION_NED")
+        assert min(-p.z for p in pos) > z0 - 0.3
+    else:
+        # land: a gentle descent to the ground, then disarm
+        pos = client.collect(2.0, "LOCAL_POSITION_NED")
+        assert max(p.vz for p in pos) < 1.0  # NED: descent speed below 1 m/s
+        client.wait("EXTENDED_SYS_STATE", 30, lambda m: m.landed_state == 1)
+        client.wait("HEARTBEAT", 10, lambda m: not m.base_mode & 128)
+
+
+def test_takeoff_and_land_then_disarm(ground_vehicle):
+    client, _ = ground_vehicle
+    assert client.command(400, 1) == ACCEPTED
+    assert client.command(22, 0, 0, 0, math.nan, math.nan, math.nan, 488.0 + 3.0) == ACCEPTED
+    client.wait("EXTENDED_SYS_STATE", 3, lambda m: m.landed_state in (2, 3))
+    client.wait("LOCAL_POSITION_NED", 10, lambda m: m.z < -2.8)
+    client.wait("HEARTBEAT", 5, lambda m: custom_sub_mode(m.custom_mode) == 3)  # Hold
+    assert abs(_altitude_m(client) - 3.0) < 0.3
+    assert client.command(21) == ACCEPTED
+    fast = client.collect(1.5, "LOCAL_POSITION_NED")
+    assert all(p.vz < 1.0 for p in fast)
+    client.wait("EXTENDED_SYS_STATE", 15, lambda m: m.landed_state == 1)
+    client.wait("STATUSTEXT", 5, lambda m: "disarmed" in m.text.lower())
+    client.wait("HEARTBEAT", 3, lambda m: not m.base_mode & 128)
+
+
+def test_parameters_list_read_set_and_refuse_unknown(ground_vehicle):
+    client, _ = ground_vehicle
+    client.send(mavlink.MAVLink_param_request_list_message(1, 1))
+    first = client.wait("PARAM_VALUE", 5)
+    values = {first.param_id: first} | {m.param_id: m for m in client.collect(1.0, "PARAM_VALUE")}
+    assert len(values) == first.param_count
+    assert values["COM_OF_LOSS_T"].param_value == pytest.approx(1.0)
+    assert client.get_param("COM_OF_LOSS_T").param_value == pytest.approx(1.0)
+    assert client.set_param("COM_OF_LOSS_T", 2.5).param_value == pytest.approx(2.5)
+    assert client.get_param("COM_OF_LOSS_T").param_value == pytest.approx(2.5)
+    # out of range: refused, the old value is echoed
+    assert client.set_param("COM_OF_LOSS_T", 1e6).param_value == pytest.approx(2.5)
+    # unknown: refused with a STATUSTEXT, no PARAM_VALUE
+    client.send(mavlink.MAVLink_param_set_message(1, 1, b"NO_SUCH_PARAM", 1.0, 9))
+    client.wait("STATUSTEXT", 3, lambda m: "NO_SUCH_PARAM" in m.text)
+
+
+def test_scheduled_mass_drop_happens_at_its_time(tmp_path):
+    team = tmp_path / "team.yaml"
+    team.write_text(
+        textwrap.dedent("""
+        vehicles:
+          - id: 1
+            sysid: 1
+            initial: {position_enu_m: [0.0, 0.0, 5.0]}
+            airframe: {arm_length_m: 0.2, anti_torque_m: 0.016, rotor_thrust_max_n: 6.0}
+            plant: {mass_kg: 0.85, inertia_kgm2: [0.04856, 0.04856, 0.08801]}
+        faults:
+          - {kind: mass_drop, vehicle: 1, at_s: 2.0, fraction: 0.3}
+    """)
+    )
+    client, ctx = _start(["--id", "1", "--team", str(team)], tmp_path)
+    with ctx:
+        client.wait("HEARTBEAT", 60)
+        assert client.get_param("EMU_MDROP_T").param_value == pytest.approx(2.0)
+        assert client.get_param("EMU_FLT_CLK").param_value == -1.0  # not started before OFFBOARD
+        with _hover_stream(client):
+            client.collect(1.3)
+            assert client.command(176, 1 | 128, OFFBOARD, 0) == ACCEPTED
+            client.wait("STATUSTEXT", 3, lambda m: "Fault clock started" in m.text)
+            text = client.wait("STATUSTEXT", 5, lambda m: m.text.startswith("Fault: mass"))
+            at_s = float(re.search(r"at ([0-9.]+) s", text.text).group(1))
+            assert 2.0 <= at_s <= 2.0 + 0.003  # the first tick (2 ms) at or after 2.0 s
+            assert client.get_param("EMU_MASS_KG").param_value == pytest.approx(0.595, abs=1e-4)
+            # same thrust, 30 % less mass: it now climbs
+            client.wait("LOCAL_POSITION_NED", 3, lambda m: m.vz < -0.5)
+    client.close()
+
+
+def test_message_interval_and_timesync(ground_vehicle):
+    client, _ = ground_vehicle
+    assert client.command(511, 30, 100_000) == ACCEPTED  # ATTITUDE at 10 Hz
+    client.collect(0.2)
+    n = len(client.collect(2.0, "ATTITUDE"))
+    assert 17 <= n <= 23
+    assert client.command(511, 30, -1) == ACCEPTED  # off
+    client.collect(0.2)
+    assert client.collect(0.5, "ATTITUDE") == []
+    assert client.command(511, 9999, 1000) == UNSUPPORTED
+    client.send(mavlink.MAVLink_timesync_message(0, 123456789))
+    reply = client.wait("TIMESYNC", 3, lambda m: m.ts1 == 123456789)
+    assert reply.tc1 > 0
+
+
+def test_actuator_control_target_flies_through_the_mixer(air_vehicle):
+    client, _ = air_vehicle
+    thrust = hover_thrust(UAV1_MASS_KG, UAV1_FMAX_N)
+    cmd = {"roll": 0.0}
+
+    def make():
+        return mavlink.MAVLink_set_actuator_control_target_message(
+            0, 0, 1, 1, [cmd["roll"], 0.0, 0.0, thrust, 0, 0, 0, 0]
+        )
+
+    with SetpointStreamer(client, make, rate_hz=100):
+        client.collect(1.3)
+        assert client.command(176, 1 | 128, OFFBOARD, 0) == ACCEPTED
+        z0 = _altitude_m(client)
+        pos = client.collect(1.0, "LOCAL_POSITION_NED")
+        assert max(abs(-p.z - z0) for p in pos) < 0.1
+        # a small positive roll torque (FRD) spins the vehicle up about +x
+        cmd["roll"] = 0.01
+        client.wait("ATTITUDE", 2, lambda m: m.rollspeed > 0.2)
+        cmd["roll"] = 0.0
+
+
+def test_attitude_branch_wins_over_rates(air_vehicle):
+    client, _ = air_vehicle
+    thrust = hover_thrust(UAV1_MASS_KG, UAV1_FMAX_N)
+    # type_mask 0: attitude AND rates given; PX4 flies the attitude (level), rates only as yaw ff
+    make = lambda: rates_setpoint(1, 2.0, 2.0, 0.0, thrust, type_mask=0)  # noqa: E731
+    with SetpointStreamer(client, make):
+        client.collect(1.3)
+        assert client.command(176, 1 | 128, OFFBOARD, 0) == ACCEPTED
+        att = client.collect(1.0, "ATTITUDE")
+        assert max(abs(a.roll) + abs(a.pitch) for a in att) < 0.02
+        targets = client.collect(0.5, "ATTITUDE_TARGET")
+        assert targets and all(abs(t.thrust - thrust) < 1e-6 for t in targets)
+
+
+def test_lockstep_advances_one_tick_per_setpoint(tmp_path):
+    client, ctx = _start(["--id", "1", "--in-air", "--lockstep", "--tick-ms", "2"], tmp_path)
+    thrust = hover_thrust(UAV1_MASS_KG, UAV1_FMAX_N)
+    with ctx:
+        client.wait("HEARTBEAT", 60)
+        with SetpointStreamer(client, lambda: rates_setpoint(1, 0.0, 0.0, 0.0, thrust)):
+            client.collect(1.3)  # not in OFFBOARD yet: real time
+            assert client.command(176, 1 | 128, OFFBOARD, 0) == ACCEPTED
+            client.collect(0.2)
+            t0 = client.wait("ATTITUDE", 2).time_boot_ms
+            sent0 = time.monotonic()
+            client.collect(2.0)
+            t1 = client.wait("ATTITUDE", 2).time_boot_ms
+            wall_ms = 1e3 * (time.monotonic() - sent0)
+        # GIVEN setpoints at 50 Hz (20 ms apart) THEN simulated time runs at 2 ms per setpoint,
+        # a tenth of wall time
+        assert 0.05 * wall_ms < t1 - t0 < 0.2 * wall_ms
+        # WHEN the GCS goes silent THEN time follows the clock again and the failsafe holds
+        client.wait("STATUSTEXT", 5, lambda m: "offboard setpoints lost" in m.text)
+    client.close()

@@ -1,0 +1,430 @@
+"""PX4-like autopilot logic of one vehicle: arming, modes, offboard rules, failsafes. Pure.
+
+No clock, no I/O: every call takes ``now_s`` (the emulator's simulated time) and an
+``Observation``; the result is a MAV_RESULT, the current ``demand`` (what the inner loops fly,
+see plant.ControlMode) and queued ``events`` (STATUSTEXT lines) that the runner drains.
+
+PX4 rules reproduced (spec/mavlink.md): custom_mode = main << 16 | sub << 24; OFFBOARD is accepted
+only when setpoints have streamed (gaps <= 0.5 s, i.e. >= 2 Hz) for more than 1 s, else
+TEMPORARILY_REJECTED; setpoint silence > COM_OF_LOSS_T leaves OFFBOARD and runs COM_OBL_RC_ACT;
+disarm in the air is refused unless forced (21196); auto-disarm COM_DISARM_LAND after landing and
+COM_DISARM_PRFLT after arming without takeoff.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+import numpy as np
+
+from vehicle_emulator.params import ParamStore
+
+__all__ = [
+    "ActuatorSetpoint",
+    "AttitudeSetpoint",
+    "Autopilot",
+    "Demand",
+    "MavResult",
+    "NavState",
+    "Observation",
+    "PositionTarget",
+    "RatesSetpoint",
+    "Severity",
+    "custom_mode_of",
+    "nav_state_of",
+]
+
+STREAM_GAP_S = 0.5  # a gap longer than this (slower than 2 Hz) restarts the setpoint stream
+STREAM_MIN_S = 1.0  # the stream must have lasted longer than this to enter OFFBOARD
+FORCE_MAGIC = 21196
+TAKEOFF_DONE_M = 0.15
+
+
+class MavResult(IntEnum):
+    """MAV_RESULT."""
+
+    ACCEPTED = 0
+    TEMPORARILY_REJECTED = 1
+    DENIED = 2
+    UNSUPPORTED = 3
+    FAILED = 4
+    IN_PROGRESS = 5
+
+
+class Severity(IntEnum):
+    """MAV_SEVERITY."""
+
+    EMERGENCY = 0
+    ALERT = 1
+    CRITICAL = 2
+    ERROR = 3
+    WARNING = 4
+    NOTICE = 5
+    INFO = 6
+    DEBUG = 7
+
+
+class NavState(IntEnum):
+    """Flight modes the emulator flies; values are PX4 (main_mode, sub_mode) packed as below."""
+
+    ALTCTL = 2 << 16
+    POSCTL = 3 << 16
+    AUTO_TAKEOFF = (4 << 16) | (2 << 24)
+    AUTO_LOITER = (4 << 16) | (3 << 24)
+    AUTO_LAND = (4 << 16) | (6 << 24)
+    OFFBOARD = 6 << 16
+
+
+def custom_mode_of(state: NavState) -> int:
+    """HEARTBEAT custom_mode of a nav state (main_mode << 16 | sub_mode << 24)."""
+    return int(state)
+
+
+def nav_state_of(main_mode: int, sub_mode: int) -> NavState | None:
+    """The NavState for a PX4 (main, sub) pair, or None when the emulator does not fly it."""
+    if main_mode == 4:
+        sub = {2: NavState.AUTO_TAKEOFF, 3: NavState.AUTO_LOITER, 6: NavState.AUTO_LAND}
+        return sub.get(sub_mode)
+    return {2: NavState.ALTCTL, 3: NavState.POSCTL, 6: NavState.OFFBOARD}.get(main_mode)
+
+
+_MODE_NAMES = {
+    NavState.ALTCTL: "Altitude",
+    NavState.POSCTL: "Position",
+    NavState.AUTO_TAKEOFF: "Takeoff",
+    NavState.AUTO_LOITER: "Hold",
+    NavState.AUTO_LAND: "Land",
+    NavState.OFFBOARD: "Offboard",
+}
+
+
+@dataclass(frozen=True, slots=True)
+class Observation:
+    """What the autopilot knows of its vehicle (ENU world, metres, radians)."""
+
+    position_enu_m: tuple[float, float, float]
+    velocity_enu_mps: tuple[float, float, float]
+    yaw_enu_rad: float
+    on_ground: bool
+    battery_remaining: float = 1.0
+
+
+@dataclass(frozen=True, slots=True)
+class RatesSetpoint:
+    """Body rates (FLU, rad/s) and collective thrust normalised 0..1 (of 4 f_max)."""
+
+    rate_flu_radps: tuple[float, float, float]
+    thrust_norm: float
+
+
+@dataclass(frozen=True, slots=True)
+class AttitudeSetpoint:
+    """Attitude R_enu_flu (3x3), yaw-rate feed-forward (FLU z, rad/s), normalised thrust."""
+
+    rotation_enu_flu: np.ndarray
+    yaw_rate_ff_flu_radps: float
+    thrust_norm: float
+
+
+@dataclass(frozen=True, slots=True)
+class ActuatorSetpoint:
+    """Normalised torques (FLU, -1..1, see plant.torque_max_nm) and normalised thrust 0..1."""
+
+    torque_norm_flu: tuple[float, float, float]
+    thrust_norm: float
+
+
+@dataclass(frozen=True, slots=True)
+class PositionTarget:
+    """Onboard position controller target: ENU position, velocity feed-forward, per-axis mask
+    (1: hold the position on that axis, 0: fly the feed-forward velocity only), ENU heading."""
+
+    position_enu_m: tuple[float, float, float]
+    velocity_ff_enu_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    mask: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    yaw_enu_rad: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class MotorsOff:
+    """Disarmed: rotors stopped."""
+
+
+@dataclass(frozen=True, slots=True)
+class Idle:
+    """Armed on the ground: idle thrust, no torque."""
+
+
+Demand = MotorsOff | Idle | PositionTarget | RatesSetpoint | AttitudeSetpoint | ActuatorSetpoint
+OffboardSetpoint = RatesSetpoint | AttitudeSetpoint | ActuatorSetpoint
+
+
+@dataclass(slots=True)
+class _Stream:
+    start_s: float = -math.inf
+    last_s: float = -math.inf
+
+    def feed(self, now_s: float) -> None:
+        if now_s - self.last_s > STREAM_GAP_S:
+            self.start_s = now_s
+        self.last_s = now_s
+
+    def ready(self, now_s: float) -> bool:
+        return now_s - self.last_s <= STREAM_GAP_S and self.last_s - self.start_s > STREAM_MIN_S
+
+
+@dataclass(slots=True)
+class Autopilot:
+    """One vehicle's mode/arming state machine. Call ``tick`` regularly (>= 10 Hz)."""
+
+    vehicle_id: int
+    params: ParamStore
+    armed: bool = False
+    nav_state: NavState = NavState.AUTO_LOITER
+    demand: Demand = field(default_factory=MotorsOff)
+    demand_version: int = 0
+    events: list[tuple[Severity, str]] = field(default_factory=list)
+    first_offboard_s: float | None = None
+    setpoint: OffboardSetpoint | None = None
+    home_enu_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    _stream: _Stream = field(default_factory=_Stream)
+    _armed_s: float = 0.0
+    _taken_off: bool = False
+    _landed_since_s: float | None = None
+    _takeoff_alt_m: float = 2.5
+    _takeoff_climbing: bool = False
+
+    # --- construction helpers ---------------------------------------------------------------
+
+    @classmethod
+    def start(
+        cls, vehicle_id: int, params: ParamStore, now_s: float, obs: Observation
+    ) -> Autopilot:
+        """A vehicle at boot: in the air -> armed, holding position (Hold); else disarmed."""
+        ap = cls(vehicle_id=vehicle_id, params=params)
+        ap.home_enu_m = (obs.position_enu_m[0], obs.position_enu_m[1], 0.0)
+        if not obs.on_ground:
+            ap.armed = True
+            ap._taken_off = True
+            ap._armed_s = now_s
+        ap._set_demand(ap._hold_demand(obs))
+        return ap
+
+    # --- queries ------------------------------------------------------------------------------
+
+    @property
+    def custom_mode(self) -> int:
+        """PX4 custom_mode for HEARTBEAT."""
+        return custom_mode_of(self.nav_state)
+
+    @property
+    def mode_name(self) -> str:
+        """Human name of the current mode (QGroundControl's wording)."""
+        return _MODE_NAMES[self.nav_state]
+
+    def offboard_stream_ready(self, now_s: float) -> bool:
+        """True when setpoints have streamed long enough to enter (or arm in) OFFBOARD."""
+        return self._stream.ready(now_s)
+
+    # --- inputs -------------------------------------------------------------------------------
+
+    def on_setpoint(self, now_s: float, setpoint: OffboardSetpoint) -> None:
+        """A valid offboard setpoint arrived (already range-checked by the codec layer)."""
+        self._stream.feed(now_s)
+        self.setpoint = setpoint
+        if self.nav_state is NavState.OFFBOARD and self.armed:
+            self._set_demand(setpoint)
+
+    def arm(self, now_s: float, obs: Observation, arm: bool, force: bool = False) -> MavResult:
+        """MAV_CMD_COMPONENT_ARM_DISARM; PX4 pre-arm and in-air disarm rules."""
+        if arm:
+            if self.armed:
+                return MavResult.ACCEPTED
+            if not force:
+                if obs.battery_remaining < 0.1:
+                    return self._deny("Arming denied: battery low")
+                if self.nav_state is NavState.OFFBOARD and not self._stream.ready(now_s):
+                    return self._deny("Arming denied: no offboard setpoints")
+                if not obs.on_ground:
+                    return self._deny("Arming denied: not landed")
+            self.armed = True
+            self._armed_s = now_s
+            self._taken_off = not obs.on_ground
+            self._landed_since_s = None
+            self._event(Severity.INFO, "Armed by external command")
+            if self.nav_state is NavState.AUTO_TAKEOFF:
+                self._begin_takeoff(obs, self._takeoff_alt_m)
+            else:
+                self._set_demand(self._mode_demand(obs))
+            return MavResult.ACCEPTED
+        if not self.armed:
+            return MavResult.ACCEPTED
+        if not obs.on_ground and not force:
+            return self._deny("Disarming denied: not landed")
+        self._disarm("Disarmed by external command")
+        return MavResult.ACCEPTED
+
+    def set_mode(self, now_s: float, obs: Observation, main_mode: int, sub_mode: int) -> MavResult:
+        """DO_SET_MODE / SET_MODE with PX4 custom main and sub modes."""
+        target = nav_state_of(main_mode, sub_mode)
+        if target is None:
+            return self._deny(f"Mode change denied: main {main_mode} sub {sub_mode} not available")
+        if target is NavState.OFFBOARD:
+            if not self._stream.ready(now_s):
+                self._event(Severity.WARNING, "Offboard denied: setpoints not streaming > 1 s")
+                return MavResult.TEMPORARILY_REJECTED
+            if self.first_offboard_s is None:
+                self.first_offboard_s = now_s
+        if target is NavState.AUTO_TAKEOFF:
+            self._takeoff_alt_m = self.params["MIS_TAKEOFF_ALT"]
+        self._enter(target, obs)
+        return MavResult.ACCEPTED
+
+    def takeoff(self, now_s: float, obs: Observation, altitude_above_ground_m: float) -> MavResult:
+        """MAV_CMD_NAV_TAKEOFF: climb to the altitude (MIS_TAKEOFF_ALT if not finite/positive)."""
+        alt = altitude_above_ground_m
+        if not math.isfinite(alt) or alt < 0.5:
+            alt = self.params["MIS_TAKEOFF_ALT"]
+        self._takeoff_alt_m = alt
+        self.nav_state = NavState.AUTO_TAKEOFF
+        self._event(Severity.INFO, f"Takeoff to {alt:.1f} m")
+        if self.armed:
+            self._begin_takeoff(obs, alt)
+        return MavResult.ACCEPTED
+
+    def land(self, now_s: float, obs: Observation) -> MavResult:
+        """MAV_CMD_NAV_LAND: descend at MPC_LAND_SPEED, then disarm."""
+        self._enter(NavState.AUTO_LAND, obs)
+        return MavResult.ACCEPTED
+
+    def tick(self, now_s: float, obs: Observation) -> None:
+        """Failsafes and mode progress: offboard loss, takeoff done, landing, auto-disarm."""
+        if self.nav_state is NavState.OFFBOARD:
+            loss_s = self.params["COM_OF_LOSS_T"]
+            if now_s - self._stream.last_s > loss_s:
+                self._offboard_lost(obs)
+        if not self.armed:
+            return
+        if not obs.on_ground:
+            self._taken_off = True
+            self._landed_since_s = None
+        elif self._landed_since_s is None:
+            self._landed_since_s = now_s
+        if self.nav_state is NavState.AUTO_TAKEOFF and self._takeoff_climbing:
+            self._takeoff_progress(obs)
+        if obs.on_ground and self.nav_state is not NavState.OFFBOARD:
+            climbing = self.nav_state is NavState.AUTO_TAKEOFF and self._takeoff_climbing
+            if not climbing and not isinstance(self.demand, Idle):
+                self._set_demand(Idle())
+        if self._landed_since_s is not None:
+            on_ground_s = now_s - self._landed_since_s
+            if self._taken_off:
+                limit = self.params["COM_DISARM_LAND"]
+                if limit >= 0.0 and on_ground_s > limit:
+                    self._disarm("Landing detected, disarmed")
+            else:
+                limit = self.params["COM_DISARM_PRFLT"]
+                if limit >= 0.0 and now_s - self._armed_s > limit:
+                    self._disarm("Disarmed: no takeoff after arming")
+
+    # --- internals ----------------------------------------------------------------------------
+
+    def _event(self, severity: Severity, text: str) -> None:
+        self.events.append((severity, text))
+
+    def _deny(self, text: str) -> MavResult:
+        self._event(Severity.CRITICAL, text)
+        return MavResult.DENIED
+
+    def _set_demand(self, demand: Demand) -> None:
+        self.demand = demand
+        self.demand_version += 1
+
+    def _disarm(self, text: str) -> None:
+        self.armed = False
+        self._takeoff_climbing = False
+        self._landed_since_s = None
+        self._event(Severity.INFO, text)
+        self._set_demand(MotorsOff())
+
+    def _hold_demand(self, obs: Observation) -> Demand:
+        if not self.armed:
+            return MotorsOff()
+        if obs.on_ground:
+            return Idle()
+        return PositionTarget(obs.position_enu_m, yaw_enu_rad=obs.yaw_enu_rad)
+
+    def _mode_demand(self, obs: Observation) -> Demand:
+        if not self.armed:
+            return MotorsOff()
+        if self.nav_state is NavState.OFFBOARD:
+            return self.setpoint if self.setpoint is not None else self._hold_demand(obs)
+        if self.nav_state is NavState.AUTO_LAND:
+            if obs.on_ground:
+                return Idle()
+            speed = self.params["MPC_LAND_SPEED"]
+            return PositionTarget(
+                obs.position_enu_m, (0.0, 0.0, -speed), (1.0, 1.0, 0.0), obs.yaw_enu_rad
+            )
+        return self._hold_demand(obs)
+
+    def _enter(self, target: NavState, obs: Observation) -> None:
+        if target is not self.nav_state:
+            self._event(Severity.INFO, f"Mode: {_MODE_NAMES[target]}")
+        self.nav_state = target
+        self._takeoff_climbing = False
+        if target is NavState.AUTO_TAKEOFF and self.armed:
+            self._begin_takeoff(obs, self._takeoff_alt_m)
+        else:
+            self._set_demand(self._mode_demand(obs))
+
+    def _begin_takeoff(self, obs: Observation, alt_m: float) -> None:
+        self._takeoff_climbing = True
+        speed = self.params["MPC_TKO_SPEED"]
+        self._set_demand(
+            PositionTarget(
+                (obs.position_enu_m[0], obs.position_enu_m[1], alt_m),
+                (0.0, 0.0, speed),
+                (1.0, 1.0, 0.0),
+                obs.yaw_enu_rad,
+            )
+        )
+
+    def _takeoff_progress(self, obs: Observation) -> None:
+        """Climb at MPC_TKO_SPEED, then let the position loop (gain 1/s) capture the altitude
+        from ``speed / 1 s`` below it; Hold once within TAKEOFF_DONE_M."""
+        z = obs.position_enu_m[2]
+        alt = self._takeoff_alt_m
+        demand = self.demand
+        if isinstance(demand, PositionTarget) and demand.mask[2] == 0.0:
+            if z >= alt - self.params["MPC_TKO_SPEED"]:
+                self._set_demand(
+                    PositionTarget(
+                        (demand.position_enu_m[0], demand.position_enu_m[1], alt),
+                        yaw_enu_rad=demand.yaw_enu_rad,
+                    )
+                )
+        elif z >= alt - TAKEOFF_DONE_M:
+            self._takeoff_climbing = False
+            self._event(Severity.INFO, "Takeoff complete, holding")
+            self.nav_state = NavState.AUTO_LOITER
+
+    def _offboard_lost(self, obs: Observation) -> None:
+        action = self.params.get_int("COM_OBL_RC_ACT")
+        if action in (3, 4):
+            target, name = NavState.AUTO_LAND, "land"
+        elif action == 7 and self.armed:
+            self._event(Severity.CRITICAL, "Failsafe: offboard setpoints lost, disarming")
+            self.nav_state = NavState.AUTO_LOITER
+            self._disarm("Disarmed by failsafe")
+            return
+        elif action == 0:
+            target, name = NavState.POSCTL, "position hold"
+        elif action == 1:
+            target, name = NavState.ALTCTL, "altitude hold"
+        else:
+            target, name = NavState.AUTO_LOITER, "hold"
+        self._event(Severity.CRITICAL, f"Failsafe: offboard setpoints lost, {name}")
+        self._enter(target, obs)

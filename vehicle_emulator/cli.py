@@ -1,0 +1,232 @@
+"""``vehicle-emu``: run one emulated PX4-like quadrotor (``--id N``) or a whole team (``--fleet``).
+
+Ports follow PX4 SITL instance i = N-1: bind 127.0.0.1:14580+i, send to 127.0.0.1:14540+i
+(instances above 9 send to 14549), sysid N; ``--gcs`` adds a second link bound to 18570+i that
+sends to 14550. Team-file ``link`` keys override the defaults, command-line flags override both.
+Ctrl-C / SIGTERM stop it cleanly (exit status 0).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import logging
+import resource
+import signal
+import sys
+import time
+from collections.abc import Sequence
+
+from vehicle_emulator.runner import Emulator, LinkPlan, RealtimeClock, RunStats
+from vehicle_emulator.team import TeamFileError, TeamSpec, VehicleSpec, default_vehicle, load_team
+
+log = logging.getLogger("vehicle_emulator")
+
+__all__ = ["main", "link_plan", "parse_address"]
+
+
+def parse_address(text: str) -> tuple[str, int]:
+    """``host:port`` or ``port`` -> (host, port); host defaults to 127.0.0.1."""
+    host, sep, port = text.rpartition(":")
+    if not sep:
+        host, port = "127.0.0.1", text
+    try:
+        p = int(port)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected host:port, got {text!r}") from None
+    if not 0 <= p <= 65535:
+        raise argparse.ArgumentTypeError(f"port {p} out of range 0..65535")
+    return (host or "127.0.0.1", p)
+
+
+def link_plan(spec: VehicleSpec, args: argparse.Namespace, single: bool) -> LinkPlan:
+    """Addresses of a vehicle: PX4 SITL defaults < team file < command line."""
+    i = spec.vehicle_id - 1
+    bind = ("127.0.0.1", args.bind_base + i)
+    remote = ("127.0.0.1", args.remote_base + min(i, 9))
+    gcs_bind = ("127.0.0.1", 18570 + i)
+    gcs_remote = ("127.0.0.1", 14550)
+    lk = spec.link
+    bind = lk.bind or bind
+    remote = lk.remote or remote
+    if single:
+        bind = args.bind or bind
+        remote = args.remote or remote
+        gcs_bind = args.gcs_bind or gcs_bind
+        gcs_remote = args.gcs_remote or gcs_remote
+    use_gcs = args.gcs or args.gcs_bind is not None
+    return LinkPlan(bind, remote, gcs_bind if use_gcs else None, gcs_remote if use_gcs else None)
+
+
+def _parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="vehicle-emu", description="PX4-like quadrotor emulator over MAVLink 2 / UDP."
+    )
+    who = ap.add_mutually_exclusive_group(required=True)
+    who.add_argument("--id", type=int, help="vehicle id N (sysid N, PX4 SITL instance N-1)")
+    who.add_argument("--fleet", action="store_true", help="run every vehicle of --team")
+    ap.add_argument("--team", help="team YAML file (airframes, plant, initial state, faults)")
+    ap.add_argument("--bind", type=parse_address, help="local UDP address (default 14580+N-1)")
+    ap.add_argument("--remote", type=parse_address, help="initial peer (default 14540+N-1)")
+    ap.add_argument("--gcs", action="store_true", help="second link: bind 18570+i, send to 14550")
+    ap.add_argument("--gcs-bind", type=parse_address, help="second link's local address")
+    ap.add_argument("--gcs-remote", type=parse_address, help="second link's peer")
+    ap.add_argument("--bind-base", type=int, default=14580, help="fleet: bind base port")
+    ap.add_argument("--remote-base", type=int, default=14540, help="fleet: remote base port")
+    ap.add_argument("--in-air", action="store_true", help="without --team: start at 10 m, holding")
+    pace = ap.add_mutually_exclusive_group()
+    pace.add_argument(
+        "--lockstep",
+        action="store_true",
+        help="while armed in OFFBOARD, advance one tick per setpoint received (see docs)",
+    )
+    pace.add_argument(
+        "--realtime-factor",
+        type=float,
+        default=1.0,
+        help="simulated seconds per wall second (default 1)",
+    )
+    ap.add_argument("--physics-rate", type=float, default=None, help="physics rate Hz (1000)")
+    ap.add_argument(
+        "--tick-ms",
+        type=float,
+        default=2.0,
+        help="loop period [ms]: setpoints are sampled and telemetry sent per tick",
+    )
+    ap.add_argument("--seed", type=int, default=0, help="seed of noise and packet loss")
+    ap.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="set a parameter at start (repeatable)",
+    )
+    ap.add_argument(
+        "--duration", type=float, default=None, help="stop after this many simulated seconds"
+    )
+    ap.add_argument("--stats-json", help="write pacing/CPU figures here at exit")
+    ap.add_argument("--log-level", default="INFO")
+    return ap
+
+
+def _team(args: argparse.Namespace) -> tuple[list[VehicleSpec], TeamSpec | None]:
+    if args.team is None:
+        if args.fleet:
+            raise SystemExit("vehicle-emu: --fleet needs --team FILE")
+        return [default_vehicle(args.id, on_ground=not args.in_air)], None
+    team = load_team(args.team)
+    if args.fleet:
+        return list(team.vehicles), team
+    try:
+        return [team.vehicle(args.id)], team
+    except KeyError as exc:
+        raise SystemExit(f"vehicle-emu: {exc.args[0]}") from None
+
+
+async def _amain(args: argparse.Namespace) -> int:
+    specs, team = _team(args)
+    overrides: dict[str, float] = {}
+    for item in args.param:
+        name, sep, value = item.partition("=")
+        if not sep:
+            raise SystemExit(f"vehicle-emu: --param expects NAME=VALUE, got {item!r}")
+        overrides[name.strip()] = float(value)
+    rate = args.physics_rate or (team.physics_rate_hz if team else 1000.0)
+    emu = Emulator(
+        specs,
+        faults=team.faults if team else (),
+        physics_rate_hz=rate,
+        tick_s=args.tick_ms * 1e-3,
+        seed=args.seed,
+        param_overrides=overrides,
+    )
+    emu.warm_up()
+    clock = RealtimeClock(args.realtime_factor)
+    plans = [link_plan(s, args, single=not args.fleet) for s in specs]
+    await emu.open_links(plans, clock)
+    for s, plan in zip(specs, plans, strict=True):
+        log.info(
+            "vehicle %d sysid %d: bind %s:%d -> %s:%d",
+            s.vehicle_id,
+            s.sysid,
+            *plan.bind,
+            *plan.remote,
+        )
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    if args.duration is not None:
+        loop.call_later(args.duration / args.realtime_factor, stop.set)
+    stats = RunStats()
+    cpu0, wall0 = time.process_time(), time.monotonic()
+    try:
+        if args.lockstep:
+            await emu.run_lockstep(clock, stop, stats)
+        else:
+            await emu.run(clock, stop, stats)
+    finally:
+        emu.close_links()
+    wall = time.monotonic() - wall0
+    cpu = time.process_time() - cpu0
+    summary = {
+        "vehicles": len(specs),
+        "wall_s": wall,
+        "sim_s": emu.now_s,
+        "cpu_s": cpu,
+        "cpu_fraction": cpu / wall if wall > 0 else 0.0,
+        "ticks": stats.ticks,
+        "late_mean_ms": 1e3 * stats.late_sum_s / max(stats.ticks, 1),
+        "late_max_ms": 1e3 * stats.late_max_s,
+        "late_p99_ms": 1e3 * _percentile(stats.lateness_samples, 99.0),
+        "late_over_1ms": stats.late_over_1ms,
+        "dropped_sim_s": stats.dropped_s,
+        "lockstep_timeouts": stats.lockstep_timeouts,
+        "telemetry_msgs": int(emu.telemetry.sent.sum()),
+        "telemetry_by_type": dict(
+            zip(emu.telemetry.names, emu.telemetry.sent.tolist(), strict=True)
+        ),
+        "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+    }
+    if args.stats_json:
+        with open(args.stats_json, "w") as fh:
+            json.dump(summary, fh, indent=1)
+    print(
+        f"vehicle-emu: stopped after {emu.now_s:.1f} s simulated, "
+        f"cpu {summary['cpu_fraction']:.0%}, tick lateness mean "
+        f"{summary['late_mean_ms']:.2f} ms max {summary['late_max_ms']:.1f} ms",
+        file=sys.stderr,
+    )
+    return 0
+
+
+def _percentile(xs: list[float], q: float) -> float:
+    if not xs:
+        return 0.0
+    s = sorted(xs)
+    return s[min(len(s) - 1, int(len(s) * q / 100.0))]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``vehicle-emu`` console script."""
+    args = _parser().parse_args(argv)
+    logging.basicConfig(
+        level=getattr(logging, str(args.log_level).upper(), logging.INFO),
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    try:
+        return asyncio.run(_amain(args))
+    except TeamFileError as exc:
+        print(f"vehicle-emu: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"vehicle-emu: {exc}", file=sys.stderr)
+        return 3
+    except ValueError as exc:  # bad --param etc.
+        print(f"vehicle-emu: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

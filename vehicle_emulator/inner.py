@@ -1,0 +1,177 @@
+"""Onboard inner-loop controllers (PX4-like cascade), per vehicle, numba njit, pure.
+
+All vectors ENU world / FLU body. Each function works on vehicle ``i`` of batched arrays and is
+called from the fleet kernel in plant.py at the physics rate (1 kHz by default).
+
+* ``rate_control``: body-rate PID + feed-forward (PX4 ``RateControl``), written in angular
+  acceleration units and scaled by the true inertia: ``tau = J (Kp e + I - Kd dw/dt + Kff w_sp)
+  + w x J w``; integrator clamped and held while landed.
+* ``attitude_control``: PX4's quaternion P law ``w_sp = K 2 sign(qe_w) qe_xyz`` with
+  ``qe = q^-1 q_sp`` (body frame) plus a yaw-rate feed-forward, clipped to the max rates.
+* ``position_control``: position P -> velocity PI -> thrust vector (hover thrust scaled, PX4
+  ``MPC_THR_HOVER`` style, tilt limited) -> attitude setpoint with a heading.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from vehicle_emulator.frames import quat_from_matrix
+from vehicle_emulator.physics import GRAVITY_MPS2
+
+# Gains (rad/s^2 per rad/s for rates; 1/s for attitude and position; 1/s^2 for velocity I).
+RATE_P = np.array([40.0, 40.0, 20.0])
+RATE_I = np.array([30.0, 30.0, 10.0])
+RATE_D = np.array([0.0, 0.0, 0.0])
+RATE_FF = np.array([0.0, 0.0, 0.0])
+RATE_I_LIMIT = np.array([10.0, 10.0, 5.0])  # rad/s^2
+RATE_MAX = np.array([3.84, 3.84, 3.49])  # PX4 MC_*RATE_MAX defaults: 220, 220, 200 deg/s
+ATT_P = np.array([6.5, 6.5, 2.8])  # PX4 MC_ROLL_P, MC_PITCH_P, MC_YAW_P
+POS_P = np.array([0.95, 0.95, 1.0])  # PX4 MPC_XY_P, MPC_Z_P
+VEL_P = np.array([1.8, 1.8, 4.0])  # PX4 MPC_XY_VEL_P_ACC, MPC_Z_VEL_P_ACC
+VEL_I = np.array([0.4, 0.4, 2.0])  # PX4 MPC_XY_VEL_I_ACC, MPC_Z_VEL_I_ACC
+VEL_I_LIMIT = np.array([3.0, 3.0, 6.0])  # m/s^2
+VEL_XY_MAX = 5.0
+VEL_UP_MAX = 3.0
+VEL_DOWN_MAX = 1.5
+TILT_MAX_RAD = math.radians(45.0)
+THRUST_MIN_NORM = 0.05
+
+
+@njit(cache=True)
+def rate_control(
+    i: int,
+    rate_sp: np.ndarray,
+    omega: np.ndarray,
+    omega_prev: np.ndarray,
+    rate_int: np.ndarray,
+    inertia: np.ndarray,
+    landed: bool,
+    dt: float,
+    torque_out: np.ndarray,
+) -> None:
+    """Body torque [N m, FLU] into ``torque_out[i]`` for rate setpoint ``rate_sp[i]`` (rad/s)."""
+    w0, w1, w2 = omega[i, 0], omega[i, 1], omega[i, 2]
+    alpha = np.empty(3)
+    for k in range(3):
+        e = rate_sp[i, k] - omega[i, k]
+        d = (omega[i, k] - omega_prev[i, k]) / dt
+        if not landed:
+            v = rate_int[i, k] + RATE_I[k] * e * dt
+            rate_int[i, k] = min(max(v, -RATE_I_LIMIT[k]), RATE_I_LIMIT[k])
+        else:
+            rate_int[i, k] = 0.0
+        alpha[k] = RATE_P[k] * e + rate_int[i, k] - RATE_D[k] * d + RATE_FF[k] * rate_sp[i, k]
+        omega_prev[i, k] = omega[i, k]
+    jx, jy, jz = inertia[i, 0], inertia[i, 1], inertia[i, 2]
+    # + w x (J w): cancels the gyroscopic term of eq. (9)
+    torque_out[i, 0] = jx * alpha[0] + (w1 * jz * w2 - w2 * jy * w1)
+    torque_out[i, 1] = jy * alpha[1] + (w2 * jx * w0 - w0 * jz * w2)
+    torque_out[i, 2] = jz * alpha[2] + (w0 * jy * w1 - w1 * jx * w0)
+
+
+@njit(cache=True)
+def attitude_control(
+    i: int,
+    rotation: np.ndarray,
+    rotation_sp: np.ndarray,
+    yaw_rate_ff: np.ndarray,
+    rate_sp_out: np.ndarray,
+) -> None:
+    """Rate setpoint (FLU, rad/s) into ``rate_sp_out[i]`` for attitude ``rotation_sp[i]``."""
+    r = rotation[i]
+    rs = rotation_sp[i]
+    err = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            err[a, b] = r[0, a] * rs[0, b] + r[1, a] * rs[1, b] + r[2, a] * rs[2, b]
+    w, x, y, z = quat_from_matrix(err)  # w >= 0: shortest way
+    e = (2.0 * x, 2.0 * y, 2.0 * z)
+    for k in range(3):
+        v = ATT_P[k] * e[k]
+        if k == 2:
+            v += yaw_rate_ff[i]
+        rate_sp_out[i, k] = min(max(v, -RATE_MAX[k]), RATE_MAX[k])
+
+
+@njit(cache=True)
+def attitude_from_thrust_vector(
+    i: int, tx: float, ty: float, tz: float, yaw_enu: float, rotation_sp_out: np.ndarray
+) -> None:
+    """R_sp with body z along (tx, ty, tz) and the body x axis heading ``yaw_enu`` (ENU, rad)."""
+    n = math.sqrt(tx * tx + ty * ty + tz * tz)
+    if n < 1e-9:
+        tx, ty, tz, n = 0.0, 0.0, 1.0, 1.0
+    zx, zy, zz = tx / n, ty / n, tz / n
+    cx, cy = math.cos(yaw_enu), math.sin(yaw_enu)
+    # y_b = z_b x x_c, with x_c = (cx, cy, 0)
+    yx, yy, yz = -zz * cy, zz * cx, zx * cy - zy * cx
+    ny = math.sqrt(yx * yx + yy * yy + yz * yz)
+    if ny < 1e-9:  # z_b horizontal along the heading: pick any orthogonal y
+        yx, yy, yz, ny = -cy, cx, 0.0, 1.0
+    yx, yy, yz = yx / ny, yy / ny, yz / ny
+    xx, xy, xz = yy * zz - yz * zy, yz * zx - yx * zz, yx * zy - yy * zx
+    m = rotation_sp_out[i]
+    m[0, 0], m[1, 0], m[2, 0] = xx, xy, xz
+    m[0, 1], m[1, 1], m[2, 1] = yx, yy, yz
+    m[0, 2], m[1, 2], m[2, 2] = zx, zy, zz
+
+
+@njit(cache=True)
+def position_control(
+    i: int,
+    position: np.ndarray,
+    velocity: np.ndarray,
+    rotation: np.ndarray,
+    pos_sp: np.ndarray,
+    vel_ff: np.ndarray,
+    pos_mask: np.ndarray,
+    yaw_sp_enu: np.ndarray,
+    vel_int: np.ndarray,
+    hover_thrust_norm: np.ndarray,
+    landed: bool,
+    dt: float,
+    rotation_sp_out: np.ndarray,
+) -> float:
+    """Attitude setpoint into ``rotation_sp_out[i]``; returns normalised collective thrust.
+
+    ``pos_mask[i, k]`` 1 uses the position error on axis k, 0 flies the velocity ``vel_ff`` only
+    (landing: z masked with a downward velocity).
+    """
+    vs = np.empty(3)
+    for k in range(3):
+        vs[k] = POS_P[k] * (pos_sp[i, k] - position[i, k]) * pos_mask[i, k] + vel_ff[i, k]
+    hxy = math.sqrt(vs[0] * vs[0] + vs[1] * vs[1])
+    if hxy > VEL_XY_MAX:
+        vs[0] *= VEL_XY_MAX / hxy
+        vs[1] *= VEL_XY_MAX / hxy
+    vs[2] = min(max(vs[2], -VEL_DOWN_MAX - max(0.0, -vel_ff[i, 2])), VEL_UP_MAX)
+    acc = np.empty(3)
+    for k in range(3):
+        e = vs[k] - velocity[i, k]
+        if not landed:
+            v = vel_int[i, k] + VEL_I[k] * e * dt
+            vel_int[i, k] = min(max(v, -VEL_I_LIMIT[k]), VEL_I_LIMIT[k])
+        acc[k] = VEL_P[k] * e + vel_int[i, k]
+    hover = hover_thrust_norm[i]
+    tx = acc[0] / GRAVITY_MPS2 * hover
+    ty = acc[1] / GRAVITY_MPS2 * hover
+    tz = (acc[2] / GRAVITY_MPS2 + 1.0) * hover
+    tz = max(tz, THRUST_MIN_NORM)
+    # tilt limit: horizontal part at most tan(tilt_max) * vertical part
+    h = math.sqrt(tx * tx + ty * ty)
+    h_max = tz * math.tan(TILT_MAX_RAD)
+    if h > h_max:
+        tx *= h_max / h
+        ty *= h_max / h
+    mag = math.sqrt(tx * tx + ty * ty + tz * tz)
+    if mag > 1.0:
+        tx, ty, tz, mag = tx / mag, ty / mag, tz / mag, 1.0
+    attitude_from_thrust_vector(i, tx, ty, tz, yaw_sp_enu[i], rotation_sp_out)
+    # PX4 projects the thrust vector on the current body z axis
+    r = rotation[i]
+    proj = tx * r[0, 2] + ty * r[1, 2] + tz * r[2, 2]
+    return min(max(proj, 0.0), 1.0)

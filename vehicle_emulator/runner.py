@@ -1,0 +1,309 @@
+"""Fleet runner: fixed-step loop with an injected clock, driving plant, autopilots and telemetry.
+
+``Emulator`` is the composition of n ``VehicleNode``s over one batched ``FleetPlant``. Its
+``advance_to(sim_time_s)`` is pure bookkeeping (no I/O but the links' ``send``): physics in whole
+steps, autopilot logic at ``AUTOPILOT_RATE_HZ``, faults, telemetry. ``run`` paces it with a
+``Clock`` (real time, scaled real time) and measures step lateness and CPU use.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from vehicle_emulator.autopilot import Autopilot, NavState, Severity
+from vehicle_emulator.codec import GenericEncoder
+from vehicle_emulator.faults import FaultSchedule, LinkImpairment
+from vehicle_emulator.params import ParamStore
+from vehicle_emulator.plant import FleetPlant
+from vehicle_emulator.server import UdpLink
+from vehicle_emulator.team import FaultSpec, VehicleSpec
+from vehicle_emulator.telemetry import FleetStatus, Telemetry
+from vehicle_emulator.vehicle import VehicleNode
+
+log = logging.getLogger(__name__)
+
+__all__ = ["Clock", "Emulator", "LinkPlan", "RealtimeClock", "RunStats"]
+
+AUTOPILOT_RATE_HZ = 50.0
+MAX_CATCHUP_S = 0.1
+LOCKSTEP_TIMEOUT_S = 0.25
+
+
+class Clock(Protocol):
+    """Source of the emulator's time (seconds, starts near 0)."""
+
+    def now_s(self) -> float:
+        """Current time."""
+
+    async def sleep_until(self, t_s: float) -> None:
+        """Return at (or soon after) time ``t_s``."""
+
+
+class RealtimeClock:
+    """Monotonic wall time times ``factor`` (2.0: twice as fast as real time)."""
+
+    def __init__(self, factor: float = 1.0) -> None:
+        if not factor > 0.0:
+            raise ValueError(f"realtime factor must be > 0, got {factor}")
+        self.factor = factor
+        self._t0 = time.monotonic()
+
+    def now_s(self) -> float:
+        return (time.monotonic() - self._t0) * self.factor
+
+    async def sleep_until(self, t_s: float) -> None:
+        delay = (t_s - self.now_s()) / self.factor
+        await asyncio.sleep(max(delay, 0.0))
+
+
+@dataclass(frozen=True, slots=True)
+class LinkPlan:
+    """UDP addresses of one vehicle: the API link and an optional GCS link."""
+
+    bind: tuple[str, int]
+    remote: tuple[str, int]
+    gcs_bind: tuple[str, int] | None = None
+    gcs_remote: tuple[str, int] | None = None
+
+
+@dataclass(slots=True)
+class RunStats:
+    """Pacing figures of a run: tick lateness [s] and CPU time."""
+
+    ticks: int = 0
+    lockstep_timeouts: int = 0
+    late_max_s: float = 0.0
+    late_sum_s: float = 0.0
+    late_over_1ms: int = 0
+    dropped_s: float = 0.0
+    lateness_samples: list[float] = field(default_factory=list)
+
+    def record(self, late_s: float) -> None:
+        self.ticks += 1
+        self.late_sum_s += late_s
+        self.late_max_s = max(self.late_max_s, late_s)
+        if late_s > 1e-3:
+            self.late_over_1ms += 1
+        if len(self.lateness_samples) < 200_000:
+            self.lateness_samples.append(late_s)
+
+
+class _NullLink:
+    name = "null"
+
+    def send(self, data: bytes, addr: Any = None) -> None:
+        """Discard."""
+
+
+class Emulator:
+    """n vehicles, one batched plant, one telemetry scheduler."""
+
+    def __init__(
+        self,
+        specs: Sequence[VehicleSpec],
+        faults: Sequence[FaultSpec] = (),
+        physics_rate_hz: float = 1000.0,
+        tick_s: float = 0.002,
+        seed: int = 0,
+        param_overrides: dict[str, float] | None = None,
+    ) -> None:
+        sysids = [s.sysid for s in specs]
+        if len(set(sysids)) != len(sysids):
+            raise ValueError(f"duplicate sysids {sysids}: ground stations would merge them")
+        self.specs = list(specs)
+        self.plant = FleetPlant(specs, dt_s=1.0 / physics_rate_hz)
+        self.tick_s = max(tick_s, self.plant.dt_s)
+        self.status = FleetStatus.create(sysids)
+        self.telemetry = Telemetry(len(specs), np.random.default_rng(seed))
+        self.link_up = np.ones(len(specs), dtype=bool)
+        self.nodes: list[VehicleNode] = []
+        self._next_autopilot_s = 0.0
+        for i, spec in enumerate(specs):
+            params = ParamStore()
+            params.set("MAV_SYS_ID", spec.sysid, force=True)
+            params.set("EMU_SEED", seed)
+            params.set("MPC_THR_HOVER", float(self.plant.hover_thrust_norm[i]))
+            params.set("EMU_MOT_TAU", spec.motor_time_constant_s)
+            params.set("EMU_MASS_KG", spec.mass_kg, force=True)
+            params.set("EMU_THR_MAX_N", 4.0 * spec.rotor_thrust_max_n, force=True)
+            for name, value in (param_overrides or {}).items():
+                params.set(name, value)
+            if spec.starts_in_air:
+                self.plant.hold_here(i)
+            obs_spec = [f for f in faults if f.vehicle_id == spec.vehicle_id]
+            node = VehicleNode(
+                index=i,
+                spec=spec,
+                plant=self.plant,
+                telemetry=self.telemetry,
+                status=self.status,
+                params=params,
+                autopilot=Autopilot(vehicle_id=spec.vehicle_id, params=params),
+                faults=FaultSchedule.from_specs(params, obs_spec),
+                impairment=LinkImpairment(np.random.default_rng(seed + i)),
+                encoder=GenericEncoder(spec.sysid, 1, self.telemetry.seq, i),
+            )
+            node.autopilot = Autopilot.start(spec.vehicle_id, params, 0.0, node.observe())
+            node.sync_all_params()
+            node.apply_demand()
+            node.refresh_status(0.0)
+            self.nodes.append(node)
+        self.links: list[UdpLink] = []
+        self._setpoint_event: asyncio.Event | None = None
+        self._fault_nodes = [node for node in self.nodes if not node.faults.idle]
+
+    def warm_up(self) -> None:
+        """Load/compile the JIT kernels on a throwaway copy, so the first real tick is not
+        late (call before starting the clock)."""
+        spare = Emulator(self.specs[:1], physics_rate_hz=1.0 / self.plant.dt_s, tick_s=self.tick_s)
+        for node in spare.nodes:
+            node.links.append(_NullLink())
+        spare.advance_to(0.05)
+
+    @property
+    def now_s(self) -> float:
+        """Simulated time [s]."""
+        return self.plant.time_s
+
+    # --- the tick ------------------------------------------------------------------------------
+
+    def advance_to(self, t_s: float) -> int:
+        """Run physics up to ``t_s`` (whole steps), then autopilots, faults and telemetry.
+        Returns the number of physics steps taken."""
+        steps = int(math.floor(t_s / self.plant.dt_s + 1e-9)) - self.plant.steps_done
+        if steps <= 0:
+            return 0
+        self.plant.step(steps)
+        now = self.now_s
+        for node in self._fault_nodes:
+            node.apply_faults(now)
+        if now + 1e-9 >= self._next_autopilot_s:
+            self._next_autopilot_s = now + 1.0 / AUTOPILOT_RATE_HZ
+            for node in self.nodes:
+                node.autopilot.tick(now, node.observe())
+                node.apply_demand()
+                node.drain_events()
+                node.refresh_status(now)
+                node.report_input(now)
+                self.link_up[node.index] = not node.impairment.is_down(now)
+            self._fault_nodes = [node for node in self.nodes if not node.faults.idle]
+        out = self.telemetry.collect(now, self.plant, self.status, self.link_up)
+        for i, data in out.items():
+            self.nodes[i].send_all(data)
+        return steps
+
+    def on_messages(self, node: VehicleNode, link: Any, msgs: list[Any], addr: Any) -> None:
+        """Decoded messages from one link of one vehicle."""
+        now = self.now_s
+        for msg in msgs:
+            node.handle(now, msg, link, addr)
+        if self._setpoint_event is not None:
+            self._setpoint_event.set()
+        node.decode_rejected = sum(
+            lk.decoder.stats.rejected for lk in node.links if isinstance(lk, UdpLink)
+        )
+
+    # --- I/O -----------------------------------------------------------------------------------
+
+    async def open_links(self, plans: Sequence[LinkPlan], clock: Clock) -> None:
+        """Bind every vehicle's UDP endpoints (OSError names the address on failure)."""
+        for node, plan in zip(self.nodes, plans, strict=True):
+            pairs = [("api", plan.bind, plan.remote)]
+            if plan.gcs_bind is not None and plan.gcs_remote is not None:
+                pairs.append(("gcs", plan.gcs_bind, plan.gcs_remote))
+            for kind, bind, remote in pairs:
+                name = f"vehicle {node.spec.vehicle_id} {kind} {bind[0]}:{bind[1]}"
+
+                def deliver(link: UdpLink, msgs: list[Any], addr: Any, node=node) -> None:
+                    self.on_messages(node, link, msgs, addr)
+
+                try:
+                    link = await UdpLink.open(
+                        bind, remote, node.impairment, clock.now_s, deliver, name=name
+                    )
+                except OSError as exc:
+                    raise OSError(f"{name}: cannot bind: {exc}") from exc
+                node.links.append(link)
+                self.links.append(link)
+
+    def close_links(self) -> None:
+        """Close every socket."""
+        for link in self.links:
+            link.close()
+
+    async def run(self, clock: Clock, stop: asyncio.Event, stats: RunStats | None = None) -> None:
+        """Pace ``advance_to`` with ``clock`` until ``stop`` is set."""
+        stats = stats if stats is not None else RunStats()
+        offset_s = 0.0  # simulated time dropped after falling too far behind
+        next_tick = clock.now_s()
+        for node in self.nodes:
+            node.statustext(
+                Severity.INFO,
+                f"vehicle-emu {node.spec.vehicle_id} ready, {node.autopilot.mode_name}",
+            )
+        while not stop.is_set():
+            now = clock.now_s()
+            stats.record(max(0.0, now - next_tick))
+            target = now - offset_s
+            if target - self.now_s > MAX_CATCHUP_S:
+                skip = target - self.now_s - MAX_CATCHUP_S
+                offset_s += skip
+                stats.dropped_s += skip
+                target -= skip
+            self.advance_to(target)
+            next_tick += self.tick_s
+            if next_tick < clock.now_s():
+                next_tick = clock.now_s()
+            await clock.sleep_until(next_tick)
+
+    async def run_lockstep(
+        self, clock: Clock, stop: asyncio.Event, stats: RunStats | None = None
+    ) -> None:
+        """Lockstep with the ground station: while any vehicle is armed in OFFBOARD, simulated
+        time advances one tick only when every such vehicle has received a new setpoint (the
+        GCS's control period drives the simulation, however slow or fast it runs); when no
+        vehicle is in OFFBOARD, or no setpoint comes within LOCKSTEP_TIMEOUT_S of wall time (a
+        silent GCS), time follows ``clock`` so that heartbeats, takeoffs and the offboard-loss
+        failsafe still happen."""
+        stats = stats if stats is not None else RunStats()
+        self._setpoint_event = asyncio.Event()
+        seen = [node.setpoints_taken for node in self.nodes]
+        t_last = clock.now_s()
+        for node in self.nodes:
+            node.statustext(Severity.INFO, f"vehicle-emu {node.spec.vehicle_id} ready, lockstep")
+        while not stop.is_set():
+            driving = [
+                n
+                for n in self.nodes
+                if n.autopilot.armed and n.autopilot.nav_state is NavState.OFFBOARD
+            ]
+            step = self.tick_s
+            if driving:
+                deadline = clock.now_s() + LOCKSTEP_TIMEOUT_S
+                while not all(n.setpoints_taken > seen[n.index] for n in driving):
+                    self._setpoint_event.clear()
+                    left = deadline - clock.now_s()
+                    if left <= 0 or stop.is_set():
+                        stats.lockstep_timeouts += 1
+                        step = max(self.tick_s, min(clock.now_s() - t_last, 1.0))
+                        break
+                    try:
+                        await asyncio.wait_for(self._setpoint_event.wait(), left)
+                    except TimeoutError:
+                        continue
+                seen = [node.setpoints_taken for node in self.nodes]
+            else:
+                await clock.sleep_until(t_last + self.tick_s)
+                step = max(self.tick_s, min(clock.now_s() - t_last, MAX_CATCHUP_S))
+            t_last = clock.now_s()
+            stats.record(0.0)
+            self.advance_to(self.now_s + step)
+            await asyncio.sleep(0)

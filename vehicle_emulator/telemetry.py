@@ -1,0 +1,368 @@
+"""Telemetry scheduler: which message is due for which vehicle, built and framed in batches.
+
+Rates are PX4's onboard-link defaults (spec/mavlink.md), per vehicle and message, changeable with
+MAV_CMD_SET_MESSAGE_INTERVAL. Each ``collect`` builds every due message type for all vehicles at
+once from the fleet arrays (NED/FRD via frames.py), frames them with ``BatchEncoder`` and returns
+one byte string per vehicle (PX4 also packs several messages into one UDP datagram).
+Pure: time is an argument; noise comes from an injected numpy Generator.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numba import njit
+
+from vehicle_emulator import frames
+from vehicle_emulator.codec import BatchEncoder, mavlink
+from vehicle_emulator.plant import FleetPlant
+
+__all__ = ["DEFAULT_RATES_HZ", "FleetStatus", "Telemetry", "HOME_LAT_DEG", "HOME_LON_DEG"]
+
+DEFAULT_RATES_HZ: dict[str, float] = {
+    "HEARTBEAT": 1.0,
+    "ATTITUDE": 100.0,
+    "ATTITUDE_QUATERNION": 50.0,
+    "LOCAL_POSITION_NED": 30.0,
+    "ODOMETRY": 30.0,
+    "HIGHRES_IMU": 50.0,
+    "GLOBAL_POSITION_INT": 50.0,
+    "ATTITUDE_TARGET": 10.0,
+    "EXTENDED_SYS_STATE": 5.0,
+    "SYS_STATUS": 5.0,
+    "TIMESYNC": 10.0,
+    "BATTERY_STATUS": 0.5,
+}
+# PX4 SITL's default home (Zurich), used for GLOBAL_POSITION_INT / HOME_POSITION.
+HOME_LAT_DEG = 47.397742
+HOME_LON_DEG = 8.545594
+HOME_ALT_M = 488.0
+EARTH_RADIUS_M = 6378137.0
+# Noise standard deviations when EMU_NOISE = 1.
+NOISE_POS_M = 0.01
+NOISE_VEL_MPS = 0.02
+NOISE_ATT_RAD = 0.002
+NOISE_GYRO_RADPS = 0.003
+NOISE_ACC_MPS2 = 0.05
+
+_SENSORS = 0x1 | 0x2 | 0x4 | 0x8 | 0x20 | 0x400 | 0x800 | 0x1000 | 0x8000 | 0x200000
+
+
+@dataclass(slots=True)
+class FleetStatus:
+    """Per-vehicle autopilot status arrays the runner keeps up to date (n,)."""
+
+    sysid: np.ndarray  # uint8
+    armed: np.ndarray  # bool
+    custom_mode: np.ndarray  # uint32
+    base_mode_flags: np.ndarray  # uint8, without SAFETY_ARMED
+    landed_state: np.ndarray  # uint8 MAV_LANDED_STATE
+    noise: np.ndarray  # bool
+    battery_remaining: np.ndarray  # 0..1
+    battery_voltage_v: np.ndarray
+    battery_current_a: np.ndarray
+    errors_comm: np.ndarray  # uint16: rejected input so far
+
+    @classmethod
+    def create(cls, sysids: list[int]) -> FleetStatus:
+        """Defaults for ``len(sysids)`` vehicles."""
+        n = len(sysids)
+        return cls(
+            sysid=np.array(sysids, dtype=np.uint8),
+            armed=np.zeros(n, dtype=bool),
+            custom_mode=np.zeros(n, dtype=np.uint32),
+            base_mode_flags=np.ones(n, dtype=np.uint8),
+            landed_state=np.ones(n, dtype=np.uint8),
+            noise=np.zeros(n, dtype=bool),
+            battery_remaining=np.ones(n),
+            battery_voltage_v=np.full(n, 16.8),
+            battery_current_a=np.zeros(n),
+            errors_comm=np.zeros(n, dtype=np.uint16),
+        )
+
+
+@njit(cache=True)
+def _scatter(out, ln, idx, buf, cursor):
+    """Append frame r of ``out`` to vehicle idx[r]'s region of ``buf`` at ``cursor``."""
+    for r in range(idx.shape[0]):
+        v = idx[r]
+        c = cursor[v]
+        for j in range(ln[r]):
+            buf[c + j] = out[r, j]
+        cursor[v] = c + ln[r]
+
+
+def _msg_class(name: str) -> Any:
+    return getattr(mavlink, f"MAVLink_{name.lower()}_message")
+
+
+class Telemetry:
+    """Per-vehicle, per-message schedule plus batched builders for the whole fleet."""
+
+    def __init__(self, n: int, rng: np.random.Generator, start_s: float = 0.0) -> None:
+        self.names = list(DEFAULT_RATES_HZ)
+        self.index = {name: k for k, name in enumerate(self.names)}
+        self.msgids = {int(_msg_class(nm).id): k for k, nm in enumerate(self.names)}
+        self.n = n
+        self.rng = rng
+        self.default_interval_s = np.array([1.0 / DEFAULT_RATES_HZ[nm] for nm in self.names])
+        self.interval_s = np.tile(self.default_interval_s, (n, 1))
+        # one random phase per vehicle: a vehicle's messages fall on the same ticks (fewer
+        # datagrams), different vehicles' messages do not (an even load)
+        self.next_due_s = start_s + rng.random((n, 1)) * 0.01 + 0.0 * self.interval_s
+        self.encoders = {nm: BatchEncoder(_msg_class(nm)) for nm in self.names}
+        self.seq = np.zeros(n, dtype=np.uint8)
+        self.sent = np.zeros(len(self.names), dtype=np.int64)
+        self._d: dict[str, np.ndarray] | None = None
+        self._builders = {
+            "HEARTBEAT": self._heartbeat,
+            "ATTITUDE": self._attitude,
+            "ATTITUDE_QUATERNION": self._attitude_quaternion,
+            "LOCAL_POSITION_NED": self._local_position,
+            "ODOMETRY": self._odometry,
+            "HIGHRES_IMU": self._highres_imu,
+            "GLOBAL_POSITION_INT": self._global_position,
+            "ATTITUDE_TARGET": self._attitude_target,
+            "EXTENDED_SYS_STATE": self._extended_sys_state,
+            "SYS_STATUS": self._sys_status,
+            "TIMESYNC": self._timesync,
+            "BATTERY_STATUS": self._battery_status,
+        }
+
+    # --- schedule -----------------------------------------------------------------------------
+
+    def set_interval(self, vehicle: int, msgid: int, interval_us: float, now_s: float) -> bool:
+        """MAV_CMD_SET_MESSAGE_INTERVAL semantics: -1 off, 0 default, > 0 period in us.
+        Returns False for a message the emulator does not stream."""
+        k = self.msgids.get(int(msgid))
+        if k is None:
+            return False
+        if interval_us < 0:
+            self.interval_s[vehicle, k] = math.inf
+        elif interval_us == 0:
+            self.interval_s[vehicle, k] = self.default_interval_s[k]
+        else:
+            self.interval_s[vehicle, k] = max(interval_us * 1e-6, 1e-3)
+        self.next_due_s[vehicle, k] = now_s + min(self.interval_s[vehicle, k], 1e9)
+        return True
+
+    def interval_us(self, vehicle: int, msgid: int) -> int:
+        """Current interval of a streamed message (-1 off); KeyError for others."""
+        s = self.interval_s[vehicle, self.msgids[int(msgid)]]
+        return -1 if math.isinf(s) else int(round(s * 1e6))
+
+    def collect(
+        self, now_s: float, plant: FleetPlant, status: FleetStatus, enabled: np.ndarray
+    ) -> dict[int, bytes]:
+        """Frames of every message due at ``now_s``: {vehicle index: datagram bytes}.
+
+        ``enabled`` (n,) bool masks vehicles whose link is up; disabled vehicles' schedules
+        still advance (their messages are lost, as on a dead link)."""
+        due = self.next_due_s <= now_s
+        if not due.any():
+            return {}
+        self._derive(plant, status)
+        chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        per_vehicle = np.zeros(self.n, dtype=np.int64)
+        for k in np.flatnonzero(due.any(axis=0)):
+            idx = np.flatnonzero(due[:, k])
+            nxt = self.next_due_s[idx, k] + self.interval_s[idx, k]
+            self.next_due_s[idx, k] = np.where(nxt <= now_s, now_s + self.interval_s[idx, k], nxt)
+            idx = idx[enabled[idx]]
+            if idx.size == 0:
+                continue
+            name = self.names[k]
+            enc = self.encoders[name]
+            rows = enc.empty(idx.size)
+            self._builders[name](rows, idx, now_s, plant, status)
+            out, ln = enc.encode(rows, idx, status.sysid, self.seq)
+            self.sent[k] += idx.size
+            per_vehicle[idx] += ln
+            chunks.append((idx, out, ln))
+        if not chunks:
+            return {}
+        ends = np.cumsum(per_vehicle)
+        cursor = ends - per_vehicle
+        starts = cursor.copy()
+        buf = np.empty(int(ends[-1]), dtype=np.uint8)
+        for idx, out, ln in chunks:
+            _scatter(out, ln, idx, buf, cursor)
+        data = buf.tobytes()
+        return {int(v): data[starts[v] : ends[v]] for v in np.flatnonzero(per_vehicle).tolist()}
+
+    # --- derived quantities, once per collect --------------------------------------------------
+
+    def _derive(self, plant: FleetPlant, status: FleetStatus) -> None:
+        """NED/FRD views of the whole fleet (numba), plus noise for vehicles with EMU_NOISE."""
+        n = plant.n
+        d = self._d
+        if d is None or d["pos_ned"].shape[0] != n:
+            d = self._d = {
+                "r_ned": np.empty((n, 3, 3)),
+                "q": np.empty((n, 4)),
+                "eul": np.empty((n, 3)),
+                "w_frd": np.empty((n, 3)),
+                "pos_ned": np.empty((n, 3)),
+                "vel_ned": np.empty((n, 3)),
+                "vel_frd": np.empty((n, 3)),
+                "acc_frd": np.empty((n, 3)),
+                "q_sp": np.empty((n, 4)),
+                "rate_sp_frd": np.empty((n, 3)),
+                "yaw_ned": np.empty(n),
+            }
+        noisy = np.flatnonzero(status.noise)
+        if noisy.size:
+            k = noisy.size
+            nz = {
+                "att": self.rng.normal(0.0, NOISE_ATT_RAD, (k, 3)),
+                "gyro": self.rng.normal(0.0, NOISE_GYRO_RADPS, (k, 3)),
+                "pos": self.rng.normal(0.0, NOISE_POS_M, (k, 3)),
+                "vel": self.rng.normal(0.0, NOISE_VEL_MPS, (k, 3)),
+                "acc": self.rng.normal(0.0, NOISE_ACC_MPS2, (k, 3)),
+            }
+        else:
+            nz = {key: np.zeros((0, 3)) for key in ("att", "gyro", "pos", "vel", "acc")}
+        frames.fleet_to_ned_frd(
+            plant.rotation,
+            plant.omega_flu_radps,
+            plant.position_enu_m,
+            plant.velocity_enu_mps,
+            plant.specific_force_flu_mps2,
+            plant.attitude_sp,
+            plant.rate_sp_flu_radps,
+            noisy,
+            nz["att"],
+            nz["gyro"],
+            nz["pos"],
+            nz["vel"],
+            nz["acc"],
+            d["r_ned"],
+            d["q"],
+            d["eul"],
+            d["w_frd"],
+            d["pos_ned"],
+            d["vel_ned"],
+            d["vel_frd"],
+            d["acc_frd"],
+            d["q_sp"],
+            d["rate_sp_frd"],
+            d["yaw_ned"],
+        )
+
+    # --- builders: fill payload rows for vehicles idx ----------------------------------------
+
+    def _heartbeat(self, rows, idx, now_s, plant, status) -> None:
+        armed = status.armed[idx]
+        rows["custom_mode"] = status.custom_mode[idx]
+        rows["type"] = 2  # MAV_TYPE_QUADROTOR
+        rows["autopilot"] = 12  # MAV_AUTOPILOT_PX4
+        rows["base_mode"] = status.base_mode_flags[idx] | np.where(armed, 128, 0).astype(np.uint8)
+        rows["system_status"] = np.where(armed, 4, 3)  # ACTIVE / STANDBY
+        rows["mavlink_version"] = 3
+
+    def _attitude(self, rows, idx, now_s, plant, status) -> None:
+        d = self._d
+        eul, w = d["eul"][idx], d["w_frd"][idx]
+        rows["time_boot_ms"] = int(now_s * 1e3)
+        rows["roll"], rows["pitch"], rows["yaw"] = eul[:, 0], eul[:, 1], eul[:, 2]
+        rows["rollspeed"], rows["pitchspeed"], rows["yawspeed"] = w[:, 0], w[:, 1], w[:, 2]
+
+    def _attitude_quaternion(self, rows, idx, now_s, plant, status) -> None:
+        d = self._d
+        q, w = d["q"][idx], d["w_frd"][idx]
+        rows["time_boot_ms"] = int(now_s * 1e3)
+        rows["q1"], rows["q2"], rows["q3"], rows["q4"] = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+        rows["rollspeed"], rows["pitchspeed"], rows["yawspeed"] = w[:, 0], w[:, 1], w[:, 2]
+
+    def _local_position(self, rows, idx, now_s, plant, status) -> None:
+        d = self._d
+        p, v = d["pos_ned"][idx], d["vel_ned"][idx]
+        rows["time_boot_ms"] = int(now_s * 1e3)
+        rows["x"], rows["y"], rows["z"] = p[:, 0], p[:, 1], p[:, 2]
+        rows["vx"], rows["vy"], rows["vz"] = v[:, 0], v[:, 1], v[:, 2]
+
+    def _odometry(self, rows, idx, now_s, plant, status) -> None:
+        d = self._d
+        p, v, w = d["pos_ned"][idx], d["vel_frd"][idx], d["w_frd"][idx]
+        rows["time_usec"] = int(now_s * 1e6)
+        rows["frame_id"] = 1  # MAV_FRAME_LOCAL_NED
+        rows["child_frame_id"] = 12  # MAV_FRAME_BODY_FRD: the twist is in the body frame
+        rows["x"], rows["y"], rows["z"] = p[:, 0], p[:, 1], p[:, 2]
+        rows["q"] = d["q"][idx]
+        rows["vx"], rows["vy"], rows["vz"] = v[:, 0], v[:, 1], v[:, 2]
+        rows["rollspeed"], rows["pitchspeed"], rows["yawspeed"] = w[:, 0], w[:, 1], w[:, 2]
+        rows["pose_covariance"][:, 0] = np.nan
+        rows["velocity_covariance"][:, 0] = np.nan
+        rows["quality"] = 100
+
+    def _highres_imu(self, rows, idx, now_s, plant, status) -> None:
+        d = self._d
+        acc, w = d["acc_frd"][idx], d["w_frd"][idx]
+        rows["time_usec"] = int(now_s * 1e6)
+        rows["xacc"], rows["yacc"], rows["zacc"] = acc[:, 0], acc[:, 1], acc[:, 2]
+        rows["xgyro"], rows["ygyro"], rows["zgyro"] = w[:, 0], w[:, 1], w[:, 2]
+        z = plant.position_enu_m[idx, 2]
+        rows["abs_pressure"] = 1013.25 * (1.0 - 2.25577e-5 * (HOME_ALT_M + z)) ** 5.25588
+        rows["pressure_alt"] = HOME_ALT_M + z
+        rows["temperature"] = 25.0
+        rows["fields_updated"] = 0x3F | 0x200 | 0x800 | 0x1000
+
+    def _global_position(self, rows, idx, now_s, plant, status) -> None:
+        d = self._d
+        p = d["pos_ned"][idx]
+        v = d["vel_ned"][idx]
+        lat = HOME_LAT_DEG + np.degrees(p[:, 0] / EARTH_RADIUS_M)
+        lon = HOME_LON_DEG + np.degrees(
+            p[:, 1] / (EARTH_RADIUS_M * math.cos(math.radians(HOME_LAT_DEG)))
+        )
+        rows["time_boot_ms"] = int(now_s * 1e3)
+        rows["lat"] = np.round(lat * 1e7)
+        rows["lon"] = np.round(lon * 1e7)
+        rows["alt"] = np.round((HOME_ALT_M - p[:, 2]) * 1e3)
+        rows["relative_alt"] = np.round(-p[:, 2] * 1e3)
+        rows["vx"] = np.round(v[:, 0] * 100)
+        rows["vy"] = np.round(v[:, 1] * 100)
+        rows["vz"] = np.round(v[:, 2] * 100)
+        rows["hdg"] = np.round(np.degrees(d["yaw_ned"][idx]) * 100).astype(np.int64) % 36000
+
+    def _attitude_target(self, rows, idx, now_s, plant, status) -> None:
+        d = self._d
+        w = d["rate_sp_frd"][idx]
+        rows["time_boot_ms"] = int(now_s * 1e3)
+        rows["q"] = d["q_sp"][idx]
+        rows["body_roll_rate"], rows["body_pitch_rate"] = w[:, 0], w[:, 1]
+        rows["body_yaw_rate"] = w[:, 2]
+        rows["thrust"] = plant.thrust_sp_norm[idx]
+
+    def _extended_sys_state(self, rows, idx, now_s, plant, status) -> None:
+        rows["landed_state"] = status.landed_state[idx]
+
+    def _sys_status(self, rows, idx, now_s, plant, status) -> None:
+        rows["onboard_control_sensors_present"] = _SENSORS
+        rows["onboard_control_sensors_enabled"] = _SENSORS
+        rows["onboard_control_sensors_health"] = _SENSORS
+        rows["load"] = 200
+        rows["voltage_battery"] = np.round(status.battery_voltage_v[idx] * 1e3).astype(np.uint16)
+        rows["current_battery"] = np.round(status.battery_current_a[idx] * 100).astype(np.int16)
+        rows["battery_remaining"] = np.round(status.battery_remaining[idx] * 100).astype(np.int8)
+        rows["errors_comm"] = status.errors_comm[idx]
+
+    def _timesync(self, rows, idx, now_s, plant, status) -> None:
+        rows["tc1"] = 0
+        rows["ts1"] = int(now_s * 1e9)
+
+    def _battery_status(self, rows, idx, now_s, plant, status) -> None:
+        rows["current_consumed"] = np.round(plant.charge_used_c[idx] / 3.6).astype(np.int32)
+        rows["energy_consumed"] = -1
+        rows["temperature"] = 32767
+        volts = np.full((idx.size, 10), 65535, dtype=np.uint16)
+        volts[:, 0] = np.round(status.battery_voltage_v[idx] * 1e3).astype(np.uint16)
+        rows["voltages"] = volts
+        rows["current_battery"] = np.round(status.battery_current_a[idx] * 100).astype(np.int16)
+        rows["battery_function"] = 1  # MAV_BATTERY_FUNCTION_ALL
+        rows["type"] = 1  # MAV_BATTERY_TYPE_LIPO
+        rows["battery_remaining"] = np.round(status.battery_remaining[idx] * 100).astype(np.int8)
+        rows["charge_state"] = 1  # MAV_BATTERY_CHARGE_STATE_OK

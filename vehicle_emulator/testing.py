@@ -1,0 +1,275 @@
+"""Test support: start ``vehicle-emu`` as a subprocess on free 127.0.0.1 ports, and a small
+pymavlink client that waits for messages with timeouts (tests never sleep to synchronise).
+
+Used by tests/integration/test_emulator_*.py and usable by other packages' integration tests.
+Every wait raises ``TimeoutError`` naming what it waited for.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import random
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink
+
+__all__ = [
+    "MavClient",
+    "clients_on_port_block",
+    "SetpointStreamer",
+    "custom_main_mode",
+    "custom_sub_mode",
+    "free_udp_port",
+    "hover_thrust",
+    "rates_setpoint",
+    "run_emulator",
+]
+
+GCS_SYSID = 245
+GCS_COMPID = 190
+
+
+def free_udp_port() -> int:
+    """A UDP port on 127.0.0.1 that was free a moment ago (bind to 0, read, close)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@dataclass
+class EmulatorProcess:
+    """A running ``vehicle-emu`` subprocess and the ports it uses."""
+
+    proc: subprocess.Popen
+    bind_port: int
+    remote_port: int
+    log_path: str
+
+    def stop(self, timeout_s: float = 10.0) -> int:
+        """SIGTERM, wait; returns the exit status (kills after the timeout)."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                return self.proc.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout_s)
+                raise
+        return int(self.proc.returncode)
+
+    def log_text(self) -> str:
+        """Everything the emulator wrote to stderr so far."""
+        with open(self.log_path) as fh:
+            return fh.read()
+
+
+@contextlib.contextmanager
+def run_emulator(
+    args: Sequence[str],
+    remote_port: int | None = None,
+    bind_port: int | None = None,
+    log_dir: str = "/tmp",
+) -> Iterator[EmulatorProcess]:
+    """``vehicle-emu ARGS --bind 127.0.0.1:B --remote 127.0.0.1:R`` for the ``with`` body."""
+    bind_port = bind_port or free_udp_port()
+    remote_port = remote_port or free_udp_port()
+    log_path = os.path.join(log_dir, f"vehicle-emu-{bind_port}.log")
+    cmd = [
+        sys.executable,
+        "-m",
+        "vehicle_emulator.cli",
+        *args,
+        "--bind",
+        f"127.0.0.1:{bind_port}",
+        "--remote",
+        f"127.0.0.1:{remote_port}",
+    ]
+    with open(log_path, "w") as log:
+        proc = subprocess.Popen(cmd, stderr=log, stdout=log)
+    emu = EmulatorProcess(proc, bind_port, remote_port, log_path)
+    try:
+        yield emu
+    finally:
+        emu.stop()
+
+
+@dataclass
+class MavClient:
+    """pymavlink UDP client listening on 127.0.0.1:``port`` (the emulator's remote)."""
+
+    port: int
+    target_system: int = 1
+    conn: Any = field(init=False)
+    lock: threading.Lock = field(default_factory=threading.Lock, init=False)
+
+    def __post_init__(self) -> None:
+        self.conn = mavutil.mavlink_connection(
+            f"udpin:127.0.0.1:{self.port}",
+            source_system=GCS_SYSID,
+            source_component=GCS_COMPID,
+            dialect="common",
+        )
+
+    def close(self) -> None:
+        """Close the socket."""
+        self.conn.close()
+
+    def send(self, msg: Any) -> None:
+        """Send a pymavlink message object (thread-safe)."""
+        with self.lock:
+            self.conn.mav.send(msg)
+
+    def recv(self, timeout_s: float) -> Any | None:
+        """Next message or None after the timeout."""
+        return self.conn.recv_match(blocking=True, timeout=timeout_s)
+
+    def wait(
+        self,
+        mtype: str | Sequence[str],
+        timeout_s: float = 5.0,
+        cond: Callable[[Any], bool] | None = None,
+    ) -> Any:
+        """First message of ``mtype`` (satisfying ``cond``) from the target; TimeoutError."""
+        types = {mtype} if isinstance(mtype, str) else set(mtype)
+        deadline = time.monotonic() + timeout_s
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise TimeoutError(f"no {sorted(types)} within {timeout_s} s")
+            m = self.conn.recv_match(blocking=True, timeout=min(left, 0.5))
+            if m is None or m.get_type() not in types:
+                continue
+            if m.get_srcSystem() != self.target_system:
+                continue
+            if cond is None or cond(m):
+                return m
+
+    def collect(self, duration_s: float, mtype: str | Sequence[str] | None = None) -> list[Any]:
+        """Every message (of ``mtype``) from the target for ``duration_s``."""
+        types = None if mtype is None else ({mtype} if isinstance(mtype, str) else set(mtype))
+        out = []
+        deadline = time.monotonic() + duration_s
+        while (left := deadline - time.monotonic()) > 0:
+            m = self.conn.recv_match(blocking=True, timeout=min(left, 0.2))
+            if m is None or m.get_srcSystem() != self.target_system:
+                continue
+            if types is None or m.get_type() in types:
+                out.append(m)
+        return out
+
+    def command(self, command: int, *params: float, timeout_s: float = 5.0) -> int:
+        """COMMAND_LONG; returns the MAV_RESULT of its COMMAND_ACK (TimeoutError if none)."""
+        p = list(params) + [0.0] * (7 - len(params))
+        self.send(mavlink.MAVLink_command_long_message(self.target_system, 1, command, 0, *p))
+        ack = self.wait("COMMAND_ACK", timeout_s, lambda m: m.command == command)
+        return int(ack.result)
+
+    def set_param(self, name: str, value: float, ptype: int = 9, timeout_s: float = 5.0) -> Any:
+        """PARAM_SET; returns the PARAM_VALUE echoed for ``name``."""
+        self.send(
+            mavlink.MAVLink_param_set_message(self.target_system, 1, name.encode(), value, ptype)
+        )
+        return self.wait("PARAM_VALUE", timeout_s, lambda m: m.param_id == name)
+
+    def get_param(self, name: str, timeout_s: float = 5.0) -> Any:
+        """PARAM_REQUEST_READ by name; returns the PARAM_VALUE."""
+        self.send(
+            mavlink.MAVLink_param_request_read_message(self.target_system, 1, name.encode(), -1)
+        )
+        return self.wait("PARAM_VALUE", timeout_s, lambda m: m.param_id == name)
+
+
+class SetpointStreamer:
+    """Background thread sending one setpoint message (a factory) at ``rate_hz``."""
+
+    def __init__(self, client: MavClient, make: Callable[[], Any], rate_hz: float = 50.0):
+        self.client = client
+        self.make = make
+        self.period_s = 1.0 / rate_hz
+        self.sent = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def __enter__(self) -> SetpointStreamer:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def stop(self) -> None:
+        """Stop sending (returns when the thread has ended)."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(5.0)
+
+    def _run(self) -> None:
+        next_t = time.monotonic()
+        while not self._stop.is_set():
+            self.client.send(self.make())
+            self.sent += 1
+            next_t += self.period_s
+            self._stop.wait(max(0.0, next_t - time.monotonic()))
+
+
+def rates_setpoint(
+    target_system: int,
+    roll_frd: float,
+    pitch_frd: float,
+    yaw_frd: float,
+    thrust: float,
+    type_mask: int = 128,
+) -> Any:
+    """SET_ATTITUDE_TARGET with body rates (FRD) + thrust: PX4's type_mask 128."""
+    return mavlink.MAVLink_set_attitude_target_message(
+        0,
+        target_system,
+        1,
+        type_mask,
+        [1.0, 0.0, 0.0, 0.0],
+        roll_frd,
+        pitch_frd,
+        yaw_frd,
+        thrust,
+    )
+
+
+def hover_thrust(mass_kg: float, rotor_thrust_max_n: float) -> float:
+    """Normalised thrust that balances gravity: m g / (4 f_max)."""
+    return mass_kg * 9.81 / (4.0 * rotor_thrust_max_n)
+
+
+def custom_main_mode(custom_mode: int) -> int:
+    """PX4 main mode of a HEARTBEAT custom_mode."""
+    return (custom_mode >> 16) & 0xFF
+
+
+def custom_sub_mode(custom_mode: int) -> int:
+    """PX4 sub mode of a HEARTBEAT custom_mode."""
+    return (custom_mode >> 24) & 0xFF
+
+
+def clients_on_port_block(n: int, attempts: int = 50) -> list[MavClient]:
+    """n MavClients on consecutive free ports (base, base+1, ...), client k for sysid k+1."""
+    rng = random.Random()
+    for _ in range(attempts):
+        base = rng.randrange(20000, 60000 - n)
+        clients: list[MavClient] = []
+        try:
+            for k in range(n):
+                clients.append(MavClient(base + k, target_system=k + 1))
+            return clients
+        except OSError:
+            for c in clients:
+                c.close()
+    raise OSError(f"no block of {n} free UDP ports found in {attempts} attempts")

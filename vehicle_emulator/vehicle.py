@@ -1,0 +1,618 @@
+"""One emulated vehicle's MAVLink behaviour: message handlers, commands, parameters, faults.
+
+``VehicleNode`` glues the pure parts of vehicle ``index`` (autopilot, params, fault schedule,
+link impairment) to the fleet arrays (plant, telemetry status) and to its links. Handlers get
+decoded pymavlink messages and answer through ``Link.send`` (bytes out); they never block, never
+raise on bad input (it is counted, logged and reported by STATUSTEXT), and never see sockets.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from vehicle_emulator import frames
+from vehicle_emulator.autopilot import (
+    ActuatorSetpoint,
+    AttitudeSetpoint,
+    Autopilot,
+    Demand,
+    Idle,
+    MavResult,
+    MotorsOff,
+    NavState,
+    Observation,
+    PositionTarget,
+    RatesSetpoint,
+    Severity,
+)
+from vehicle_emulator.codec import GenericEncoder, mavlink
+from vehicle_emulator.faults import FaultSchedule, LinkImpairment
+from vehicle_emulator.params import ParamError, ParamStore, decode_value, encode_value
+from vehicle_emulator.plant import ControlMode, FleetPlant
+from vehicle_emulator.setpoints import from_actuator_control_target, from_attitude_target
+from vehicle_emulator.team import FaultSpec, VehicleSpec
+from vehicle_emulator.telemetry import (
+    HOME_ALT_M,
+    HOME_LAT_DEG,
+    HOME_LON_DEG,
+    FleetStatus,
+    Telemetry,
+)
+
+log = logging.getLogger(__name__)
+
+__all__ = ["Link", "VehicleNode", "InputCounters"]
+
+COMPID = 1
+REPORT_PERIOD_S = 5.0
+LIMITED_TEXT_PERIOD_S = 1.0
+LIMITED_TEXT_BURST = 5
+PX4_VERSION = (1 << 24) | (14 << 16) | (0 << 8) | 255  # reported as PX4 v1.14.0 release
+# COMMAND_INT | PARAM_ENCODE_BYTEWISE | SET_ATTITUDE_TARGET | SET_ACTUATOR_TARGET | MAVLINK2
+CAPABILITIES = 0x8 | 0x10 | 0x40 | 0x400 | 0x2000
+
+# PX4 base_mode flags per nav state (besides CUSTOM_MODE_ENABLED and SAFETY_ARMED).
+_BASE_FLAGS = {
+    NavState.ALTCTL: 64 | 16,  # MANUAL_INPUT | STABILIZE
+    NavState.POSCTL: 64 | 16 | 8,  # + GUIDED
+    NavState.OFFBOARD: 4 | 16 | 8,  # AUTO | STABILIZE | GUIDED
+}
+
+
+class Link(Protocol):
+    """Where a vehicle's bytes go: one UDP endpoint (server.py) or a test double."""
+
+    name: str
+
+    def send(self, data: bytes, addr: Any = None) -> None:
+        """Queue bytes to ``addr`` (None: the link's current remote). Never blocks."""
+
+
+@dataclass(slots=True)
+class InputCounters:
+    """Per-vehicle counters of input that was not used as is."""
+
+    other_target: int = 0
+    own_echo: int = 0
+    setpoints_rejected: int = 0
+    setpoints_clamped: int = 0
+    unhandled: int = 0
+    params_refused: int = 0
+    last_reject_reason: str = ""
+    reported_total: int = 0
+
+    def total(self, decode_rejected: int) -> int:
+        """Everything suspicious so far (for SYS_STATUS.errors_comm and the reports)."""
+        return (
+            decode_rejected
+            + self.other_target
+            + self.setpoints_rejected
+            + self.setpoints_clamped
+            + self.params_refused
+        )
+
+
+@dataclass(slots=True)
+class VehicleNode:
+    """Vehicle ``index`` of the fleet; see module docstring."""
+
+    index: int
+    spec: VehicleSpec
+    plant: FleetPlant
+    telemetry: Telemetry
+    status: FleetStatus
+    params: ParamStore
+    autopilot: Autopilot
+    faults: FaultSchedule
+    impairment: LinkImpairment
+    encoder: GenericEncoder
+    links: list[Link] = field(default_factory=list)
+    counters: InputCounters = field(default_factory=InputCounters)
+    decode_rejected: int = 0
+    setpoints_taken: int = 0
+    applied_version: int = -1
+    _next_report_s: float = REPORT_PERIOD_S
+    _fault_clock_announced: bool = False
+    _limited_window_end_s: float = 0.0
+    _limited_in_window: int = 0
+    _limited_last: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def sysid(self) -> int:
+        """MAVLink system id."""
+        return self.spec.sysid
+
+    # --- state exchange with the fleet arrays ------------------------------------------------
+
+    def observe(self) -> Observation:
+        """Current observation of this vehicle from the plant arrays."""
+        i, p = self.index, self.plant
+        pos = p.position_enu_m[i]
+        vel = p.velocity_enu_mps[i]
+        return Observation(
+            (float(pos[0]), float(pos[1]), float(pos[2])),
+            (float(vel[0]), float(vel[1]), float(vel[2])),
+            math.atan2(p.rotation[i, 1, 0], p.rotation[i, 0, 0]),
+            bool(p.on_ground[i]),
+            float(self.status.battery_remaining[i]),
+        )
+
+    def apply_demand(self) -> None:
+        """Write the autopilot's demand into the plant arrays (if it changed)."""
+        ap = self.autopilot
+        if ap.demand_version == self.applied_version:
+            return
+        self.applied_version = ap.demand_version
+        write_demand(self.plant, self.index, ap.demand)
+
+    def refresh_status(self, now_s: float) -> None:
+        """Status arrays for telemetry, the battery model and the fault clock parameter."""
+        i, ap, st = self.index, self.autopilot, self.status
+        st.armed[i] = ap.armed
+        st.custom_mode[i] = ap.custom_mode
+        st.base_mode_flags[i] = 1 | _BASE_FLAGS.get(ap.nav_state, 4 | 16 | 8)
+        on_ground = bool(self.plant.on_ground[i])
+        if on_ground:
+            st.landed_state[i] = 1
+        elif ap.nav_state is NavState.AUTO_TAKEOFF:
+            st.landed_state[i] = 3
+        elif ap.nav_state is NavState.AUTO_LAND:
+            st.landed_state[i] = 4
+        else:
+            st.landed_state[i] = 2
+        capacity_c = max(1.0, 3.0 * self.spec.mass_kg) * 3600.0  # 3 Ah per kg of take-off mass
+        remaining = max(0.0, 1.0 - self.plant.charge_used_c[i] / capacity_c)
+        st.battery_remaining[i] = remaining
+        st.battery_voltage_v[i] = 13.2 + 3.6 * remaining
+        st.battery_current_a[i] = (0.5 + 0.8 * self.plant.thrust_n[i]) if ap.armed else 0.0
+        st.errors_comm[i] = min(self.counters.total(self.decode_rejected), 65535)
+        clock = self.faults.clock_s(now_s, ap.first_offboard_s)
+        self.params.set("EMU_FLT_CLK", -1.0 if clock is None else min(clock, 1e9), force=True)
+        if clock is not None and not self._fault_clock_announced:
+            self._fault_clock_announced = True
+            t = self.params["EMU_MDROP_T"]
+            plan = f", mass drop at {t:.1f} s" if t >= 0 else ""
+            self.statustext(Severity.INFO, f"Fault clock started{plan}")
+
+    # --- outputs -------------------------------------------------------------------------------
+
+    def send_all(self, data: bytes) -> None:
+        """Bytes to every link's current remote."""
+        for link in self.links:
+            link.send(data)
+
+    def send_msg(self, msg: Any, link: Link | None = None, addr: Any = None) -> None:
+        """Pack a pymavlink message; to (link, addr) or to all links."""
+        data = self.encoder.pack(msg)
+        if link is None:
+            self.send_all(data)
+        else:
+            link.send(data, addr)
+
+    def statustext(self, severity: Severity, text: str) -> None:
+        """STATUSTEXT (50 characters max) to all links, and the log."""
+        log.info("vehicle %d (sysid %d): %s", self.spec.vehicle_id, self.sysid, text)
+        self.send_msg(mavlink.MAVLink_statustext_message(int(severity), text.encode()[:50], 0, 0))
+
+    def statustext_limited(self, now_s: float, severity: Severity, text: str) -> bool:
+        """STATUSTEXT for rejected input: the same text at most once per
+        LIMITED_TEXT_PERIOD_S and at most LIMITED_TEXT_BURST texts per period overall (hostile
+        input must not become a flood of replies); the rest go into the periodic report.
+        Returns whether it was sent."""
+        if now_s >= self._limited_window_end_s:
+            self._limited_window_end_s = now_s + LIMITED_TEXT_PERIOD_S
+            self._limited_in_window = 0
+            self._limited_last = {k: t for k, t in self._limited_last.items() if t > now_s - 1.0}
+        last = self._limited_last.get(text)
+        if (last is not None and now_s - last < LIMITED_TEXT_PERIOD_S) or (
+            self._limited_in_window >= LIMITED_TEXT_BURST
+        ):
+            log.debug("vehicle %d: %s", self.spec.vehicle_id, text)
+            return False
+        self._limited_last[text] = now_s
+        self._limited_in_window += 1
+        self.statustext(severity, text)
+        return True
+
+    def drain_events(self, now_s: float | None = None) -> None:
+        """Autopilot events -> STATUSTEXT (rate limited when ``now_s`` is given: replies to
+        commands, which a flood could repeat)."""
+        events, self.autopilot.events[:] = list(self.autopilot.events), []
+        for severity, text in events:
+            if now_s is None:
+                self.statustext(severity, text)
+            else:
+                self.statustext_limited(now_s, severity, text)
+
+    def report_input(self, now_s: float) -> None:
+        """Every REPORT_PERIOD_S: one STATUSTEXT if rejected/clamped input grew."""
+        if now_s < self._next_report_s:
+            return
+        self._next_report_s = now_s + REPORT_PERIOD_S
+        total = self.counters.total(self.decode_rejected)
+        if total > self.counters.reported_total:
+            new = total - self.counters.reported_total
+            self.counters.reported_total = total
+            why = self.counters.last_reject_reason
+            self.statustext(Severity.WARNING, f"Bad input: {new} msgs ({why})"[:50])
+
+    # --- faults ------------------------------------------------------------------------------
+
+    def apply_faults(self, now_s: float) -> None:
+        """Fire the scheduled faults that are due on the fault clock."""
+        clock = self.faults.clock_s(now_s, self.autopilot.first_offboard_s)
+        for f in self.faults.due(clock):
+            self.apply_fault(now_s, f, clock)
+
+    def apply_fault(self, now_s: float, f: FaultSpec, clock: float | None) -> None:
+        """Apply one fault now."""
+        i = self.index
+        at = "" if clock is None else f" at {clock:.3f} s"
+        if f.kind == "mass_drop":
+            before = float(self.plant.mass_kg[i])
+            self.plant.mass_kg[i] = before * (1.0 - f.fraction)
+            self.params.set("EMU_MASS_KG", float(self.plant.mass_kg[i]), force=True)
+            self.statustext(
+                Severity.WARNING,
+                f"Fault: mass {before:.3f}->{self.plant.mass_kg[i]:.3f} kg{at}",
+            )
+        elif f.kind == "link_loss":
+            self.impairment.down_until_s = now_s + f.duration_s
+            self.statustext(Severity.WARNING, f"Fault: link lost for {f.duration_s:.1f} s{at}")
+        elif f.kind == "packet_loss":
+            self.params.set("EMU_PKT_LOSS", f.probability)
+            self.params.set("EMU_LATENCY_MS", f.latency_ms)
+            self._sync_param("EMU_PKT_LOSS")
+            self._sync_param("EMU_LATENCY_MS")
+            self.statustext(
+                Severity.WARNING, f"Fault: loss {f.probability:.2f} +{f.latency_ms:.0f} ms{at}"
+            )
+        elif f.kind == "motor_efficiency":
+            name = f"EMU_MOT{f.motor}_EFF"
+            self.params.set(name, f.efficiency)
+            self._sync_param(name)
+            self.statustext(Severity.WARNING, f"Fault: motor {f.motor} eff {f.efficiency:.2f}{at}")
+
+    def _sync_param(self, name: str) -> None:
+        """Side effects of a parameter value on the arrays and the link."""
+        i, v = self.index, self.params[name]
+        if name.startswith("EMU_MOT") and name.endswith("_EFF"):
+            self.plant.rotor_efficiency[i, int(name[7]) - 1] = v
+        elif name == "EMU_MOT_TAU":
+            self.plant.motor_time_constant_s[i] = v
+        elif name == "EMU_NOISE":
+            self.status.noise[i] = bool(v)
+        elif name == "EMU_PKT_LOSS":
+            self.impairment.loss_probability = v
+        elif name == "EMU_LATENCY_MS":
+            self.impairment.latency_s = v * 1e-3
+        elif name == "EMU_SEED":
+            self.impairment.rng = np.random.default_rng(int(v) + self.index)
+        elif name == "MPC_THR_HOVER":
+            self.plant.hover_thrust_norm[i] = v
+        elif name in ("EMU_MDROP_T", "EMU_MDROP_FRAC"):
+            self.faults.mass_drop_done = False
+
+    def sync_all_params(self) -> None:
+        """Push every parameter's side effect (after start-up overrides)."""
+        for name in self.params.names():
+            self._sync_param(name)
+
+    # --- input ---------------------------------------------------------------------------------
+
+    def _for_me(self, msg: Any) -> bool:
+        ts = getattr(msg, "target_system", 0)
+        tc = getattr(msg, "target_component", 0)
+        if ts not in (0, self.sysid) or tc not in (0, COMPID):
+            self.counters.other_target += 1
+            self.counters.last_reject_reason = f"target {ts}/{tc}"
+            return False
+        return True
+
+    def handle(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
+        """Dispatch one decoded message (never raises for bad content)."""
+        if msg.get_srcSystem() == self.sysid and msg.get_srcComponent() == COMPID:
+            self.counters.own_echo += 1
+            return
+        mid = msg.get_msgId()
+        handler = _HANDLERS.get(mid)
+        if handler is None:
+            self.counters.unhandled += 1
+            return
+        try:
+            handler(self, now_s, msg, link, addr)
+        except Exception:  # a handler bug must not kill the vehicle: count and log it
+            self.counters.unhandled += 1
+            self.counters.last_reject_reason = f"handler error on {msg.get_type()}"
+            log.exception("vehicle %d: error handling %s", self.spec.vehicle_id, msg.get_type())
+        self.apply_demand()
+
+    def _on_attitude_target(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
+        if not self._for_me(msg):
+            return
+        prev = getattr(self.autopilot.setpoint, "thrust_norm", None)
+        d = from_attitude_target(
+            msg.type_mask,
+            msg.q,
+            (msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate),
+            msg.thrust,
+            getattr(msg, "thrust_body", None),
+            prev,
+        )
+        self._take_setpoint(now_s, d)
+
+    def _on_actuator_target(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
+        if not self._for_me(msg):
+            return
+        self._take_setpoint(now_s, from_actuator_control_target(msg.group_mlx, msg.controls))
+
+    def _take_setpoint(self, now_s: float, d: Any) -> None:
+        if d.setpoint is None:
+            self.counters.setpoints_rejected += 1
+            self.counters.last_reject_reason = d.rejected or "setpoint"
+            return
+        self.setpoints_taken += 1
+        if d.clamped:
+            self.counters.setpoints_clamped += 1
+            self.counters.last_reject_reason = "setpoint clamped"
+        self.autopilot.on_setpoint(now_s, d.setpoint)
+
+    def _on_set_mode(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
+        if msg.target_system not in (0, self.sysid):
+            self.counters.other_target += 1
+            return
+        if not msg.base_mode & 1:
+            self.counters.unhandled += 1
+            self.statustext_limited(now_s, Severity.ERROR, "SET_MODE without custom mode")
+            return
+        main, sub = (msg.custom_mode >> 16) & 0xFF, (msg.custom_mode >> 24) & 0xFF
+        result = self.autopilot.set_mode(now_s, self.observe(), main, sub)
+        self._ack(176, result, link, addr, msg)
+        self.drain_events(now_s)
+
+    def _on_command(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
+        if not self._for_me(msg):
+            return
+        p = [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7]
+        if msg.get_msgId() == 75:  # COMMAND_INT: x, y are scaled integers, z a float
+            p[4], p[5] = msg.x * 1e-7, msg.y * 1e-7
+        try:
+            result = self.command(now_s, int(msg.command), p, link, addr)
+        except Exception:  # never leave a command unanswered
+            log.exception("vehicle %d: command %d failed", self.spec.vehicle_id, msg.command)
+            result = MavResult.FAILED
+        self._ack(int(msg.command), result, link, addr, msg)
+        self.drain_events(now_s)
+
+    def _ack(self, command: int, result: MavResult, link: Link, addr: Any, msg: Any) -> None:
+        ack = mavlink.MAVLink_command_ack_message(
+            command, int(result), 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
+        )
+        self.send_msg(ack, link, addr)
+
+    def command(self, now_s: float, cmd: int, p: list[float], link: Link, addr: Any) -> MavResult:
+        """Execute a COMMAND_LONG / COMMAND_INT; returns the MAV_RESULT to acknowledge."""
+        ap, obs = self.autopilot, self.observe()
+        if cmd == 400:  # COMPONENT_ARM_DISARM
+            if p[0] not in (0.0, 1.0):
+                return MavResult.DENIED
+            return ap.arm(now_s, obs, p[0] == 1.0, force=_int(p[1]) in (21196, 2989))
+        if cmd == 176:  # DO_SET_MODE
+            if not _int(p[0]) & 1 or not math.isfinite(p[1]):
+                return MavResult.DENIED
+            return ap.set_mode(now_s, obs, _int(p[1]), _int(p[2]))
+        if cmd == 22:  # NAV_TAKEOFF: param7 altitude AMSL (PX4)
+            alt = p[6] - HOME_ALT_M if math.isfinite(p[6]) else math.nan
+            return ap.takeoff(now_s, obs, alt)
+        if cmd == 21:  # NAV_LAND
+            return ap.land(now_s, obs)
+        if cmd == 511:  # SET_MESSAGE_INTERVAL
+            if not (math.isfinite(p[0]) and math.isfinite(p[1])):
+                return MavResult.DENIED
+            ok = self.telemetry.set_interval(self.index, _int(p[0], -1), p[1], now_s)
+            return MavResult.ACCEPTED if ok else MavResult.UNSUPPORTED
+        if cmd == 510:  # GET_MESSAGE_INTERVAL
+            msgid = _int(p[0], -1)
+            us = (
+                self.telemetry.interval_us(self.index, msgid)
+                if msgid in self.telemetry.msgids
+                else 0
+            )
+            self.send_msg(mavlink.MAVLink_message_interval_message(msgid & 0xFFFF, us), link, addr)
+            return MavResult.ACCEPTED
+        if cmd in (512, 520):  # REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES
+            msgid = 148 if cmd == 520 else _int(p[0], -1)
+            return self._send_requested(now_s, msgid, link, addr)
+        if cmd == 420:  # INJECT_FAILURE
+            return self._inject_failure(now_s, p)
+        return MavResult.UNSUPPORTED
+
+    def _send_requested(self, now_s: float, msgid: int, link: Link, addr: Any) -> MavResult:
+        if msgid == 148:
+            msg = mavlink.MAVLink_autopilot_version_message(
+                CAPABILITIES,
+                PX4_VERSION,
+                0,
+                0,
+                0,
+                [0] * 8,
+                [0] * 8,
+                [0] * 8,
+                0,
+                0,
+                self.sysid,
+                [0] * 18,
+            )
+        elif msgid == 242:
+            home = self.autopilot.home_enu_m
+            lat = HOME_LAT_DEG + math.degrees(home[1] / 6378137.0)
+            lon = HOME_LON_DEG + math.degrees(
+                home[0] / (6378137.0 * math.cos(math.radians(HOME_LAT_DEG)))
+            )
+            ned = frames.enu_to_ned(np.array(home))
+            msg = mavlink.MAVLink_home_position_message(
+                int(lat * 1e7),
+                int(lon * 1e7),
+                int(HOME_ALT_M * 1e3),
+                float(ned[0]),
+                float(ned[1]),
+                float(ned[2]),
+                [1, 0, 0, 0],
+                0,
+                0,
+                0,
+                int(now_s * 1e6),
+            )
+        elif msgid in self.telemetry.msgids:
+            k = self.telemetry.msgids[msgid]
+            self.telemetry.next_due_s[self.index, k] = now_s  # sent on the next tick
+            return MavResult.ACCEPTED
+        else:
+            return MavResult.UNSUPPORTED
+        self.send_msg(msg, link, addr)
+        return MavResult.ACCEPTED
+
+    def _inject_failure(self, now_s: float, p: list[float]) -> MavResult:
+        """MAV_CMD_INJECT_FAILURE: unit 101 motor (instance 1-4, 0 all), 302 MAVLink signal.
+        Types: 0 OK, 1 OFF, 3 SLOW (50% efficiency)."""
+        unit, ftype, inst = _int(p[0], -1), _int(p[1], -1), _int(p[2], 0)
+        if unit == 101 and ftype in (0, 1, 3) and 0 <= inst <= 4:
+            eff = {0: 1.0, 1: 0.0, 3: 0.5}[ftype]
+            for m in [inst] if inst else [1, 2, 3, 4]:
+                self.apply_fault(
+                    now_s, FaultSpec("motor_efficiency", 0, 0.0, motor=m, efficiency=eff), None
+                )
+            return MavResult.ACCEPTED
+        if unit == 302 and ftype in (0, 1):
+            self.impairment.down_until_s = now_s + 3600.0 if ftype == 1 else -1.0
+            return MavResult.ACCEPTED
+        return MavResult.UNSUPPORTED
+
+    def _on_timesync(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
+        if msg.tc1 == 0:
+            self.send_msg(mavlink.MAVLink_timesync_message(int(now_s * 1e9), msg.ts1), link, addr)
+
+    # --- parameters ----------------------------------------------------------------------------
+
+    def _param_msg(self, name: str) -> Any:
+        d = self.params.definition(name)
+        names = self.params.names()
+        return mavlink.MAVLink_param_value_message(
+            name.encode(),
+            encode_value(d.ptype, self.params[name]),
+            int(d.ptype),
+            len(names),
+            names.index(name),
+        )
+
+    def _on_param_request_list(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
+        if not self._for_me(msg):
+            return
+        for name in self.params.names():
+            self.send_msg(self._param_msg(name), link, addr)
+
+    @staticmethod
+    def _param_name(raw: Any) -> str:
+        if isinstance(raw, bytes):
+            raw = raw.decode("ascii", errors="replace")
+        return str(raw).split("\x00", 1)[0]
+
+    def _on_param_request_read(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
+        if not self._for_me(msg):
+            return
+        names = self.params.names()
+        if msg.param_index >= 0:
+            if msg.param_index >= len(names):
+                self._param_refused(now_s, f"no parameter index {msg.param_index}")
+                return
+            name = names[msg.param_index]
+        else:
+            name = self._param_name(msg.param_id)
+            if name not in names:
+                self._param_refused(now_s, f"unknown parameter {name}")
+                return
+        self.send_msg(self._param_msg(name), link, addr)
+
+    def _on_param_set(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
+        if not self._for_me(msg):
+            return
+        name = self._param_name(msg.param_id)
+        try:
+            d = self.params.definition(name)
+            value = decode_value(d.ptype, msg.param_value, msg.param_type)
+            self.params.set(name, value)
+        except ParamError as exc:
+            self._param_refused(now_s, str(exc))
+            if name in self.params.names():  # MAVLink: answer a refused write with the value
+                self.send_msg(self._param_msg(name))
+            return
+        self._sync_param(name)
+        self._param_triggers(now_s, name)
+        self.send_msg(self._param_msg(name))
+
+    def _param_refused(self, now_s: float, text: str) -> None:
+        self.counters.params_refused += 1
+        self.counters.last_reject_reason = text
+        self.statustext_limited(now_s, Severity.ERROR, text)
+
+    def _param_triggers(self, now_s: float, name: str) -> None:
+        v = self.params[name]
+        if name == "EMU_MASS_DROP" and v > 0.0:
+            self.apply_fault(now_s, FaultSpec("mass_drop", 0, 0.0, fraction=v), None)
+        elif name == "EMU_LINK_LOSS" and v > 0.0:
+            self.apply_fault(now_s, FaultSpec("link_loss", 0, 0.0, duration_s=v), None)
+
+
+def _int(x: float, default: int = 0) -> int:
+    """int of a command parameter; ``default`` for NaN/inf (MAVSDK sends NaN for unused)."""
+    return int(x) if math.isfinite(x) and abs(x) < 2**31 else default
+
+
+def write_demand(plant: FleetPlant, i: int, demand: Demand) -> None:
+    """Set vehicle i's control mode and setpoint arrays for an autopilot demand."""
+    prev_mode = int(plant.mode[i])
+    if isinstance(demand, MotorsOff):
+        plant.mode[i] = ControlMode.OFF
+    elif isinstance(demand, Idle):
+        plant.mode[i] = ControlMode.IDLE
+    elif isinstance(demand, PositionTarget):
+        plant.position_sp_enu_m[i] = demand.position_enu_m
+        plant.velocity_ff_enu_mps[i] = demand.velocity_ff_enu_mps
+        plant.position_mask[i] = demand.mask
+        plant.yaw_sp_enu_rad[i] = demand.yaw_enu_rad
+        plant.yaw_rate_ff_radps[i] = 0.0
+        if prev_mode != ControlMode.POSITION:
+            plant.velocity_integral[i] = 0.0
+        plant.mode[i] = ControlMode.POSITION
+    elif isinstance(demand, RatesSetpoint):
+        plant.rate_cmd_flu_radps[i] = demand.rate_flu_radps
+        plant.thrust_cmd_norm[i] = demand.thrust_norm
+        plant.mode[i] = ControlMode.RATES
+    elif isinstance(demand, AttitudeSetpoint):
+        plant.attitude_cmd[i] = demand.rotation_enu_flu
+        plant.yaw_rate_ff_radps[i] = demand.yaw_rate_ff_flu_radps
+        plant.thrust_cmd_norm[i] = demand.thrust_norm
+        plant.mode[i] = ControlMode.ATTITUDE
+    elif isinstance(demand, ActuatorSetpoint):
+        plant.torque_cmd_norm[i] = demand.torque_norm_flu
+        plant.thrust_cmd_norm[i] = demand.thrust_norm
+        plant.mode[i] = ControlMode.ACTUATOR
+
+
+_HANDLERS = {
+    82: VehicleNode._on_attitude_target,
+    139: VehicleNode._on_actuator_target,
+    11: VehicleNode._on_set_mode,
+    76: VehicleNode._on_command,
+    75: VehicleNode._on_command,
+    111: VehicleNode._on_timesync,
+    21: VehicleNode._on_param_request_list,
+    20: VehicleNode._on_param_request_read,
+    23: VehicleNode._on_param_set,
+    0: lambda self, now_s, msg, link, addr: None,  # GCS heartbeat: nothing to do
+}
