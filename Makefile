@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 TEAM ?= configs/square4.yaml
 OUT ?= runs/demo
 
-.PHONY: install test demo bench lint clean
+.PHONY: install test demo sim bench lint clean
 
 $(BIN)/activate: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -16,13 +16,21 @@ $(BIN)/activate: pyproject.toml
 install: $(BIN)/activate
 
 test: install
+	$(BIN)/ruff check gcs vehicle_emulator tests benchmarks
 	$(BIN)/python -m pytest
 
+# The main job: start the emulator fleet, fly the team over MAVLink, stop the emulators.
 demo: install
-	$(BIN)/gcs sim --team $(TEAM) --out $(OUT)
+	$(BIN)/gcs fly --team $(TEAM) --mode rates --out $(OUT) --emulators
+
+# The paper's scenarios in-process (no MAVLink).
+sim: install
+	$(BIN)/gcs sim --team $(TEAM) --out runs/sim
 
 bench: install
-	$(BIN)/python benchmarks/bench_sim.py
+	$(BIN)/python benchmarks/bench_sim.py --write docs/benchmarks.md
+	$(BIN)/python benchmarks/bench_emulator.py
+	$(BIN)/python benchmarks/bench_fly.py
 
 lint: install
 	$(BIN)/ruff check gcs vehicle_emulator tests benchmarks

@@ -45,8 +45,12 @@ def update_section(path: Path, heading: str, body: str) -> None:
     if start is None:
         new = text.rstrip("\n") + "\n\n" + heading + "\n" + body.rstrip("\n") + "\n"
     else:
-        end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
-        new = "\n".join(lines[:start] + [heading] + body.rstrip("\n").splitlines() + [""] + lines[end:])
+        end = next(
+            (i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines)
+        )
+        new = "\n".join(
+            lines[:start] + [heading] + body.rstrip("\n").splitlines() + [""] + lines[end:]
+        )
         new = new.rstrip("\n") + "\n"
     path.write_text(new)
 
@@ -69,8 +73,11 @@ def main() -> int:
         first, median, best, result = timed(team, options, args.repeat)
         steps = result.plant_steps
         rows.append((label, first, median, best, 60.0 / median, 1e6 * median / steps))
-        print(f"{label:48s} first {first:6.2f} s  warm median {median:6.3f} s  best {best:6.3f} s  "
-              f"{60.0 / median:6.0f}x real time  {1e6 * median / steps:5.2f} us/step", flush=True)
+        print(
+            f"{label:48s} first {first:6.2f} s  warm median {median:6.3f} s  best {best:6.3f} s  "
+            f"{60.0 / median:6.0f}x real time  {1e6 * median / steps:5.2f} us/step",
+            flush=True,
+        )
     body = [
         "",
         "Scenario I (`configs/square4.yaml`), 60 s of flight, plant RK4 at 1 kHz, 4 vehicles; "
@@ -81,7 +88,9 @@ def main() -> int:
         "| run | first (s) | warm median (s) | best (s) | x real time | us per plant step |",
         "|---|---|---|---|---|---|",
     ]
-    body += [f"| {r[0]} | {r[1]:.2f} | {r[2]:.3f} | {r[3]:.3f} | {r[4]:.0f} | {r[5]:.2f} |" for r in rows]
+    body += [
+        f"| {r[0]} | {r[1]:.2f} | {r[2]:.3f} | {r[3]:.3f} | {r[4]:.0f} | {r[5]:.2f} |" for r in rows
+    ]
     body += [
         "",
         "Target: 60 s of Scenario I in <= 6 s wall (the plain-numpy reference of the spec needs 69 s).",

@@ -46,13 +46,17 @@ def main() -> int:
     for step in range(60_000):
         t = step * dt
         ref = reference_velocity(t, *ref_args)
-        u, a, s, ve, ph, kap, t_n, mrate = position_stage(p, v, rot, mhat, m, adj, off, ref, gains, True)
+        u, a, s, ve, ph, kap, t_n, mrate = position_stage(
+            p, v, rot, mhat, m, adj, off, ref, gains, True
+        )
         acc_meas = _acceleration(rot, thrust_hold, m, gains.gravity_mps2)
-        du_m, ddu_m = force_derivatives(v, acc_meas, rot, w, u, a, s, ve, ph, kap, mhat, mrate,
-                                        1.0 / kap, adj, ref, gains, True)
+        du_m, ddu_m = force_derivatives(
+            v, acc_meas, rot, w, u, a, s, ve, ph, kap, mhat, mrate, 1.0 / kap, adj, ref, gains, True
+        )
         acc_true = _acceleration(rot, t_n, m, gains.gravity_mps2)
-        du_x, ddu_x = force_derivatives(v, acc_true, rot, w, u, a, s, ve, ph, kap, mhat, mrate,
-                                        1.0 / m, adj, ref, gains, True)
+        du_x, ddu_x = force_derivatives(
+            v, acc_true, rot, w, u, a, s, ve, ph, kap, mhat, mrate, 1.0 / m, adj, ref, gains, True
+        )
         if u_prev is None:
             levant[:, :, 0] = u
         else:
@@ -60,20 +64,32 @@ def main() -> int:
         u_prev = u
         scale1 = np.abs(du_x).max() + 1e-3
         scale2 = np.abs(ddu_x).max() + 1e-3
-        rows.append((t, np.abs(du_m - du_x).max(), np.abs(ddu_m - ddu_x).max(),
-                     np.abs(levant[:, :, 1] - du_x).max(), np.abs(levant[:, :, 2] - ddu_x).max(),
-                     scale1, scale2))
+        rows.append(
+            (
+                t,
+                np.abs(du_m - du_x).max(),
+                np.abs(ddu_m - ddu_x).max(),
+                np.abs(levant[:, :, 1] - du_x).max(),
+                np.abs(levant[:, :, 2] - ddu_x).max(),
+                scale1,
+                scale2,
+            )
+        )
         *_, tau, rrate, _, _, _, _ = attitude_stage(rot, w, u, du_m, ddu_m, rho, gains, True)
         thrust_hold = t_n
         mhat = mhat + dt * mrate
         rho = rho + dt * rrate
         rk4_step(p, v, rot, w, t_n, tau, m, j, dt)
     r = np.array(rows)
-    print("window        | model u' max err | model u'' max err | Levant u' max err | Levant u'' max err | max|u'| | max|u''|")
+    print(
+        "window        | model u' max err | model u'' max err | Levant u' max err | Levant u'' max err | max|u'| | max|u''|"
+    )
     for lo, hi in ((0.0, 0.1), (0.1, 5.0), (5.0, 10.0), (10.0, 60.0)):
         sel = (r[:, 0] >= lo) & (r[:, 0] < hi)
-        print(f"t in [{lo:4.1f},{hi:4.1f}) | {r[sel, 1].max():.2e} | {r[sel, 2].max():.2e} | "
-              f"{r[sel, 3].max():.2e} | {r[sel, 4].max():.2e} | {r[sel, 5].max():.2e} | {r[sel, 6].max():.2e}")
+        print(
+            f"t in [{lo:4.1f},{hi:4.1f}) | {r[sel, 1].max():.2e} | {r[sel, 2].max():.2e} | "
+            f"{r[sel, 3].max():.2e} | {r[sel, 4].max():.2e} | {r[sel, 5].max():.2e} | {r[sel, 6].max():.2e}"
+        )
     return 0
 
 

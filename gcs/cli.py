@@ -1,4 +1,4 @@
-"""The `gcs` command line: sim, check and plot (print lives here, not in the library)."""
+"""The `gcs` command line: sim, fly, check and plot (print lives here, not in the library)."""
 
 from __future__ import annotations
 
@@ -28,19 +28,35 @@ def build_parser() -> argparse.ArgumentParser:
     sim = sub.add_parser("sim", help="simulate the team in-process and write records")
     _add_team(sim)
     sim.add_argument(
-        "--controller", choices=("adaptive", "baseline", "both"), default=None,
+        "--controller",
+        choices=("adaptive", "baseline", "both"),
+        default=None,
         help="law to run (default: the file's); 'both' runs adaptive and baseline and compares",
     )
-    sim.add_argument("--out", type=Path, default=None, help="output directory (default runs/<name>)")
-    sim.add_argument("--mode", choices=("actuators", "rates"), default=None,
-                     help="attitude loop: the paper's torque law or thrust + body rates")
-    sim.add_argument("--derivative", choices=("model", "levant"), default=None,
-                     help="how u', u'' are obtained (default: the file's)")
+    sim.add_argument(
+        "--out", type=Path, default=None, help="output directory (default runs/<name>)"
+    )
+    sim.add_argument(
+        "--mode",
+        choices=("actuators", "rates"),
+        default=None,
+        help="attitude loop: the paper's torque law or thrust + body rates",
+    )
+    sim.add_argument(
+        "--derivative",
+        choices=("model", "levant"),
+        default=None,
+        help="how u', u'' are obtained (default: the file's)",
+    )
     sim.add_argument("--controller-rate-hz", type=float, default=None)
     sim.add_argument("--plant-rate-hz", type=float, default=None)
     sim.add_argument("--duration-s", type=float, default=None)
     sim.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     sim.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    from gcs.fly.command import add_parser as add_fly_parser
+
+    add_fly_parser(sub)
 
     check = sub.add_parser("check", help="validate a team config and print what it says")
     _add_team(check)
@@ -62,6 +78,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             from gcs.sim.command import run_sim
 
             return run_sim(args)
+        if args.command == "fly":
+            from gcs.fly.command import run_fly
+
+            return run_fly(args)
         if args.command == "plot":
             from gcs.sim.command import run_plot
 

@@ -27,6 +27,8 @@ LAWS = ("adaptive", "baseline")
 MODES = ("rates", "actuators")
 DERIVATIVE_METHODS = ("model", "levant")
 FAULT_KINDS = ("mass_drop", "link_loss", "packet_loss", "motor_efficiency")
+FLY_ACTIONS = ("land", "hold")  # what `gcs fly` tells vehicles to do when it stops flying them
+FLY_STARTS = ("auto", "in_air", "takeoff")
 
 Vec3 = tuple[float, float, float]
 ZERO3: Vec3 = (0.0, 0.0, 0.0)
@@ -324,6 +326,50 @@ Fault = FaultConfig | LinkLossFault | PacketLossFault | MotorEfficiencyFault
 
 
 @dataclass(frozen=True, slots=True)
+class FlyModeConfig:
+    """`gcs fly` settings of one control mode: the tick rate over the link and, where the paper's
+    attitude gains are not stable at that rate (spec section 9), the gains flown instead."""
+
+    tick_rate_hz: float
+    alpha_eps: float | None = None  # None: controller.gains.alpha_eps (actuators mode)
+    alpha_omega: float | None = None  # None: controller.gains.alpha_omega (actuators mode)
+    max_rate_radps: float = 1.0  # rates mode: norm limit of the body-rate command
+
+
+@dataclass(frozen=True, slots=True)
+class GeofenceConfig:
+    """Axis-aligned box in the world ENU frame [m]; checked during the formation phase."""
+
+    min_enu_m: Vec3
+    max_enu_m: Vec3
+
+
+@dataclass(frozen=True, slots=True)
+class FlyConfig:
+    """The `fly:` section: flight sequence, safety rules and link timing of `gcs fly`."""
+
+    rates: FlyModeConfig = FlyModeConfig(100.0)
+    actuators: FlyModeConfig = FlyModeConfig(250.0)
+    start: str = "auto"  # auto: take off the vehicles that report being on the ground
+    takeoff_altitude_m: float = 2.5  # above home
+    end_action: str = "land"  # after the formation phase
+    abort_action: str = "land"  # Ctrl-C, abort key, geofence, failed check
+    link_loss_action: str = "hold"  # the other vehicles when one link is lost
+    stale_after_s: float = 0.1  # telemetry older than this is stale (see docs/gcs.md)
+    link_lost_after_s: float = 0.5  # a vehicle silent this long is lost
+    max_tilt_rad: float = 1.0  # abort above this tilt (formation phase)
+    geofence: GeofenceConfig | None = None
+    log_rate_hz: float = 50.0  # time-series samples; must divide every mode's tick rate
+    connect_timeout_s: float = 10.0
+    takeoff_timeout_s: float = 60.0
+    land_timeout_s: float = 120.0
+
+    def mode(self, name: str) -> FlyModeConfig:
+        """The settings of control mode `name` ('rates' or 'actuators')."""
+        return self.rates if name == "rates" else self.actuators
+
+
+@dataclass(frozen=True, slots=True)
 class TeamConfig:
     name: str
     source_path: str
@@ -334,6 +380,7 @@ class TeamConfig:
     sim: SimConfig
     vehicles: tuple[VehicleConfig, ...]
     faults: tuple[Fault, ...] = ()
+    fly: FlyConfig = FlyConfig()
 
     @property
     def n(self) -> int:
@@ -733,7 +780,10 @@ def _axis(node: _Node) -> AxisReference:
 
 
 def _vehicle(node: _Node, gains: Gains) -> VehicleConfig:
-    node.keys("id sysid offset_enu_m initial estimates airframe", "link plant nominal_mass_kg nominal_inertia_kgm2")
+    node.keys(
+        "id sysid offset_enu_m initial estimates airframe",
+        "link plant nominal_mass_kg nominal_inertia_kgm2",
+    )
     vehicle_id = node.child("id").integer(ge=1)
     sysid = node.child("sysid").integer(ge=1, le=255)
     ini = node.child("initial").keys(
@@ -918,8 +968,76 @@ _FAULT_KINDS: dict[str, tuple[type, str, str, Callable[[_Node], tuple[Any, ...]]
 }
 
 
+def _fly_mode(node: _Node, default: FlyModeConfig) -> FlyModeConfig:
+    if node.absent:
+        return default
+    node.keys("", "tick_rate_hz alpha_eps alpha_omega max_rate_radps")
+    return FlyModeConfig(
+        node.child("tick_rate_hz").number(default.tick_rate_hz, gt=0.0, le=1000.0),
+        node.child("alpha_eps").number(None, gt=0.0),
+        node.child("alpha_omega").number(None, gt=0.0),
+        node.child("max_rate_radps").number(default.max_rate_radps, gt=0.0),
+    )
+
+
+def _fly(node: _Node) -> FlyConfig:
+    """The optional `fly:` section (every key optional; see docs/configuration.md)."""
+    d = FlyConfig()
+    if node.absent:
+        return d
+    node.keys(
+        "",
+        "rates actuators start takeoff_altitude_m end_action abort_action link_loss_action "
+        "stale_after_s link_lost_after_s max_tilt_rad geofence log_rate_hz connect_timeout_s "
+        "takeoff_timeout_s land_timeout_s",
+    )
+    geofence = None
+    g = node.child("geofence")
+    if not g.absent:
+        g.keys("min_enu_m max_enu_m")
+        geofence = GeofenceConfig(g.child("min_enu_m").vec3(), g.child("max_enu_m").vec3())
+        for k, axis in enumerate("xyz"):
+            if not geofence.min_enu_m[k] < geofence.max_enu_m[k]:
+                g.child("max_enu_m").fail(
+                    f"expected max > min on every axis, got {axis}: min "
+                    f"{geofence.min_enu_m[k]!r} >= max {geofence.max_enu_m[k]!r}"
+                )
+    fly = FlyConfig(
+        rates=_fly_mode(node.child("rates"), d.rates),
+        actuators=_fly_mode(node.child("actuators"), d.actuators),
+        start=node.child("start").string(d.start, FLY_STARTS),
+        takeoff_altitude_m=node.child("takeoff_altitude_m").number(
+            d.takeoff_altitude_m, ge=0.5, le=1000.0
+        ),
+        end_action=node.child("end_action").string(d.end_action, FLY_ACTIONS),
+        abort_action=node.child("abort_action").string(d.abort_action, FLY_ACTIONS),
+        link_loss_action=node.child("link_loss_action").string(d.link_loss_action, FLY_ACTIONS),
+        stale_after_s=node.child("stale_after_s").number(d.stale_after_s, gt=0.0),
+        link_lost_after_s=node.child("link_lost_after_s").number(d.link_lost_after_s, gt=0.0),
+        max_tilt_rad=node.child("max_tilt_rad").number(d.max_tilt_rad, gt=0.0, le=math.pi),
+        geofence=geofence,
+        log_rate_hz=node.child("log_rate_hz").number(d.log_rate_hz, gt=0.0),
+        connect_timeout_s=node.child("connect_timeout_s").number(d.connect_timeout_s, gt=0.0),
+        takeoff_timeout_s=node.child("takeoff_timeout_s").number(d.takeoff_timeout_s, gt=0.0),
+        land_timeout_s=node.child("land_timeout_s").number(d.land_timeout_s, gt=0.0),
+    )
+    if not fly.link_lost_after_s > fly.stale_after_s:
+        node.child("link_lost_after_s").fail(
+            f"expected > stale_after_s {fly.stale_after_s!r}, got {fly.link_lost_after_s!r}"
+        )
+    for name in ("rates", "actuators"):
+        rate = fly.mode(name).tick_rate_hz
+        ratio = rate / fly.log_rate_hz
+        if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-9 * ratio:
+            node.child("log_rate_hz").fail(
+                f"must divide fly.{name}.tick_rate_hz {rate:g} (a whole number of ticks per "
+                f"sample), got {fly.log_rate_hz:g}"
+            )
+    return fly
+
+
 def _team(root: _Node) -> TeamConfig:
-    root.keys("name mission controller reference_velocity graph vehicles", "sim faults")
+    root.keys("name mission controller reference_velocity graph vehicles", "sim faults fly")
     name = root.child("name").string()
     mission = MissionConfig(
         root.child("mission").keys("duration_s").child("duration_s").number(gt=0.0)
@@ -984,8 +1102,10 @@ def _team(root: _Node) -> TeamConfig:
     graph = _graph(root.child("graph"), ids)
 
     faults = [_fault(f, ids, mission.duration_s) for f in root.child("faults").items("faults")]
+    fly = _fly(root.child("fly"))
     return TeamConfig(
-        name, root.source, mission, controller, reference, graph, sim, vehicles, tuple(faults)
+        name, root.source, mission, controller, reference, graph, sim, vehicles, tuple(faults),
+        fly,
     )
 
 

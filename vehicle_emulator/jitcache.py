@@ -35,7 +35,9 @@ def configure() -> None:
     if "NUMBA_CACHE_DIR" in os.environ:
         return
     root = Path(__file__).resolve().parent.parent
-    base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "formation-gcs" / "numba"
+    base = (
+        Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "formation-gcs" / "numba"
+    )
     target = base / source_digest(root)
     try:
         target.mkdir(parents=True, exist_ok=True)

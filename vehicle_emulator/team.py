@@ -223,8 +223,8 @@ def _vehicle(raw: Any, index: int) -> VehicleSpec:
     rpy = (0.0, 0.0, 0.0) if rpy_raw is None else _vec3(rpy_raw, f"{path}.initial.attitude_rpy_rad")
     if rpy[0] != 0.0 or rpy[1] != 0.0:
         raise TeamFileError(
-            f"{path}.initial.attitude_rpy_rad: the emulator starts level; roll and pitch must be 0, "
-            f"got {rpy[0]!r}, {rpy[1]!r}"
+            f"{path}.initial.attitude_rpy_rad: the emulator starts level; roll and pitch "
+            f"must be 0, got {rpy[0]!r}, {rpy[1]!r}"
         )
 
     return VehicleSpec(

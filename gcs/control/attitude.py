@@ -48,7 +48,11 @@ def attitude_errors(
 
 @njit(cache=True)
 def regressor(
-    re: np.ndarray, omega_radps: np.ndarray, wc: np.ndarray, dwc: np.ndarray, we: np.ndarray,
+    re: np.ndarray,
+    omega_radps: np.ndarray,
+    wc: np.ndarray,
+    dwc: np.ndarray,
+    we: np.ndarray,
     wc_body: np.ndarray,
 ) -> np.ndarray:
     """Gamma_i of (19), (n, 3, 3), such that J omega^e' = tau + Gamma rho, rho = (Jx, Jy, Jz).
@@ -81,8 +85,13 @@ def regressor(
 
 @njit(cache=True)
 def adaptive_torque(
-    eps: np.ndarray, tr_err: np.ndarray, we: np.ndarray, gam: np.ndarray, rhohat: np.ndarray,
-    gains: LawGains, adaptive: bool,
+    eps: np.ndarray,
+    tr_err: np.ndarray,
+    we: np.ndarray,
+    gam: np.ndarray,
+    rhohat: np.ndarray,
+    gains: LawGains,
+    adaptive: bool,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Torque (26) [N m, body] and inertia-estimate rate (27), both (n, 3).
 
@@ -95,9 +104,16 @@ def adaptive_torque(
     for i in range(n):
         barrier = 1.0 / (4.0 - tr_err[i])
         for r in range(3):
-            g_rho = gam[i, r, 0] * rhohat[i, 0] + gam[i, r, 1] * rhohat[i, 1] + gam[i, r, 2] * rhohat[i, 2]
+            g_rho = (
+                gam[i, r, 0] * rhohat[i, 0]
+                + gam[i, r, 1] * rhohat[i, 1]
+                + gam[i, r, 2] * rhohat[i, 2]
+            )
             tau[i, r] = (
-                -barrier * eps[i, r] - gains.alpha_eps * eps[i, r] - gains.alpha_omega * we[i, r] - g_rho
+                -barrier * eps[i, r]
+                - gains.alpha_eps * eps[i, r]
+                - gains.alpha_omega * we[i, r]
+                - g_rho
             )
         if adaptive:
             for c in range(3):
@@ -121,8 +137,12 @@ def rate_command(eps: np.ndarray, wc_body: np.ndarray, k_eps: float) -> np.ndarr
 
 @njit(cache=True)
 def attitude_lyapunov(
-    tr_err: np.ndarray, eps: np.ndarray, we: np.ndarray, inertia_kgm2: np.ndarray,
-    rho_error: np.ndarray, gains: LawGains,
+    tr_err: np.ndarray,
+    eps: np.ndarray,
+    we: np.ndarray,
+    inertia_kgm2: np.ndarray,
+    rho_error: np.ndarray,
+    gains: LawGains,
 ) -> np.ndarray:
     """The corrected Lyapunov function (29) per vehicle (analysis and tests; needs the true J):
 

@@ -31,6 +31,13 @@ class LawGains(NamedTuple):
 
 #: The paper's Section V gains (with k_eps for the rates variant).
 PAPER_GAINS = LawGains(
-    c_p=4.0, alpha_p=2.0, alpha_m=1.0, sigma_a=1.0, alpha_eps=32.0, alpha_omega=32.0,
-    c_eps=0.5, alpha_rho=0.5, k_eps=8.0,
+    c_p=4.0,
+    alpha_p=2.0,
+    alpha_m=1.0,
+    sigma_a=1.0,
+    alpha_eps=32.0,
+    alpha_omega=32.0,
+    c_eps=0.5,
+    alpha_rho=0.5,
+    k_eps=8.0,
 )

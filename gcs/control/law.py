@@ -26,16 +26,31 @@ DERIVATIVE_METHODS = {"model": DERIVATIVE_MODEL, "levant": DERIVATIVE_LEVANT}
 
 @njit(cache=True)
 def position_stage(
-    position_m, velocity_mps, rotation, mhat, nominal_mass_kg, adjacency, offsets_m,
-    reference_mps, gains, adaptive,
+    position_m,
+    velocity_mps,
+    rotation,
+    mhat,
+    nominal_mass_kg,
+    adjacency,
+    offsets_m,
+    reference_mps,
+    gains,
+    adaptive,
 ):
     """Command force u (23), thrust T = |u| (12) and mhat' (24) for the team.
 
     Returns (u, a, s, ve, phi, kappa, thrust_n, mhat_rate); mhat_rate is zero for the baseline.
     """
     u, a, s, ve, ph, kappa = force_law(
-        position_m, velocity_mps, mhat, nominal_mass_kg, adjacency, offsets_m, reference_mps,
-        gains, adaptive,
+        position_m,
+        velocity_mps,
+        mhat,
+        nominal_mass_kg,
+        adjacency,
+        offsets_m,
+        reference_mps,
+        gains,
+        adaptive,
     )
     t_n = thrust(u)
     if adaptive:
@@ -117,7 +132,9 @@ class TeamLaw:
     ) -> None:
         n = adjacency.shape[0]
         if derivative not in DERIVATIVE_METHODS:
-            raise ValueError(f"derivative method {derivative!r}: expected one of {sorted(DERIVATIVE_METHODS)}")
+            raise ValueError(
+                f"derivative method {derivative!r}: expected one of {sorted(DERIVATIVE_METHODS)}"
+            )
         self.gains = gains
         self.adjacency = np.ascontiguousarray(adjacency, dtype=float)
         self.offsets_m = np.ascontiguousarray(offsets_m, dtype=float)
@@ -140,14 +157,23 @@ class TeamLaw:
         `reference_mps` (4, 3), then advance the adaptive states by `dt_s` seconds."""
         g = self.gains
         u, a, s, ve, ph, kappa, t_n, mhat_rate = position_stage(
-            meas.position_m, meas.velocity_mps, meas.rotation, self.mhat, self.nominal_mass_kg,
-            self.adjacency, self.offsets_m, reference_mps, g, self.adaptive,
+            meas.position_m,
+            meas.velocity_mps,
+            meas.rotation,
+            self.mhat,
+            self.nominal_mass_kg,
+            self.adjacency,
+            self.offsets_m,
+            reference_mps,
+            g,
+            self.adaptive,
         )
         bad = np.flatnonzero(~is_nonsingular(u))
         if bad.size:
             i = int(bad[0])
             raise SingularCommandError(
-                f"vehicle index {i}: command force {u[i].tolist()} N admits no command attitude (14)"
+                f"vehicle index {i}: command force {u[i].tolist()} N admits no command "
+                "attitude (14)"
             )
         if self.derivative == DERIVATIVE_LEVANT:
             if self._levant is None:
@@ -156,24 +182,48 @@ class TeamLaw:
                 self._u_prev = u
             else:
                 levant_advance(
-                    self._levant, self._u_prev, u, dt_s, self.levant_substep_s, self.levant_lipschitz
+                    self._levant,
+                    self._u_prev,
+                    u,
+                    dt_s,
+                    self.levant_substep_s,
+                    self.levant_lipschitz,
                 )
                 self._u_prev = u
             du = np.ascontiguousarray(self._levant[:, :, 1])
             ddu = np.ascontiguousarray(self._levant[:, :, 2])
         else:
             du, ddu = force_derivatives(
-                meas.velocity_mps, meas.acceleration_mps2, meas.rotation, meas.omega_radps, u, a,
-                s, ve, ph, kappa, self.mhat, mhat_rate, 1.0 / kappa, self.adjacency,
-                reference_mps, g, self.adaptive,
+                meas.velocity_mps,
+                meas.acceleration_mps2,
+                meas.rotation,
+                meas.omega_radps,
+                u,
+                a,
+                s,
+                ve,
+                ph,
+                kappa,
+                self.mhat,
+                mhat_rate,
+                1.0 / kappa,
+                self.adjacency,
+                reference_mps,
+                g,
+                self.adaptive,
             )
         rc, wc, dwc, tau, rho_rate, omega_cmd, eps, tr_err, we = attitude_stage(
             meas.rotation, meas.omega_radps, u, du, ddu, self.rhohat, g, self.adaptive
         )
         command = TeamCommand(
-            thrust_n=t_n, torque_nm=tau, rate_cmd_radps=omega_cmd, force_n=u,
-            mass_estimate_kg=kappa, inertia_estimate_kgm2=self.rhohat.copy(),
-            attitude_error=tr_err, omega_error_radps=np.sqrt((we * we).sum(axis=1)),
+            thrust_n=t_n,
+            torque_nm=tau,
+            rate_cmd_radps=omega_cmd,
+            force_n=u,
+            mass_estimate_kg=kappa,
+            inertia_estimate_kgm2=self.rhohat.copy(),
+            attitude_error=tr_err,
+            omega_error_radps=np.sqrt((we * we).sum(axis=1)),
         )
         self.mhat = self.mhat + dt_s * mhat_rate
         self.rhohat = self.rhohat + dt_s * rho_rate

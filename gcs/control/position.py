@@ -109,7 +109,9 @@ def force_law(
     for i in range(n):
         kappa[i] = gains.alpha_m * mhat[i] / ph[i] if adaptive else nominal_mass_kg[i]
         for k in range(3):
-            a[i, k] = -gains.alpha_p * (sat(s[i, k], sig) + sat(ve[i, k], sig)) + reference_mps[1, k]
+            a[i, k] = (
+                -gains.alpha_p * (sat(s[i, k], sig) + sat(ve[i, k], sig)) + reference_mps[1, k]
+            )
         a[i, 2] += gains.gravity_mps2
         for k in range(3):
             u[i, k] = kappa[i] * a[i, k]
@@ -147,8 +149,7 @@ def mass_estimator_rate(
         zeta_re3 = 0.0
         for k in range(3):
             zeta_re3 += dsat(velocity_mps[i, k], sig) * rotation[i, k, 2]
-        out[i] = (
-            -gains.gravity_mps2 * dsat(velocity_mps[i, 2], sig) * mhat[i] / (3.0 * sig * phi_values[i])
-            + thrust_n[i] * zeta_re3 / (3.0 * sig * gains.alpha_m)
-        )
+        out[i] = -gains.gravity_mps2 * dsat(velocity_mps[i, 2], sig) * mhat[i] / (
+            3.0 * sig * phi_values[i]
+        ) + thrust_n[i] * zeta_re3 / (3.0 * sig * gains.alpha_m)
     return out

@@ -11,21 +11,26 @@ from gcs.config import TeamConfig, load_team
 from gcs.flightlog import FlightLog, load_timeseries, save_timeseries
 from gcs.plots import write_comparison_figures, write_figures
 from gcs.report import build_report, summary_table, write_report
-from gcs.sim.runner import SimOptions, SimulationError, SimResult, simulate
+from gcs.sim.runner import SimOptions, SimResult, SimulationError, simulate
 
 REPORT_NAME = "report.json"
 TIMESERIES_NAME = "timeseries.csv"
 
 
-def _progress_printer(label: str, quiet: bool) -> tuple[Callable[[float, float], None] | None, Callable[[], None]]:
+def _progress_printer(
+    label: str, quiet: bool
+) -> tuple[Callable[[float, float], None] | None, Callable[[], None]]:
     """A rich progress bar on a terminal, nothing otherwise (logs stay clean in CI)."""
     if quiet or not sys.stderr.isatty():
         return None, lambda: None
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
     bar = Progress(
-        TextColumn(f"[bold]{label}"), BarColumn(), TextColumn("{task.completed:.0f}/{task.total:.0f} s"),
-        TimeRemainingColumn(), transient=True,
+        TextColumn(f"[bold]{label}"),
+        BarColumn(),
+        TextColumn("{task.completed:.0f}/{task.total:.0f} s"),
+        TimeRemainingColumn(),
+        transient=True,
     )
     bar.start()
     task = bar.add_task(label, total=1.0)
@@ -57,17 +62,27 @@ def _run_one(team: TeamConfig, options: SimOptions, quiet: bool) -> SimResult:
 def run_sim(args: argparse.Namespace) -> int:
     """Entry of `gcs sim`; returns the process exit status."""
     team = load_team(args.team)
-    laws = ["adaptive", "baseline"] if args.controller == "both" else [args.controller or team.controller.law]
+    laws = (
+        ["adaptive", "baseline"]
+        if args.controller == "both"
+        else [args.controller or team.controller.law]
+    )
     out = args.out if args.out is not None else Path("runs") / team.name
     ignored = [f for f in team.faults if getattr(f, "kind", "") != "mass_drop"]
     for fault in ignored:
-        print(f"gcs sim: note: fault {fault.kind!r} on vehicle {fault.vehicle} acts on the MAVLink "
-              "link or the emulator; the in-process simulation does not apply it", file=sys.stderr)
+        print(
+            f"gcs sim: note: fault {fault.kind!r} on vehicle {fault.vehicle} acts on the MAVLink "
+            "link or the emulator; the in-process simulation does not apply it",
+            file=sys.stderr,
+        )
     logs: dict[str, FlightLog] = {}
     for law in laws:
         options = SimOptions(
-            law=law, mode=args.mode, derivative=args.derivative,
-            controller_rate_hz=args.controller_rate_hz, plant_rate_hz=args.plant_rate_hz,
+            law=law,
+            mode=args.mode,
+            derivative=args.derivative,
+            controller_rate_hz=args.controller_rate_hz,
+            plant_rate_hz=args.plant_rate_hz,
             duration_s=args.duration_s,
         )
         try:
@@ -79,8 +94,10 @@ def run_sim(args: argparse.Namespace) -> int:
         _write_run(result, team, run_dir, figures=not args.no_figures)
         logs[law] = result.log
         print(summary_table(result.log))
-        print(f"  simulated {result.plant_steps / (result.log.extra['plant_rate_hz']):.0f} s in "
-              f"{result.wall_s:.2f} s wall; records in {run_dir}/")
+        print(
+            f"  simulated {result.plant_steps / (result.log.extra['plant_rate_hz']):.0f} s in "
+            f"{result.wall_s:.2f} s wall; records in {run_dir}/"
+        )
         print()
     if len(laws) > 1 and not args.no_figures:
         paths = write_comparison_figures(logs["adaptive"], logs["baseline"], out)
@@ -103,8 +120,10 @@ def run_plot(run_dir: Path, out: Path | None) -> int:
         written += write_figures(baseline, target / "baseline")
         written += write_comparison_figures(adaptive, baseline, target)
     else:
-        print(f"gcs plot: {run_dir} holds no {TIMESERIES_NAME} (nor adaptive/ and baseline/ runs)",
-              file=sys.stderr)
+        print(
+            f"gcs plot: {run_dir} holds no {TIMESERIES_NAME} (nor adaptive/ and baseline/ runs)",
+            file=sys.stderr,
+        )
         return 2
     for path in written:
         print(path)

@@ -29,8 +29,23 @@ MODE_RATES = 1  #: the body-rate command is tracked by an idealised onboard rate
 
 #: Indices of the per-sample log columns written by the kernels (per vehicle).
 LOG_FIELDS = (
-    "px", "py", "pz", "vx", "vy", "vz", "attitude_error", "omega_error", "mass_estimate",
-    "mass_true", "jx", "jy", "jz", "thrust", "ux", "uy", "uz",
+    "px",
+    "py",
+    "pz",
+    "vx",
+    "vy",
+    "vz",
+    "attitude_error",
+    "omega_error",
+    "mass_estimate",
+    "mass_true",
+    "jx",
+    "jy",
+    "jz",
+    "thrust",
+    "ux",
+    "uy",
+    "uz",
 )
 N_LOG = len(LOG_FIELDS)
 
@@ -72,11 +87,43 @@ def _apply_mass_drops(step, drop_step, drop_factor, mass):
 
 @njit(cache=True)
 def run_sampled(
-    first_step, n_steps, dt_s, ctrl_every, log_every,
-    p, v, rot, w, mass, inertia, drop_step, drop_factor,
-    mhat, rhohat, nominal_mass, adjacency, offsets, ref_c, ref_a, ref_w, ref_ph,
-    gains, adaptive, derivative, levant_state, u_prev, levant_l, levant_h,
-    mode, rate_loop_gain, thrust_hold, torque_hold, rate_cmd, diag, log, log_row0,
+    first_step,
+    n_steps,
+    dt_s,
+    ctrl_every,
+    log_every,
+    p,
+    v,
+    rot,
+    w,
+    mass,
+    inertia,
+    drop_step,
+    drop_factor,
+    mhat,
+    rhohat,
+    nominal_mass,
+    adjacency,
+    offsets,
+    ref_c,
+    ref_a,
+    ref_w,
+    ref_ph,
+    gains,
+    adaptive,
+    derivative,
+    levant_state,
+    u_prev,
+    levant_l,
+    levant_h,
+    mode,
+    rate_loop_gain,
+    thrust_hold,
+    torque_hold,
+    rate_cmd,
+    diag,
+    log,
+    log_row0,
 ):
     """Advance plant and law by `n_steps` plant steps from step index `first_step`.
 
@@ -123,8 +170,23 @@ def run_sampled(
                 # Measured acceleration: the plant's specific force under the held thrust.
                 acc = _acceleration(rot, thrust_hold, mass, gains.gravity_mps2)
                 du, ddu = force_derivatives(
-                    v, acc, rot, w, u, a, s, ve, ph, kappa, mhat, mhat_rate, 1.0 / kappa,
-                    adjacency, ref, gains, adaptive,
+                    v,
+                    acc,
+                    rot,
+                    w,
+                    u,
+                    a,
+                    s,
+                    ve,
+                    ph,
+                    kappa,
+                    mhat,
+                    mhat_rate,
+                    1.0 / kappa,
+                    adjacency,
+                    ref,
+                    gains,
+                    adaptive,
                 )
             rc, wc, dwc, tau, rho_rate, omega_cmd, eps, tr_err, we = attitude_stage(
                 rot, w, u, du, ddu, rhohat, gains, adaptive
@@ -142,12 +204,29 @@ def run_sampled(
             for i in range(n):
                 jx, jy, jz = inertia[i, 0], inertia[i, 1], inertia[i, 2]
                 wx, wy, wz = w[i, 0], w[i, 1], w[i, 2]
-                torque_hold[i, 0] = jx * rate_loop_gain * (rate_cmd[i, 0] - wx) + (jz - jy) * wy * wz
-                torque_hold[i, 1] = jy * rate_loop_gain * (rate_cmd[i, 1] - wy) + (jx - jz) * wz * wx
-                torque_hold[i, 2] = jz * rate_loop_gain * (rate_cmd[i, 2] - wz) + (jy - jx) * wx * wy
+                torque_hold[i, 0] = (
+                    jx * rate_loop_gain * (rate_cmd[i, 0] - wx) + (jz - jy) * wy * wz
+                )
+                torque_hold[i, 1] = (
+                    jy * rate_loop_gain * (rate_cmd[i, 1] - wy) + (jx - jz) * wz * wx
+                )
+                torque_hold[i, 2] = (
+                    jz * rate_loop_gain * (rate_cmd[i, 2] - wz) + (jy - jx) * wx * wy
+                )
         if step % log_every == 0:
-            _write_log(log, log_row0 + (step - first_step) // log_every, p, v, tr_err, we, kappa,
-                       mass, rhohat, thrust_hold, u)
+            _write_log(
+                log,
+                log_row0 + (step - first_step) // log_every,
+                p,
+                v,
+                tr_err,
+                we,
+                kappa,
+                mass,
+                rhohat,
+                thrust_hold,
+                u,
+            )
         rk4_step(p, v, rot, w, thrust_hold, torque_hold, mass, inertia, dt_s)
     for i in range(n):
         diag[i, 0] = tr_err[i]
@@ -160,8 +239,24 @@ def run_sampled(
 
 @njit(cache=True)
 def _oracle_rates(
-    t, p, v, rot, w, mhat, rhohat, mass, inertia, nominal_mass, adjacency, offsets,
-    ref_c, ref_a, ref_w, ref_ph, gains, adaptive,
+    t,
+    p,
+    v,
+    rot,
+    w,
+    mhat,
+    rhohat,
+    mass,
+    inertia,
+    nominal_mass,
+    adjacency,
+    offsets,
+    ref_c,
+    ref_a,
+    ref_w,
+    ref_ph,
+    gains,
+    adaptive,
 ):
     """Closed-loop vector field with the exact u', u'' (spec 2.9). Returns the state
     derivatives and the law's diagnostics at this state."""
@@ -171,8 +266,23 @@ def _oracle_rates(
     )
     acc = _acceleration(rot, t_n, mass, gains.gravity_mps2)
     du, ddu = force_derivatives(
-        v, acc, rot, w, u, a, s, ve, ph, kappa, mhat, mhat_rate, 1.0 / mass, adjacency, ref,
-        gains, adaptive,
+        v,
+        acc,
+        rot,
+        w,
+        u,
+        a,
+        s,
+        ve,
+        ph,
+        kappa,
+        mhat,
+        mhat_rate,
+        1.0 / mass,
+        adjacency,
+        ref,
+        gains,
+        adaptive,
     )
     rc, wc, dwc, tau, rho_rate, omega_cmd, eps, tr_err, we = attitude_stage(
         rot, w, u, du, ddu, rhohat, gains, adaptive
@@ -183,10 +293,31 @@ def _oracle_rates(
 
 @njit(cache=True)
 def run_oracle(
-    first_step, n_steps, dt_s, log_every,
-    p, v, rot, w, mass, inertia, drop_step, drop_factor,
-    mhat, rhohat, nominal_mass, adjacency, offsets, ref_c, ref_a, ref_w, ref_ph,
-    gains, adaptive, log, log_row0,
+    first_step,
+    n_steps,
+    dt_s,
+    log_every,
+    p,
+    v,
+    rot,
+    w,
+    mass,
+    inertia,
+    drop_step,
+    drop_factor,
+    mhat,
+    rhohat,
+    nominal_mass,
+    adjacency,
+    offsets,
+    ref_c,
+    ref_a,
+    ref_w,
+    ref_ph,
+    gains,
+    adaptive,
+    log,
+    log_row0,
 ):
     """Classic RK4 on the full closed-loop state (p, v, R, omega, mhat, rhohat) with the law
     evaluated in every stage (exact derivatives, true masses). Returns the minimum u_z."""
@@ -194,21 +325,67 @@ def run_oracle(
     for step in range(first_step, first_step + n_steps):
         _apply_mass_drops(step, drop_step, drop_factor, mass)
         t = step * dt_s
-        args = (mass, inertia, nominal_mass, adjacency, offsets, ref_c, ref_a, ref_w, ref_ph,
-                gains, adaptive)
+        args = (
+            mass,
+            inertia,
+            nominal_mass,
+            adjacency,
+            offsets,
+            ref_c,
+            ref_a,
+            ref_w,
+            ref_ph,
+            gains,
+            adaptive,
+        )
         k1 = _oracle_rates(t, p, v, rot, w, mhat, rhohat, *args)
         for i in range(p.shape[0]):
             min_uz = min(min_uz, k1[6][i, 2])
         if step % log_every == 0:
-            _write_log(log, log_row0 + (step - first_step) // log_every, p, v, k1[9], k1[10],
-                       k1[7], mass, rhohat, k1[8], k1[6])
+            _write_log(
+                log,
+                log_row0 + (step - first_step) // log_every,
+                p,
+                v,
+                k1[9],
+                k1[10],
+                k1[7],
+                mass,
+                rhohat,
+                k1[8],
+                k1[6],
+            )
         h = 0.5 * dt_s
-        k2 = _oracle_rates(t + h, p + h * k1[0], v + h * k1[1], rot + h * k1[2], w + h * k1[3],
-                           mhat + h * k1[4], rhohat + h * k1[5], *args)
-        k3 = _oracle_rates(t + h, p + h * k2[0], v + h * k2[1], rot + h * k2[2], w + h * k2[3],
-                           mhat + h * k2[4], rhohat + h * k2[5], *args)
-        k4 = _oracle_rates(t + dt_s, p + dt_s * k3[0], v + dt_s * k3[1], rot + dt_s * k3[2],
-                           w + dt_s * k3[3], mhat + dt_s * k3[4], rhohat + dt_s * k3[5], *args)
+        k2 = _oracle_rates(
+            t + h,
+            p + h * k1[0],
+            v + h * k1[1],
+            rot + h * k1[2],
+            w + h * k1[3],
+            mhat + h * k1[4],
+            rhohat + h * k1[5],
+            *args,
+        )
+        k3 = _oracle_rates(
+            t + h,
+            p + h * k2[0],
+            v + h * k2[1],
+            rot + h * k2[2],
+            w + h * k2[3],
+            mhat + h * k2[4],
+            rhohat + h * k2[5],
+            *args,
+        )
+        k4 = _oracle_rates(
+            t + dt_s,
+            p + dt_s * k3[0],
+            v + dt_s * k3[1],
+            rot + dt_s * k3[2],
+            w + dt_s * k3[3],
+            mhat + dt_s * k3[4],
+            rhohat + dt_s * k3[5],
+            *args,
+        )
         c = dt_s / 6.0
         p += c * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
         v += c * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])

@@ -56,9 +56,15 @@ class SimulationError(RuntimeError):
 def law_gains(team: TeamConfig) -> LawGains:
     g = team.controller.gains
     return LawGains(
-        c_p=g.c_p, alpha_p=g.alpha_p, alpha_m=g.alpha_m, sigma_a=g.sigma_a,
-        alpha_eps=g.alpha_eps, alpha_omega=g.alpha_omega, c_eps=g.c_eps,
-        alpha_rho=g.alpha_rho, k_eps=g.k_eps,
+        c_p=g.c_p,
+        alpha_p=g.alpha_p,
+        alpha_m=g.alpha_m,
+        sigma_a=g.sigma_a,
+        alpha_eps=g.alpha_eps,
+        alpha_omega=g.alpha_omega,
+        c_eps=g.c_eps,
+        alpha_rho=g.alpha_rho,
+        k_eps=g.k_eps,
     )
 
 
@@ -86,9 +92,13 @@ def simulate(
     if mode not in _MODES:
         raise ConfigError(f"controller mode {mode!r}: expected one of {sorted(_MODES)}")
     if derivative not in DERIVATIVE_METHODS:
-        raise ConfigError(f"derivative method {derivative!r}: expected one of {sorted(DERIVATIVE_METHODS)}")
+        raise ConfigError(
+            f"derivative method {derivative!r}: expected one of {sorted(DERIVATIVE_METHODS)}"
+        )
     if options.oracle and mode != "actuators":
-        raise ConfigError("the verification (oracle) mode runs the paper's torque law: use mode actuators")
+        raise ConfigError(
+            "the verification (oracle) mode runs the paper's torque law: use mode actuators"
+        )
     plant_hz = options.plant_rate_hz or team.sim.plant_rate_hz
     ctrl_hz = options.controller_rate_hz or team.sim.controller_rate_hz
     duration_s = options.duration_s or team.mission.duration_s
@@ -119,8 +129,9 @@ def simulate(
         raise ConfigError("the baseline law needs nominal_mass_kg on every vehicle")
     adjacency = np.ascontiguousarray(team.adjacency(), dtype=float)
     offsets = np.ascontiguousarray(team.offsets_enu_m(), dtype=float)
-    ref_c, ref_a, ref_w, ref_ph = (np.ascontiguousarray(x, dtype=float)
-                                   for x in team.reference_velocity.as_arrays())
+    ref_c, ref_a, ref_w, ref_ph = (
+        np.ascontiguousarray(x, dtype=float) for x in team.reference_velocity.as_arrays()
+    )
     drop_step = np.full(n, -1, dtype=np.int64)
     drop_factor = np.ones(n)
     for fault in team.faults:
@@ -149,19 +160,72 @@ def simulate(
         row0 = done // log_every
         if options.oracle:
             chunk_min = run_oracle(
-                done, count, dt_s, log_every, p, v, rot, w, mass, inertia, drop_step,
-                drop_factor, mhat, rhohat, nominal, adjacency, offsets, ref_c, ref_a, ref_w,
-                ref_ph, gains, adaptive, log, row0,
+                done,
+                count,
+                dt_s,
+                log_every,
+                p,
+                v,
+                rot,
+                w,
+                mass,
+                inertia,
+                drop_step,
+                drop_factor,
+                mhat,
+                rhohat,
+                nominal,
+                adjacency,
+                offsets,
+                ref_c,
+                ref_a,
+                ref_w,
+                ref_ph,
+                gains,
+                adaptive,
+                log,
+                row0,
             )
             singular = 0
         else:
             chunk_min, singular = run_sampled(
-                done, count, dt_s, ctrl_every, log_every, p, v, rot, w, mass, inertia,
-                drop_step, drop_factor, mhat, rhohat, nominal, adjacency, offsets, ref_c, ref_a,
-                ref_w, ref_ph, gains, adaptive, DERIVATIVE_METHODS[derivative], levant_state,
-                u_prev, team.controller.derivative.levant_lipschitz,
-                team.controller.derivative.levant_substep_s, _MODES[mode],
-                options.rate_loop_gain_radps, thrust_hold, torque_hold, rate_cmd, diag, log, row0,
+                done,
+                count,
+                dt_s,
+                ctrl_every,
+                log_every,
+                p,
+                v,
+                rot,
+                w,
+                mass,
+                inertia,
+                drop_step,
+                drop_factor,
+                mhat,
+                rhohat,
+                nominal,
+                adjacency,
+                offsets,
+                ref_c,
+                ref_a,
+                ref_w,
+                ref_ph,
+                gains,
+                adaptive,
+                DERIVATIVE_METHODS[derivative],
+                levant_state,
+                u_prev,
+                team.controller.derivative.levant_lipschitz,
+                team.controller.derivative.levant_substep_s,
+                _MODES[mode],
+                options.rate_loop_gain_radps,
+                thrust_hold,
+                torque_hold,
+                rate_cmd,
+                diag,
+                log,
+                row0,
             )
         min_uz = min(min_uz, chunk_min)
         if singular or not np.isfinite(p).all():
@@ -179,16 +243,16 @@ def simulate(
     c = _COL
     flight = FlightLog(
         t_s=t_s,
-        position_enu_m=log[:, :, c["px"]:c["pz"] + 1],
-        velocity_enu_mps=log[:, :, c["vx"]:c["vz"] + 1],
+        position_enu_m=log[:, :, c["px"] : c["pz"] + 1],
+        velocity_enu_mps=log[:, :, c["vx"] : c["vz"] + 1],
         reference_velocity_enu_mps=ref,
         attitude_error=log[:, :, c["attitude_error"]],
         omega_error_radps=log[:, :, c["omega_error"]],
         mass_estimate_kg=log[:, :, c["mass_estimate"]],
         mass_true_kg=log[:, :, c["mass_true"]],
-        inertia_estimate_kgm2=log[:, :, c["jx"]:c["jz"] + 1],
+        inertia_estimate_kgm2=log[:, :, c["jx"] : c["jz"] + 1],
         thrust_n=log[:, :, c["thrust"]],
-        force_enu_n=log[:, :, c["ux"]:c["uz"] + 1],
+        force_enu_n=log[:, :, c["ux"] : c["uz"] + 1],
         vehicle_ids=np.array([vc.id for vc in vehicles]),
         sysids=np.array([vc.sysid for vc in vehicles]),
         offsets_enu_m=offsets,
@@ -196,7 +260,11 @@ def simulate(
         controller=law,
         team=team.source_path,
         name=team.name,
-        extra={"mode": mode, "derivative": "exact (oracle)" if options.oracle else derivative,
-               "plant_rate_hz": plant_hz, "controller_rate_hz": ctrl_hz},
+        extra={
+            "mode": mode,
+            "derivative": "exact (oracle)" if options.oracle else derivative,
+            "plant_rate_hz": plant_hz,
+            "controller_rate_hz": ctrl_hz,
+        },
     )
     return SimResult(log=flight, min_force_z_n=float(min_uz), wall_s=wall_s, plant_steps=n_steps)

@@ -31,7 +31,9 @@ def imported_roots(path: Path) -> set[str]:
 def test_pure_layers_do_no_io(path):
     found = imported_roots(path)
     assert not found & IMPURE, f"{path.name} imports {sorted(found & IMPURE)}"
-    assert not {m for m in found if m.startswith("gcs.")}, f"{path.name} reaches outside gcs.control"
+    assert not {m for m in found if m.startswith("gcs.")}, (
+        f"{path.name} reaches outside gcs.control"
+    )
 
 
 def test_emulator_never_imports_gcs():

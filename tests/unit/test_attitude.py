@@ -100,8 +100,12 @@ def _attitude_only_run(inertia, seconds=6.0, dt=2e-4):
     while t < seconds:
         k1 = rates(t, rot, omega, rhohat)
         values.append(k1[3])
-        k2 = rates(t + dt / 2, rot + dt / 2 * k1[0], omega + dt / 2 * k1[1], rhohat + dt / 2 * k1[2])
-        k3 = rates(t + dt / 2, rot + dt / 2 * k2[0], omega + dt / 2 * k2[1], rhohat + dt / 2 * k2[2])
+        k2 = rates(
+            t + dt / 2, rot + dt / 2 * k1[0], omega + dt / 2 * k1[1], rhohat + dt / 2 * k1[2]
+        )
+        k3 = rates(
+            t + dt / 2, rot + dt / 2 * k2[0], omega + dt / 2 * k2[1], rhohat + dt / 2 * k2[2]
+        )
         k4 = rates(t + dt, rot + dt * k3[0], omega + dt * k3[1], rhohat + dt * k3[2])
         rot = rot + dt / 6 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
         u_, _, vt = np.linalg.svd(rot)
@@ -132,7 +136,9 @@ def test_torque_is_pure_feedback_at_zero_error_and_rate_command_feeds_forward():
     # THEN the torque and the adaptation vanish
     assert np.allclose(tau, 0.0) and np.allclose(rho_rate, 0.0)
     # AND the rate command of a small roll error rotates back (sign) at 2 k_eps
-    small = np.array([[1.0, 0, 0], [0, np.cos(0.01), -np.sin(0.01)], [0, np.sin(0.01), np.cos(0.01)]])
+    small = np.array(
+        [[1.0, 0, 0], [0, np.cos(0.01), -np.sin(0.01)], [0, np.sin(0.01), np.cos(0.01)]]
+    )
     re, eps, tr_err, wc_body, we = attitude_errors(small[None], rot, np.zeros((1, 3)), wc)
     cmd = rate_command(eps, wc_body, PAPER_GAINS.k_eps)
     assert cmd[0, 0] == pytest.approx(-2 * PAPER_GAINS.k_eps * 0.01, rel=1e-3)

@@ -16,7 +16,18 @@ CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
 def test_sim_writes_report_timeseries_and_figures(tmp_path, capsys):
     # GIVEN Scenario I WHEN simulated for 3 s
-    code = main(["sim", "--team", str(CONFIGS / "square4.yaml"), "--out", str(tmp_path), "--duration-s", "3", "--quiet"])
+    code = main(
+        [
+            "sim",
+            "--team",
+            str(CONFIGS / "square4.yaml"),
+            "--out",
+            str(tmp_path),
+            "--duration-s",
+            "3",
+            "--quiet",
+        ]
+    )
     # THEN it succeeds, prints the summary and writes the records
     assert code == 0
     out = capsys.readouterr().out
@@ -32,11 +43,25 @@ def test_sim_writes_report_timeseries_and_figures(tmp_path, capsys):
 
 def test_sim_both_controllers_writes_the_comparison_and_plot_redraws_it(tmp_path, capsys):
     # GIVEN the mass-drop scenario, both laws, 2 s
-    code = main(["sim", "--team", str(CONFIGS / "square4_massdrop.yaml"), "--controller", "both",
-                 "--out", str(tmp_path / "run"), "--duration-s", "2", "--quiet"])
+    code = main(
+        [
+            "sim",
+            "--team",
+            str(CONFIGS / "square4_massdrop.yaml"),
+            "--controller",
+            "both",
+            "--out",
+            str(tmp_path / "run"),
+            "--duration-s",
+            "2",
+            "--quiet",
+        ]
+    )
     assert code == 0
     for part in ("adaptive", "baseline"):
-        assert json.loads((tmp_path / "run" / part / "report.json").read_text())["controller"] == part
+        assert (
+            json.loads((tmp_path / "run" / part / "report.json").read_text())["controller"] == part
+        )
     assert (tmp_path / "run" / "fig8_adaptive_z.png").is_file()
     assert (tmp_path / "run" / "fig9_baseline_z.png").is_file()
     # WHEN the figures are redrawn elsewhere from the time series alone
@@ -60,11 +85,18 @@ def test_check_prints_what_it_understood(capsys):
 
 def test_bad_config_is_one_clear_line_and_exit_2(tmp_path, capsys):
     # GIVEN a config with a negative mass
-    text = (CONFIGS / "square4.yaml").read_text().replace("      mass_kg: 0.35", "      mass_kg: -0.35", 1)
+    text = (
+        (CONFIGS / "square4.yaml")
+        .read_text()
+        .replace("      mass_kg: 0.35", "      mass_kg: -0.35", 1)
+    )
     bad = tmp_path / "bad.yaml"
     bad.write_text(text)
     # WHEN checked or simulated THEN the command fails with one line naming the key path
-    for argv in (["check", "--team", str(bad)], ["sim", "--team", str(bad), "--out", str(tmp_path)]):
+    for argv in (
+        ["check", "--team", str(bad)],
+        ["sim", "--team", str(bad), "--out", str(tmp_path)],
+    ):
         assert main(argv) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1

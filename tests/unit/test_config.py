@@ -266,7 +266,7 @@ ERRORS = [
         "nmae",
         "x",
         r"^<dict>: nmae: unknown key; did you mean 'name'\? allowed keys: name, "
-        r"mission, controller, reference_velocity, graph, vehicles, sim, faults$",
+        r"mission, controller, reference_velocity, graph, vehicles, sim, faults, fly$",
     ),
     (
         "vehicles.2.plant.mas_kg",
@@ -492,7 +492,38 @@ ERRORS = [
         r"faults\[0\]\.x: unknown key; allowed keys: kind, vehicle, at_s, fraction",
     ),
     ("faults", {"kind": "mass_drop"}, r"faults: expected a list of faults, got a mapping"),
+    ("fly", [1], r"^<dict>: fly: expected a mapping with keys rates, actuators, start, "),
+    ("fly.rates.tick_hz", 100, r"fly\.rates\.tick_hz: unknown key; did you mean 'tick_rate_hz'"),
+    ("fly.rates.tick_rate_hz", 0, r"fly\.rates\.tick_rate_hz: expected a value in \(0, 1000\], "
+     r"got 0\.0$"),
+    ("fly.actuators.alpha_omega", -3, r"fly\.actuators\.alpha_omega: expected > 0, got -3\.0"),
+    ("fly.end_action", "crash",
+     r"fly\.end_action: expected one of 'land', 'hold', got string 'crash'"),
+    ("fly.start", "maybe", r"fly\.start: expected one of 'auto', 'in_air', 'takeoff'"),
+    ("fly.link_lost_after_s", 0.05, r"fly\.link_lost_after_s: expected > stale_after_s 0\.1, "
+     r"got 0\.05$"),
+    ("fly.geofence", {"min_enu_m": [0, 0, 5], "max_enu_m": [1, 1, 5]},
+     r"fly\.geofence\.max_enu_m: expected max > min on every axis, got z: min 5\.0 >= max 5\.0"),
+    ("fly.geofence", {"min_enu_m": [0, 0, 5]},
+     r"fly\.geofence\.max_enu_m: required key is missing"),
+    ("fly.log_rate_hz", 30, r"fly\.log_rate_hz: must divide fly\.rates\.tick_rate_hz 100 \(a "
+     r"whole number of ticks per sample\), got 30$"),
 ]
+
+
+def test_fly_section_is_optional_and_defaults_are_documented():
+    # GIVEN no fly section THEN the documented defaults
+    data = base()
+    data.pop("fly", None)
+    fly = team_from_dict(data).fly
+    assert (fly.rates.tick_rate_hz, fly.actuators.tick_rate_hz) == (100.0, 250.0)
+    assert fly.rates.max_rate_radps == 1.0 and fly.actuators.alpha_omega is None
+    assert (fly.end_action, fly.abort_action, fly.link_loss_action) == ("land", "land", "hold")
+    assert fly.geofence is None and fly.stale_after_s == 0.1 and fly.link_lost_after_s == 0.5
+    # AND the shipped file flies the criterion's torque gains
+    shipped = load_team(SQUARE4).fly
+    assert (shipped.actuators.alpha_eps, shipped.actuators.alpha_omega) == (24.0, 3.0)
+    assert shipped.geofence is not None and shipped.mode("rates") is shipped.rates
 
 
 @pytest.mark.parametrize(("path", "value", "match"), ERRORS, ids=[e[0] for e in ERRORS])

@@ -24,7 +24,9 @@ def _levant_track(signal, d1, d2, t_end, dt, lipschitz, substep):
         levant_advance(state, prev, now, dt, substep, lipschitz)
         prev = now
         t += dt
-        errors.append((t, np.abs(state[0, :, 1] - d1(t)).max(), np.abs(state[0, :, 2] - d2(t)).max()))
+        errors.append(
+            (t, np.abs(state[0, :, 1] - d1(t)).max(), np.abs(state[0, :, 2] - d2(t)).max())
+        )
     return np.array(errors)
 
 
@@ -81,8 +83,12 @@ def _scenario_state():
     rhohat = np.full((4, 3), 0.08)
     adjacency = adjacency_from_edges(4, [(0, 1, 1.0), (1, 2, 1.0), (2, 3, 1.0), (3, 0, 1.0)])
     offsets = np.array([[2.0, 2, 0], [2, -2, 0], [-2, -2, 0], [-2, 2, 0]])
-    ref = (np.zeros(3), np.array([[0.3], [0.3], [0.0]]), np.array([[2 * np.pi / 23], [4 * np.pi / 23], [0.0]]),
-           np.zeros((3, 1)))
+    ref = (
+        np.zeros(3),
+        np.array([[0.3], [0.3], [0.0]]),
+        np.array([[2 * np.pi / 23], [4 * np.pi / 23], [0.0]]),
+        np.zeros((3, 1)),
+    )
     ref_c = np.array([0.0, 0.0, 0.2])
     return p, v, rot, w, mhat, rhohat, masses, inertia, adjacency, offsets, ref_c, ref
 
@@ -99,12 +105,15 @@ def test_exact_force_derivatives_match_finite_differences_along_the_closed_loop(
     def rk4(t, x, h):
         def add(x, k, c):
             return tuple(xi + c * ki for xi, ki in zip(x, k[:6], strict=True))
+
         k1 = rates(t, x)
         k2 = rates(t + h / 2, add(x, k1, h / 2))
         k3 = rates(t + h / 2, add(x, k2, h / 2))
         k4 = rates(t + h, add(x, k3, h))
-        out = tuple(xi + h / 6 * (a + 2 * b + 2 * c + d)
-                    for xi, a, b, c, d in zip(x, k1[:6], k2[:6], k3[:6], k4[:6], strict=True))
+        out = tuple(
+            xi + h / 6 * (a + 2 * b + 2 * c + d)
+            for xi, a, b, c, d in zip(x, k1[:6], k2[:6], k3[:6], k4[:6], strict=True)
+        )
         orthonormalise(out[2])
         return out
 
@@ -134,10 +143,29 @@ def test_exact_force_derivatives_match_finite_differences_along_the_closed_loop(
         t_mid += h / 20
     pm, vm, rm, wm, mh, rh = x_mid
     refm = reference_velocity(t_mid, ref_c, ref[1], ref[2], ref[3])
-    uu, a, s, ve, ph, kappa, t_n, mhat_rate = position_stage(pm, vm, rm, mh, m, adj, off, refm, PAPER_GAINS, adaptive)
+    uu, a, s, ve, ph, kappa, t_n, mhat_rate = position_stage(
+        pm, vm, rm, mh, m, adj, off, refm, PAPER_GAINS, adaptive
+    )
     acc = _acceleration(rm, t_n, m, PAPER_GAINS.gravity_mps2)
-    du, ddu = force_derivatives(vm, acc, rm, wm, uu, a, s, ve, ph, kappa, mh, mhat_rate, 1.0 / m,
-                                adj, refm, PAPER_GAINS, adaptive)
+    du, ddu = force_derivatives(
+        vm,
+        acc,
+        rm,
+        wm,
+        uu,
+        a,
+        s,
+        ve,
+        ph,
+        kappa,
+        mh,
+        mhat_rate,
+        1.0 / m,
+        adj,
+        refm,
+        PAPER_GAINS,
+        adaptive,
+    )
     assert np.allclose(uu, u[2], atol=1e-12)
     assert np.abs(du - du_fd).max() / np.abs(du_fd).max() < 1e-6
     assert np.abs(ddu - ddu_fd).max() / np.abs(ddu_fd).max() < 1e-3

@@ -49,7 +49,10 @@ def test_massdrop_team_file_has_the_scenario_ii_fault():
             {"vehicles": [{"id": 1}], "faults": [{"kind": "mass_drop", "vehicle": 3}]},
             "faults[0].vehicle: no vehicle with id 3",
         ),
-        ({"vehicles": [{"id": 1, "link": {"remote_port": "nowhere"}}]}, "vehicles[0].link.remote_port"),
+        (
+            {"vehicles": [{"id": 1, "link": {"remote_port": "nowhere"}}]},
+            "vehicles[0].link.remote_port",
+        ),
         (
             {"vehicles": [{"id": 1, "initial": {"attitude_rpy_rad": [0.1, 0, 0]}}]},
             "vehicles[0].initial.attitude_rpy_rad: the emulator starts level",
@@ -63,7 +66,11 @@ def test_bad_values_name_the_key_path(raw, message):
 
 def test_defaults_and_tolerance():
     team = parse_team(
-        {"vehicles": [{"id": 3, "extra": "ignored", "link": {"remote_port": 15000, "local_port": 15100}}]}
+        {
+            "vehicles": [
+                {"id": 3, "extra": "ignored", "link": {"remote_port": 15000, "local_port": 15100}}
+            ]
+        }
     )
     v = team.vehicle(3)
     assert v == default_vehicle(3).__class__(**{**_fields(default_vehicle(3)), "link": v.link})

@@ -97,7 +97,9 @@ def test_command_angular_velocity_matches_finite_differences_of_rc(seed):
 
     def omega_closed(t: float) -> tuple[np.ndarray, np.ndarray]:
         uu = u(t)[None, :]
-        wc, dwc = command_angular_velocity(uu, u(t, 1)[None, :], u(t, 2)[None, :], command_attitude(uu))
+        wc, dwc = command_angular_velocity(
+            uu, u(t, 1)[None, :], u(t, 2)[None, :], command_attitude(uu)
+        )
         return wc[0], dwc[0]
 
     worst_w = worst_dw = 0.0

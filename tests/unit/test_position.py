@@ -22,8 +22,13 @@ from gcs.control.position import force_law, mass_estimator_rate, phi, sliding_va
 
 RING = adjacency_from_edges(4, [(0, 1, 1.0), (1, 2, 1.0), (2, 3, 1.0), (3, 0, 1.0)])
 SQUARE = np.array([[2.0, 2, 0], [2, -2, 0], [-2, -2, 0], [-2, 2, 0]])
-REF = reference_velocity(0.7, np.array([0.0, 0, 0.2]), np.array([[0.3], [0.3], [0.0]]),
-                         np.array([[2 * np.pi / 23], [4 * np.pi / 23], [0.0]]), np.zeros((3, 1)))
+REF = reference_velocity(
+    0.7,
+    np.array([0.0, 0, 0.2]),
+    np.array([[0.3], [0.3], [0.0]]),
+    np.array([[2 * np.pi / 23], [4 * np.pi / 23], [0.0]]),
+    np.zeros((3, 1)),
+)
 
 vec = arrays(np.float64, (4, 3), elements=st.floats(-1e3, 1e3, allow_nan=False))
 vel = arrays(np.float64, (4, 3), elements=st.floats(-50, 50, allow_nan=False))
@@ -40,7 +45,11 @@ def test_force_law_is_translation_invariant_bounded_and_finite(p, v, mhat, shift
     np.testing.assert_allclose(u, u2, atol=1e-9 * (1 + np.abs(u).max()))
     # AND it is finite and bounded by kappa (2 alpha_p sqrt3 sigma + g + |v_r'|), kappa < alpha_m mhat
     assert np.isfinite(u).all()
-    bound = PAPER_GAINS.alpha_m * mhat * (2 * PAPER_GAINS.alpha_p * np.sqrt(3) + 9.81 + np.abs(REF[1]).sum())
+    bound = (
+        PAPER_GAINS.alpha_m
+        * mhat
+        * (2 * PAPER_GAINS.alpha_p * np.sqrt(3) + 9.81 + np.abs(REF[1]).sum())
+    )
     assert (np.linalg.norm(u, axis=1) <= bound + 1e-9).all()
     # AND with alpha_p < g/(2 sigma) the vertical component stays positive (the basis of u_z > 0)
     assert (u[:, 2] > 0).all()
@@ -119,9 +128,15 @@ def test_graph_helpers():
 
 
 def test_reference_velocity_derivatives_match_finite_differences():
-    args = (np.array([0.1, 0, 0.2]), np.array([[0.3, 0.1], [0.3, 0.0], [0.0, 0.05]]),
-            np.array([[0.27, 1.3], [0.55, 0.0], [0.0, 2.0]]), np.array([[0.0, 0.4], [0.0, 0.0], [0.0, 1.0]]))
+    args = (
+        np.array([0.1, 0, 0.2]),
+        np.array([[0.3, 0.1], [0.3, 0.0], [0.0, 0.05]]),
+        np.array([[0.27, 1.3], [0.55, 0.0], [0.0, 2.0]]),
+        np.array([[0.0, 0.4], [0.0, 0.0], [0.0, 1.0]]),
+    )
     h = 1e-4
     for order in range(3):
-        fd = (reference_velocity(1.3 + h, *args)[order] - reference_velocity(1.3 - h, *args)[order]) / (2 * h)
+        fd = (
+            reference_velocity(1.3 + h, *args)[order] - reference_velocity(1.3 - h, *args)[order]
+        ) / (2 * h)
         np.testing.assert_allclose(fd, reference_velocity(1.3, *args)[order + 1], atol=1e-6)

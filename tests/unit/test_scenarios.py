@@ -40,12 +40,25 @@ def velocity_error(log) -> np.ndarray:
 
 
 # Spec 4.1: formation error, velocity error (exact derivatives).
-REFERENCE_4_1 = {5: (3.14e-2, 5.59e-2), 10: (1.07e-5, 7.4e-6), 20: (1.02e-5, 7.0e-6),
-                 30: (3.6e-6, 5.5e-6), 60: (9.4e-6, 7.1e-6)}
-REFERENCE_MASS = {1: (0.7741, 1.4322, 0.3827, 3.0964), 2: (0.8305, 1.2546, 0.3602, 3.3282),
-                  5: (0.84964, 1.20091, 0.35043, 3.39500), 10: (0.85, 1.2, 0.35, 3.4)}
-REFERENCE_JHAT_60 = ((0.0535, 0.0587, 0.0801), (0.1483, 0.1160, 0.0806),
-                     (0.1244, 0.1024, 0.0798), (0.1238, 0.1472, 0.0807))
+REFERENCE_4_1 = {
+    5: (3.14e-2, 5.59e-2),
+    10: (1.07e-5, 7.4e-6),
+    20: (1.02e-5, 7.0e-6),
+    30: (3.6e-6, 5.5e-6),
+    60: (9.4e-6, 7.1e-6),
+}
+REFERENCE_MASS = {
+    1: (0.7741, 1.4322, 0.3827, 3.0964),
+    2: (0.8305, 1.2546, 0.3602, 3.3282),
+    5: (0.84964, 1.20091, 0.35043, 3.39500),
+    10: (0.85, 1.2, 0.35, 3.4),
+}
+REFERENCE_JHAT_60 = (
+    (0.0535, 0.0587, 0.0801),
+    (0.1483, 0.1160, 0.0806),
+    (0.1244, 0.1024, 0.0798),
+    (0.1238, 0.1472, 0.0807),
+)
 
 
 def test_verification_mode_reproduces_the_scenario_i_reference_table():
@@ -63,13 +76,19 @@ def test_verification_mode_reproduces_the_scenario_i_reference_table():
     # AND Jhat stays bounded at the reference values (no persistent excitation, spec 4.1)
     np.testing.assert_allclose(log.inertia_estimate_kgm2[-1], REFERENCE_JHAT_60, atol=1e-3)
     # AND the largest attitude errors are at t = 0 (R(0) = I, tilted R^c(0))
-    np.testing.assert_allclose(log.attitude_error.max(axis=0), (0.026, 0.118, 0.173, 0.026), atol=1e-3)
+    np.testing.assert_allclose(
+        log.attitude_error.max(axis=0), (0.026, 0.118, 0.173, 0.026), atol=1e-3
+    )
 
 
 REFERENCE_5_ADAPTIVE_Z = {40: -0.1903, 45: -0.0232, 50: -0.0231, 60: -0.0231, 80: -0.0231}
-REFERENCE_5_BASELINE_Z = {40: (0.1811,) * 4, 45: (2.7309, 2.3456, 2.2172, 2.3456),
-                          50: (5.3006, 4.9151, 4.7866, 4.9151), 60: (10.4398, 10.0544, 9.9259, 10.0544),
-                          80: (20.7184, 20.3330, 20.2045, 20.3330)}
+REFERENCE_5_BASELINE_Z = {
+    40: (0.1811,) * 4,
+    45: (2.7309, 2.3456, 2.2172, 2.3456),
+    50: (5.3006, 4.9151, 4.7866, 4.9151),
+    60: (10.4398, 10.0544, 9.9259, 10.0544),
+    80: (20.7184, 20.3330, 20.2045, 20.3330),
+}
 REFERENCE_5_UAV1_MASS = {40.5: 0.710, 41: 0.648, 42: 0.604, 45: 0.595}
 
 
@@ -79,13 +98,17 @@ def test_verification_mode_reproduces_the_scenario_ii_tables():
     baseline = run("square4_massdrop.yaml", oracle=True, law="baseline")
     # THEN the adaptive team re-forms on a plane 0.167 m higher (spec 5) within 1e-3 m
     for t, z in REFERENCE_5_ADAPTIVE_Z.items():
-        np.testing.assert_allclose(adaptive.position_enu_m[at(adaptive, t), :, 2] - Z_SHIFT_M, z, atol=1e-3)
+        np.testing.assert_allclose(
+            adaptive.position_enu_m[at(adaptive, t), :, 2] - Z_SHIFT_M, z, atol=1e-3
+        )
     for t, m1 in REFERENCE_5_UAV1_MASS.items():
         assert adaptive.mass_estimate_kg[at(adaptive, t), 0] == pytest.approx(m1, abs=1e-3)
     assert formation_error(adaptive)[at(adaptive, 80)] < 1e-4
     # AND the baseline climbs at 0.514 m/s with UAV 1 0.385 m above the others
     for t, z in REFERENCE_5_BASELINE_Z.items():
-        np.testing.assert_allclose(baseline.position_enu_m[at(baseline, t), :, 2] - Z_SHIFT_M, z, atol=1e-3)
+        np.testing.assert_allclose(
+            baseline.position_enu_m[at(baseline, t), :, 2] - Z_SHIFT_M, z, atol=1e-3
+        )
     np.testing.assert_allclose(baseline.velocity_enu_mps[at(baseline, 60), :, 2], 0.5139, atol=1e-3)
 
 
@@ -97,7 +120,9 @@ def test_default_sim_meets_the_scenario_i_acceptance_bounds():
     assert fe[at(log, 5)] <= 0.1
     assert fe[at(log, 20)] <= 1e-3 and fe[at(log, 60)] <= 1e-3
     assert ve[at(log, 60)] <= 1e-3
-    np.testing.assert_allclose(log.mass_estimate_kg[at(log, 10)], log.mass_true_kg[at(log, 10)], atol=1e-3)
+    np.testing.assert_allclose(
+        log.mass_estimate_kg[at(log, 10)], log.mass_true_kg[at(log, 10)], atol=1e-3
+    )
     # AND the command force keeps u_z > 0 (the condition of (14))
     assert log.force_enu_n[..., 2].min() > 0.0
 
@@ -111,7 +136,10 @@ def test_default_sim_meets_the_scenario_ii_acceptance_bounds():
     assert formation_error(adaptive)[at(adaptive, 60)] <= 0.01
     # AND the baseline keeps climbing
     assert np.abs(baseline.velocity_enu_mps[at(baseline, 60), :, 2]).min() >= 0.4
-    gained = baseline.position_enu_m[at(baseline, 80), :, 2] - baseline.position_enu_m[at(baseline, 40), :, 2]
+    gained = (
+        baseline.position_enu_m[at(baseline, 80), :, 2]
+        - baseline.position_enu_m[at(baseline, 40), :, 2]
+    )
     assert gained.min() >= 15.0
 
 
@@ -140,7 +168,9 @@ def test_levant_differentiator_and_rates_mode_also_converge():
     # GIVEN the thrust + body-rate variant with an idealised autopilot rate loop
     rates = run("square4.yaml", mode="rates", duration_s=30.0)
     assert formation_error(rates)[at(rates, 30)] < 1e-3
-    np.testing.assert_allclose(rates.mass_estimate_kg[at(rates, 20)], rates.mass_true_kg[0], atol=1e-3)
+    np.testing.assert_allclose(
+        rates.mass_estimate_kg[at(rates, 20)], rates.mass_true_kg[0], atol=1e-3
+    )
 
 
 def test_slower_controller_rates_still_fly():

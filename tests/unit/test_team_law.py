@@ -19,8 +19,14 @@ CONFIG = Path(__file__).resolve().parents[2] / "configs" / "square4.yaml"
 def fly_with_team_law(team, seconds, derivative="model", rate_hz=1000.0):
     """Closed loop written the way a ground station runs it: measure, TeamLaw.step, hold."""
     gains = law_gains(team)
-    law = TeamLaw(gains, team.adjacency(), team.offsets_enu_m(), team.initial_mhat(),
-                  team.initial_inertia_estimates_kgm2(), derivative=derivative)
+    law = TeamLaw(
+        gains,
+        team.adjacency(),
+        team.offsets_enu_m(),
+        team.initial_mhat(),
+        team.initial_inertia_estimates_kgm2(),
+        derivative=derivative,
+    )
     m, j = team.true_masses_kg(), team.true_inertias_kgm2()
     p = team.initial_positions_enu_m().copy()
     v = np.zeros((team.n, 3))
@@ -67,12 +73,22 @@ def test_singular_command_force_is_refused_with_the_vehicle_named():
     team = load_team(CONFIG)
     mhat = team.initial_mhat().copy()
     mhat[2] = -1.0
-    law = TeamLaw(law_gains(team), team.adjacency(), team.offsets_enu_m(), mhat,
-                  team.initial_inertia_estimates_kgm2())
+    law = TeamLaw(
+        law_gains(team),
+        team.adjacency(),
+        team.offsets_enu_m(),
+        mhat,
+        team.initial_inertia_estimates_kgm2(),
+    )
     offsets = team.offsets_enu_m()
     ref = np.zeros((4, 3))
-    meas = TeamMeasurement(offsets + 10.0, np.zeros((4, 3)), np.zeros((4, 3)),
-                           np.tile(np.eye(3), (4, 1, 1)), np.zeros((4, 3)))
+    meas = TeamMeasurement(
+        offsets + 10.0,
+        np.zeros((4, 3)),
+        np.zeros((4, 3)),
+        np.tile(np.eye(3), (4, 1, 1)),
+        np.zeros((4, 3)),
+    )
     # WHEN the law ticks THEN it refuses, naming the vehicle
     with pytest.raises(SingularCommandError, match="vehicle index 2"):
         law.step(meas, ref, 0.01)
@@ -80,8 +96,13 @@ def test_singular_command_force_is_refused_with_the_vehicle_named():
 
 def test_unknown_derivative_method_and_missing_nominal_masses_are_refused():
     team = load_team(CONFIG)
-    args = (law_gains(team), team.adjacency(), team.offsets_enu_m(), team.initial_mhat(),
-            team.initial_inertia_estimates_kgm2())
+    args = (
+        law_gains(team),
+        team.adjacency(),
+        team.offsets_enu_m(),
+        team.initial_mhat(),
+        team.initial_inertia_estimates_kgm2(),
+    )
     with pytest.raises(ValueError, match="derivative method 'magic'"):
         TeamLaw(*args, derivative="magic")
     with pytest.raises(ValueError, match="baseline law needs nominal masses"):

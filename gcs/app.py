@@ -1,0 +1,622 @@
+"""Composition root of `gcs fly`: links, the mission machine, the fixed-rate control tick, records.
+
+One asyncio event loop owns everything through an `asyncio.TaskGroup`:
+
+* one `VehicleProxy` per vehicle (codec + UDP endpoint + telemetry cache + acked commands),
+* the control tick (`_tick_loop`): absolute deadlines t0 + k h (never `sleep(h)`, so it does not
+  drift), lateness measured; each tick snapshots every vehicle's telemetry as received, steps the
+  pure `MissionMachine`, runs the WHOLE team's law in one vectorised `TeamLaw.step`, and sends
+  each streaming vehicle its setpoint,
+* one task per command the machine asks for (its result goes back to the machine),
+* the live status (gcs/status.py) and, on a terminal, the abort key.
+
+Ctrl-C / SIGTERM / the abort key become `MissionMachine.request_abort`; the machine then lands or
+holds every vehicle and keeps streaming to each until it has left offboard. If the flight code
+itself fails, `_emergency_stop` still sends the abort action to every vehicle before the links
+close. See docs/architecture.md and docs/gcs.md.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import copy
+import logging
+import math
+import os
+import signal
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gcs.config import FLY_ACTIONS, MODES, ConfigError, TeamConfig
+from gcs.control.formation import reference_velocity
+from gcs.control.gains import GRAVITY_MPS2, LawGains
+from gcs.control.law import SingularCommandError, TeamCommand, TeamLaw
+from gcs.flightlog import FlightLog, FlightLogBuilder, save_timeseries
+from gcs.fly.measure import (
+    TeamSample,
+    desaturate_torque,
+    effective_adjacency,
+    fresh_mask,
+    limit_rate_command,
+    normalised_thrust,
+    normalised_torque,
+    stale_neighbour_counts,
+    torque_max_nm,
+)
+from gcs.fly.stats import AgeStats, TickStats, link_report
+from gcs.fly.telemetry import team_sample, vehicle_statuses
+from gcs.link import (
+    CommandRejectedError,
+    CommandTimeoutError,
+    LinkClosedError,
+    SetpointError,
+    TlogWriter,
+    VehicleLinkConfig,
+    VehicleProxy,
+    check_unique_sysids,
+)
+from gcs.link.enums import MSG_ID, Px4AutoSubMode, Px4MainMode
+from gcs.mission.machine import (
+    EXIT_ABORTED,
+    Cmd,
+    Command,
+    CommandResult,
+    MissionMachine,
+    MissionPlan,
+    Outcome,
+    Phase,
+)
+from gcs.mission.safety import SafetyRules
+from gcs.mission.stability import MIN_DECAY_PER_S, describe_margins, rate_margin, torque_margins
+from gcs.report import build_report, write_report
+
+logger = logging.getLogger(__name__)
+
+REPORT_NAME = "report.json"
+TIMESERIES_NAME = "timeseries.csv"
+TLOG_NAME = "flight.tlog"
+#: Streams that are not needed and cost CPU on both sides: switched off (0) or slowed down.
+OPTIONAL_RATES_HZ = {"ATTITUDE": 0.0, "ODOMETRY": 0.0, "GLOBAL_POSITION_INT": 5.0, "HEARTBEAT": 5.0}
+MAX_POSITION_RATE_HZ = 100.0
+#: The tick wakes this much before its deadline and blocks precisely for the rest (see _tick_loop).
+WAKE_EARLY_S = 1.5e-3
+#: The mission machine (checks, phase changes) runs at about this rate, on tick boundaries.
+MACHINE_RATE_HZ = 20.0
+
+
+class FlightSetupError(Exception):
+    """The flight cannot start as configured (before any link is opened); one line."""
+
+
+@dataclass(frozen=True, slots=True)
+class FlyOptions:
+    """Command-line overrides of the team file for one flight (None: the file's value)."""
+
+    out_dir: Path
+    mode: str | None = None
+    law: str | None = None
+    tick_rate_hz: float | None = None
+    duration_s: float | None = None
+    end_action: str | None = None
+    figures: bool = True
+    status: str = "auto"  # auto | rich | plain | off
+    abort_key: bool = True
+
+
+@dataclass(frozen=True, slots=True)
+class FlightSetup:
+    """Everything derived from the team file before flying (pure; see `prepare`)."""
+
+    team: TeamConfig
+    mode: str
+    law: str
+    tick_rate_hz: float
+    gains: LawGains
+    plan: MissionPlan
+    requested_rates_hz: dict[str, float]
+    log_every: int
+    stability: str  # the discrete-time criterion, evaluated (for the log and the report)
+
+
+@dataclass(frozen=True, slots=True)
+class FlyResult:
+    outcome: Outcome
+    log: FlightLog | None
+    out_dir: Path
+    report: dict[str, Any] | None
+
+
+def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
+    """Resolve mode, law, rate and gains; check the discrete-time criterion (stability.py).
+
+    Raises FlightSetupError naming the vehicle, the figure and the limit when a mode would not be
+    stable at the rate it would run at.
+    """
+    fly = team.fly
+    mode = options.mode or team.controller.mode
+    law = options.law or team.controller.law
+    if mode not in MODES:
+        raise FlightSetupError(f"mode {mode!r}: expected one of {MODES}")
+    if law == "baseline":
+        try:
+            team.with_law("baseline")
+        except ConfigError as exc:
+            raise FlightSetupError(str(exc)) from None
+    mode_cfg = fly.mode(mode)
+    rate = options.tick_rate_hz or mode_cfg.tick_rate_hz
+    if not 0.0 < rate <= 1000.0:
+        raise FlightSetupError(f"tick rate {rate:g} Hz: expected 0 < rate <= 1000")
+    ratio = rate / fly.log_rate_hz
+    if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-9 * ratio:
+        raise FlightSetupError(
+            f"tick rate {rate:g} Hz must be a multiple of fly.log_rate_hz {fly.log_rate_hz:g}")
+    g = team.controller.gains
+    gains = LawGains(
+        c_p=g.c_p, alpha_p=g.alpha_p, alpha_m=g.alpha_m, sigma_a=g.sigma_a,
+        alpha_eps=mode_cfg.alpha_eps if mode == "actuators" and mode_cfg.alpha_eps else g.alpha_eps,
+        alpha_omega=(mode_cfg.alpha_omega if mode == "actuators" and mode_cfg.alpha_omega
+                     else g.alpha_omega),
+        c_eps=g.c_eps, alpha_rho=g.alpha_rho, k_eps=g.k_eps,
+    )
+    if mode == "actuators":
+        inertias = [
+            v.nominal_inertia_kgm2
+            or (v.plant.inertia_kgm2 if v.plant else v.estimates.inertia_kgm2)
+            for v in team.vehicles
+        ]
+        margins = torque_margins(team.ids(), inertias, gains.alpha_eps, gains.alpha_omega, rate)
+        stability = (f"actuators mode at {rate:g} Hz, alpha_eps {gains.alpha_eps:g}, alpha_omega "
+                     f"{gains.alpha_omega:g}:\n" + describe_margins(margins))
+        bad = [m for m in margins if not m.ok()]
+        if bad:
+            worst = max(bad, key=lambda m: m.spectral_radius)
+            raise FlightSetupError(
+                f"actuators mode at {rate:g} Hz is not stable with alpha_eps {gains.alpha_eps:g}, "
+                f"alpha_omega {gains.alpha_omega:g}: vehicle {worst.vehicle_id} axis {worst.axis} "
+                f"(J {worst.inertia_kgm2:g} kg m^2) has spectral radius "
+                f"{worst.spectral_radius:.3f} (decay {worst.decay_per_s:.3g} /s, need >= "
+                f"{MIN_DECAY_PER_S:g} /s with 1-2 ticks of delay); set fly.actuators.alpha_eps/"
+                f"alpha_omega or tick_rate_hz (docs/gcs.md)")
+    else:
+        rho, decay = rate_margin(gains.k_eps, rate)
+        stability = (f"rates mode at {rate:g} Hz, k_eps {gains.k_eps:g}: rho {rho:.4f}, "
+                     f"decay {decay:.3g} /s")
+        if not (rho < 1.0 and decay >= MIN_DECAY_PER_S):
+            raise FlightSetupError(f"rates mode at {rate:g} Hz is not stable with k_eps "
+                                   f"{gains.k_eps:g}: spectral radius {rho:.3f}")
+    end_action = options.end_action or fly.end_action
+    if end_action not in FLY_ACTIONS:
+        raise FlightSetupError(f"end action {end_action!r}: expected one of {FLY_ACTIONS}")
+    gf = fly.geofence
+    # Attitude at the tick rate (the torque loop needs it fresh); position and IMU at most at
+    # MAX_POSITION_RATE_HZ (the position loop is slow, and every message costs CPU on both ends).
+    slow = min(rate, MAX_POSITION_RATE_HZ)
+    required = {"ATTITUDE_QUATERNION": rate, "LOCAL_POSITION_NED": slow}
+    if team.controller.derivative.method == "model":
+        required["HIGHRES_IMU"] = slow
+    rules = SafetyRules(
+        max_tilt_rad=fly.max_tilt_rad, link_lost_after_s=fly.link_lost_after_s,
+        geofence_min_enu_m=gf.min_enu_m if gf else None,
+        geofence_max_enu_m=gf.max_enu_m if gf else None,
+        required_rates_hz=required,
+    )
+    plan = MissionPlan(
+        duration_s=options.duration_s or team.mission.duration_s, rules=rules, start=fly.start,
+        takeoff_altitude_m=fly.takeoff_altitude_m, end_action=end_action,
+        abort_action=fly.abort_action, link_loss_action=fly.link_loss_action,
+        connect_timeout_s=fly.connect_timeout_s, takeoff_timeout_s=fly.takeoff_timeout_s,
+        land_timeout_s=fly.land_timeout_s,
+    )
+    return FlightSetup(team, mode, law, rate, gains, plan, required,
+                       round(rate / fly.log_rate_hz), stability)
+
+
+def true_mass_kg(team: TeamConfig, t_s: float) -> np.ndarray:
+    """The team file's plant masses with its mass-drop faults applied at formation time t_s
+    (NaN without a plant). For the records only: the controller never sees it."""
+    out = np.array([v.plant.mass_kg if v.plant else math.nan for v in team.vehicles])
+    for f in team.faults:
+        if f.kind == "mass_drop" and t_s >= f.at_s:
+            out[team.index_of(f.vehicle)] *= 1.0 - f.fraction
+    return out
+
+
+class Flight:
+    """One flight of the team (see the module docstring). Use `await Flight(setup, opts).run()`."""
+
+    def __init__(self, setup: FlightSetup, options: FlyOptions,
+                 status_factory: Callable[[Flight], Any] | None = None) -> None:
+        self.setup = setup
+        self.options = options
+        team = setup.team
+        self.team = team
+        self.n = team.n
+        self.ids = team.ids()
+        self.period_s = 1.0 / setup.tick_rate_hz
+        self.machine = MissionMachine(setup.plan, self.ids)
+        self.adjacency = np.ascontiguousarray(team.adjacency(), dtype=float)
+        adaptive = setup.law == "adaptive"
+        vehicles = team.vehicles
+        nominal = (team.nominal_masses_kg() if not adaptive else None)
+        rhohat = np.array([v.estimates.inertia_kgm2 if adaptive else v.baseline_inertia_kgm2
+                           for v in vehicles], dtype=float)
+        d = team.controller.derivative
+        self.law = TeamLaw(
+            setup.gains, self.adjacency, team.offsets_enu_m(), team.initial_mhat(), rhohat,
+            nominal_mass_kg=nominal, adaptive=adaptive, derivative=d.method,
+            levant_lipschitz=d.levant_lipschitz, levant_substep_s=d.levant_substep_s,
+        )
+        self.ref_arrays = tuple(np.ascontiguousarray(a, dtype=float)
+                                for a in team.reference_velocity.as_arrays())
+        self._warm_up(team, setup, rhohat, nominal)
+        self.max_thrust_n = np.array([v.airframe.max_thrust_n for v in vehicles])
+        self.arm_m = np.array([v.airframe.arm_length_m for v in vehicles])
+        self.anti_torque_m = np.array([v.airframe.anti_torque_m for v in vehicles])
+        self.rotor_max_n = np.array([v.airframe.rotor_thrust_max_n for v in vehicles])
+        self.torque_max = torque_max_nm(self.arm_m, self.anti_torque_m, self.rotor_max_n)
+        self.max_rate_radps = team.fly.rates.max_rate_radps
+        self.limited_ticks = np.zeros(self.n, dtype=np.int64)  # rate or torque limit applied
+        # Before the formation starts (PRIME), vehicles get level, zero-rate setpoints at the
+        # law's own initial mass estimate times g (what the law itself would ask at rest).
+        kappa0 = (setup.gains.alpha_m * team.initial_mhat() / 2.0 if adaptive
+                  else np.asarray(nominal, dtype=float))
+        self.prime_thrust_norm = normalised_thrust(kappa0 * GRAVITY_MPS2, self.max_thrust_n)
+        self.links = [
+            VehicleLinkConfig(vehicle_id=v.id, sysid=v.sysid, local_port=v.link.local_port,
+                              remote_port=v.link.remote_port, remote_host=v.link.remote_host,
+                              link_timeout_s=team.fly.link_lost_after_s)
+            for v in vehicles
+        ]
+        check_unique_sysids(self.links)
+        self.proxies: list[VehicleProxy] = []
+        self._proxy_by_id: dict[int, VehicleProxy] = {}
+        self.builder = FlightLogBuilder(
+            vehicle_ids=self.ids, sysids=team.sysids(), offsets_enu_m=team.offsets_enu_m(),
+            source="fly", controller=setup.law, team=team.source_path, name=team.name,
+            extra={"mode": setup.mode, "tick_rate_hz": setup.tick_rate_hz,
+                   "derivative": d.method, "gains": setup.gains._asdict(),
+                   "stability": setup.stability},
+        )
+        self.ticks = TickStats(setup.tick_rate_hz)
+        self.ages = AgeStats(self.n)
+        self.machine_every = max(1, round(setup.tick_rate_hz / MACHINE_RATE_HZ))
+        offsets = team.offsets_enu_m()
+        self._pair_offsets = offsets[:, None, :] - offsets[None, :, :]
+        self.last_sample: TeamSample | None = None
+        self.last_command: TeamCommand | None = None
+        self.formation_error_m = math.nan
+        self.formation_t_s: float | None = None
+        self._k0: int | None = None
+        self._last_law_k: int | None = None
+        self._tg: asyncio.TaskGroup | None = None
+        self._finished = asyncio.Event()
+        self._status_factory = status_factory
+        self._setpoint_errors = 0
+        self._notes_logged = 0
+
+    def _warm_up(self, team: TeamConfig, setup: FlightSetup, rhohat: np.ndarray,
+                 nominal: np.ndarray | None) -> None:
+        """Compile (or load from numba's cache) every kernel of the law on a throwaway copy, so
+        the first formation tick does not stall for seconds with the vehicles waiting."""
+        scratch = copy.deepcopy(self.law)
+        n = team.n
+        rotation = np.tile(np.eye(3), (n, 1, 1))
+        meas = TeamSample(
+            np.ascontiguousarray(team.initial_positions_enu_m(), dtype=float), np.zeros((n, 3)),
+            np.zeros((n, 3)), rotation, np.zeros((n, 3)), np.zeros(n), np.zeros(n),
+            np.ones(n, dtype=bool)).measurement()
+        ref = reference_velocity(0.0, *self.ref_arrays)
+        for _ in range(2):
+            scratch.step(meas, ref, self.period_s)
+        stale_neighbour_counts(self.adjacency, np.ones(n, dtype=bool))
+
+    # --- lifetime --------------------------------------------------------------------------------
+
+    async def run(self) -> FlyResult:
+        """Fly until the mission machine is done; returns when the records are written."""
+        out = self.options.out_dir
+        out.mkdir(parents=True, exist_ok=True)
+        loop = asyncio.get_running_loop()
+        with contextlib.ExitStack() as sync_stack:
+            tlog = sync_stack.enter_context(TlogWriter(out / TLOG_NAME))
+            sync_stack.callback(self._remove_signal_handlers, loop)
+            self._install_signal_handlers(loop)
+            async with contextlib.AsyncExitStack() as stack:
+                for cfg in self.links:
+                    proxy = await stack.enter_async_context(VehicleProxy(cfg, tlog=tlog))
+                    self.proxies.append(proxy)
+                    self._proxy_by_id[cfg.vehicle_id] = proxy
+                logger.info("%s", self.setup.stability)
+                try:
+                    async with asyncio.TaskGroup() as tg:
+                        self._tg = tg
+                        tg.create_task(self._tick_loop(), name="control tick")
+                        if self._status_factory is not None:
+                            tg.create_task(self._status_factory(self).run(self._finished),
+                                           name="status")
+                        if self.options.abort_key:
+                            stack.enter_context(self._abort_key(loop))
+                except BaseException:
+                    logger.exception("flight code failed; abort action to every vehicle")
+                    await self._emergency_stop()
+                    raise
+        outcome = self.machine.outcome or Outcome(EXIT_ABORTED, "stopped without an outcome")
+        return self._write_records(outcome)
+
+    def _install_signal_handlers(self, loop: asyncio.AbstractEventLoop) -> None:
+        for sig, why in ((signal.SIGINT, "interrupted (Ctrl-C)"), (signal.SIGTERM, "terminated")):
+            with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
+                loop.add_signal_handler(sig, self.machine.request_abort, why)
+
+    @staticmethod
+    def _remove_signal_handlers(loop: asyncio.AbstractEventLoop) -> None:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
+                loop.remove_signal_handler(sig)
+
+    @contextlib.contextmanager
+    def _abort_key(self, loop: asyncio.AbstractEventLoop):  # noqa: ANN202
+        """On a terminal: 'q' or 'a' aborts (lands/holds per the team file)."""
+        if not sys.stdin.isatty():
+            yield
+            return
+        import termios
+        import tty
+
+        fd = sys.stdin.fileno()
+        saved = termios.tcgetattr(fd)
+        tty.setcbreak(fd)
+
+        def on_key() -> None:
+            key = os.read(fd, 1)
+            if key in (b"q", b"a", b"Q", b"A"):
+                self.machine.request_abort("abort key pressed")
+
+        loop.add_reader(fd, on_key)
+        try:
+            yield
+        finally:
+            loop.remove_reader(fd)
+            termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+
+    async def _emergency_stop(self) -> None:
+        """Best effort after a failure of the flight code: abort action to every vehicle."""
+        land = self.setup.plan.abort_action == "land"
+
+        async def one(p: VehicleProxy) -> None:
+            with contextlib.suppress(Exception):
+                if land:
+                    await p.land(timeout_s=0.3, retries=2)
+                else:
+                    await p.set_mode_px4(Px4MainMode.AUTO, Px4AutoSubMode.LOITER,
+                                         timeout_s=0.3, retries=2)
+
+        await asyncio.gather(*(one(p) for p in self.proxies))
+
+    # --- commands --------------------------------------------------------------------------------
+
+    def _dispatch(self, commands: Sequence[Command]) -> None:
+        assert self._tg is not None
+        for c in commands:
+            self._tg.create_task(self._execute(c), name=f"vehicle {c.vehicle_id} {c.cmd.value}")
+
+    async def _execute(self, c: Command) -> None:
+        p = self._proxy_by_id[c.vehicle_id]
+        ok, detail = True, ""
+        try:
+            if c.cmd is Cmd.CONFIGURE:
+                for kind, hz in self.setup.requested_rates_hz.items():
+                    await p.set_message_interval(MSG_ID[kind], hz)
+                for kind, hz in OPTIONAL_RATES_HZ.items():
+                    await p.set_message_interval(MSG_ID[kind], hz, check=False)
+            elif c.cmd is Cmd.ARM:
+                await p.arm()
+            elif c.cmd is Cmd.DISARM:
+                await p.disarm()
+            elif c.cmd is Cmd.TAKEOFF:
+                await p.takeoff(self._takeoff_amsl_m(p, c.altitude_m))
+            elif c.cmd is Cmd.OFFBOARD:
+                await p.set_mode_px4(Px4MainMode.OFFBOARD)
+            elif c.cmd is Cmd.HOLD:
+                await p.set_mode_px4(Px4MainMode.AUTO, Px4AutoSubMode.LOITER)
+            elif c.cmd is Cmd.LAND:
+                await p.land()
+        except (CommandRejectedError, CommandTimeoutError, LinkClosedError, TimeoutError) as exc:
+            ok, detail = False, str(exc)
+        logger.log(logging.INFO if ok else logging.WARNING, "vehicle %d: %s %s%s", c.vehicle_id,
+                   c.cmd.value, "ok" if ok else "failed", f": {detail}" if detail else "")
+        self._dispatch(self.machine.on_result(CommandResult(c.vehicle_id, c.cmd, ok, detail)))
+
+    @staticmethod
+    def _takeoff_amsl_m(p: VehicleProxy, altitude_m: float) -> float:
+        """PX4 NAV_TAKEOFF wants AMSL: home AMSL (GLOBAL_POSITION_INT alt - relative_alt) + alt;
+        NaN (the autopilot's MIS_TAKEOFF_ALT) when the vehicle sent no global position."""
+        gpi = p.latest("GLOBAL_POSITION_INT")
+        if gpi is None:
+            return math.nan
+        return (gpi.msg.alt - gpi.msg.relative_alt) * 1e-3 + altitude_m
+
+    # --- the tick --------------------------------------------------------------------------------
+
+    async def _tick_loop(self) -> None:
+        """Fixed-rate tick on absolute deadlines t_start + k h; lateness recorded; a tick more
+        than one period late is skipped (counted), never run twice."""
+        loop = asyncio.get_running_loop()
+        h = self.period_s
+        margin = min(WAKE_EARLY_S, 0.25 * h)
+        t_start = loop.time()
+        k = 0
+        try:
+            while not self.machine.done:
+                deadline = t_start + k * h
+                # asyncio's timers wake on a millisecond grid and after the I/O callbacks that
+                # are ready: wake `margin` early (telemetry handled meanwhile), then block for
+                # the sub-millisecond rest (time.sleep is precise and uses no CPU).
+                wait = deadline - loop.time() - margin
+                if wait > 0:
+                    await asyncio.sleep(wait)
+                else:
+                    await asyncio.sleep(0)  # let the telemetry callbacks run every tick
+                rest = deadline - loop.time()
+                if rest > 0:
+                    time.sleep(rest)
+                started = loop.time()
+                behind = int((started - deadline) / h)
+                if behind >= 1:  # missed whole periods: jump to the newest deadline
+                    if self.machine.phase is Phase.FORMATION:
+                        self.ticks.skipped += behind
+                    k += behind
+                    deadline = t_start + k * h
+                self._tick(k, deadline, started)
+                if self.machine.phase is Phase.FORMATION:  # the tick statistics of the report
+                    self.ticks.record(started - deadline, loop.time() - started)
+                k += 1
+        finally:
+            self._finished.set()
+
+    def _tick(self, k: int, deadline_s: float, now_s: float) -> None:
+        sample = team_sample(self.proxies, now_s, self.last_sample)
+        self.last_sample = sample
+        m = self.machine
+        if k % self.machine_every == 0:
+            want_rates = m.phase in (Phase.CONNECT, Phase.PREFLIGHT)
+            statuses = vehicle_statuses(self.proxies, self.ids, sample, want_rates)
+            self._dispatch(m.on_tick(deadline_s, statuses))
+            self._log_notes()
+        streaming = m.streaming
+        if m.law_active and (streaming or m.phase is Phase.FORMATION):
+            command = self._run_law(k, sample)
+            if command is not None:
+                self._send(command, streaming)
+        elif m.phase is Phase.PRIME:
+            for i, p in enumerate(self.proxies):
+                if self.ids[i] in streaming:
+                    self._send_one(i, p, np.zeros(3), self.prime_thrust_norm[i])
+
+    def _log_notes(self) -> None:
+        notes = self.machine.notes
+        for text in notes[self._notes_logged:]:
+            logger.log(logging.WARNING if text.startswith(("stopping", "done: exit 1"))
+                       else logging.INFO, "mission: %s", text)
+        self._notes_logged = len(notes)
+
+    def _run_law(self, k: int, sample: TeamSample) -> TeamCommand | None:
+        if self._k0 is None:
+            self._k0 = k
+        t = (k - self._k0) * self.period_s
+        dt = (k - (self._last_law_k if self._last_law_k is not None else k - 1)) * self.period_s
+        self._last_law_k = k
+        fresh = fresh_mask(sample, self.team.fly.stale_after_s)
+        self.law.adjacency = np.ascontiguousarray(effective_adjacency(self.adjacency, fresh))
+        ref = reference_velocity(t, *self.ref_arrays)
+        try:
+            command = self.law.step(sample.measurement(), ref, dt)
+        except SingularCommandError as exc:
+            self.machine.request_abort(f"t = {t:.2f} s: {exc}", operator=False)
+            return self.last_command
+        if not (np.isfinite(command.thrust_n).all() and np.isfinite(command.rate_cmd_radps).all()
+                and np.isfinite(command.torque_nm).all()):
+            self.machine.request_abort(f"t = {t:.2f} s: the law produced a non-finite command",
+                                       operator=False)
+            return self.last_command
+        self.last_command = command
+        self.formation_t_s = t
+        if self.machine.phase is Phase.FORMATION:
+            self.ages.record(sample.age_s, fresh, stale_neighbour_counts(self.adjacency, fresh))
+            if (k - self._k0) % self.setup.log_every == 0:
+                self._log(t, sample, ref, command)
+        return command
+
+    def _log(self, t: float, sample: TeamSample, ref: np.ndarray, c: TeamCommand) -> None:
+        p = sample.position_m
+        rel = p[:, None, :] - p[None, :, :] - self._pair_offsets
+        self.formation_error_m = float(np.sqrt((rel * rel).sum(axis=2)).max())
+        self.builder.append(
+            t_s=t, position_enu_m=p, velocity_enu_mps=sample.velocity_mps,
+            reference_velocity_enu_mps=ref[0], attitude_error=c.attitude_error,
+            omega_error_radps=c.omega_error_radps, mass_estimate_kg=c.mass_estimate_kg,
+            inertia_estimate_kgm2=c.inertia_estimate_kgm2, thrust_n=c.thrust_n,
+            force_enu_n=c.force_n, mass_true_kg=true_mass_kg(self.team, t),
+        )
+
+    def _send(self, c: TeamCommand, streaming: frozenset[int]) -> None:
+        """Thrust / max thrust; actuators: thrust-preserving torque limit of (51), then torque /
+        torque scale; rates: body-rate norm limit (docs/gcs.md)."""
+        thrust = normalised_thrust(c.thrust_n, self.max_thrust_n)
+        if self.setup.mode == "actuators":
+            torque, limited = desaturate_torque(c.thrust_n, c.torque_nm, self.arm_m,
+                                                self.anti_torque_m, self.rotor_max_n)
+            vec = normalised_torque(torque, self.torque_max)
+        else:
+            vec, limited = limit_rate_command(c.rate_cmd_radps, self.max_rate_radps)
+        if self.machine.phase is Phase.FORMATION:
+            self.limited_ticks += limited
+        for i, p in enumerate(self.proxies):
+            if self.ids[i] in streaming:
+                self._send_one(i, p, vec[i], thrust[i])
+
+    def _send_one(self, i: int, p: VehicleProxy, vec: np.ndarray, thrust_norm: float) -> None:
+        try:
+            if self.setup.mode == "actuators":
+                p.send_actuator_controls(vec, thrust_norm)
+            else:
+                p.send_rates_thrust(vec, thrust_norm)
+        except SetpointError as exc:
+            self._setpoint_errors += 1
+            self.machine.request_abort(str(exc), operator=False)
+
+    # --- records ---------------------------------------------------------------------------------
+
+    def _write_records(self, outcome: Outcome) -> FlyResult:
+        out = self.options.out_dir
+        if len(self.builder) == 0:
+            logger.warning("no formation samples: no report written")
+            return FlyResult(outcome, None, out, None)
+        stats = [p.stats() for p in self.proxies]
+        link = link_report(
+            self.ids, self.ages,
+            setpoints_sent=[s.proxy.setpoints_sent for s in stats],
+            telemetry_received=[s.proxy.messages_accepted for s in stats],
+            telemetry_lost=[s.sequence.lost for s in stats],
+            extra=[{"limited_ticks": int(self.limited_ticks[i]),
+                    "thrust_clamped": s.proxy.thrust_clamped,
+                    "torque_clamped": s.proxy.torque_clamped,
+                    "link_lost_events": s.proxy.link_lost_events,
+                    "command_retries": getattr(s.commands, "retries", None),
+                    "lost": self.ids[i] in self.machine.lost}
+                   for i, s in enumerate(stats)],
+        )
+        tick = self.ticks.report()
+        log = self.builder.build(extra={
+            "link": link, "tick": tick,
+            "outcome": {"exit_code": outcome.exit_code, "reason": outcome.reason},
+            "events": self.machine.notes[-50:],
+        })
+        report = build_report(log)
+        write_report(out / REPORT_NAME, report)
+        save_timeseries(log, out / TIMESERIES_NAME)
+        if self.options.figures:
+            from gcs.plots import write_figures
+
+            write_figures(log, out, pairs=[(e.i, e.j) for e in self.team.graph.edges])
+        return FlyResult(outcome, log, out, report)
+
+
+async def fly(team: TeamConfig, options: FlyOptions,
+              status_factory: Callable[[Flight], Any] | None = None) -> FlyResult:
+    """Fly `team` once; returns when every vehicle is landed/holding (or lost) and the records
+    are written. Raises FlightSetupError before opening any link if the setup is invalid."""
+    setup = prepare(team, options)
+    return await Flight(setup, options, status_factory).run()
+
+
+__all__ = [
+    "FlightSetupError", "FlyOptions", "FlyResult", "Flight", "fly", "prepare", "true_mass_kg",
+]

@@ -1,0 +1,131 @@
+"""Tick timing and per-vehicle telemetry-age statistics of a flight (for report.json). Pure.
+
+A tick is *late* when it starts more than `late_threshold_s(period)` after its deadline: a fifth
+of the period, but at least 1.5 ms (asyncio wakes up on a millisecond timer, so sub-millisecond
+thresholds would measure the timer, not the design). Lateness, compute time and telemetry ages are
+stored in preallocated, growing arrays (no per-tick allocation beyond amortised growth).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+MIN_LATE_THRESHOLD_S = 1.5e-3
+
+
+def late_threshold_s(period_s: float) -> float:
+    return max(MIN_LATE_THRESHOLD_S, 0.2 * period_s)
+
+
+class _Grow:
+    """Append-only float array of fixed row width."""
+
+    def __init__(self, width: int, capacity: int = 4096) -> None:
+        self._a = np.empty((capacity, width))
+        self.n = 0
+
+    def append(self, row: np.ndarray | float) -> None:
+        if self.n == self._a.shape[0]:
+            self._a = np.concatenate((self._a, np.empty_like(self._a)))
+        self._a[self.n] = row
+        self.n += 1
+
+    @property
+    def data(self) -> np.ndarray:
+        return self._a[: self.n]
+
+
+def _pct(a: np.ndarray, q: float) -> float:
+    return float(np.percentile(a, q)) if a.size else float("nan")
+
+
+class TickStats:
+    """Lateness [s] and compute time [s] of every tick, skipped ticks, late count."""
+
+    def __init__(self, rate_hz: float) -> None:
+        self.rate_hz = rate_hz
+        self.period_s = 1.0 / rate_hz
+        self.threshold_s = late_threshold_s(self.period_s)
+        self._late = _Grow(1)
+        self._compute = _Grow(1)
+        self.skipped = 0
+
+    def record(self, lateness_s: float, compute_s: float) -> None:
+        self._late.append(lateness_s)
+        self._compute.append(compute_s)
+
+    @property
+    def ticks(self) -> int:
+        return self._late.n
+
+    def late_fraction(self) -> float:
+        late = self._late.data[:, 0]
+        return float((late > self.threshold_s).mean()) if late.size else 0.0
+
+    def report(self) -> dict[str, Any]:
+        late = self._late.data[:, 0]
+        comp = self._compute.data[:, 0]
+        return {
+            "rate_hz": self.rate_hz,
+            "late_pct": 100.0 * self.late_fraction(),
+            "lateness_p99_ms": 1e3 * _pct(late, 99),
+            "lateness_p50_ms": 1e3 * _pct(late, 50),
+            "lateness_max_ms": 1e3 * float(late.max()) if late.size else None,
+            "late_threshold_ms": 1e3 * self.threshold_s,
+            "ticks": int(late.size),
+            "skipped_ticks": self.skipped,
+            "compute_p50_ms": 1e3 * _pct(comp, 50),
+            "compute_p99_ms": 1e3 * _pct(comp, 99),
+        }
+
+
+class AgeStats:
+    """Per vehicle: the age [s] of the data each formation tick used, and stale counters."""
+
+    def __init__(self, n: int) -> None:
+        self._age = _Grow(n)
+        self.stale_own = np.zeros(n, dtype=np.int64)
+        self.stale_neighbour = np.zeros(n, dtype=np.int64)
+
+    def record(self, age_s: np.ndarray, fresh: np.ndarray, stale_neighbours: np.ndarray) -> None:
+        self._age.append(age_s)
+        self.stale_own += ~fresh
+        self.stale_neighbour += stale_neighbours
+
+    def percentiles_ms(self, q: float) -> np.ndarray:
+        a = self._age.data
+        if not a.shape[0]:
+            return np.full(a.shape[1], np.nan)
+        finite = np.where(np.isfinite(a), a, np.nan)
+        return 1e3 * np.nanpercentile(finite, q, axis=0)
+
+
+def link_report(
+    vehicle_ids: Sequence[int],
+    ages: AgeStats,
+    setpoints_sent: Sequence[int],
+    telemetry_received: Sequence[int],
+    telemetry_lost: Sequence[int],
+    extra: Sequence[dict[str, Any]] | None = None,
+) -> dict[str, dict[str, Any]]:
+    """The report's `link` object: per vehicle id, the spec's fields plus `extra[i]`."""
+    p50, p99 = ages.percentiles_ms(50), ages.percentiles_ms(99)
+    out: dict[str, dict[str, Any]] = {}
+    for i, vid in enumerate(vehicle_ids):
+        got, lost = int(telemetry_received[i]), int(telemetry_lost[i])
+        entry: dict[str, Any] = {
+            "setpoints_sent": int(setpoints_sent[i]),
+            "telemetry_received": got,
+            "telemetry_lost_pct": 100.0 * lost / (got + lost) if got + lost else 0.0,
+            "telemetry_age_p50_ms": float(p50[i]),
+            "telemetry_age_p99_ms": float(p99[i]),
+            "stale_own_ticks": int(ages.stale_own[i]),
+            "stale_neighbour_ticks": int(ages.stale_neighbour[i]),
+        }
+        if extra is not None:
+            entry.update(extra[i])
+        out[str(int(vid))] = entry
+    return out

@@ -1,0 +1,115 @@
+"""Batched team snapshot for the tick: the proxies' latest messages -> one TeamSample, and the
+mission's per-vehicle `VehicleStatus`.
+
+`VehicleProxy.state()` converts one vehicle at a time (tens of microseconds each); the tick
+needs the whole team every period, so this module reads the cached messages (with their receive
+times) and converts the team in one call per quantity through gcs.frames (the only place that
+knows NED/FRD). Sources: LOCAL_POSITION_NED (position, velocity), ATTITUDE_QUATERNION (attitude,
+body rates), HIGHRES_IMU (specific force), HEARTBEAT (armed, mode), EXTENDED_SYS_STATE (landed).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from gcs import frames
+from gcs.control.gains import GRAVITY_MPS2
+from gcs.fly.measure import TeamSample
+from gcs.link import VehicleProxy
+from gcs.link.enums import LandedState, MavModeFlag, mode_name
+from gcs.mission.safety import VehicleStatus, tilt_rad
+
+_IDENTITY_Q = (1.0, 0.0, 0.0, 0.0)
+_LANDED = {LandedState.ON_GROUND: True, LandedState.IN_AIR: False, LandedState.TAKEOFF: False,
+           LandedState.LANDING: False}
+
+
+def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
+                fallback: TeamSample | None = None) -> TeamSample:
+    """The team's latest telemetry (ENU/FLU), ages at `now_s`; rows with nothing received yet
+    take `fallback`'s row when given (else NaN, and finite[i] is False)."""
+    n = len(proxies)
+    pos = np.full((n, 3), np.nan)
+    vel = np.full((n, 3), np.nan)
+    q = np.tile(np.array(_IDENTITY_Q), (n, 1))
+    rates = np.full((n, 3), np.nan)
+    force = np.full((n, 3), np.nan)
+    prx = np.full(n, -math.inf)
+    arx = np.full(n, -math.inf)
+    irx = np.full(n, -math.inf)
+    have_q = np.zeros(n, dtype=bool)
+    for i, p in enumerate(proxies):
+        lpn = p.latest("LOCAL_POSITION_NED")
+        if lpn is not None:
+            m = lpn.msg
+            pos[i] = (m.x, m.y, m.z)
+            vel[i] = (m.vx, m.vy, m.vz)
+            prx[i] = lpn.rx_time_s
+        aq = p.latest("ATTITUDE_QUATERNION")
+        if aq is not None:
+            m = aq.msg
+            quat = (m.q1, m.q2, m.q3, m.q4)
+            if all(math.isfinite(x) for x in quat) and sum(x * x for x in quat) > 1e-6:
+                q[i] = quat
+                have_q[i] = True
+            rates[i] = (m.rollspeed, m.pitchspeed, m.yawspeed)
+            arx[i] = aq.rx_time_s
+        imu = p.latest("HIGHRES_IMU")
+        if imu is not None:
+            m = imu.msg
+            force[i] = (m.xacc, m.yacc, m.zacc)
+            irx[i] = imu.rx_time_s
+    rot = frames.rotation_enu_flu_from_mavlink_quat(q)
+    rot[~have_q] = np.nan
+    p_enu = frames.enu_from_ned(pos)
+    v_enu = frames.enu_from_ned(vel)
+    omega = frames.flu_from_frd(rates)
+    f_flu = frames.flu_from_frd(force)
+    acc = np.einsum("nij,nj->ni", rot, f_flu)
+    acc[:, 2] -= GRAVITY_MPS2
+    acc[~np.isfinite(acc).all(axis=1)] = 0.0  # no IMU yet: assume v' = 0 rather than NaN
+    finite = (np.isfinite(p_enu).all(axis=1) & np.isfinite(v_enu).all(axis=1) & have_q
+              & np.isfinite(omega).all(axis=1))
+    if fallback is not None and not finite.all():
+        bad = ~finite
+        p_enu[bad], v_enu[bad], rot[bad] = (fallback.position_m[bad], fallback.velocity_mps[bad],
+                                            fallback.rotation[bad])
+        omega[bad], acc[bad] = fallback.omega_radps[bad], fallback.acceleration_mps2[bad]
+    age = now_s - np.minimum(prx, arx)
+    return TeamSample(np.ascontiguousarray(p_enu), np.ascontiguousarray(v_enu), acc,
+                      np.ascontiguousarray(rot), np.ascontiguousarray(omega), age, now_s - irx,
+                      finite)
+
+
+def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample: TeamSample,
+                     want_rates: bool) -> list[VehicleStatus]:
+    """What the mission machine sees of each vehicle (see gcs.mission.safety.VehicleStatus)."""
+    out = []
+    for i, p in enumerate(proxies):
+        hb = p.latest("HEARTBEAT")
+        armed, mode, autopilot, vtype = False, "", 0, 0
+        if hb is not None:
+            m = hb.msg
+            armed = bool(int(m.base_mode) & MavModeFlag.SAFETY_ARMED)
+            mode = mode_name(int(m.autopilot), int(m.custom_mode))
+            autopilot, vtype = int(m.autopilot), int(m.type)
+        landed = None
+        ess = p.latest("EXTENDED_SYS_STATE")
+        if ess is not None:
+            try:
+                landed = _LANDED.get(LandedState(int(ess.msg.landed_state)))
+            except ValueError:
+                landed = None
+        rates = {k: v.rate_hz for k, v in p.stats().by_type.items()} if want_rates else {}
+        out.append(VehicleStatus(
+            vehicle_id=ids[i], sysid=p.config.sysid, link=p.link_state().value, armed=armed,
+            mode=mode, landed=landed, position_enu_m=tuple(sample.position_m[i].tolist()),
+            velocity_enu_mps=tuple(sample.velocity_mps[i].tolist()),
+            tilt_rad=tilt_rad(sample.rotation[i]), data_age_s=float(sample.age_s[i]),
+            autopilot=autopilot, vehicle_type=vtype, sysid_mismatch=p.sysid_mismatch,
+            rates_hz=rates,
+        ))
+    return out

@@ -1,0 +1,458 @@
+"""The flight sequence of `gcs fly` as an explicit, pure state machine (sans-IO).
+
+Phases: CONNECT -> PREFLIGHT -> [ARM -> TAKEOFF] -> PRIME -> FORMATION -> STOPPING -> DONE.
+
+The machine never touches a socket or a clock. The composition root (gcs/app.py) feeds it
+`on_tick(now_s, team)` with every vehicle's `VehicleStatus` as received, `on_result(...)` when a
+command it asked for finished, and `request_abort(...)` for Ctrl-C or the abort key; it executes the
+`Command`s the machine returns, streams setpoints to the vehicles in `streaming`, and runs the law
+while `law_active`. Rules (docs/gcs.md):
+
+* At most one command is outstanding per vehicle (so a late OFFBOARD ack cannot override a LAND).
+* Setpoints stream to a vehicle from PRIME until it has acknowledged its stop command (LAND or
+  HOLD) AND reported a mode other than OFFBOARD: a vehicle is never left in offboard without
+  setpoints while its link is up. A lost vehicle gets nothing (its own offboard-loss failsafe acts).
+* Any problem (failed check, rejected command, geofence, tilt, lost link, operator abort) moves to
+  STOPPING: the lost vehicles are left to their failsafe, the others get `abort_action` (or
+  `link_loss_action` when the cause is a lost link), and the outcome is non-zero with the reason.
+* A second abort request while STOPPING ends at once (the autopilots' failsafes take over).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from enum import Enum
+
+from gcs.mission.safety import (
+    Problem,
+    SafetyRules,
+    VehicleStatus,
+    flight_problems,
+    preflight_problems,
+)
+
+EXIT_OK = 0
+EXIT_ABORTED = 1
+EXIT_INTERRUPTED = 130
+
+HOLD_MODE = "AUTO_LOITER"
+OFFBOARD_MODE = "OFFBOARD"
+
+
+class Phase(Enum):
+    CONNECT = "connect"
+    PREFLIGHT = "preflight"
+    ARM = "arm"
+    TAKEOFF = "takeoff"
+    PRIME = "prime"
+    FORMATION = "formation"
+    STOPPING = "stopping"
+    DONE = "done"
+
+
+class Cmd(Enum):
+    """What the app must do to one vehicle (it maps these to proxy calls)."""
+
+    CONFIGURE = "configure"  # telemetry rates (SET_MESSAGE_INTERVAL)
+    ARM = "arm"
+    TAKEOFF = "takeoff"  # altitude_m above home
+    OFFBOARD = "offboard"
+    HOLD = "hold"  # PX4 AUTO_LOITER
+    LAND = "land"
+    DISARM = "disarm"
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    vehicle_id: int
+    cmd: Cmd
+    altitude_m: float = math.nan
+
+
+@dataclass(frozen=True, slots=True)
+class CommandResult:
+    vehicle_id: int
+    cmd: Cmd
+    ok: bool
+    detail: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class Outcome:
+    exit_code: int
+    reason: str
+
+
+@dataclass(frozen=True, slots=True)
+class MissionPlan:
+    """What to fly and the rules, from the team file's `mission:` and `fly:` sections."""
+
+    duration_s: float
+    rules: SafetyRules = SafetyRules()
+    start: str = "auto"  # auto | in_air | takeoff
+    takeoff_altitude_m: float = 2.5
+    end_action: str = "land"
+    abort_action: str = "land"
+    link_loss_action: str = "hold"
+    connect_timeout_s: float = 10.0
+    settle_s: float = 1.0  # after CONFIGURE, before the rates are judged
+    takeoff_timeout_s: float = 60.0
+    takeoff_tolerance_m: float = 0.3
+    prime_s: float = 1.5  # setpoint stream before OFFBOARD (PX4 needs > 1 s at >= 2 Hz)
+    land_timeout_s: float = 120.0
+    disarm_after_landed_s: float = 3.0  # PX4 auto-disarms after COM_DISARM_LAND (2 s)
+    command_attempts: int = 3  # per stop command (each has its own ack retries)
+    command_retry_s: float = 1.0  # between two attempts of a refused stop command
+
+
+@dataclass(slots=True)
+class _Stop:
+    """Progress of one vehicle while STOPPING."""
+
+    action: str | None  # land | hold | None (lost: nothing to do)
+    attempts: int = 0
+    last_attempt_s: float = -math.inf
+    acked: bool = False
+    done: bool = False
+    landed_since_s: float | None = None
+    failure: str = ""
+
+
+@dataclass(slots=True)
+class _Vehicle:
+    status: VehicleStatus | None = None
+    pending: Cmd | None = None
+    lost: bool = False
+    offboard_sent: bool = False
+    offboard_acked: bool = False
+    seen_offboard: bool = False
+    took_off: bool = False
+    stop: _Stop | None = None
+
+
+@dataclass(slots=True)
+class MissionMachine:
+    """See the module docstring. Time (`now_s`) is any monotonic clock in seconds."""
+
+    plan: MissionPlan
+    vehicle_ids: tuple[int, ...]
+    phase: Phase = Phase.CONNECT
+    formation_t0_s: float | None = None
+    outcome: Outcome | None = None
+    notes: list[str] = field(default_factory=list)  # human-readable events, newest last
+    _v: dict[int, _Vehicle] = field(default_factory=dict)
+    _phase_since_s: float | None = None
+    _now_s: float = 0.0
+    _abort: list[tuple[str, int]] = field(default_factory=list)
+    _stop_reason: Outcome | None = None
+    _stopping_since_s: float = 0.0
+    _interrupts: int = 0
+
+    def __post_init__(self) -> None:
+        self._v = {vid: _Vehicle() for vid in self.vehicle_ids}
+
+    # --- queries ---------------------------------------------------------------------------------
+
+    @property
+    def done(self) -> bool:
+        return self.phase is Phase.DONE
+
+    @property
+    def law_active(self) -> bool:
+        """The law runs (and its states advance) from the formation start until the end."""
+        return self.formation_t0_s is not None and self.phase is not Phase.DONE
+
+    @property
+    def streaming(self) -> frozenset[int]:
+        """Vehicles that must get a setpoint this tick."""
+        if self.phase is Phase.PRIME or self.phase is Phase.FORMATION:
+            return frozenset(vid for vid, v in self._v.items() if not v.lost)
+        if self.phase is Phase.STOPPING:
+            return frozenset(
+                vid for vid, v in self._v.items()
+                if not v.lost and v.offboard_sent and v.stop is not None
+                and not (v.stop.acked and v.status is not None and v.status.mode != OFFBOARD_MODE)
+            )
+        return frozenset()
+
+    @property
+    def lost(self) -> frozenset[int]:
+        return frozenset(vid for vid, v in self._v.items() if v.lost)
+
+    def formation_time_s(self, now_s: float) -> float | None:
+        return None if self.formation_t0_s is None else now_s - self.formation_t0_s
+
+    # --- inputs ----------------------------------------------------------------------------------
+
+    def request_abort(self, reason: str, *, operator: bool = True) -> None:
+        """Ctrl-C, the abort key (operator) or an outside failure; acted on at the next tick."""
+        code = EXIT_INTERRUPTED if operator else EXIT_ABORTED
+        if self.phase is Phase.STOPPING and operator:
+            self._interrupts += 1
+        self._abort.append((reason, code))
+
+    def on_result(self, result: CommandResult) -> list[Command]:
+        """A command finished (acknowledged, rejected or timed out)."""
+        v = self._v[result.vehicle_id]
+        if v.pending is result.cmd:
+            v.pending = None
+        if not result.ok:
+            self._note(f"vehicle {result.vehicle_id}: {result.cmd.value} failed: {result.detail}")
+        if result.cmd is Cmd.OFFBOARD:
+            v.offboard_acked = result.ok
+            if not result.ok and self.phase is Phase.FORMATION:
+                self._begin_stop(
+                    [Problem(result.vehicle_id, f"vehicle {result.vehicle_id}: OFFBOARD refused: "
+                                                f"{result.detail}")],
+                    EXIT_ABORTED,
+                )
+        elif self.phase is Phase.STOPPING and v.stop is not None and result.cmd in (
+            Cmd.LAND, Cmd.HOLD
+        ):
+            if result.ok:
+                v.stop.acked = True
+            elif v.stop.attempts >= self.plan.command_attempts:
+                v.stop.done = True
+                v.stop.failure = f"{result.cmd.value} not accepted ({result.detail})"
+        elif not result.ok and self.phase in (Phase.CONNECT, Phase.PREFLIGHT, Phase.ARM,
+                                              Phase.TAKEOFF):
+            self._begin_stop(
+                [Problem(result.vehicle_id, f"vehicle {result.vehicle_id}: {result.cmd.value} "
+                                            f"failed: {result.detail}")],
+                EXIT_ABORTED,
+            )
+        return self._drive()
+
+    def on_tick(self, now_s: float, team: Sequence[VehicleStatus]) -> list[Command]:
+        """Advance with the latest status of every vehicle; returns the commands to send now."""
+        self._now_s = now_s
+        if self._phase_since_s is None:
+            self._phase_since_s = now_s
+        for s in team:
+            v = self._v[s.vehicle_id]
+            v.status = s
+            if s.mode == OFFBOARD_MODE and v.offboard_acked:
+                v.seen_offboard = True
+        if self._abort:
+            reasons = [r for r, _ in self._abort]
+            code = max(c for _, c in self._abort)
+            self._abort.clear()
+            if self.phase is Phase.STOPPING:
+                if self._interrupts:
+                    self._finish(Outcome(code, f"{'; '.join(reasons)} while stopping; the "
+                                               "autopilots' failsafes take over"))
+                    return []
+            elif self.phase is not Phase.DONE:
+                self._begin_stop([Problem(None, r) for r in reasons], code)
+        return self._drive()
+
+    # --- the sequence ----------------------------------------------------------------------------
+
+    def _drive(self) -> list[Command]:
+        handler = {
+            Phase.CONNECT: self._connect,
+            Phase.PREFLIGHT: self._preflight,
+            Phase.ARM: self._arm,
+            Phase.TAKEOFF: self._takeoff,
+            Phase.PRIME: self._prime,
+            Phase.FORMATION: self._formation,
+            Phase.STOPPING: self._stopping,
+        }.get(self.phase)
+        return handler() if handler is not None else []
+
+    def _elapsed(self) -> float:
+        since = self._phase_since_s if self._phase_since_s is not None else self._now_s
+        return self._now_s - since
+
+    def _enter(self, phase: Phase) -> None:
+        self.phase = phase
+        self._phase_since_s = self._now_s
+        self._note(f"phase {phase.value}")
+
+    def _note(self, text: str) -> None:
+        self.notes.append(text)
+
+    def _statuses(self) -> list[VehicleStatus]:
+        return [v.status for v in self._v.values() if v.status is not None]
+
+    def _send(self, vid: int, cmd: Cmd, altitude_m: float = math.nan) -> Command:
+        self._v[vid].pending = cmd
+        if cmd is Cmd.OFFBOARD:
+            self._v[vid].offboard_sent = True
+        return Command(vid, cmd, altitude_m)
+
+    def _idle(self, vids: Sequence[int] | None = None) -> bool:
+        return all(self._v[vid].pending is None for vid in (vids or self.vehicle_ids))
+
+    def _connect(self) -> list[Command]:
+        team = self._statuses()
+        if len(team) == len(self._v) and all(s.link == "alive" for s in team):
+            self._enter(Phase.PREFLIGHT)
+            return [self._send(vid, Cmd.CONFIGURE) for vid in self.vehicle_ids]
+        if self._elapsed() > self.plan.connect_timeout_s:
+            silent = [f"vehicle {vid}" for vid, v in self._v.items()
+                      if v.status is None or v.status.link != "alive"]
+            self._begin_stop([Problem(None, f"no link to {', '.join(silent)} within "
+                                            f"{self.plan.connect_timeout_s:g} s", "link")],
+                             EXIT_ABORTED)
+        return []
+
+    def _preflight(self) -> list[Command]:
+        if not self._idle() or self._elapsed() < self.plan.settle_s:
+            return []
+        team = self._statuses()
+        problems = preflight_problems(team, self.plan.rules)
+        ground = [s.vehicle_id for s in team if s.landed is True]
+        airborne = [s.vehicle_id for s in team if s.in_air]
+        if self.plan.start == "in_air" and ground:
+            problems.append(Problem(None, f"start: in_air, but vehicles {ground} are on the "
+                                          "ground"))
+        if self.plan.start == "takeoff" and airborne:
+            problems.append(Problem(None, f"start: takeoff, but vehicles {airborne} are "
+                                          "airborne"))
+        for s in team:
+            if s.in_air and not s.armed:
+                problems.append(Problem(s.vehicle_id, f"{s.name}: in the air but not armed"))
+        if problems:
+            self._begin_stop(problems, EXIT_ABORTED)
+            return self._drive()
+        self._note("preflight checks passed")
+        if ground:
+            self._enter(Phase.ARM)
+            return [self._send(vid, Cmd.ARM) for vid in ground]
+        self._enter(Phase.PRIME)
+        return []
+
+    def _arm(self) -> list[Command]:
+        if not self._idle():
+            return []
+        ground = [vid for vid, v in self._v.items() if v.status is not None and not v.status.in_air]
+        for vid in ground:
+            self._v[vid].took_off = True
+        self._enter(Phase.TAKEOFF)
+        return [self._send(vid, Cmd.TAKEOFF, self.plan.takeoff_altitude_m) for vid in ground]
+
+    def _takeoff(self) -> list[Command]:
+        if not self._idle():
+            return []
+        target = self.plan.takeoff_altitude_m - self.plan.takeoff_tolerance_m
+        waiting = [
+            vid for vid, v in self._v.items()
+            if v.took_off and not (v.status is not None and v.status.in_air
+                                   and v.status.mode == HOLD_MODE
+                                   and v.status.position_enu_m[2] >= target)
+        ]
+        if not waiting:
+            self._enter(Phase.PRIME)
+        elif self._elapsed() > self.plan.takeoff_timeout_s:
+            self._begin_stop([Problem(None, f"vehicles {waiting} did not reach "
+                                            f"{self.plan.takeoff_altitude_m:g} m within "
+                                            f"{self.plan.takeoff_timeout_s:g} s")], EXIT_ABORTED)
+            return self._drive()
+        return []
+
+    def _prime(self) -> list[Command]:
+        problems = flight_problems(self._statuses(), self.plan.rules)
+        if problems:
+            self._begin_stop(problems, EXIT_ABORTED)
+            return self._drive()
+        if self._elapsed() < self.plan.prime_s:
+            return []
+        self.formation_t0_s = self._now_s
+        self._enter(Phase.FORMATION)
+        return [self._send(vid, Cmd.OFFBOARD) for vid in self.vehicle_ids]
+
+    def _formation(self) -> list[Command]:
+        problems = flight_problems(self._statuses(), self.plan.rules)
+        for vid, v in self._v.items():
+            s = v.status
+            if v.seen_offboard and s is not None and s.mode != OFFBOARD_MODE and s.link == "alive":
+                problems.append(Problem(vid, f"{s.name}: left OFFBOARD (now {s.mode or '?'})",
+                                        "mode"))
+        if problems:
+            self._begin_stop(problems, EXIT_ABORTED)
+            return self._drive()
+        t = self._now_s - (self.formation_t0_s or self._now_s)
+        if t >= self.plan.duration_s:
+            self._begin_stop([], EXIT_OK, end=True)
+            return self._drive()
+        return []
+
+    # --- stopping --------------------------------------------------------------------------------
+
+    def _begin_stop(self, problems: Sequence[Problem], code: int, end: bool = False) -> None:
+        if self.phase in (Phase.STOPPING, Phase.DONE):
+            return
+        lost = {p.vehicle_id for p in problems if p.kind == "link" and p.vehicle_id is not None}
+        if end:
+            action, reason = self.plan.end_action, "formation complete"
+        elif lost and code != EXIT_INTERRUPTED:
+            action = self.plan.link_loss_action
+            reason = "; ".join(p.text for p in problems)
+        else:
+            action = self.plan.abort_action
+            reason = "; ".join(p.text for p in problems)
+        for vid, v in self._v.items():
+            if vid in lost:
+                v.lost = True
+                v.stop = _Stop(None, done=True)
+            elif v.status is None or v.status.link != "alive":
+                v.stop = _Stop(None, done=True, failure="no link")
+            else:
+                v.stop = _Stop(action)
+        self._stop_reason = Outcome(code, reason)
+        self._stopping_since_s = self._now_s
+        self._note(f"stopping ({action}): {reason}")
+        self._enter(Phase.STOPPING)
+
+    def _stopping(self) -> list[Command]:
+        out: list[Command] = []
+        now = self._now_s
+        for vid, v in self._v.items():
+            st, s = v.stop, v.status
+            if st is None or st.done:
+                continue
+            if s is None or s.link == "lost" or (s.data_age_s > self.plan.rules.link_lost_after_s):
+                v.lost = True
+                st.done, st.failure = True, "link lost while stopping"
+                continue
+            on_ground = s.landed is True
+            if on_ground and not s.armed:
+                st.done = True  # landed and disarmed (or never took off)
+                continue
+            if v.pending is not None:
+                continue
+            if on_ground:  # landed but still armed
+                st.landed_since_s = st.landed_since_s if st.landed_since_s is not None else now
+                if now - st.landed_since_s > self.plan.disarm_after_landed_s:
+                    out.append(self._send(vid, Cmd.DISARM))
+                    st.landed_since_s = now
+                continue
+            if st.action == "hold" and st.acked and s.mode == HOLD_MODE:
+                st.done = True
+                continue
+            if (not st.acked and st.attempts < self.plan.command_attempts
+                    and now - st.last_attempt_s >= self.plan.command_retry_s):
+                st.attempts += 1
+                st.last_attempt_s = now
+                out.append(self._send(vid, Cmd.LAND if st.action == "land" else Cmd.HOLD))
+            if now - self._stopping_since_s > self.plan.land_timeout_s:
+                st.done = True
+                st.failure = f"not {st.action}ed within {self.plan.land_timeout_s:g} s"
+        if all(v.stop is None or v.stop.done for v in self._v.values()) and self._idle():
+            base = self._stop_reason or Outcome(EXIT_ABORTED, "stopped")
+            failures = [f"vehicle {vid}: {v.stop.failure}" for vid, v in self._v.items()
+                        if v.stop is not None and v.stop.failure]
+            if failures:
+                code = base.exit_code or EXIT_ABORTED
+                self._finish(Outcome(code, "; ".join([base.reason, *failures])))
+            else:
+                self._finish(base)
+        return out
+
+    def _finish(self, outcome: Outcome) -> None:
+        self.outcome = outcome
+        self._note(f"done: exit {outcome.exit_code}: {outcome.reason}")
+        self._enter(Phase.DONE)

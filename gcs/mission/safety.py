@@ -1,0 +1,190 @@
+"""Pure safety checks of `gcs fly`: preflight (before arming / offboard) and in-flight rules.
+
+Every check takes plain values (a `VehicleStatus` per vehicle, the rules from the team file) and
+returns `Problem`s naming the vehicle, the value and the limit; nothing here reads a clock or a
+socket. Frames: positions ENU [m], tilt = angle between body z and world z [rad].
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+PX4_AUTOPILOT = 12
+QUADROTOR_TYPE = 2
+#: A vehicle moving faster than this is not "holding" before the formation starts [m/s].
+MAX_START_SPEED_MPS = 1.5
+#: A telemetry stream must reach this fraction of its requested rate in preflight.
+RATE_TOLERANCE = 0.5
+
+
+@dataclass(frozen=True, slots=True)
+class Problem:
+    """Why the flight cannot go on. `vehicle_id` is None for a team-level problem."""
+
+    vehicle_id: int | None
+    text: str
+    kind: str = "check"  # check | link | geofence | tilt | mode
+
+    def __str__(self) -> str:
+        return self.text
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleStatus:
+    """One vehicle as the mission sees it at a tick (from its link, as received).
+
+    link: 'waiting' | 'alive' | 'lost'; mode: e.g. 'OFFBOARD', 'AUTO_LOITER'; landed: True on
+    the ground, False in the air, None unknown; data_age_s: age of the older of its position and
+    attitude samples; rates_hz: measured receive rate per message type.
+    """
+
+    vehicle_id: int
+    sysid: int
+    link: str
+    armed: bool = False
+    mode: str = ""
+    landed: bool | None = None
+    position_enu_m: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+    velocity_enu_mps: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+    tilt_rad: float = math.nan
+    data_age_s: float = math.inf
+    autopilot: int = 0
+    vehicle_type: int = 0
+    sysid_mismatch: int | None = None
+    rates_hz: Mapping[str, float] = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return f"vehicle {self.vehicle_id} (sysid {self.sysid})"
+
+    @property
+    def in_air(self) -> bool:
+        return self.landed is False
+
+
+@dataclass(frozen=True, slots=True)
+class SafetyRules:
+    """Limits from the team file's `fly:` section (see gcs.config.FlyConfig)."""
+
+    max_tilt_rad: float = 1.0
+    link_lost_after_s: float = 0.5
+    geofence_min_enu_m: tuple[float, float, float] | None = None
+    geofence_max_enu_m: tuple[float, float, float] | None = None
+    #: message type -> minimum rate [Hz] required in preflight
+    required_rates_hz: Mapping[str, float] = field(default_factory=dict)
+
+
+def tilt_rad(rotation_enu_flu: np.ndarray) -> float:
+    """Angle between body z and world z: acos(R[2, 2]) (NaN for a NaN rotation)."""
+    c = float(rotation_enu_flu[2, 2])
+    return math.acos(max(-1.0, min(1.0, c))) if math.isfinite(c) else math.nan
+
+
+def geofence_problem(status: VehicleStatus, rules: SafetyRules) -> Problem | None:
+    """The vehicle outside the geofence box (or its position unknown while one is set)."""
+    lo, hi = rules.geofence_min_enu_m, rules.geofence_max_enu_m
+    if lo is None or hi is None:
+        return None
+    p = status.position_enu_m
+    for k, axis in enumerate("xyz"):
+        if not lo[k] <= p[k] <= hi[k]:
+            return Problem(
+                status.vehicle_id,
+                f"{status.name}: geofence breach: {axis} = {p[k]:.2f} m outside "
+                f"[{lo[k]:g}, {hi[k]:g}] m",
+                "geofence",
+            )
+    return None
+
+
+def link_problem(status: VehicleStatus, rules: SafetyRules) -> Problem | None:
+    """Lost link: the proxy says so, or no position/attitude for `link_lost_after_s`."""
+    if status.link == "lost" or status.data_age_s > rules.link_lost_after_s:
+        age = "never" if math.isinf(status.data_age_s) else f"{status.data_age_s:.2f} s ago"
+        return Problem(
+            status.vehicle_id,
+            f"{status.name}: link lost (last position/attitude {age}, limit "
+            f"{rules.link_lost_after_s:g} s)",
+            "link",
+        )
+    return None
+
+
+def tilt_problem(status: VehicleStatus, rules: SafetyRules) -> Problem | None:
+    if not status.tilt_rad <= rules.max_tilt_rad:
+        return Problem(
+            status.vehicle_id,
+            f"{status.name}: tilt {math.degrees(status.tilt_rad):.1f} deg exceeds max_tilt_rad "
+            f"{rules.max_tilt_rad:g} ({math.degrees(rules.max_tilt_rad):.1f} deg)",
+            "tilt",
+        )
+    return None
+
+
+def flight_problems(team: Sequence[VehicleStatus], rules: SafetyRules,
+                    skip: frozenset[int] = frozenset()) -> list[Problem]:
+    """In-flight rules for every vehicle not in `skip` (ids already handled): link, geofence,
+    tilt. Returns all problems found (empty: fly on)."""
+    out: list[Problem] = []
+    for s in team:
+        if s.vehicle_id in skip:
+            continue
+        p = link_problem(s, rules)
+        if p is not None:
+            out.append(p)
+            continue  # the other values are stale
+        for check in (geofence_problem, tilt_problem):
+            q = check(s, rules)
+            if q is not None:
+                out.append(q)
+    return out
+
+
+def preflight_problems(team: Sequence[VehicleStatus], rules: SafetyRules) -> list[Problem]:
+    """Everything that must hold before arming or switching to offboard.
+
+    Per vehicle: link alive, no foreign vehicle on its link, a PX4 quadrotor, telemetry at the
+    required rates, a finite state, tilt and speed within limits, inside the geofence if airborne.
+    """
+    out: list[Problem] = []
+    for s in team:
+        n = s.name
+        if s.link != "alive":
+            out.append(Problem(s.vehicle_id, f"{n}: link {s.link}", "link"))
+            continue
+        if s.sysid_mismatch is not None:
+            out.append(Problem(s.vehicle_id, f"{n}: a vehicle with sysid {s.sysid_mismatch} "
+                                             "answers on this link; check the team file"))
+        if s.autopilot != PX4_AUTOPILOT:
+            out.append(Problem(s.vehicle_id, f"{n}: autopilot {s.autopilot} is not PX4 "
+                                             f"({PX4_AUTOPILOT}); gcs fly drives PX4 offboard "
+                                             "only"))
+        if s.vehicle_type != QUADROTOR_TYPE:
+            out.append(Problem(s.vehicle_id, f"{n}: MAV_TYPE {s.vehicle_type} is not a quadrotor "
+                                             f"({QUADROTOR_TYPE})"))
+        for kind, need in rules.required_rates_hz.items():
+            got = s.rates_hz.get(kind, 0.0)
+            if not got >= RATE_TOLERANCE * need:
+                out.append(Problem(s.vehicle_id, f"{n}: {kind} at {got:.1f} Hz, need >= "
+                                                 f"{RATE_TOLERANCE * need:g} Hz (asked {need:g})"))
+        if not all(math.isfinite(x) for x in (*s.position_enu_m, *s.velocity_enu_mps)):
+            out.append(Problem(s.vehicle_id, f"{n}: no valid position/velocity"))
+            continue
+        q = tilt_problem(s, rules)
+        if q is not None:
+            out.append(q)
+        speed = math.sqrt(sum(v * v for v in s.velocity_enu_mps))
+        if speed > MAX_START_SPEED_MPS:
+            out.append(Problem(s.vehicle_id, f"{n}: moving at {speed:.2f} m/s, more than "
+                                             f"{MAX_START_SPEED_MPS:g} m/s before the start"))
+        if s.in_air:
+            g = geofence_problem(s, rules)
+            if g is not None:
+                out.append(g)
+        if s.landed is None:
+            out.append(Problem(s.vehicle_id, f"{n}: landed state unknown (no EXTENDED_SYS_STATE)"))
+    return out

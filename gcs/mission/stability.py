@@ -1,0 +1,124 @@
+"""Discrete-time stability of the attitude loops as flown over a link (spec section 9). Pure.
+
+The paper designs its attitude loop in continuous time. Over MAVLink the command is computed at a
+fixed tick of period h from telemetry that is up to about one tick old, and held (zero-order hold)
+until the next one. The criterion used by `gcs fly` linearises each body axis about R^e = I
+(eps ~ 2 theta, omega^e ~ theta'):
+
+* actuators mode, torque (26): J theta'' = -(2 alpha_eps + 1/2) theta - alpha_omega theta'
+  (the 1/2 is -eps/(4 - tr(I - R^e)) at R^e = I); the Gamma rhohat feed-forward is not feedback.
+* rates mode: the body-rate command omega_cmd = R^eT omega^c - k_eps eps gives
+  theta' = -2 k_eps theta, closed by the autopilot's own rate loop (a first-order lag of
+  bandwidth `rate_loop_bandwidth_radps`, modelled as extra delay).
+
+Each is discretised exactly (ZOH) with a pure measurement delay of d = 1 and d = 2 ticks (telemetry
+age plus the vehicle's own sampling). The criterion: for every vehicle, every axis and both
+delays, the spectral radius rho of the discrete closed loop is < 1, and its equivalent decay rate
+-ln(rho)/h is at least `min_decay_per_s` (default 1.5 /s; the paper's own continuous loop has a
+slowest attitude mode of about 2 (alpha_eps + 1/4)/alpha_omega = 2.0 /s).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+DELAYS_TICKS = (1, 2)
+MIN_DECAY_PER_S = 1.5
+
+
+@dataclass(frozen=True, slots=True)
+class AxisMargin:
+    """Worst case over the delays for one vehicle axis."""
+
+    vehicle_id: int
+    axis: str
+    inertia_kgm2: float
+    spectral_radius: float
+    decay_per_s: float  # -ln(rho)/h; negative when unstable
+
+    def ok(self, min_decay_per_s: float = MIN_DECAY_PER_S) -> bool:
+        return self.spectral_radius < 1.0 and self.decay_per_s >= min_decay_per_s
+
+
+def _delayed_loop_radius(phi: np.ndarray, gam: np.ndarray, gain: np.ndarray, delay: int) -> float:
+    """Spectral radius of x_{k+1} = phi x_k - gam gain x_{k-delay} (augmented state)."""
+    m = phi.shape[0]
+    size = m * (delay + 1)
+    a = np.zeros((size, size))
+    a[:m, :m] = phi
+    a[:m, m * delay : m * (delay + 1)] -= np.outer(gam, gain)
+    for j in range(1, delay + 1):
+        a[m * j : m * (j + 1), m * (j - 1) : m * j] = np.eye(m)
+    return float(np.max(np.abs(np.linalg.eigvals(a))))
+
+
+def torque_loop_radius(
+    alpha_eps: float, alpha_omega: float, inertia_kgm2: float, period_s: float, delay_ticks: int
+) -> float:
+    """rho of the linearised torque loop (26) of one axis, ZOH period h, measurement delay d."""
+    h, j = period_s, inertia_kgm2
+    phi = np.array([[1.0, h], [0.0, 1.0]])
+    gam = np.array([h * h / (2.0 * j), h / j])
+    gain = np.array([2.0 * alpha_eps + 0.5, alpha_omega])
+    return _delayed_loop_radius(phi, gam, gain, delay_ticks)
+
+
+def rate_loop_radius(
+    k_eps: float, period_s: float, delay_ticks: int, rate_loop_bandwidth_radps: float = 40.0
+) -> float:
+    """rho of the rates-mode attitude loop theta' = -2 k_eps theta(t - d h - 1/bandwidth)."""
+    h = period_s
+    extra = max(0, math.ceil(1.0 / (rate_loop_bandwidth_radps * h)))
+    return _delayed_loop_radius(
+        np.array([[1.0]]), np.array([h]), np.array([2.0 * k_eps]), delay_ticks + extra
+    )
+
+
+def _decay(rho: float, period_s: float) -> float:
+    return -math.log(rho) / period_s if rho > 0.0 else math.inf
+
+
+def torque_margins(
+    vehicle_ids: Sequence[int],
+    inertias_kgm2: Sequence[Sequence[float]],
+    alpha_eps: float,
+    alpha_omega: float,
+    tick_rate_hz: float,
+) -> list[AxisMargin]:
+    """Worst-case (over DELAYS_TICKS) margin of every vehicle axis in actuators mode.
+
+    `inertias_kgm2` are the principal inertias (Jx, Jy, Jz) the check assumes: a lower bound is
+    the safe choice, since the loop is stiffest for the smallest inertia.
+    """
+    h = 1.0 / tick_rate_hz
+    out = []
+    for vid, inertia in zip(vehicle_ids, inertias_kgm2, strict=True):
+        for axis, j in zip("xyz", inertia, strict=True):
+            rho = max(torque_loop_radius(alpha_eps, alpha_omega, j, h, d) for d in DELAYS_TICKS)
+            out.append(AxisMargin(int(vid), axis, float(j), rho, _decay(rho, h)))
+    return out
+
+
+def rate_margin(k_eps: float, tick_rate_hz: float) -> tuple[float, float]:
+    """(rho, decay_per_s) of the rates-mode attitude loop, worst case over DELAYS_TICKS."""
+    h = 1.0 / tick_rate_hz
+    rho = max(rate_loop_radius(k_eps, h, d) for d in DELAYS_TICKS)
+    return rho, _decay(rho, h)
+
+
+def describe_margins(margins: Sequence[AxisMargin],
+                     min_decay_per_s: float = MIN_DECAY_PER_S) -> str:
+    """One line per vehicle: worst axis, rho and decay rate, OK / NOT MET."""
+    lines = []
+    for vid in dict.fromkeys(m.vehicle_id for m in margins):
+        worst = max((m for m in margins if m.vehicle_id == vid), key=lambda m: m.spectral_radius)
+        lines.append(
+            f"vehicle {vid}: worst axis {worst.axis} (J {worst.inertia_kgm2:g} kg m^2): rho "
+            f"{worst.spectral_radius:.4f}, decay {worst.decay_per_s:.3g} /s: "
+            f"{'OK' if worst.ok(min_decay_per_s) else 'NOT MET'}"
+        )
+    return "\n".join(lines)

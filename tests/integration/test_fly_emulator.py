@@ -1,0 +1,270 @@
+"""`gcs fly` end to end: real `vehicle-emu` processes and the real `gcs` CLI over 127.0.0.1 UDP.
+
+Flights are shortened where the acceptance allows (formation figures from t = 30 s need 30 s;
+Scenario II's drop is moved from 40 s to 10 s with the same windows after it); the full-length
+figures are measured by running `gcs fly` on the shipped configs (docs/gcs.md). Each test waits on
+the GCS's own log lines or exit, with timeouts; none sleeps to synchronise.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as dt
+import json
+import os
+import random
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from pymavlink import mavutil
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(420)]
+
+ROOT = Path(__file__).resolve().parents[2]
+SQUARE4 = ROOT / "configs" / "square4.yaml"
+
+
+def _port_block(n: int) -> int:
+    """A base port with n consecutive free UDP ports on 127.0.0.1."""
+    for _ in range(200):
+        base = random.randrange(20000, 60000 - n)
+        socks = []
+        try:
+            for k in range(n):
+                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                socks.append(s)
+                s.bind(("127.0.0.1", base + k))
+            return base
+        except OSError:
+            continue
+        finally:
+            for s in socks:
+                s.close()
+    raise RuntimeError("no block of free UDP ports")
+
+
+def team_file(tmp: Path, bind_base: int, *, duration_s: float, z_shift: float = 0.0,
+              faults: list | None = None, massdrop: bool = False) -> Path:
+    """square4 (or its Scenario II variant) on free ports: vehicle i binds bind_base + i and the
+    GCS listens on gcs_base + i (the team file's link keys, which the emulator reads too)."""
+    gcs_base = _port_block(4)
+    data = yaml.safe_load((ROOT / "configs" / ("square4_massdrop.yaml" if massdrop
+                                               else "square4.yaml")).read_text())
+    data["mission"]["duration_s"] = duration_s
+    for k, v in enumerate(data["vehicles"]):
+        v["link"] = {"local_port": gcs_base + k, "remote_port": bind_base + k}
+        v["initial"]["position_enu_m"][2] += z_shift
+    data["fly"]["geofence"]["min_enu_m"][2] = 0.5
+    data["faults"] = faults if faults is not None else data.get("faults", [])
+    path = tmp / "team.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+@contextlib.contextmanager
+def emulators(team: Path, bind_base: int, tmp: Path, *, separate: bool = False,
+              n: int = 4) -> Iterator[list[subprocess.Popen]]:
+    """`vehicle-emu --fleet` (or one process per vehicle) on the team file's ports; stopped on
+    exit."""
+    cmd = [sys.executable, "-m", "vehicle_emulator.cli", "--team", str(team), "--log-level",
+           "WARNING"]
+    argv = [cmd + ["--id", str(k + 1)] for k in range(n)] if separate else [cmd + ["--fleet"]]
+    procs = [subprocess.Popen(a, stdout=subprocess.DEVNULL,
+                              stderr=open(tmp / f"emu{k}.log", "w"))  # noqa: SIM115
+             for k, a in enumerate(argv)]
+    try:
+        yield procs
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.terminate()
+        for p in procs:
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+
+
+class Gcs:
+    """`gcs fly` as a subprocess with its log in a file (timestamps from Python logging)."""
+
+    def __init__(self, team: Path, out: Path, *args: str) -> None:
+        self.log_path = out.parent / f"{out.name}.stderr"
+        self.out = out
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "gcs.cli", "fly", "--team", str(team), "--out", str(out),
+             "--no-figures", "--status", "plain", "--log-level", "INFO", *args],
+            stdout=subprocess.PIPE, stderr=open(self.log_path, "w"), text=True,  # noqa: SIM115
+            env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        )
+
+    def wait_for(self, text: str, timeout_s: float) -> None:
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            if text in self.log_path.read_text():
+                return
+            if self.proc.poll() is not None:
+                break
+            time.sleep(0.05)  # polling a file written by another process, not synchronising
+        raise TimeoutError(f"gcs fly: no {text!r} within {timeout_s} s:\n"
+                           + self.log_path.read_text()[-3000:])
+
+    def finish(self, timeout_s: float) -> tuple[int, str]:
+        out, _ = self.proc.communicate(timeout=timeout_s)
+        return self.proc.returncode, out
+
+    def log_time(self, text: str) -> float:
+        """Unix time of the first log line containing `text`."""
+        for line in self.log_path.read_text().splitlines():
+            if text in line:
+                stamp = dt.datetime.strptime(line[:23], "%Y-%m-%d %H:%M:%S,%f")
+                return stamp.timestamp()
+        raise AssertionError(f"no log line with {text!r}")
+
+    def report(self) -> dict:
+        return json.loads((self.out / "report.json").read_text())
+
+
+def series(report: dict, key: str) -> tuple[np.ndarray, np.ndarray]:
+    t = np.array(report["t_s"])
+    return t, np.array(report[key], dtype=float)
+
+
+def last_vehicle_messages(tlog: Path) -> dict[int, dict[str, object]]:
+    """Latest HEARTBEAT and EXTENDED_SYS_STATE per vehicle sysid in a .tlog."""
+    out: dict[int, dict[str, object]] = {}
+    conn = mavutil.mavlink_connection(str(tlog))
+    while (msg := conn.recv_match(type=["HEARTBEAT", "EXTENDED_SYS_STATE"])) is not None:
+        if msg.get_srcSystem() != 255:
+            out.setdefault(msg.get_srcSystem(), {})[msg.get_type()] = msg
+    return out
+
+
+def check_scenario_one(report: dict, code: int, out: str) -> None:
+    assert code == 0, out
+    t, fe = series(report, "formation_error_m")
+    assert np.nanmax(fe[t >= 30.0]) <= 0.05
+    k20 = int(np.argmin(np.abs(t - 20.0)))
+    est = np.array(report["mass_estimate_kg"][k20])
+    truth = np.array(report["mass_true_kg"][k20])
+    np.testing.assert_allclose(est, truth, atol=0.02)
+
+
+def test_scenario_one_rates_mode_at_100_hz(tmp_path):
+    base = _port_block(4)
+    team = team_file(tmp_path, base, duration_s=32.0)
+    with emulators(team, base, tmp_path):
+        gcs = Gcs(team, tmp_path / "run", "--mode", "rates", "--end-action", "hold")
+        code, out = gcs.finish(180)
+    report = gcs.report()
+    check_scenario_one(report, code, out)
+    assert report["source"] == "fly" and report["tick"]["rate_hz"] == 100.0
+    assert report["tick"]["late_pct"] < 10.0
+    assert all(report["link"][str(i)]["setpoints_sent"] > 2500 for i in range(1, 5))
+    # the .tlog reads with pymavlink and holds both directions
+    conn = mavutil.mavlink_connection(str(tmp_path / "run" / "flight.tlog"))
+    want, kinds = {"SET_ATTITUDE_TARGET", "ATTITUDE_QUATERNION", "COMMAND_ACK"}, set()
+    while not want <= kinds and (msg := conn.recv_match()) is not None:
+        kinds.add(msg.get_type())
+    assert want <= kinds
+    # and `gcs plot` redraws the figures from the time series
+    plot = subprocess.run([sys.executable, "-m", "gcs.cli", "plot", str(tmp_path / "run")],
+                          capture_output=True, text=True, timeout=120)
+    assert plot.returncode == 0 and ".png" in plot.stdout
+
+
+def test_scenario_one_actuators_mode_at_250_hz(tmp_path):
+    base = _port_block(4)
+    team = team_file(tmp_path, base, duration_s=32.0)
+    with emulators(team, base, tmp_path):
+        gcs = Gcs(team, tmp_path / "run", "--mode", "actuators", "--end-action", "hold")
+        code, out = gcs.finish(180)
+    report = gcs.report()
+    check_scenario_one(report, code, out)
+    assert report["tick"]["rate_hz"] == 250.0
+    assert report["extra"]["gains"]["alpha_omega"] == 3.0
+
+
+def test_scenario_two_over_the_link_adaptive_holds_baseline_climbs(tmp_path):
+    # Scenario II with the drop at 10 s instead of 40 s: the same windows after the drop
+    # (|v_z| <= 0.05 from 15 s after it; baseline climbing >= 0.3 m/s 20 s after it)
+    drop = [{"kind": "mass_drop", "vehicle": 1, "at_s": 10.0, "fraction": 0.3}]
+    vz = {}
+    for law in ("adaptive", "baseline"):
+        base = _port_block(4)
+        team = team_file(tmp_path, base, duration_s=31.0, faults=drop, massdrop=True)
+        with emulators(team, base, tmp_path):
+            gcs = Gcs(team, tmp_path / law, "--mode", "rates", "--controller", law,
+                      "--end-action", "hold")
+            code, out = gcs.finish(180)
+        assert code == 0, out
+        t, v = series(gcs.report(), "velocity_ned_mps")
+        vz[law] = (t, -v[:, :, 2])  # NED d -> up
+    t, up = vz["adaptive"]
+    assert np.nanmax(np.abs(up[t >= 25.0])) <= 0.05
+    t, up = vz["baseline"]
+    k = int(np.argmin(np.abs(t - 30.0)))
+    assert np.all(up[k] >= 0.3)
+
+
+def test_sigint_mid_flight_lands_and_disarms_every_vehicle(tmp_path):
+    base = _port_block(4)
+    team = team_file(tmp_path, base, duration_s=60.0, z_shift=-6.0)
+    with emulators(team, base, tmp_path):
+        gcs = Gcs(team, tmp_path / "run", "--mode", "rates")
+        gcs.wait_for("mission: phase formation", 60)
+        time.sleep(3.0)  # let it fly a little: the point of the test is mid-flight
+        gcs.proc.send_signal(signal.SIGINT)
+        code, out = gcs.finish(120)
+        assert code == 130, gcs.log_path.read_text()[-2000:]
+        assert "interrupted (Ctrl-C)" in gcs.log_path.read_text()
+    last = last_vehicle_messages(tmp_path / "run" / "flight.tlog")
+    assert set(last) == {1, 2, 3, 4}
+    for sysid, msgs in last.items():
+        assert not msgs["HEARTBEAT"].base_mode & 128, f"vehicle {sysid} still armed"
+        assert msgs["EXTENDED_SYS_STATE"].landed_state == 1, f"vehicle {sysid} not on the ground"
+
+
+def test_killing_one_emulator_is_detected_within_a_second_and_the_others_hold(tmp_path):
+    base = _port_block(4)
+    team = team_file(tmp_path, base, duration_s=60.0)
+    with emulators(team, base, tmp_path, separate=True) as procs:
+        gcs = Gcs(team, tmp_path / "run", "--mode", "rates")
+        gcs.wait_for("mission: phase formation", 60)
+        time.sleep(3.0)
+        killed_at = time.time()
+        procs[2].kill()  # vehicle 3
+        code, out = gcs.finish(120)
+        log = gcs.log_path.read_text()
+        assert code == 1, log[-2000:]
+        assert "vehicle 3 (sysid 3): link lost" in log
+        detected = gcs.log_time("mission: stopping (hold)")
+        assert detected - killed_at <= 1.0
+    last = last_vehicle_messages(tmp_path / "run" / "flight.tlog")
+    for sysid in (1, 2, 4):
+        hb = last[sysid]["HEARTBEAT"]
+        assert hb.custom_mode == (4 << 16) | (3 << 24), f"vehicle {sysid} not holding"
+
+
+def test_ten_percent_packet_loss_on_every_link_still_converges(tmp_path):
+    base = _port_block(4)
+    loss = [{"kind": "packet_loss", "vehicle": k, "at_s": 0.0, "probability": 0.1}
+            for k in (1, 2, 3, 4)]
+    team = team_file(tmp_path, base, duration_s=25.0, faults=loss)
+    with emulators(team, base, tmp_path):
+        gcs = Gcs(team, tmp_path / "run", "--mode", "rates", "--end-action", "hold")
+        code, out = gcs.finish(180)
+    assert code == 0, out
+    report = gcs.report()
+    t, fe = series(report, "formation_error_m")
+    assert np.nanmax(fe[t >= 20.0]) <= 0.2
+    lost = [report["link"][str(k)]["telemetry_lost_pct"] for k in (1, 2, 3, 4)]
+    assert all(5.0 <= x <= 15.0 for x in lost), lost

@@ -1,0 +1,167 @@
+"""`gcs fly` without sockets: setup and its stability check, the staleness rule, setpoint scaling,
+tick statistics, and the distributed structure of the team computation."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gcs.app import FlightSetupError, FlyOptions, prepare, true_mass_kg
+from gcs.config import load_team
+from gcs.control.formation import reference_velocity
+from gcs.control.law import TeamLaw, TeamMeasurement
+from gcs.fly.measure import (
+    desaturate_torque,
+    effective_adjacency,
+    limit_rate_command,
+    normalised_thrust,
+    stale_neighbour_counts,
+    torque_max_nm,
+)
+from gcs.fly.stats import AgeStats, TickStats, late_threshold_s, link_report
+from gcs.sim.runner import law_gains
+from vehicle_emulator.physics import rotors_from_wrench, wrench_from_rotors
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+OUT = Path("/nonexistent")
+
+
+def test_rates_setup_uses_the_file_and_checks_the_criterion():
+    team = load_team(CONFIGS / "square4.yaml")
+    setup = prepare(team, FlyOptions(out_dir=OUT, mode="rates"))
+    assert setup.tick_rate_hz == 100.0 and setup.log_every == 2
+    assert setup.requested_rates_hz == {"ATTITUDE_QUATERNION": 100.0, "LOCAL_POSITION_NED": 100.0,
+                                        "HIGHRES_IMU": 100.0}
+    assert "rates mode at 100 Hz, k_eps 8" in setup.stability
+
+
+def test_actuators_setup_flies_the_criterion_gains_at_250_hz():
+    team = load_team(CONFIGS / "square4.yaml")
+    setup = prepare(team, FlyOptions(out_dir=OUT))
+    assert setup.mode == "actuators" and setup.tick_rate_hz == 250.0
+    assert (setup.gains.alpha_eps, setup.gains.alpha_omega) == (24.0, 3.0)
+    assert setup.requested_rates_hz["ATTITUDE_QUATERNION"] == 250.0
+    assert setup.requested_rates_hz["LOCAL_POSITION_NED"] == 100.0
+
+
+def test_paper_torque_gains_at_250_hz_are_refused_before_any_link_opens():
+    team = load_team(CONFIGS / "square4.yaml")
+    fly = dataclasses.replace(team.fly, actuators=dataclasses.replace(
+        team.fly.actuators, alpha_eps=None, alpha_omega=None))
+    team = dataclasses.replace(team, fly=fly)
+    with pytest.raises(FlightSetupError, match=r"^actuators mode at 250 Hz is not stable with "
+                       r"alpha_eps 32, alpha_omega 32: vehicle 3 axis [xy] \(J 0.0256 kg m\^2\)"):
+        prepare(team, FlyOptions(out_dir=OUT))
+
+
+def test_tick_rate_must_be_a_multiple_of_the_log_rate():
+    team = load_team(CONFIGS / "square4.yaml")
+    with pytest.raises(FlightSetupError, match="tick rate 75 Hz must be a multiple of"):
+        prepare(team, FlyOptions(out_dir=OUT, mode="rates", tick_rate_hz=75.0))
+
+
+def test_true_mass_follows_the_scheduled_drop():
+    team = load_team(CONFIGS / "square4_massdrop.yaml")
+    np.testing.assert_allclose(true_mass_kg(team, 39.99), [0.85, 1.2, 0.35, 3.4])
+    np.testing.assert_allclose(true_mass_kg(team, 40.0), [0.595, 1.2, 0.35, 3.4])
+
+
+def test_stale_neighbour_edges_are_dropped_in_their_neighbours_rows_only():
+    a = np.array([[0, 1, 0, 1], [1, 0, 1, 0], [0, 1, 0, 1], [1, 0, 1, 0]], dtype=float)
+    fresh = np.array([True, False, True, True])
+    eff = effective_adjacency(a, fresh)
+    assert eff[0, 1] == 0 and eff[2, 1] == 0  # vehicles 1 and 3 stop using vehicle 2
+    np.testing.assert_array_equal(eff[1], a[1])  # vehicle 2 still uses its fresh neighbours
+    np.testing.assert_array_equal(stale_neighbour_counts(a, fresh), [1, 0, 1, 0])
+
+
+def test_thrust_is_normalised_by_max_thrust_never_by_mass():
+    team = load_team(CONFIGS / "square4.yaml")
+    max_n = np.array([v.airframe.max_thrust_n for v in team.vehicles])
+    np.testing.assert_allclose(normalised_thrust([12.0, 16.0, 6.0, 40.0], max_n),
+                               [0.5, 0.5, 0.5, 0.5])
+
+
+def test_rate_limit_keeps_the_direction():
+    out, clipped = limit_rate_command(np.array([[3.0, 4.0, 0.0], [0.1, 0.0, 0.0]]), 1.0)
+    np.testing.assert_allclose(out, [[0.6, 0.8, 0.0], [0.1, 0.0, 0.0]])
+    assert clipped.tolist() == [True, False]
+
+
+def test_desaturated_torque_is_realised_exactly_by_the_mixer_at_the_commanded_thrust():
+    # GIVEN random wrenches, some far beyond what the rotors can do
+    rng = np.random.default_rng(1)
+    n = 200
+    d, c, fmax = np.full(n, 0.12), np.full(n, 0.016), np.full(n, 3.0)
+    thrust = rng.uniform(0.2, 11.8, n)
+    torque = rng.normal(0.0, 0.3, (n, 3))
+    # WHEN limited THEN the emulator's mixer (51) returns that wrench unchanged (thrust kept)
+    limited, was = desaturate_torque(thrust, torque, d, c, fmax)
+    rotors = rotors_from_wrench(thrust, limited, d, c, fmax)
+    t_out, tau_out = wrench_from_rotors(rotors, d, c)
+    np.testing.assert_allclose(t_out, thrust, atol=1e-9)
+    np.testing.assert_allclose(tau_out, limited, atol=1e-9)
+    # AND a feasible torque is untouched, an infeasible one only scaled down
+    assert was.any() and not was.all()
+    np.testing.assert_allclose(limited[~was], torque[~was])
+    assert np.all(np.abs(limited) <= np.abs(torque) + 1e-12)
+
+
+def test_torque_scale_is_the_emulators_convention():
+    np.testing.assert_allclose(torque_max_nm([0.12], [0.016], [3.0]), [[0.36, 0.36, 0.096]])
+
+
+def test_tick_stats_count_late_ticks_against_a_fifth_of_the_period():
+    assert late_threshold_s(0.01) == pytest.approx(2e-3)
+    assert late_threshold_s(0.004) == pytest.approx(1.5e-3)
+    stats = TickStats(100.0)
+    for late in [0.0005] * 98 + [0.003, 0.012]:
+        stats.record(late, 0.001)
+    r = stats.report()
+    assert r["rate_hz"] == 100.0 and r["late_pct"] == pytest.approx(2.0) and r["ticks"] == 100
+
+
+def test_link_report_has_the_spec_fields():
+    ages = AgeStats(2)
+    ages.record(np.array([0.004, 0.2]), np.array([True, False]), np.array([1, 0]))
+    r = link_report([7, 9], ages, [10, 20], [100, 90], [0, 10])
+    assert set(r) == {"7", "9"}
+    assert r["9"]["telemetry_lost_pct"] == pytest.approx(10.0)
+    assert r["7"]["telemetry_age_p50_ms"] == pytest.approx(4.0)
+    assert r["9"]["stale_own_ticks"] == 1 and r["7"]["stale_neighbour_ticks"] == 1
+
+
+def test_each_row_of_the_team_call_is_what_that_vehicle_would_compute_alone():
+    # GIVEN the team law in one vectorised call
+    team = load_team(CONFIGS / "square4.yaml")
+    rng = np.random.default_rng(3)
+    n = team.n
+    adj = team.adjacency()
+    meas = TeamMeasurement(
+        team.initial_positions_enu_m() + rng.normal(0, 0.3, (n, 3)), rng.normal(0, 0.3, (n, 3)),
+        rng.normal(0, 0.5, (n, 3)), np.tile(np.eye(3), (n, 1, 1)), rng.normal(0, 0.1, (n, 3)))
+    ref = reference_velocity(1.3, *team.reference_velocity.as_arrays())
+
+    def law(adjacency, offsets, mhat):
+        return TeamLaw(law_gains(team), adjacency, offsets, mhat,
+                       np.full((len(mhat), 3), 0.08))
+
+    batch = law(adj, team.offsets_enu_m(), team.initial_mhat()).step(meas, ref, 0.01)
+    for i in range(n):
+        # WHEN vehicle i computes on its own: itself + its neighbours' telemetry, its own mhat
+        hood = [i] + [j for j in range(n) if adj[i, j] != 0]
+        local_adj = np.zeros((len(hood), len(hood)))
+        local_adj[0] = adj[i, hood]
+        mhat = team.initial_mhat()[hood] * 0 + 99.0  # neighbours' estimates must not matter
+        mhat[0] = team.initial_mhat()[i]
+        sub = TeamMeasurement(*(np.ascontiguousarray(getattr(meas, f)[hood]) for f in
+                                ("position_m", "velocity_mps", "acceleration_mps2", "rotation",
+                                 "omega_radps")))
+        alone = law(local_adj, team.offsets_enu_m()[hood], mhat).step(sub, ref, 0.01)
+        # THEN it gets exactly its row of the team call
+        np.testing.assert_allclose(alone.rate_cmd_radps[0], batch.rate_cmd_radps[i], rtol=1e-12)
+        np.testing.assert_allclose(alone.torque_nm[0], batch.torque_nm[i], rtol=1e-12)
+        assert alone.thrust_n[0] == pytest.approx(batch.thrust_n[i], rel=1e-12)

@@ -1,0 +1,335 @@
+"""The flight sequence state machine, the safety checks and the discrete-time criterion (no
+sockets, no clock: time and telemetry are arguments)."""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import math
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gcs.mission.machine import (
+    EXIT_ABORTED,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    Cmd,
+    CommandResult,
+    MissionMachine,
+    MissionPlan,
+    Phase,
+)
+from gcs.mission.safety import SafetyRules, VehicleStatus, flight_problems, preflight_problems
+from gcs.mission.stability import rate_margin, torque_loop_radius, torque_margins
+
+ROOT = Path(__file__).resolve().parents[2]
+IDS = (1, 2, 3)
+RATES = {"ATTITUDE_QUATERNION": 100.0, "LOCAL_POSITION_NED": 100.0}
+RULES = SafetyRules(max_tilt_rad=1.0, link_lost_after_s=0.5, geofence_min_enu_m=(-50, -50, 1),
+                    geofence_max_enu_m=(50, 50, 50), required_rates_hz=RATES)
+
+
+def status(vid: int, **kw) -> VehicleStatus:
+    base = dict(vehicle_id=vid, sysid=vid, link="alive", armed=True, mode="AUTO_LOITER",
+                landed=False, position_enu_m=(vid * 3.0, 0.0, 10.0), velocity_enu_mps=(0, 0, 0),
+                tilt_rad=0.01, data_age_s=0.01, autopilot=12, vehicle_type=2,
+                rates_hz={"ATTITUDE_QUATERNION": 99.0, "LOCAL_POSITION_NED": 98.0})
+    base.update(kw)
+    return VehicleStatus(**base)
+
+
+class World:
+    """A tiny fake team that obeys the commands immediately (the machine's only environment)."""
+
+    def __init__(self, machine: MissionMachine, on_ground: bool = False) -> None:
+        self.m = machine
+        self.t = 0.0
+        self.v = {vid: status(vid, armed=not on_ground, landed=on_ground,
+                              position_enu_m=(vid * 3.0, 0.0, 0.0 if on_ground else 10.0))
+                  for vid in machine.vehicle_ids}
+        self.sent: list[tuple[int, Cmd]] = []
+        self.reject: set[tuple[int, Cmd]] = set()
+        self.silent: set[int] = set()
+
+    def apply(self, cmds) -> None:
+        for c in cmds:
+            self.sent.append((c.vehicle_id, c.cmd))
+            ok = (c.vehicle_id, c.cmd) not in self.reject
+            s = self.v[c.vehicle_id]
+            if ok:
+                if c.cmd is Cmd.OFFBOARD:
+                    s = dataclasses.replace(s, mode="OFFBOARD")
+                elif c.cmd is Cmd.HOLD:
+                    s = dataclasses.replace(s, mode="AUTO_LOITER")
+                elif c.cmd is Cmd.LAND:
+                    s = dataclasses.replace(s, mode="AUTO_LAND", landed=True, armed=False,
+                                            position_enu_m=(s.position_enu_m[0], 0.0, 0.0))
+                elif c.cmd is Cmd.ARM:
+                    s = dataclasses.replace(s, armed=True)
+                elif c.cmd is Cmd.TAKEOFF:
+                    s = dataclasses.replace(s, landed=False, mode="AUTO_LOITER",
+                                            position_enu_m=(s.position_enu_m[0], 0.0, c.altitude_m))
+                elif c.cmd is Cmd.DISARM:
+                    s = dataclasses.replace(s, armed=False)
+            self.v[c.vehicle_id] = s
+            self.apply(self.m.on_result(CommandResult(c.vehicle_id, c.cmd, ok, "" if ok else "no")))
+
+    def tick(self, dt: float = 0.05) -> None:
+        self.t += dt
+        team = []
+        for vid, s in self.v.items():
+            if vid in self.silent:
+                s = dataclasses.replace(s, link="lost", data_age_s=9.0)
+            team.append(s)
+        self.apply(self.m.on_tick(self.t, team))
+        # THE safety invariant: a vehicle in OFFBOARD with its link up always gets setpoints
+        for vid, s in self.v.items():
+            if s.mode == "OFFBOARD" and vid not in self.silent and not self.m.done:
+                assert vid in self.m.streaming, f"vehicle {vid} in OFFBOARD without setpoints"
+
+    def run(self, seconds: float) -> None:
+        for _ in range(int(seconds / 0.05)):
+            if self.m.done:
+                return
+            self.tick()
+
+
+def machine(**plan) -> MissionMachine:
+    return MissionMachine(MissionPlan(duration_s=plan.pop("duration_s", 5.0), rules=RULES, **plan),
+                          IDS)
+
+
+def test_airborne_team_flies_the_whole_sequence_and_lands():
+    # GIVEN three vehicles holding in the air
+    m = machine()
+    w = World(m)
+    # WHEN the mission runs to its end
+    w.run(30.0)
+    # THEN it configured, primed (> 1 s of setpoints), switched all to OFFBOARD, flew 5 s, landed
+    assert m.done and m.outcome.exit_code == EXIT_OK and m.outcome.reason == "formation complete"
+    cmds = [c for _, c in w.sent]
+    assert cmds.count(Cmd.CONFIGURE) == 3 and cmds.count(Cmd.OFFBOARD) == 3
+    assert cmds.count(Cmd.LAND) == 3 and Cmd.ARM not in cmds
+    assert m.formation_t0_s is not None
+    assert all(not s.armed and s.landed for s in w.v.values())
+    assert [n for n in m.notes if n.startswith("phase")] == [
+        "phase preflight", "phase prime", "phase formation", "phase stopping", "phase done"]
+
+
+def test_vehicles_on_the_ground_are_armed_and_take_off_first():
+    m = machine(takeoff_altitude_m=3.0)
+    w = World(m, on_ground=True)
+    w.run(40.0)
+    cmds = [c for _, c in w.sent]
+    assert cmds.index(Cmd.ARM) < cmds.index(Cmd.TAKEOFF) < cmds.index(Cmd.OFFBOARD)
+    assert m.outcome.exit_code == EXIT_OK
+
+
+def test_offboard_switch_waits_for_the_priming_stream():
+    m = machine(prime_s=1.5)
+    w = World(m)
+    while m.phase is not Phase.PRIME:
+        w.tick()
+    t_prime = w.t
+    while m.phase is Phase.PRIME:
+        assert m.streaming == frozenset(IDS)  # setpoints flow before OFFBOARD is asked for
+        w.tick()
+    assert w.t - t_prime >= 1.5 and m.phase is Phase.FORMATION and m.law_active
+
+
+def test_lost_link_leaves_that_vehicle_to_its_failsafe_and_holds_the_others():
+    # GIVEN a team in formation
+    m = machine(duration_s=60.0, link_loss_action="hold")
+    w = World(m)
+    while m.phase is not Phase.FORMATION:
+        w.tick()
+    w.run(1.0)
+    # WHEN vehicle 2 falls silent
+    w.silent.add(2)
+    w.tick()
+    # THEN the mission stops at once, vehicle 2 gets nothing more, the others are told to hold
+    assert m.phase in (Phase.STOPPING, Phase.DONE) and 2 in m.lost and 2 not in m.streaming
+    w.run(5.0)
+    assert m.outcome.exit_code == EXIT_ABORTED
+    assert "vehicle 2 (sysid 2): link lost" in m.outcome.reason
+    after = w.sent[[c for _, c in w.sent].index(Cmd.OFFBOARD):]
+    assert (1, Cmd.HOLD) in after and (3, Cmd.HOLD) in after
+    assert all(vid != 2 for vid, c in after if c in (Cmd.HOLD, Cmd.LAND))
+
+
+def test_operator_abort_lands_everyone_and_exits_130():
+    m = machine(duration_s=60.0, abort_action="land")
+    w = World(m)
+    while m.phase is not Phase.FORMATION:
+        w.tick()
+    m.request_abort("interrupted (Ctrl-C)")
+    w.run(10.0)
+    assert m.outcome.exit_code == EXIT_INTERRUPTED
+    assert m.outcome.reason.startswith("interrupted (Ctrl-C)")
+    assert all(s.landed and not s.armed for s in w.v.values())
+
+
+def test_second_abort_while_stopping_ends_at_once():
+    m = machine(duration_s=60.0)
+    w = World(m)
+    while m.phase is not Phase.FORMATION:
+        w.tick()
+    w.reject |= {(vid, Cmd.LAND) for vid in IDS}  # the vehicles do not obey
+    m.request_abort("interrupted (Ctrl-C)")
+    w.tick()
+    assert m.phase is Phase.STOPPING
+    m.request_abort("interrupted (Ctrl-C)")
+    w.tick()
+    assert m.done and "while stopping" in m.outcome.reason
+
+
+def test_failed_preflight_never_asks_for_offboard():
+    m = machine()
+    w = World(m)
+    w.v[3] = dataclasses.replace(w.v[3], rates_hz={"ATTITUDE_QUATERNION": 10.0,
+                                                   "LOCAL_POSITION_NED": 99.0})
+    w.run(20.0)
+    assert m.outcome.exit_code == EXIT_ABORTED
+    assert "vehicle 3 (sysid 3): ATTITUDE_QUATERNION at 10.0 Hz, need >= 50 Hz" in m.outcome.reason
+    assert Cmd.OFFBOARD not in [c for _, c in w.sent]
+
+
+def test_rejected_offboard_aborts_and_stops_streaming_only_after_leaving_offboard():
+    m = machine()
+    w = World(m)
+    w.reject.add((2, Cmd.OFFBOARD))
+    w.run(20.0)
+    assert m.outcome.exit_code == EXIT_ABORTED and "OFFBOARD refused" in m.outcome.reason
+
+
+def test_geofence_breach_aborts_naming_vehicle_axis_and_limit():
+    m = machine(duration_s=60.0)
+    w = World(m)
+    while m.phase is not Phase.FORMATION:
+        w.tick()
+    w.v[1] = dataclasses.replace(w.v[1], position_enu_m=(3.0, 0.0, 55.0))
+    w.run(10.0)
+    assert "vehicle 1 (sysid 1): geofence breach: z = 55.00 m outside [1, 50] m" in m.outcome.reason
+
+
+def test_no_link_at_start_fails_after_the_connect_timeout():
+    m = machine(connect_timeout_s=2.0)
+    w = World(m)
+    w.silent.add(3)
+    w.run(5.0)
+    assert m.done and "no link to vehicle 3 within 2 s" in m.outcome.reason
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 400), st.sampled_from(["abort", "silent", "reject",
+                                                                  "fence"]),
+                          st.sampled_from(IDS)), max_size=4))
+def test_never_offboard_without_setpoints_under_random_failures(events):
+    # GIVEN random failures at random ticks THEN World.tick's invariant holds and the mission ends
+    m = machine(duration_s=8.0)
+    w = World(m)
+    at = {}
+    for k, what, vid in events:
+        at.setdefault(k, []).append((what, vid))
+    for k in range(1200):
+        if m.done:
+            break
+        for what, vid in at.get(k, []):
+            if what == "abort":
+                m.request_abort("operator")
+            elif what == "silent":
+                w.silent.add(vid)
+            elif what == "reject":
+                w.reject.add((vid, Cmd.LAND))
+            else:
+                w.v[vid] = dataclasses.replace(w.v[vid], position_enu_m=(0.0, 0.0, 99.0))
+        w.tick()
+    assert m.done and m.outcome is not None
+
+
+# --- safety ------------------------------------------------------------------------------------
+
+
+def test_preflight_names_every_problem():
+    team = [status(1, autopilot=3), status(2, vehicle_type=13), status(3, sysid_mismatch=7),
+            status(4, link="waiting"), status(5, tilt_rad=1.2),
+            status(6, velocity_enu_mps=(2.0, 0.0, 0.0))]
+    text = "\n".join(p.text for p in preflight_problems(team, RULES))
+    assert "vehicle 1 (sysid 1): autopilot 3 is not PX4 (12)" in text
+    assert "vehicle 2 (sysid 2): MAV_TYPE 13 is not a quadrotor (2)" in text
+    assert "vehicle 3 (sysid 3): a vehicle with sysid 7 answers on this link" in text
+    assert "vehicle 4 (sysid 4): link waiting" in text
+    assert "vehicle 5 (sysid 5): tilt 68.8 deg exceeds max_tilt_rad 1 (57.3 deg)" in text
+    assert "vehicle 6 (sysid 6): moving at 2.00 m/s, more than 1.5 m/s before the start" in text
+
+
+def test_flight_checks_link_then_fence_then_tilt():
+    team = [status(1, data_age_s=0.7), status(2, position_enu_m=(-51.0, 0.0, 10.0)),
+            status(3, tilt_rad=math.nan), status(4)]
+    problems = flight_problems(team, RULES)
+    assert [(p.vehicle_id, p.kind) for p in problems] == [(1, "link"), (2, "geofence"),
+                                                            (3, "tilt")]
+    assert problems[0].text == ("vehicle 1 (sysid 1): link lost (last position/attitude 0.70 s "
+                                "ago, limit 0.5 s)")
+    assert flight_problems(team, RULES, skip=frozenset({1, 2, 3})) == []
+
+
+# --- stability criterion ------------------------------------------------------------------------
+
+
+def test_paper_gains_diverge_at_250_hz_on_uav3_as_spec_section_9_says():
+    # the spec's figure without delay: factor 1 - 32 * 0.004 / 0.0256 = -4 -> unstable
+    assert torque_loop_radius(32.0, 32.0, 0.0256, 1 / 250, 1) > 1.0
+    margins = torque_margins([3], [(0.0256, 0.0256, 0.052)], 32.0, 32.0, 250.0)
+    assert not margins[0].ok()
+
+
+def test_shipped_actuator_gains_pass_the_criterion_for_every_table_one_axis():
+    inertia = [(0.04856, 0.04856, 0.08801), (0.1522, 0.1522, 0.3), (0.0256, 0.0256, 0.052),
+               (0.354, 0.354, 0.654)]
+    margins = torque_margins([1, 2, 3, 4], inertia, 24.0, 3.0, 250.0)
+    assert all(m.ok() for m in margins)
+    assert min(m.decay_per_s for m in margins) == pytest.approx(2.0, abs=0.1)  # UAV 4 yaw
+
+
+@pytest.mark.parametrize("gains,inertia,delay", [((24.0, 3.0), 0.0256, 1), ((24.0, 3.0), 0.654, 2),
+                                               ((32.0, 32.0), 0.0256, 1), ((4.0, 0.8), 0.1, 2)])
+def test_spectral_radius_is_the_growth_rate_of_the_simulated_delayed_loop(gains, inertia, delay):
+    # GIVEN the linearised axis J theta'' = -(2 a_eps + 1/2) theta - a_om theta', torque computed
+    # from the state `delay` ticks old and held for h (simulated exactly, step by step)
+    a_eps, a_om = gains
+    h = 1 / 250
+    hist = [(0.1, -0.3)] * (delay + 1)
+    log_norm, at_3000 = 0.0, 0.0  # every step is renormalised (linear: the growth is kept)
+    for k in range(4000):
+        th_old, w_old = hist[-1 - delay]
+        tau = -(2 * a_eps + 0.5) * th_old - a_om * w_old
+        th, w = hist[-1]
+        hist.append((th + h * w + h * h / (2 * inertia) * tau, w + h / inertia * tau))
+        size = math.hypot(*hist[-1])
+        hist = [(a / size, b / size) for a, b in hist[-(delay + 1):]]
+        log_norm += math.log(size)
+        if k == 2999:
+            at_3000 = log_norm
+    growth = math.exp((log_norm - at_3000) / 1000)
+    # THEN the criterion's spectral radius is that growth rate per tick
+    assert torque_loop_radius(a_eps, a_om, inertia, h, delay) == pytest.approx(growth, rel=2e-3)
+
+
+def test_rates_mode_at_100_hz_is_well_inside_the_criterion():
+    rho, decay = rate_margin(8.0, 100.0)
+    assert rho < 1.0 and decay > 5.0
+
+
+def test_mission_modules_are_pure():
+    impure = {"asyncio", "socket", "time", "pymavlink", "select", "threading", "subprocess"}
+    for path in (ROOT / "gcs" / "mission").glob("*.py"):
+        tree = ast.parse(path.read_text())
+        names = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import)
+                 for a in n.names}
+        names |= {n.module.split(".")[0] for n in ast.walk(tree)
+                  if isinstance(n, ast.ImportFrom) and n.module}
+        assert not names & impure, f"{path.name} imports {names & impure}"
