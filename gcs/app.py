@@ -158,17 +158,16 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
         raise FlightSetupError(
             f"tick rate {rate:g} Hz must be a multiple of fly.log_rate_hz {fly.log_rate_hz:g}")
     g = team.controller.gains
-    gains = LawGains(
-        c_p=g.c_p, alpha_p=g.alpha_p, alpha_m=g.alpha_m, sigma_a=g.sigma_a,
+    gains = g._replace(
         alpha_eps=mode_cfg.alpha_eps if mode == "actuators" and mode_cfg.alpha_eps else g.alpha_eps,
         alpha_omega=(mode_cfg.alpha_omega if mode == "actuators" and mode_cfg.alpha_omega
                      else g.alpha_omega),
-        c_eps=g.c_eps, alpha_rho=g.alpha_rho, k_eps=g.k_eps,
     )
     if mode == "actuators":
+        # The criterion needs an inertia per vehicle: the nominal one where the file gives it,
+        # else the initial estimate (never the plant's true value: the GCS does not know it).
         inertias = [
-            v.nominal_inertia_kgm2
-            or (v.plant.inertia_kgm2 if v.plant else v.estimates.inertia_kgm2)
+            v.nominal_inertia_kgm2 or v.estimates.inertia_kgm2
             for v in team.vehicles
         ]
         margins = torque_margins(team.ids(), inertias, gains.alpha_eps, gains.alpha_omega, rate)
@@ -517,7 +516,10 @@ class Flight:
         self.law.adjacency = np.ascontiguousarray(effective_adjacency(self.adjacency, fresh))
         ref = reference_velocity(t, *self.ref_arrays)
         try:
-            command = self.law.step(sample.measurement(), ref, dt)
+            # The estimators adapt only while the formation is flown: afterwards the vehicles
+            # switch to their own modes (land/hold) and the thrust applied is no longer ours.
+            command = self.law.step(sample.measurement(), ref, dt,
+                                    adapt=self.machine.phase is Phase.FORMATION)
         except SingularCommandError as exc:
             self.machine.request_abort(f"t = {t:.2f} s: {exc}", operator=False)
             return self.last_command

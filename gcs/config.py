@@ -21,6 +21,8 @@ from typing import Any, NoReturn
 import numpy as np
 import yaml
 
+from gcs.control.gains import LawGains
+
 GRAVITY_MPS2 = 9.81
 THRUST_MARGIN = 1.2  # max collective thrust must be >= THRUST_MARGIN * m g when a plant is given
 LAWS = ("adaptive", "baseline")
@@ -59,19 +61,10 @@ class ConfigError(ValueError):
 # The configuration, as dataclasses. Frames: ENU world (x east, y north, z up), FLU body.
 
 
-@dataclass(frozen=True, slots=True)
-class Gains:
-    """Gains of the paper's law (Section V; k_eps: attitude feedback of the rates mode [1/s])."""
-
-    c_p: float
-    alpha_p: float
-    alpha_m: float
-    sigma_a: float
-    alpha_eps: float
-    alpha_omega: float
-    c_eps: float
-    alpha_rho: float
-    k_eps: float
+#: Gains of the paper's law (Section V; k_eps: attitude feedback of the rates mode [1/s]). The
+#: config holds the law's own record, so what is validated is exactly what the law receives.
+Gains = LawGains
+GAIN_NAMES = tuple(name for name in LawGains._fields if name != "gravity_mps2")
 
 
 @dataclass(frozen=True, slots=True)
@@ -745,9 +738,8 @@ class _Node:
 
 def _controller(node: _Node) -> ControllerConfig:
     node.keys("law mode gains", "derivative")
-    names = [f.name for f in dataclasses.fields(Gains)]
-    g = node.child("gains").keys(" ".join(names))
-    gains = Gains(**{name: g.child(name).number(gt=0.0) for name in names})
+    g = node.child("gains").keys(" ".join(GAIN_NAMES))
+    gains = Gains(**{name: g.child(name).number(gt=0.0) for name in GAIN_NAMES})
     d = node.child("derivative")
     if not d.absent:
         d.keys("", "method levant_lipschitz levant_substep_s")
@@ -1104,7 +1096,15 @@ def _team(root: _Node) -> TeamConfig:
     faults = [_fault(f, ids, mission.duration_s) for f in root.child("faults").items("faults")]
     fly = _fly(root.child("fly"))
     return TeamConfig(
-        name, root.source, mission, controller, reference, graph, sim, vehicles, tuple(faults),
+        name,
+        root.source,
+        mission,
+        controller,
+        reference,
+        graph,
+        sim,
+        vehicles,
+        tuple(faults),
         fly,
     )
 
@@ -1141,6 +1141,8 @@ def team_to_dict(team: TeamConfig) -> dict[str, Any]:
     """Plain data that team_from_dict reads back to an equal TeamConfig (None fields left out)."""
 
     def plain(x: Any) -> Any:
+        if isinstance(x, LawGains):
+            return {name: getattr(x, name) for name in GAIN_NAMES}
         if dataclasses.is_dataclass(x):
             return {
                 f.name: plain(getattr(x, f.name))
@@ -1179,7 +1181,7 @@ def describe(team: TeamConfig) -> str:
         f"team {team.name!r} ({team.source_path}): {team.n} vehicles, "
         f"mission {team.mission.duration_s:g} s",
         f"controller: {c.law} law, {c.mode} mode ({mode}), derivatives: {deriv}",
-        "gains: " + ", ".join(f"{f.name} {getattr(g, f.name):g}" for f in dataclasses.fields(g)),
+        "gains: " + ", ".join(f"{name} {getattr(g, name):g}" for name in GAIN_NAMES),
         f"sim: plant {sim.plant_rate_hz:g} Hz, controller {sim.controller_rate_hz:g} Hz "
         f"({sim.plant_steps_per_tick} plant step(s) per tick)",
         "reference velocity v_r(t) [m/s, ENU]:",
@@ -1218,6 +1220,27 @@ def describe(team: TeamConfig) -> str:
             f" m; link udp :{v.link.local_port} -> {v.link.remote_host}:{v.link.remote_port};"
             f" {plant}{nominal}",
         ]
+    fly = team.fly
+
+    def mode_line(name: str, m: FlyModeConfig) -> str:
+        gains = ""
+        if m.alpha_eps is not None or m.alpha_omega is not None:
+            a_eps, a_om = m.alpha_eps or g.alpha_eps, m.alpha_omega or g.alpha_omega
+            gains = f", alpha_eps {a_eps:g}, alpha_omega {a_om:g}"
+        return f"{name} {m.tick_rate_hz:g} Hz{gains}"
+
+    fence = (
+        f"geofence {_v3(fly.geofence.min_enu_m)}..{_v3(fly.geofence.max_enu_m)} m"
+        if fly.geofence
+        else "no geofence"
+    )
+    out += [
+        f"fly: {mode_line('rates', fly.rates)} (body-rate limit "
+        f"{fly.rates.max_rate_radps:g} rad/s); {mode_line('actuators', fly.actuators)}",
+        f"     start {fly.start}, end {fly.end_action}, abort {fly.abort_action}, link loss "
+        f"{fly.link_loss_action}; stale after {fly.stale_after_s:g} s, lost after "
+        f"{fly.link_lost_after_s:g} s; max tilt {fly.max_tilt_rad:g} rad; {fence}",
+    ]
     out.append("faults:" + ("" if team.faults else " none"))
     for f in team.faults:
         plant = team.vehicle(f.vehicle).plant

@@ -88,13 +88,15 @@ def _f(x: float, spec: str) -> str:
 
 
 def plain_line(s: StatusSnapshot) -> str:
-    """One line: phase, time, formation error, then per vehicle id:mode/armed/age/mass."""
+    """One line: phase, time, formation error, then per vehicle
+    id:mode(* armed)/link/age/altitude/mass estimate."""
     t = f"t={_f(s.t_s, '.1f')}/{s.duration_s:g}s" if s.t_s is not None else "t=-"
     parts = [f"[{s.phase}] {t} form_err={_f(s.formation_error_m, '.3g')}m "
              f"late={s.late_pct:.1f}%"]
     for v in s.vehicles:
         parts.append(f"{v.vehicle_id}:{v.mode}{'*' if v.armed else ''}/{v.link[0]}"
-                     f"/{_f(v.age_ms, '.0f')}ms/m={_f(v.mass_estimate_kg, '.3f')}")
+                     f"/{_f(v.age_ms, '.0f')}ms/z={_f(v.altitude_m, '.1f')}"
+                     f"/m={_f(v.mass_estimate_kg, '.3f')}")
     return " ".join(parts)
 
 

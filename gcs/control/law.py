@@ -152,9 +152,14 @@ class TeamLaw:
         self._levant: np.ndarray | None = None
         self._u_prev: np.ndarray | None = None
 
-    def step(self, meas: TeamMeasurement, reference_mps: np.ndarray, dt_s: float) -> TeamCommand:
+    def step(
+        self, meas: TeamMeasurement, reference_mps: np.ndarray, dt_s: float, adapt: bool = True
+    ) -> TeamCommand:
         """Compute the team's command from `meas` at the tick whose v_r derivatives are
-        `reference_mps` (4, 3), then advance the adaptive states by `dt_s` seconds."""
+        `reference_mps` (4, 3), then advance the adaptive states by `dt_s` seconds.
+
+        adapt=False holds mhat and rhohat (e.g. while the autopilot, not this law, sets the
+        thrust: the I&I update (24) assumes the thrust it commands is the one applied)."""
         g = self.gains
         u, a, s, ve, ph, kappa, t_n, mhat_rate = position_stage(
             meas.position_m,
@@ -225,6 +230,7 @@ class TeamLaw:
             attitude_error=tr_err,
             omega_error_radps=np.sqrt((we * we).sum(axis=1)),
         )
-        self.mhat = self.mhat + dt_s * mhat_rate
-        self.rhohat = self.rhohat + dt_s * rho_rate
+        if adapt:
+            self.mhat = self.mhat + dt_s * mhat_rate
+            self.rhohat = self.rhohat + dt_s * rho_rate
         return command

@@ -54,18 +54,8 @@ class SimulationError(RuntimeError):
 
 
 def law_gains(team: TeamConfig) -> LawGains:
-    g = team.controller.gains
-    return LawGains(
-        c_p=g.c_p,
-        alpha_p=g.alpha_p,
-        alpha_m=g.alpha_m,
-        sigma_a=g.sigma_a,
-        alpha_eps=g.alpha_eps,
-        alpha_omega=g.alpha_omega,
-        c_eps=g.c_eps,
-        alpha_rho=g.alpha_rho,
-        k_eps=g.k_eps,
-    )
+    """The gains the law runs with (the config already holds them as a LawGains record)."""
+    return team.controller.gains
 
 
 def _steps_per(rate_hz: float, plant_hz: float, what: str) -> int:

@@ -107,3 +107,20 @@ def test_unknown_derivative_method_and_missing_nominal_masses_are_refused():
         TeamLaw(*args, derivative="magic")
     with pytest.raises(ValueError, match="baseline law needs nominal masses"):
         TeamLaw(*args, adaptive=False)
+
+
+def test_adapt_false_holds_the_estimates():
+    # GIVEN a law and one measurement WHEN stepped without adaptation THEN mhat and rhohat stay
+    team = load_team(CONFIG)
+    law = TeamLaw(law_gains(team), team.adjacency(), team.offsets_enu_m(), team.initial_mhat(),
+                  team.initial_inertia_estimates_kgm2())
+    meas = TeamMeasurement(team.initial_positions_enu_m(), np.zeros((4, 3)), np.zeros((4, 3)),
+                           np.tile(np.eye(3), (4, 1, 1)), np.zeros((4, 3)))
+    ref = np.zeros((4, 3))
+    before = law.mhat.copy(), law.rhohat.copy()
+    law.step(meas, ref, 0.01, adapt=False)
+    np.testing.assert_array_equal(law.mhat, before[0])
+    np.testing.assert_array_equal(law.rhohat, before[1])
+    # AND WHEN stepped with adaptation THEN they move (the vehicles are out of formation)
+    law.step(meas, ref, 0.01)
+    assert np.abs(law.mhat - before[0]).max() > 0
