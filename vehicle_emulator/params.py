@@ -87,6 +87,10 @@ PARAMS: tuple[ParamDef, ...] = (
     ParamDef("EMU_MOT3_EFF", _F, 1.0, 0.0, 1.0, "rotor 3 efficiency (thrust factor)"),
     ParamDef("EMU_MOT4_EFF", _F, 1.0, 0.0, 1.0, "rotor 4 efficiency (thrust factor)"),
     ParamDef("EMU_MOT_TAU", _F, 0.0, 0.0, 1.0, "first-order motor time constant [s], 0 off"),
+    ParamDef(
+        "MC_AIRMODE", _I, 0, 0, 1,
+        "mixer at low thrust: 0 keep thrust, shrink torque (PX4 default); 1 raise thrust",
+    ),
     ParamDef("EMU_MASS_KG", _F, 1.0, 0.0, 1e4, "true plant mass now [kg]", read_only=True),
     ParamDef(
         "EMU_THR_MAX_N", _F, 1.0, 0.0, 1e5, "max collective thrust 4 f_max [N]", read_only=True

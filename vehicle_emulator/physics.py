@@ -339,9 +339,15 @@ def rotors_from_wrench_into(
     anti_torque_m: FloatArray,
     rotor_thrust_max_n: FloatArray,
     out_rotor_thrust_n: FloatArray,
+    airmode: FloatArray,
 ) -> int:
     """Invert (51) into out (n, 4) with every rotor in [0, f_max]; returns how many vehicles'
     wrenches could not be met exactly.
+
+    `airmode` (n,) selects what gives way when the torque does not fit at a LOW collective
+    thrust, like PX4's MC_AIRMODE: 0 (PX4's default) keeps the thrust and shrinks the torque
+    (yaw first, then roll and pitch together); 1 raises the thrust to make room for roll/pitch,
+    as described next. Above, at high thrust, both reduce the thrust.
 
     Write f = c + (p, q, -p, -q) + y (1, -1, 1, -1) with c = T/4, p = tau_y/(2d), q = -tau_x/(2d),
     y = tau_z/(4C) (the exact inverse). The limits decouple: c + y in [|p|, f_max - |p|] and
@@ -373,7 +379,17 @@ def rotors_from_wrench_into(
         y_at_hi = min(max(0.5 * (aq - ap), y1), y2)
         c_lo = max(ap - y_at_lo, aq + y_at_lo)
         c_hi = min(f_max - ap - y_at_hi, f_max - aq + y_at_hi)
-        c_new = min(max(c, c_lo), c_hi)
+        if airmode[i] == 0.0 and c < c_lo:
+            # Thrust first: at this c the lower limits need c + y >= |p| and c - y >= |q|,
+            # so |p| + |q| <= 2c; shrink roll/pitch to fit, then yaw to the range left.
+            room = 2.0 * max(c, 0.0)
+            if ap + aq > room:
+                k = room / (ap + aq)
+                p, q, ap, aq = p * k, q * k, ap * k, aq * k
+            c_new = max(c, 0.0)
+            changed = True
+        else:
+            c_new = min(max(c, c_lo), c_hi)
         y_lo = max(ap - c_new, c_new - (f_max - aq))
         y_hi = min(f_max - ap - c_new, c_new - aq)
         y_new = min(max(y, y_lo), y_hi)
@@ -396,7 +412,8 @@ def rotors_from_wrench(
 ) -> FloatArray:
     """Rotor thrusts f (n, 4) for a wrench; see rotors_from_wrench_into for the clipping rule."""
     out = np.empty((thrust_n.shape[0], 4))
+    airmode = np.ones(thrust_n.shape[0])
     rotors_from_wrench_into(
-        thrust_n, torque_nm, arm_length_m, anti_torque_m, rotor_thrust_max_n, out
+        thrust_n, torque_nm, arm_length_m, anti_torque_m, rotor_thrust_max_n, out, airmode
     )
     return out

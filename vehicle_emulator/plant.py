@@ -5,7 +5,8 @@ fleet by ``k`` fixed physics steps in one numba call (``_step_kernel``). Per ste
 
 1. control mode -> (collective thrust [N], body torque [N m]) through the onboard cascade in
    inner.py (position -> attitude -> rate) or directly (actuator mode, disarmed, idle);
-2. the mixer (51) ``rotors_from_wrench_into`` (rotor limits 0..f_max, roll/pitch > thrust > yaw);
+2. the mixer (51) ``rotors_from_wrench_into`` (rotor limits 0..f_max; MC_AIRMODE decides whether
+   thrust or torque gives way at low thrust);
 3. optional first-order motor lag, then per-rotor efficiency (fault);
 4. ``wrench_from_rotors`` -> ``rk4_step`` (physics.py, eqs (6)-(9));
 5. ground plane at z = 0: a vehicle below it is put back on it, level, at rest (landed); the
@@ -91,6 +92,7 @@ def _step_kernel(
     fmax,
     tmax,
     motor_tau,
+    airmode,
     eff,
     rotor_cmd,
     rotor_f,
@@ -152,7 +154,7 @@ def _step_kernel(
                     i, rate_sp, omega, omega_prev, rate_int, inertia, landed, dt, torque_sp
                 )
             t_sp_n[i] = thrust_sp[i] * t_max
-        rotors_from_wrench_into(t_sp_n, torque_sp, arm, anti, fmax, rotor_cmd)
+        rotors_from_wrench_into(t_sp_n, torque_sp, arm, anti, fmax, rotor_cmd, airmode)
         for i in range(n):
             tau = motor_tau[i]
             a = 1.0 if tau <= 0.0 else 1.0 - math.exp(-dt / tau)
@@ -223,6 +225,7 @@ class FleetPlant:
             self.arm_length_m, self.anti_torque_m, self.rotor_thrust_max_n
         )
         self.motor_time_constant_s = np.array([s.motor_time_constant_s for s in specs], dtype=f)
+        self.airmode = np.zeros(len(specs), dtype=f)  # MC_AIRMODE, PX4's default 0
         self.rotor_efficiency = np.ones((n, 4))
         self.rotor_cmd_n = np.zeros((n, 4))
         self.rotor_thrust_n = np.zeros((n, 4))
@@ -313,6 +316,7 @@ class FleetPlant:
             self.rotor_thrust_max_n,
             self.torque_max_nm,
             self.motor_time_constant_s,
+            self.airmode,
             self.rotor_efficiency,
             self.rotor_cmd_n,
             self.rotor_thrust_n,

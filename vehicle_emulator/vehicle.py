@@ -285,6 +285,8 @@ class VehicleNode:
             self.plant.rotor_efficiency[i, int(name[7]) - 1] = v
         elif name == "EMU_MOT_TAU":
             self.plant.motor_time_constant_s[i] = v
+        elif name == "MC_AIRMODE":
+            self.plant.airmode[i] = float(v)
         elif name == "EMU_NOISE":
             self.status.noise[i] = bool(v)
         elif name == "EMU_PKT_LOSS":

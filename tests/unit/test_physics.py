@@ -354,7 +354,7 @@ def test_rotors_from_wrench_inverts_feasible_wrenches_exactly() -> None:
     thrust, torque = ph.wrench_from_rotors(f, d, c)
     out = np.empty((n, 4))
     # WHEN allocated back  THEN the rotor thrusts are recovered and nothing is reported modified
-    assert ph.rotors_from_wrench_into(thrust, torque, d, c, f_max, out) == 0
+    assert ph.rotors_from_wrench_into(thrust, torque, d, c, f_max, out, np.ones(len(thrust))) == 0
     np.testing.assert_allclose(out, f, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(ph.rotors_from_wrench(thrust, torque, d, c, f_max), out)
 
@@ -368,7 +368,7 @@ def test_rotor_limits_hold_and_priorities_are_kept_for_infeasible_wrenches() -> 
     torque = rng.normal(size=(n, 3)) * np.column_stack([d, d, c]) * f_max[:, None]
     out = np.empty((n, 4))
     # WHEN allocated
-    modified = ph.rotors_from_wrench_into(thrust, torque, d, c, f_max, out)
+    modified = ph.rotors_from_wrench_into(thrust, torque, d, c, f_max, out, np.ones(len(thrust)))
     t_out, tau_out = ph.wrench_from_rotors(out, d, c)
     # THEN every rotor is in [0, f_max]
     assert np.all(out >= 0.0) and np.all(out <= f_max[:, None])
@@ -470,3 +470,21 @@ def test_property_one_step_stays_finite_and_on_so3(seed: int, rate_radps: float)
     # THEN the state is finite and R is a rotation
     assert all(np.all(np.isfinite(a)) for a in state)
     assert _ortho_error(r) < 1e-12 and np.allclose(np.linalg.det(r), 1.0, atol=1e-12)
+
+
+def test_airmode_off_keeps_low_thrust_and_shrinks_the_torque():
+    # GIVEN a low collective thrust with a roll/pitch torque that does not fit under it
+    thrust = np.array([2.0, 2.0])
+    torque = np.array([[0.0, 0.6, 0.05], [0.0, 0.6, 0.05]])
+    arm, anti, fmax = np.full(2, 0.25), np.full(2, 0.016), np.full(2, 6.0)
+    out = np.empty((2, 4))
+    # WHEN mixed with MC_AIRMODE 0 (vehicle 0) and 1 (vehicle 1)
+    modified = ph.rotors_from_wrench_into(thrust, torque, arm, anti, fmax, out, np.array([0.0, 1.0]))
+    t_out, tau_out = ph.wrench_from_rotors(out, arm, anti)
+    # THEN both report the wrench as modified and keep every rotor within limits
+    assert modified == 2 and (out >= 0.0).all() and (out <= 6.0).all()
+    # AND airmode 0 keeps the commanded thrust, shrinking the pitch torque in the same direction
+    assert t_out[0] == pytest.approx(2.0)
+    assert 0.0 < tau_out[0, 1] < 0.6
+    # AND airmode 1 raises the thrust to deliver the full pitch torque
+    assert t_out[1] > 2.0 and tau_out[1, 1] == pytest.approx(0.6)
