@@ -10,6 +10,10 @@ One asyncio event loop owns everything through an `asyncio.TaskGroup`:
 * one task per command the machine asks for (its result goes back to the machine),
 * the live status (gcs/status.py) and, on a terminal, the abort key.
 
+Each vehicle is commanded through its autopilot's profile (gcs.mission.autopilots: PX4 OFFBOARD /
+ArduPilot GUIDED_NOGPS, their hold, land and takeoff recipes), which the machine fixes at preflight
+from the vehicle's HEARTBEAT; a team may mix autopilots.
+
 Ctrl-C / SIGTERM / the abort key become `MissionMachine.request_abort`; the machine then lands or
 holds every vehicle and keeps streaming to each until it has left offboard. If the flight code
 itself fails, `_emergency_stop` still sends the abort action to every vehicle before the links
@@ -62,7 +66,8 @@ from gcs.link import (
     VehicleProxy,
     check_unique_sysids,
 )
-from gcs.link.enums import MSG_ID, Px4AutoSubMode, Px4MainMode
+from gcs.link.enums import MSG_ID
+from gcs.mission.autopilots import AutopilotProfile, ModeSpec
 from gcs.mission.machine import (
     EXIT_ABORTED,
     Cmd,
@@ -207,7 +212,8 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
         required_rates_hz=required,
     )
     plan = MissionPlan(
-        duration_s=options.duration_s or team.mission.duration_s, rules=rules, start=fly.start,
+        duration_s=options.duration_s or team.mission.duration_s, rules=rules, control_mode=mode,
+        start=fly.start,
         takeoff_altitude_m=fly.takeoff_altitude_m, end_action=end_action,
         abort_action=fly.abort_action, link_loss_action=fly.link_loss_action,
         connect_timeout_s=fly.connect_timeout_s, takeoff_timeout_s=fly.takeoff_timeout_s,
@@ -389,15 +395,15 @@ class Flight:
         """Best effort after a failure of the flight code: abort action to every vehicle."""
         land = self.setup.plan.abort_action == "land"
 
-        async def one(p: VehicleProxy) -> None:
+        async def one(vehicle_id: int, p: VehicleProxy) -> None:
+            profile = self.machine.profile(vehicle_id)
             with contextlib.suppress(Exception):
                 if land:
-                    await p.land(timeout_s=0.3, retries=2)
+                    await self._land(p, profile, timeout_s=0.3, retries=2)
                 else:
-                    await p.set_mode_px4(Px4MainMode.AUTO, Px4AutoSubMode.LOITER,
-                                         timeout_s=0.3, retries=2)
+                    await self._set_mode(p, profile, profile.hold, timeout_s=0.3, retries=2)
 
-        await asyncio.gather(*(one(p) for p in self.proxies))
+        await asyncio.gather(*(one(self.ids[i], p) for i, p in enumerate(self.proxies)))
 
     # --- commands --------------------------------------------------------------------------------
 
@@ -408,30 +414,60 @@ class Flight:
 
     async def _execute(self, c: Command) -> None:
         p = self._proxy_by_id[c.vehicle_id]
+        profile = self.machine.profile(c.vehicle_id)
         ok, detail = True, ""
+        values: list[tuple[str, float]] = []
         try:
             if c.cmd is Cmd.CONFIGURE:
                 for kind, hz in self.setup.requested_rates_hz.items():
                     await p.set_message_interval(MSG_ID[kind], hz)
                 for kind, hz in OPTIONAL_RATES_HZ.items():
                     await p.set_message_interval(MSG_ID[kind], hz, check=False)
+            elif c.cmd is Cmd.READ_PARAMS:
+                for name in c.names:
+                    values.append((name, await p.param_read(name)))
+                detail = ", ".join(f"{name} = {value:g}" for name, value in values)
             elif c.cmd is Cmd.ARM:
+                if profile.takeoff_mode is not None:  # ArduPilot: NAV_TAKEOFF needs GUIDED
+                    await self._set_mode(p, profile, profile.takeoff_mode)
                 await p.arm()
             elif c.cmd is Cmd.DISARM:
                 await p.disarm()
             elif c.cmd is Cmd.TAKEOFF:
-                await p.takeoff(self._takeoff_amsl_m(p, c.altitude_m))
+                await p.takeoff(self._takeoff_amsl_m(p, c.altitude_m)
+                                if profile.takeoff_altitude_amsl else c.altitude_m)
             elif c.cmd is Cmd.OFFBOARD:
-                await p.set_mode_px4(Px4MainMode.OFFBOARD)
+                await self._set_mode(p, profile, profile.offboard)
             elif c.cmd is Cmd.HOLD:
-                await p.set_mode_px4(Px4MainMode.AUTO, Px4AutoSubMode.LOITER)
+                await self._set_mode(p, profile, profile.hold)
             elif c.cmd is Cmd.LAND:
-                await p.land()
+                await self._land(p, profile)
         except (CommandRejectedError, CommandTimeoutError, LinkClosedError, TimeoutError) as exc:
             ok, detail = False, str(exc)
         logger.log(logging.INFO if ok else logging.WARNING, "vehicle %d: %s %s%s", c.vehicle_id,
                    c.cmd.value, "ok" if ok else "failed", f": {detail}" if detail else "")
-        self._dispatch(self.machine.on_result(CommandResult(c.vehicle_id, c.cmd, ok, detail)))
+        self._dispatch(self.machine.on_result(
+            CommandResult(c.vehicle_id, c.cmd, ok, detail, tuple(values) if ok else ())))
+
+    @staticmethod
+    async def _set_mode(p: VehicleProxy, profile: AutopilotProfile, mode: ModeSpec, *,
+                        timeout_s: float = 0.5, retries: int = 2) -> None:
+        """DO_SET_MODE as the vehicle's autopilot encodes `mode`; returns when accepted (raises
+        CommandRejectedError / CommandTimeoutError otherwise)."""
+        if profile.family == "ardupilot":
+            await p.set_mode_ardupilot(mode.number, timeout_s=timeout_s, retries=retries)
+        else:
+            await p.set_mode_px4(mode.number, mode.sub, timeout_s=timeout_s, retries=retries)
+
+    @classmethod
+    async def _land(cls, p: VehicleProxy, profile: AutopilotProfile, *, timeout_s: float = 0.5,
+                    retries: int = 2) -> None:
+        """The profile's land: its LAND mode (ArduPilot) or MAV_CMD_NAV_LAND (PX4); returns when
+        accepted, not when landed."""
+        if profile.land is not None:
+            await cls._set_mode(p, profile, profile.land, timeout_s=timeout_s, retries=retries)
+        else:
+            await p.land(timeout_s=timeout_s, retries=retries)
 
     @staticmethod
     def _takeoff_amsl_m(p: VehicleProxy, altitude_m: float) -> float:

@@ -20,6 +20,7 @@ from gcs.control.gains import GRAVITY_MPS2
 from gcs.fly.measure import TeamSample
 from gcs.link import VehicleProxy
 from gcs.link.enums import LandedState, MavModeFlag, mode_name
+from gcs.mission.autopilots import profile_for
 from gcs.mission.safety import VehicleStatus, tilt_rad
 
 _IDENTITY_Q = (1.0, 0.0, 0.0, 0.0)
@@ -94,8 +95,11 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
         if hb is not None:
             m = hb.msg
             armed = bool(int(m.base_mode) & MavModeFlag.SAFETY_ARMED)
-            mode = mode_name(int(m.autopilot), int(m.custom_mode))
             autopilot, vtype = int(m.autopilot), int(m.type)
+            # the profile's names (ArduPilot BRAKE included) are the ones the mission compares
+            profile = profile_for(autopilot)
+            mode = (profile.mode_name(int(m.custom_mode)) if profile is not None
+                    else mode_name(autopilot, int(m.custom_mode)))
         landed = None
         ess = p.latest("EXTENDED_SYS_STATE")
         if ess is not None:

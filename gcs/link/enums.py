@@ -82,6 +82,8 @@ class Px4AutoSubMode(IntEnum):
 
 
 class ArduCopterMode(IntEnum):
+    """ArduCopter flight modes (HEARTBEAT custom_mode is the mode number)."""
+
     STABILIZE = 0
     ACRO = 1
     ALT_HOLD = 2
@@ -89,8 +91,25 @@ class ArduCopterMode(IntEnum):
     GUIDED = 4
     LOITER = 5
     RTL = 6
+    CIRCLE = 7
     LAND = 9
+    DRIFT = 11
+    SPORT = 13
+    FLIP = 14
+    AUTOTUNE = 15
+    POSHOLD = 16
+    BRAKE = 17
+    THROW = 18
+    AVOID_ADSB = 19
     GUIDED_NOGPS = 20
+    SMART_RTL = 21
+    FLOWHOLD = 22
+    FOLLOW = 23
+    ZIGZAG = 24
+    SYSTEMID = 25
+    AUTOROTATE = 26
+    AUTO_RTL = 27
+    TURTLE = 28
 
 
 class LinkState(Enum):

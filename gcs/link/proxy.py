@@ -44,11 +44,16 @@ logger = logging.getLogger(__name__)
 TYPE_MASK_RATES_THRUST = 128  # ATTITUDE_IGNORE: body rates + thrust
 TYPE_MASK_ATTITUDE_THRUST = 7  # roll/pitch/yaw rates ignored: attitude + thrust
 FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 forcing arm/disarm (PX4; ArduPilot disarm)
+#: q of rate setpoints: ignored (type_mask 128), but ArduPilot drops a non-unit one, so unit.
 _IDENTITY_Q = (1.0, 0.0, 0.0, 0.0)
 
 
 class SetpointError(ValueError):
     """A setpoint with NaN/inf or the wrong shape; nothing was sent."""
+
+
+class ParamTimeoutError(TimeoutError):
+    """No PARAM_VALUE answered a PARAM_REQUEST_READ after all attempts."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -307,6 +312,40 @@ class VehicleProxy:
         """NAV_LAND (21) here (lat/lon/yaw NaN); returns when acknowledged, not when landed."""
         return await self._checked(MavCmd.NAV_LAND, [0, 0, 0, math.nan, math.nan, math.nan, 0],
                                    check, timeout_s, retries)
+
+    async def param_read(self, name: str, timeout_s: float = 0.5, retries: int = 2) -> float:
+        """Read one parameter: PARAM_REQUEST_READ by id (param_index -1), returns the value of the
+        matching PARAM_VALUE (as the autopilot sends it: ArduPilot casts integers to float).
+
+        The reply is awaited before the first send; an attempt without reply within ``timeout_s``
+        is resent, at most ``retries`` times (a late reply to an earlier attempt still counts);
+        then raises ParamTimeoutError (a TimeoutError) naming vehicle and parameter."""
+        if not 1 <= len(name) <= 16 or not name.isascii():
+            raise ValueError(f"{self.name}: parameter id: expected 1-16 ASCII characters, got "
+                             f"{name!r}")
+        if retries < 0 or not timeout_s > 0:
+            raise ValueError(f"{self.name}: need retries >= 0 and timeout_s > 0, "
+                             f"got {retries}, {timeout_s}")
+        fut: asyncio.Future[Received] = asyncio.get_running_loop().create_future()
+        entry = ("PARAM_VALUE", lambda m: str(m.param_id) == name, fut)
+        self._waiters.append(entry)
+        try:
+            for _ in range(retries + 1):
+                self._send(self._codec.mav.param_request_read_encode(
+                    self.config.sysid, self.config.compid, name.encode("ascii"), -1))
+                try:
+                    async with asyncio.timeout(timeout_s):
+                        received = await asyncio.shield(fut)
+                    return float(received.msg.param_value)
+                except TimeoutError:
+                    logger.debug("%s: PARAM_REQUEST_READ %s timed out", self.name, name)
+        finally:
+            if entry in self._waiters:
+                self._waiters.remove(entry)
+            if not fut.done():
+                fut.cancel()
+        raise ParamTimeoutError(f"{self.name}: PARAM_REQUEST_READ {name} got no PARAM_VALUE in "
+                                f"{retries + 1} attempts of {timeout_s} s")
 
     async def set_message_interval(self, msg_id: int, rate_hz: float, *, check: bool = True,
                                    timeout_s: float = 0.5, retries: int = 2) -> MavResult:

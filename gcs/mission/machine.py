@@ -1,6 +1,11 @@
 """The flight sequence of `gcs fly` as an explicit, pure state machine (sans-IO).
 
-Phases: CONNECT -> PREFLIGHT -> [ARM -> TAKEOFF] -> PRIME -> FORMATION -> STOPPING -> DONE.
+Phases: CONNECT -> PREFLIGHT -> [ARM -> TAKEOFF] -> [HOLD] -> PRIME -> FORMATION -> STOPPING ->
+DONE.
+
+Each vehicle is driven through its autopilot's profile (gcs.mission.autopilots, chosen from its
+HEARTBEAT.autopilot and fixed at preflight): "offboard" below means the profile's offboard mode
+(PX4 OFFBOARD, ArduPilot GUIDED_NOGPS), "hold" its hold mode (PX4 AUTO_LOITER, ArduPilot BRAKE).
 
 The machine never touches a socket or a clock. The composition root (gcs/app.py) feeds it
 `on_tick(now_s, team)` with every vehicle's `VehicleStatus` as received, `on_result(...)` when a
@@ -10,8 +15,12 @@ while `law_active`. Rules (docs/gcs.md):
 
 * At most one command is outstanding per vehicle (so a late OFFBOARD ack cannot override a LAND).
 * Setpoints stream to a vehicle from PRIME until it has acknowledged its stop command (LAND or
-  HOLD) AND reported a mode other than OFFBOARD: a vehicle is never left in offboard without
+  HOLD) AND reported a mode other than offboard: a vehicle is never left in offboard without
   setpoints while its link is up. A lost vehicle gets nothing (its own offboard-loss failsafe acts).
+* Priming is inert: before PRIME, an airborne vehicle whose autopilot would act on the priming
+  setpoints at once (ArduPilot in GUIDED, e.g. after its takeoff) is switched to hold (HOLD phase).
+* Autopilot parameters the profile requires (ArduPilot GUID_OPTIONS) are read in PREFLIGHT
+  (READ_PARAMS) and checked with the other preflight rules.
 * Any problem (failed check, rejected command, geofence, tilt, lost link, operator abort) moves to
   STOPPING: the lost vehicles are left to their failsafe, the others get `abort_action` (or
   `link_loss_action` when the cause is a lost link), and the outcome is non-zero with the reason.
@@ -25,6 +34,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 
+from gcs.mission.autopilots import PX4, AutopilotProfile, profile_for
 from gcs.mission.safety import (
     Problem,
     SafetyRules,
@@ -37,8 +47,9 @@ EXIT_OK = 0
 EXIT_ABORTED = 1
 EXIT_INTERRUPTED = 130
 
-HOLD_MODE = "AUTO_LOITER"
-OFFBOARD_MODE = "OFFBOARD"
+# PX4's names, kept for callers; the machine reads each vehicle's own from its profile.
+HOLD_MODE = PX4.hold.name
+OFFBOARD_MODE = PX4.offboard.name
 
 
 class Phase(Enum):
@@ -46,6 +57,7 @@ class Phase(Enum):
     PREFLIGHT = "preflight"
     ARM = "arm"
     TAKEOFF = "takeoff"
+    HOLD = "hold"  # only when needed: airborne vehicles that would act on priming setpoints
     PRIME = "prime"
     FORMATION = "formation"
     STOPPING = "stopping"
@@ -56,11 +68,12 @@ class Cmd(Enum):
     """What the app must do to one vehicle (it maps these to proxy calls)."""
 
     CONFIGURE = "configure"  # telemetry rates (SET_MESSAGE_INTERVAL)
-    ARM = "arm"
+    READ_PARAMS = "read_params"  # the profile's required parameters (`names`), values in result
+    ARM = "arm"  # (ArduPilot: GUIDED first, the profile's takeoff_mode)
     TAKEOFF = "takeoff"  # altitude_m above home
-    OFFBOARD = "offboard"
-    HOLD = "hold"  # PX4 AUTO_LOITER
-    LAND = "land"
+    OFFBOARD = "offboard"  # the profile's offboard mode (PX4 OFFBOARD, ArduPilot GUIDED_NOGPS)
+    HOLD = "hold"  # the profile's hold mode (PX4 AUTO_LOITER, ArduPilot BRAKE)
+    LAND = "land"  # PX4 NAV_LAND, ArduPilot LAND mode
     DISARM = "disarm"
 
 
@@ -69,6 +82,7 @@ class Command:
     vehicle_id: int
     cmd: Cmd
     altitude_m: float = math.nan
+    names: tuple[str, ...] = ()  # READ_PARAMS: parameter ids
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,6 +91,7 @@ class CommandResult:
     cmd: Cmd
     ok: bool
     detail: str = ""
+    values: tuple[tuple[str, float], ...] = ()  # READ_PARAMS: (parameter id, value)
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,6 +106,7 @@ class MissionPlan:
 
     duration_s: float
     rules: SafetyRules = SafetyRules()
+    control_mode: str = "rates"  # rates | actuators: which setpoints the vehicles will get
     start: str = "auto"  # auto | in_air | takeoff
     takeoff_altitude_m: float = 2.5
     end_action: str = "land"
@@ -101,6 +117,7 @@ class MissionPlan:
     takeoff_timeout_s: float = 60.0
     takeoff_tolerance_m: float = 0.3
     prime_s: float = 1.5  # setpoint stream before OFFBOARD (PX4 needs > 1 s at >= 2 Hz)
+    hold_timeout_s: float = 10.0  # HOLD phase: vehicles reach their hold mode within this
     land_timeout_s: float = 120.0
     disarm_after_landed_s: float = 3.0  # PX4 auto-disarms after COM_DISARM_LAND (2 s)
     command_attempts: int = 3  # per stop command (each has its own ack retries)
@@ -130,6 +147,9 @@ class _Vehicle:
     seen_offboard: bool = False
     took_off: bool = False
     stop: _Stop | None = None
+    profile: AutopilotProfile | None = None  # fixed at preflight
+    params: dict[str, float] | None = None  # READ_PARAMS result
+    params_asked: bool = False
 
 
 @dataclass(slots=True)
@@ -149,6 +169,7 @@ class MissionMachine:
     _stop_reason: Outcome | None = None
     _stopping_since_s: float = 0.0
     _interrupts: int = 0
+    _held: tuple[int, ...] = ()  # vehicles sent to hold in the HOLD phase
 
     def __post_init__(self) -> None:
         self._v = {vid: _Vehicle() for vid in self.vehicle_ids}
@@ -173,13 +194,27 @@ class MissionMachine:
             return frozenset(
                 vid for vid, v in self._v.items()
                 if not v.lost and v.offboard_sent and v.stop is not None
-                and not (v.stop.acked and v.status is not None and v.status.mode != OFFBOARD_MODE)
+                and not (v.stop.acked and v.status is not None and not self._in_offboard(vid))
             )
         return frozenset()
 
     @property
     def lost(self) -> frozenset[int]:
         return frozenset(vid for vid, v in self._v.items() if v.lost)
+
+    def profile(self, vehicle_id: int) -> AutopilotProfile:
+        """The vehicle's autopilot profile: fixed at preflight from its HEARTBEAT.autopilot;
+        before that (or for an autopilot without a profile) the one its latest status names,
+        else PX4's."""
+        v = self._v[vehicle_id]
+        if v.profile is not None:
+            return v.profile
+        found = profile_for(v.status.autopilot) if v.status is not None else None
+        return found if found is not None else PX4
+
+    def _in_offboard(self, vehicle_id: int) -> bool:
+        s = self._v[vehicle_id].status
+        return s is not None and s.mode == self.profile(vehicle_id).offboard.name
 
     def formation_time_s(self, now_s: float) -> float | None:
         return None if self.formation_t0_s is None else now_s - self.formation_t0_s
@@ -200,11 +235,14 @@ class MissionMachine:
             v.pending = None
         if not result.ok:
             self._note(f"vehicle {result.vehicle_id}: {result.cmd.value} failed: {result.detail}")
+        if result.cmd is Cmd.READ_PARAMS and result.ok:
+            v.params = dict(result.values)
         if result.cmd is Cmd.OFFBOARD:
             v.offboard_acked = result.ok
             if not result.ok and self.phase is Phase.FORMATION:
+                name = self.profile(result.vehicle_id).offboard.name
                 self._begin_stop(
-                    [Problem(result.vehicle_id, f"vehicle {result.vehicle_id}: OFFBOARD refused: "
+                    [Problem(result.vehicle_id, f"vehicle {result.vehicle_id}: {name} refused: "
                                                 f"{result.detail}")],
                     EXIT_ABORTED,
                 )
@@ -217,7 +255,7 @@ class MissionMachine:
                 v.stop.done = True
                 v.stop.failure = f"{result.cmd.value} not accepted ({result.detail})"
         elif not result.ok and self.phase in (Phase.CONNECT, Phase.PREFLIGHT, Phase.ARM,
-                                              Phase.TAKEOFF):
+                                              Phase.TAKEOFF, Phase.HOLD):
             self._begin_stop(
                 [Problem(result.vehicle_id, f"vehicle {result.vehicle_id}: {result.cmd.value} "
                                             f"failed: {result.detail}")],
@@ -233,7 +271,7 @@ class MissionMachine:
         for s in team:
             v = self._v[s.vehicle_id]
             v.status = s
-            if s.mode == OFFBOARD_MODE and v.offboard_acked:
+            if v.offboard_acked and self._in_offboard(s.vehicle_id):
                 v.seen_offboard = True
         if self._abort:
             reasons = [r for r, _ in self._abort]
@@ -256,6 +294,7 @@ class MissionMachine:
             Phase.PREFLIGHT: self._preflight,
             Phase.ARM: self._arm,
             Phase.TAKEOFF: self._takeoff,
+            Phase.HOLD: self._hold,
             Phase.PRIME: self._prime,
             Phase.FORMATION: self._formation,
             Phase.STOPPING: self._stopping,
@@ -277,11 +316,12 @@ class MissionMachine:
     def _statuses(self) -> list[VehicleStatus]:
         return [v.status for v in self._v.values() if v.status is not None]
 
-    def _send(self, vid: int, cmd: Cmd, altitude_m: float = math.nan) -> Command:
+    def _send(self, vid: int, cmd: Cmd, altitude_m: float = math.nan,
+              names: tuple[str, ...] = ()) -> Command:
         self._v[vid].pending = cmd
         if cmd is Cmd.OFFBOARD:
             self._v[vid].offboard_sent = True
-        return Command(vid, cmd, altitude_m)
+        return Command(vid, cmd, altitude_m, names)
 
     def _idle(self, vids: Sequence[int] | None = None) -> bool:
         return all(self._v[vid].pending is None for vid in (vids or self.vehicle_ids))
@@ -303,7 +343,15 @@ class MissionMachine:
         if not self._idle() or self._elapsed() < self.plan.settle_s:
             return []
         team = self._statuses()
+        reads = self._read_params(team)
+        if reads:
+            return reads
         problems = preflight_problems(team, self.plan.rules)
+        for s in team:
+            profile = self._v[s.vehicle_id].profile
+            if profile is not None:
+                problems += [Problem(s.vehicle_id, text) for text in profile.preflight_problems(
+                    s.name, self.plan.control_mode, self._v[s.vehicle_id].params)]
         ground = [s.vehicle_id for s in team if s.landed is True]
         airborne = [s.vehicle_id for s in team if s.in_air]
         if self.plan.start == "in_air" and ground:
@@ -322,7 +370,54 @@ class MissionMachine:
         if ground:
             self._enter(Phase.ARM)
             return [self._send(vid, Cmd.ARM) for vid in ground]
-        self._enter(Phase.PRIME)
+        return self._to_prime()
+
+    def _read_params(self, team: Sequence[VehicleStatus]) -> list[Command]:
+        """Fix each live vehicle's profile from its HEARTBEAT; ask once for the parameters the
+        profile requires (the checks run when every answer is in)."""
+        out = []
+        for s in team:
+            v = self._v[s.vehicle_id]
+            profile = profile_for(s.autopilot)
+            if profile is None or s.link != "alive":
+                continue
+            v.profile = profile
+            names = tuple(r.name for r in profile.required_params)
+            if names and not v.params_asked:
+                v.params_asked = True
+                out.append(self._send(s.vehicle_id, Cmd.READ_PARAMS, names=names))
+        return out
+
+    def _to_prime(self) -> list[Command]:
+        """PRIME, after switching to hold the airborne vehicles that would act on the priming
+        setpoints at once (profile.hold_before_prime: ArduPilot in GUIDED or GUIDED_NOGPS)."""
+        held = []
+        for vid, v in self._v.items():
+            s, profile = v.status, self.profile(vid)
+            if (s is not None and s.in_air and profile.hold_before_prime
+                    and s.mode in profile.setpoint_modes):
+                held.append(vid)
+        if not held:
+            self._enter(Phase.PRIME)
+            return []
+        self._held = tuple(held)
+        self._enter(Phase.HOLD)
+        return [self._send(vid, Cmd.HOLD) for vid in held]
+
+    def _hold(self) -> list[Command]:
+        if not self._idle():
+            return []
+        waiting = [vid for vid in self._held
+                   if not (self._v[vid].status is not None
+                           and self._v[vid].status.mode == self.profile(vid).hold.name)]
+        if not waiting:
+            self._enter(Phase.PRIME)
+        elif self._elapsed() > self.plan.hold_timeout_s:
+            names = ", ".join(f"{vid} ({self.profile(vid).hold.name})" for vid in waiting)
+            self._begin_stop([Problem(None, f"vehicles {names} did not report their hold mode "
+                                            f"within {self.plan.hold_timeout_s:g} s")],
+                             EXIT_ABORTED)
+            return self._drive()
         return []
 
     def _arm(self) -> list[Command]:
@@ -341,12 +436,12 @@ class MissionMachine:
         waiting = [
             vid for vid, v in self._v.items()
             if v.took_off and not (v.status is not None and v.status.in_air
-                                   and v.status.mode == HOLD_MODE
+                                   and v.status.mode in self.profile(vid).takeoff_done_modes
                                    and v.status.position_enu_m[2] >= target)
         ]
         if not waiting:
-            self._enter(Phase.PRIME)
-        elif self._elapsed() > self.plan.takeoff_timeout_s:
+            return self._to_prime()
+        if self._elapsed() > self.plan.takeoff_timeout_s:
             self._begin_stop([Problem(None, f"vehicles {waiting} did not reach "
                                             f"{self.plan.takeoff_altitude_m:g} m within "
                                             f"{self.plan.takeoff_timeout_s:g} s")], EXIT_ABORTED)
@@ -368,8 +463,10 @@ class MissionMachine:
         problems = flight_problems(self._statuses(), self.plan.rules)
         for vid, v in self._v.items():
             s = v.status
-            if v.seen_offboard and s is not None and s.mode != OFFBOARD_MODE and s.link == "alive":
-                problems.append(Problem(vid, f"{s.name}: left OFFBOARD (now {s.mode or '?'})",
+            if v.seen_offboard and s is not None and not self._in_offboard(vid) \
+                    and s.link == "alive":
+                name = self.profile(vid).offboard.name
+                problems.append(Problem(vid, f"{s.name}: left {name} (now {s.mode or '?'})",
                                         "mode"))
         if problems:
             self._begin_stop(problems, EXIT_ABORTED)
@@ -430,7 +527,7 @@ class MissionMachine:
                     out.append(self._send(vid, Cmd.DISARM))
                     st.landed_since_s = now
                 continue
-            if st.action == "hold" and st.acked and s.mode == HOLD_MODE:
+            if st.action == "hold" and st.acked and s.mode == self.profile(vid).hold.name:
                 st.done = True
                 continue
             if (not st.acked and st.attempts < self.plan.command_attempts

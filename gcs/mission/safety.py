@@ -13,7 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-PX4_AUTOPILOT = 12
+from gcs.mission.autopilots import PX4_AUTOPILOT as PX4_AUTOPILOT  # re-exported
+from gcs.mission.autopilots import profile_for, unsupported_text
+
 QUADROTOR_TYPE = 2
 #: A vehicle moving faster than this is not "holding" before the formation starts [m/s].
 MAX_START_SPEED_MPS = 1.5
@@ -37,9 +39,9 @@ class Problem:
 class VehicleStatus:
     """One vehicle as the mission sees it at a tick (from its link, as received).
 
-    link: 'waiting' | 'alive' | 'lost'; mode: e.g. 'OFFBOARD', 'AUTO_LOITER'; landed: True on
-    the ground, False in the air, None unknown; data_age_s: age of the older of its position and
-    attitude samples; rates_hz: measured receive rate per message type.
+    link: 'waiting' | 'alive' | 'lost'; mode: e.g. 'OFFBOARD', 'AUTO_LOITER', 'GUIDED_NOGPS';
+    landed: True on the ground, False in the air, None unknown; data_age_s: age of the older of
+    its position and attitude samples; rates_hz: measured receive rate per message type.
     """
 
     vehicle_id: int
@@ -147,8 +149,10 @@ def flight_problems(team: Sequence[VehicleStatus], rules: SafetyRules,
 def preflight_problems(team: Sequence[VehicleStatus], rules: SafetyRules) -> list[Problem]:
     """Everything that must hold before arming or switching to offboard.
 
-    Per vehicle: link alive, no foreign vehicle on its link, a PX4 quadrotor, telemetry at the
-    required rates, a finite state, tilt and speed within limits, inside the geofence if airborne.
+    Per vehicle: link alive, no foreign vehicle on its link, a quadrotor with a supported autopilot
+    (gcs.mission.autopilots; that autopilot's own requirements, e.g. ArduPilot's GUID_OPTIONS, are
+    checked by the mission machine once read), telemetry at the required rates, a finite state,
+    tilt and speed within limits, inside the geofence if airborne.
     """
     out: list[Problem] = []
     for s in team:
@@ -159,10 +163,8 @@ def preflight_problems(team: Sequence[VehicleStatus], rules: SafetyRules) -> lis
         if s.sysid_mismatch is not None:
             out.append(Problem(s.vehicle_id, f"{n}: a vehicle with sysid {s.sysid_mismatch} "
                                              "answers on this link; check the team file"))
-        if s.autopilot != PX4_AUTOPILOT:
-            out.append(Problem(s.vehicle_id, f"{n}: autopilot {s.autopilot} is not PX4 "
-                                             f"({PX4_AUTOPILOT}); gcs fly drives PX4 offboard "
-                                             "only"))
+        if profile_for(s.autopilot) is None:
+            out.append(Problem(s.vehicle_id, unsupported_text(n, s.autopilot)))
         if s.vehicle_type != QUADROTOR_TYPE:
             out.append(Problem(s.vehicle_id, f"{n}: MAV_TYPE {s.vehicle_type} is not a quadrotor "
                                              f"({QUADROTOR_TYPE})"))

@@ -254,11 +254,12 @@ def test_never_offboard_without_setpoints_under_random_failures(events):
 
 
 def test_preflight_names_every_problem():
-    team = [status(1, autopilot=3), status(2, vehicle_type=13), status(3, sysid_mismatch=7),
+    team = [status(1, autopilot=7), status(2, vehicle_type=13), status(3, sysid_mismatch=7),
             status(4, link="waiting"), status(5, tilt_rad=1.2),
             status(6, velocity_enu_mps=(2.0, 0.0, 0.0))]
     text = "\n".join(p.text for p in preflight_problems(team, RULES))
-    assert "vehicle 1 (sysid 1): autopilot 3 is not PX4 (12)" in text
+    assert ("vehicle 1 (sysid 1): autopilot 7 is not supported; gcs fly flies PX4 (12) and "
+            "ArduPilot Copter (3) only") in text
     assert "vehicle 2 (sysid 2): MAV_TYPE 13 is not a quadrotor (2)" in text
     assert "vehicle 3 (sysid 3): a vehicle with sysid 7 answers on this link" in text
     assert "vehicle 4 (sysid 4): link waiting" in text

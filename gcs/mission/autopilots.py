@@ -1,0 +1,149 @@
+"""Per-autopilot profiles of `gcs fly`: which modes mean "the GCS flies it", hold, land and take
+off, how they are commanded, and what must be configured on the vehicle before flying (pure).
+
+One `AutopilotProfile` per supported autopilot, chosen per vehicle from its HEARTBEAT.autopilot
+(`profile_for`), so a team may mix autopilots. The mission machine and the composition root use
+the profile instead of PX4 constants. Facts: ../shared/spec/mavlink.md (docs/gcs.md says why each
+mode was chosen).
+
+* PX4 (12): OFFBOARD; hold AUTO_LOITER; land with MAV_CMD_NAV_LAND; NAV_TAKEOFF with an AMSL
+  altitude, after which PX4 switches itself to AUTO_LOITER; the OFFBOARD switch needs > 1 s of
+  setpoints first (the PRIME phase).
+* ArduPilot Copter (3): GUIDED_NOGPS (20), the attitude-only guided mode; hold BRAKE (17); land
+  with the LAND mode (9); take off in GUIDED (4) with NAV_TAKEOFF at a relative altitude, then
+  BRAKE before the setpoint stream starts (ArduPilot acts on SET_ATTITUDE_TARGET at once in GUIDED
+  and GUIDED_NOGPS, and ignores it in every other mode). Preflight: GUID_OPTIONS bit 3 (8) must
+  be set, otherwise `thrust` is read as a climb rate.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from gcs.link.enums import mode_name
+
+PX4_AUTOPILOT = 12  # MAV_AUTOPILOT_PX4
+ARDUPILOT_AUTOPILOT = 3  # MAV_AUTOPILOT_ARDUPILOTMEGA
+
+
+
+@dataclass(frozen=True, slots=True)
+class ModeSpec:
+    """One flight mode: `name` as `AutopilotProfile.mode_name` reads it from HEARTBEAT, and the
+    numbers DO_SET_MODE carries (PX4: main and sub mode; ArduPilot: the mode number, sub 0)."""
+
+    name: str
+    number: int
+    sub: int = 0
+
+    def custom_mode(self, family: str) -> int:
+        """HEARTBEAT custom_mode of this mode (PX4: main << 16 | sub << 24)."""
+        return (self.number << 16) | (self.sub << 24) if family == "px4" else self.number
+
+
+@dataclass(frozen=True, slots=True)
+class ParamRequirement:
+    """A vehicle parameter whose bits in `mask` must all be set before flying; `fix` says what to
+    do and why, in one line."""
+
+    name: str
+    mask: int
+    fix: str
+
+    def problem(self, vehicle: str, value: float | None) -> str | None:
+        """One line naming vehicle, parameter, value and fix; None when satisfied."""
+        if value is None or not math.isfinite(value):
+            return f"{vehicle}: {self.name} could not be read; {self.fix}"
+        if int(round(value)) & self.mask != self.mask:
+            return f"{vehicle}: {self.name} = {value:g} (bit mask {self.mask} clear); {self.fix}"
+        return None
+
+
+@dataclass(frozen=True, slots=True)
+class AutopilotProfile:
+    """How `gcs fly` drives one autopilot (see the module docstring for the values)."""
+
+    name: str
+    autopilot: int  # HEARTBEAT.autopilot (MAV_AUTOPILOT)
+    family: str  # 'px4' | 'ardupilot': how a ModeSpec is encoded in DO_SET_MODE and HEARTBEAT
+    offboard: ModeSpec  # the GCS flies the vehicle (setpoints stream) in this mode
+    hold: ModeSpec  # position hold: end/abort/link-loss action `hold`
+    land: ModeSpec | None  # None: MAV_CMD_NAV_LAND
+    takeoff_mode: ModeSpec | None  # commanded before arming a vehicle that will take off
+    takeoff_done_modes: frozenset[str]  # what a vehicle reports once its NAV_TAKEOFF finished
+    takeoff_altitude_amsl: bool  # NAV_TAKEOFF param7 AMSL (PX4) or above home (ArduPilot)
+    setpoint_modes: frozenset[str]  # modes in which the autopilot acts on SET_ATTITUDE_TARGET
+    hold_before_prime: bool  # airborne vehicles in setpoint_modes go to `hold` before priming
+    control_modes: frozenset[str]  # `gcs fly --mode` values whose setpoints it acts on
+    required_params: tuple[ParamRequirement, ...] = ()
+    force_arm_magic: int = 21196  # COMPONENT_ARM_DISARM param2 (gcs fly never forces)
+    force_disarm_magic: int = 21196
+
+    def mode_name(self, custom_mode: int) -> str:
+        """Name of a HEARTBEAT custom_mode, e.g. 'OFFBOARD', 'AUTO_LOITER', 'GUIDED_NOGPS'."""
+        return mode_name(self.autopilot, custom_mode)
+
+    def preflight_problems(self, vehicle: str, control_mode: str,
+                           params: Mapping[str, float] | None) -> list[str]:
+        """What this autopilot needs before flying `control_mode`, given the parameters read from
+        the vehicle (`required_params`); one line per problem, naming the vehicle and the fix."""
+        out: list[str] = []
+        if control_mode not in self.control_modes:
+            allowed = " or ".join(sorted(self.control_modes))
+            out.append(f"{vehicle}: {self.name} does not act on {control_mode} setpoints; fly "
+                       f"it with --mode {allowed}")
+        for req in self.required_params:
+            text = req.problem(vehicle, None if params is None else params.get(req.name))
+            if text is not None:
+                out.append(text)
+        return out
+
+
+PX4 = AutopilotProfile(
+    name="PX4", autopilot=PX4_AUTOPILOT, family="px4",
+    offboard=ModeSpec("OFFBOARD", 6),
+    hold=ModeSpec("AUTO_LOITER", 4, 3),
+    land=None,
+    takeoff_mode=None,
+    takeoff_done_modes=frozenset({"AUTO_LOITER"}),
+    takeoff_altitude_amsl=True,
+    setpoint_modes=frozenset({"OFFBOARD"}),
+    hold_before_prime=False,
+    control_modes=frozenset({"rates", "actuators"}),  # actuators: PX4 <= 1.13 and the emulator
+)
+
+#: GUID_OPTIONS bit 3: SET_ATTITUDE_TARGET `thrust` is normalised thrust, not a climb rate.
+GUID_OPTIONS_THRUST = ParamRequirement(
+    "GUID_OPTIONS", 8,
+    "set GUID_OPTIONS bit 3 (8): otherwise ArduPilot reads thrust as a climb rate")
+
+ARDUPILOT = AutopilotProfile(
+    name="ArduPilot Copter", autopilot=ARDUPILOT_AUTOPILOT, family="ardupilot",
+    offboard=ModeSpec("GUIDED_NOGPS", 20),
+    hold=ModeSpec("BRAKE", 17),
+    land=ModeSpec("LAND", 9),
+    takeoff_mode=ModeSpec("GUIDED", 4),
+    takeoff_done_modes=frozenset({"GUIDED"}),
+    takeoff_altitude_amsl=False,
+    setpoint_modes=frozenset({"GUIDED", "GUIDED_NOGPS"}),
+    hold_before_prime=True,
+    control_modes=frozenset({"rates"}),  # SET_ATTITUDE_TARGET only
+    required_params=(GUID_OPTIONS_THRUST,),
+    force_arm_magic=2989,
+    force_disarm_magic=21196,
+)
+
+PROFILES: dict[int, AutopilotProfile] = {p.autopilot: p for p in (PX4, ARDUPILOT)}
+
+
+def profile_for(autopilot: int) -> AutopilotProfile | None:
+    """The profile of a HEARTBEAT.autopilot value; None for an autopilot gcs fly cannot fly."""
+    return PROFILES.get(autopilot)
+
+
+def unsupported_text(vehicle: str, autopilot: int) -> str:
+    """One line for a vehicle whose autopilot has no profile."""
+    known = " and ".join(f"{p.name} ({p.autopilot})" for p in PROFILES.values())
+    return f"{vehicle}: autopilot {autopilot} is not supported; gcs fly flies {known} only"

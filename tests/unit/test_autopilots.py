@@ -1,0 +1,379 @@
+"""Autopilot profiles (PX4, ArduPilot Copter) and the mission machine driving ArduPilot and mixed
+teams (pure: no sockets, no clock; time and telemetry are arguments)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from gcs.link.enums import ArduCopterMode, mode_name, px4_custom_mode
+from gcs.mission.autopilots import (
+    ARDUPILOT,
+    GUID_OPTIONS_THRUST,
+    PX4,
+    AutopilotProfile,
+    profile_for,
+    unsupported_text,
+)
+from gcs.mission.machine import (
+    EXIT_ABORTED,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    Cmd,
+    Command,
+    CommandResult,
+    MissionMachine,
+    MissionPlan,
+    Phase,
+)
+from gcs.mission.safety import SafetyRules, VehicleStatus, preflight_problems
+
+RATES = {"ATTITUDE_QUATERNION": 100.0, "LOCAL_POSITION_NED": 100.0}
+RULES = SafetyRules(max_tilt_rad=1.0, link_lost_after_s=0.5, geofence_min_enu_m=(-50, -50, 1),
+                    geofence_max_enu_m=(50, 50, 50), required_rates_hz=RATES)
+FIX = "set GUID_OPTIONS bit 3 (8): otherwise ArduPilot reads thrust as a climb rate"
+
+
+# --- the profiles --------------------------------------------------------------------------------
+
+
+def test_profiles_are_chosen_from_heartbeat_autopilot():
+    assert profile_for(12) is PX4 and profile_for(3) is ARDUPILOT
+    assert profile_for(0) is None and profile_for(8) is None
+    assert unsupported_text("vehicle 1 (sysid 1)", 0) == (
+        "vehicle 1 (sysid 1): autopilot 0 is not supported; gcs fly flies PX4 (12) and "
+        "ArduPilot Copter (3) only")
+
+
+def test_ardupilot_profile_holds_the_spec_facts():
+    a = ARDUPILOT
+    assert (a.offboard.name, a.offboard.number) == ("GUIDED_NOGPS", 20)
+    assert (a.hold.name, a.hold.number) == ("BRAKE", 17)
+    assert a.land is not None and (a.land.name, a.land.number) == ("LAND", 9)
+    assert a.takeoff_mode is not None and (a.takeoff_mode.name, a.takeoff_mode.number) == (
+        "GUIDED", 4)
+    assert not a.takeoff_altitude_amsl and a.takeoff_done_modes == {"GUIDED"}
+    assert a.setpoint_modes == {"GUIDED", "GUIDED_NOGPS"} and a.hold_before_prime
+    assert (a.force_arm_magic, a.force_disarm_magic) == (2989, 21196)
+    assert a.control_modes == {"rates"}
+    assert a.required_params == (GUID_OPTIONS_THRUST,) and GUID_OPTIONS_THRUST.mask == 8
+
+
+def test_px4_profile_is_what_gcs_fly_did_before():
+    p = PX4
+    assert p.offboard.custom_mode("px4") == 393216 == px4_custom_mode(6)
+    assert p.hold.custom_mode("px4") == px4_custom_mode(4, 3) and p.hold.name == "AUTO_LOITER"
+    assert p.land is None and p.takeoff_mode is None and p.takeoff_altitude_amsl
+    assert not p.hold_before_prime and not p.required_params
+    assert p.control_modes == {"rates", "actuators"}
+    assert (p.force_arm_magic, p.force_disarm_magic) == (21196, 21196)
+
+
+@pytest.mark.parametrize("profile", [PX4, ARDUPILOT], ids=lambda p: p.name)
+def test_mode_names_agree_with_the_link_layer_and_the_mode_specs(profile: AutopilotProfile):
+    # GIVEN every custom_mode the link layer can name for this autopilot
+    if profile.family == "px4":
+        modes = [px4_custom_mode(main, sub) for main in range(9) for sub in range(8)]
+    else:
+        modes = [int(m) for m in ArduCopterMode] + [8, 99]
+    # THEN the profile names them as gcs.link.enums.mode_name does (BRAKE etc. beyond it)
+    for cm in modes:
+        assert profile.mode_name(cm) == mode_name(profile.autopilot, cm), cm
+    # AND every mode the profile commands reads back under its own name
+    specs = [profile.offboard, profile.hold, profile.land, profile.takeoff_mode]
+    for spec in (s for s in specs if s is not None):
+        assert profile.mode_name(spec.custom_mode(profile.family)) == spec.name
+    assert ARDUPILOT.mode_name(17) == "BRAKE"
+
+
+@pytest.mark.parametrize("value,ok", [(8.0, True), (72.0, True), (15.0, True), (0.0, False),
+                                      (7.0, False), (64.0, False), (None, False),
+                                      (math.nan, False)])
+def test_guid_options_bit_3_is_required(value, ok):
+    text = GUID_OPTIONS_THRUST.problem("vehicle 2 (sysid 5)", value)
+    assert (text is None) == ok
+    if not ok:
+        assert text.startswith("vehicle 2 (sysid 5): GUID_OPTIONS ") and text.endswith(FIX)
+        assert "\n" not in text
+    if value == 0.0:
+        assert text == f"vehicle 2 (sysid 5): GUID_OPTIONS = 0 (bit mask 8 clear); {FIX}"
+
+
+def test_ardupilot_refuses_actuator_setpoints():
+    assert ARDUPILOT.preflight_problems("vehicle 1 (sysid 1)", "actuators", {"GUID_OPTIONS": 8}) \
+        == ["vehicle 1 (sysid 1): ArduPilot Copter does not act on actuators setpoints; fly it "
+            "with --mode rates"]
+    assert ARDUPILOT.preflight_problems("v", "rates", {"GUID_OPTIONS": 8}) == []
+    assert PX4.preflight_problems("v", "actuators", None) == []
+
+
+def test_preflight_accepts_ardupilot_and_refuses_unknown_autopilots():
+    team = [status(1, 3), status(2, 12), status(3, 4)]
+    texts = [p.text for p in preflight_problems(team, RULES)]
+    assert texts == [unsupported_text("vehicle 3 (sysid 3)", 4)]
+
+
+# --- the machine with ArduPilot (and mixed) statuses ---------------------------------------------
+
+ARDU_SETPOINT_MODES = ARDUPILOT.setpoint_modes
+
+
+def status(vid: int, autopilot: int, **kw) -> VehicleStatus:
+    base = dict(vehicle_id=vid, sysid=vid, link="alive", armed=True,
+                mode="BRAKE" if autopilot == 3 else "AUTO_LOITER", landed=False,
+                position_enu_m=(vid * 3.0, 0.0, 10.0), velocity_enu_mps=(0, 0, 0), tilt_rad=0.01,
+                data_age_s=0.01, autopilot=autopilot, vehicle_type=2,
+                rates_hz={"ATTITUDE_QUATERNION": 99.0, "LOCAL_POSITION_NED": 98.0})
+    base.update(kw)
+    return VehicleStatus(**base)
+
+
+class World:
+    """A fake team that obeys like its autopilots would (ArduPilot: arming enters GUIDED,
+    NAV_TAKEOFF only in GUIDED, and the vehicle stays in GUIDED afterwards; setpoints act only in
+    GUIDED/GUIDED_NOGPS), and checks the safety invariants after every tick."""
+
+    def __init__(self, machine: MissionMachine, autopilots: dict[int, int], *,
+                 on_ground: bool = False, guid_options: float = 8.0,
+                 in_air_mode: str | None = None) -> None:
+        self.m = machine
+        self.t = 0.0
+        self.v = {}
+        for vid, ap in autopilots.items():
+            s = status(vid, ap, armed=not on_ground, landed=on_ground,
+                       position_enu_m=(vid * 3.0, 0.0, 0.0 if on_ground else 10.0))
+            if on_ground:
+                s = dataclasses.replace(s, mode="STABILIZE" if ap == 3 else "AUTO_READY")
+            elif in_air_mode is not None and ap == 3:
+                s = dataclasses.replace(s, mode=in_air_mode)
+            self.v[vid] = s
+        self.params = {vid: {"GUID_OPTIONS": guid_options} for vid in autopilots}
+        self.sent: list[Command] = []
+        self.reject: set[tuple[int, Cmd]] = set()
+        self.ignore: set[tuple[int, Cmd]] = set()  # acknowledged, without effect
+        self.silent: set[int] = set()
+        self.acted_before_formation: list[int] = []
+
+    def cmds(self, vid: int | None = None) -> list[Cmd]:
+        return [c.cmd for c in self.sent if vid is None or c.vehicle_id == vid]
+
+    def _obey(self, c: Command, s: VehicleStatus) -> tuple[VehicleStatus, bool, tuple]:
+        ardu = s.autopilot == 3
+        if (c.vehicle_id, c.cmd) in self.reject:
+            return s, False, ()
+        if (c.vehicle_id, c.cmd) in self.ignore:
+            return s, True, ()
+        if c.cmd is Cmd.READ_PARAMS:
+            return s, True, tuple((n, self.params[c.vehicle_id][n]) for n in c.names)
+        if c.cmd is Cmd.ARM:
+            return dataclasses.replace(s, armed=True, mode="GUIDED" if ardu else s.mode), True, ()
+        if c.cmd is Cmd.TAKEOFF:
+            if ardu and not (s.armed and s.mode == "GUIDED"):
+                return s, False, ()
+            return dataclasses.replace(s, landed=False, mode="GUIDED" if ardu else "AUTO_LOITER",
+                                       position_enu_m=(s.position_enu_m[0], 0.0, c.altitude_m)
+                                       ), True, ()
+        if c.cmd is Cmd.OFFBOARD:
+            return dataclasses.replace(s, mode="GUIDED_NOGPS" if ardu else "OFFBOARD"), True, ()
+        if c.cmd is Cmd.HOLD:
+            return dataclasses.replace(s, mode="BRAKE" if ardu else "AUTO_LOITER"), True, ()
+        if c.cmd is Cmd.LAND:
+            return dataclasses.replace(s, mode="LAND" if ardu else "AUTO_LAND", landed=True,
+                                       armed=False,
+                                       position_enu_m=(s.position_enu_m[0], 0.0, 0.0)), True, ()
+        if c.cmd is Cmd.DISARM:
+            return dataclasses.replace(s, armed=False), True, ()
+        return s, True, ()
+
+    def apply(self, cmds) -> None:
+        for c in cmds:
+            self.sent.append(c)
+            s, ok, values = self._obey(c, self.v[c.vehicle_id])
+            self.v[c.vehicle_id] = s
+            result = CommandResult(c.vehicle_id, c.cmd, ok, "" if ok else "no", values)
+            self.apply(self.m.on_result(result))
+
+    def tick(self, dt: float = 0.05) -> None:
+        self.t += dt
+        team = [dataclasses.replace(s, link="lost", data_age_s=9.0) if vid in self.silent else s
+                for vid, s in self.v.items()]
+        self.apply(self.m.on_tick(self.t, team))
+        for vid, s in self.v.items():
+            # THE invariant: a vehicle in its offboard mode with its link up gets setpoints
+            offboard = self.m.profile(vid).offboard.name
+            if s.mode == offboard and vid not in self.silent and not self.m.done:
+                assert vid in self.m.streaming, f"vehicle {vid} in {offboard} without setpoints"
+            # and priming is inert: before the formation no streamed setpoint is acted on
+            if (self.m.formation_t0_s is None and vid in self.m.streaming
+                    and s.autopilot == 3 and s.mode in ARDU_SETPOINT_MODES):
+                self.acted_before_formation.append(vid)
+
+    def run(self, seconds: float) -> None:
+        for _ in range(int(seconds / 0.05)):
+            if self.m.done:
+                return
+            self.tick()
+
+
+def machine(ids=(1, 2), **plan) -> MissionMachine:
+    return MissionMachine(MissionPlan(duration_s=plan.pop("duration_s", 5.0), rules=RULES, **plan),
+                          tuple(ids))
+
+
+def test_ardupilot_team_on_the_ground_takes_off_in_guided_brakes_flies_guided_nogps_and_lands():
+    # GIVEN two ArduPilot Copters on the ground with GUID_OPTIONS = 8
+    m = machine(takeoff_altitude_m=3.0)
+    w = World(m, {1: 3, 2: 3}, on_ground=True)
+    # WHEN the mission runs to its end
+    w.run(40.0)
+    # THEN each: parameters read, armed (in GUIDED), NAV_TAKEOFF at 3 m above home, BRAKE before
+    # the setpoints start, GUIDED_NOGPS, LAND
+    assert m.outcome.exit_code == EXIT_OK, m.outcome
+    for vid in (1, 2):
+        assert w.cmds(vid) == [Cmd.CONFIGURE, Cmd.READ_PARAMS, Cmd.ARM, Cmd.TAKEOFF, Cmd.HOLD,
+                               Cmd.OFFBOARD, Cmd.LAND]
+        assert w.v[vid].mode == "LAND" and w.v[vid].landed and not w.v[vid].armed
+    (read,) = [c for c in w.sent if c.cmd is Cmd.READ_PARAMS and c.vehicle_id == 1]
+    assert read.names == ("GUID_OPTIONS",)
+    assert {c.altitude_m for c in w.sent if c.cmd is Cmd.TAKEOFF} == {3.0}
+    assert [n for n in m.notes if n.startswith("phase")] == [
+        "phase preflight", "phase arm", "phase takeoff", "phase hold", "phase prime",
+        "phase formation", "phase stopping", "phase done"]
+    assert w.acted_before_formation == []
+
+
+def test_guid_options_without_bit_3_refuses_to_fly_naming_vehicle_and_fix():
+    # GIVEN vehicle 2 with GUID_OPTIONS = 0 (thrust would be read as a climb rate)
+    m = machine()
+    w = World(m, {1: 3, 2: 3}, on_ground=True)
+    w.params[2]["GUID_OPTIONS"] = 0.0
+    w.run(20.0)
+    # THEN preflight refuses with one line naming vehicle 2 and the fix; nothing is armed
+    assert m.outcome.exit_code == EXIT_ABORTED
+    assert m.outcome.reason == f"vehicle 2 (sysid 2): GUID_OPTIONS = 0 (bit mask 8 clear); {FIX}"
+    assert Cmd.ARM not in w.cmds() and Cmd.OFFBOARD not in w.cmds() and not m.streaming
+
+
+def test_unanswered_parameter_read_aborts_before_arming():
+    m = machine()
+    w = World(m, {1: 3, 2: 3}, on_ground=True)
+    w.reject.add((1, Cmd.READ_PARAMS))
+    w.run(20.0)
+    assert m.outcome.exit_code == EXIT_ABORTED
+    assert m.outcome.reason == "vehicle 1: read_params failed: no"
+    assert Cmd.ARM not in w.cmds()
+
+
+def test_ardupilot_in_actuators_mode_is_refused():
+    m = machine(control_mode="actuators")
+    w = World(m, {1: 12, 2: 3})
+    w.run(20.0)
+    assert m.outcome.exit_code == EXIT_ABORTED
+    assert m.outcome.reason == ("vehicle 2 (sysid 2): ArduPilot Copter does not act on actuators "
+                                "setpoints; fly it with --mode rates")
+    assert Cmd.OFFBOARD not in w.cmds()
+
+
+def test_unknown_autopilot_is_refused():
+    m = machine()
+    w = World(m, {1: 3, 2: 0})
+    w.run(20.0)
+    assert m.outcome.reason == unsupported_text("vehicle 2 (sysid 2)", 0)
+    assert w.cmds(2) == [Cmd.CONFIGURE, Cmd.LAND]  # alive and airborne: the abort action
+
+
+def test_mixed_team_each_vehicle_gets_its_own_modes():
+    # GIVEN a PX4 vehicle holding and an ArduPilot vehicle in the air still in GUIDED
+    m = machine(end_action="hold")
+    w = World(m, {1: 12, 2: 3}, in_air_mode="GUIDED")
+    while m.phase is not Phase.FORMATION:
+        w.tick()
+    # THEN only the ArduPilot vehicle was read and sent to BRAKE before priming
+    assert w.cmds(1) == [Cmd.CONFIGURE, Cmd.OFFBOARD]
+    assert w.cmds(2) == [Cmd.CONFIGURE, Cmd.READ_PARAMS, Cmd.HOLD, Cmd.OFFBOARD]
+    assert (w.v[1].mode, w.v[2].mode) == ("OFFBOARD", "GUIDED_NOGPS")
+    w.run(20.0)
+    assert m.outcome.exit_code == EXIT_OK
+    assert (w.v[1].mode, w.v[2].mode) == ("AUTO_LOITER", "BRAKE")
+    assert w.acted_before_formation == []
+
+
+def test_ardupilot_leaving_guided_nogps_on_its_own_aborts():
+    m = machine(duration_s=60.0)
+    w = World(m, {1: 3, 2: 3})
+    while m.phase is not Phase.FORMATION:
+        w.tick()
+    w.run(1.0)
+    w.v[1] = dataclasses.replace(w.v[1], mode="RTL")  # e.g. a failsafe of its own
+    w.run(10.0)
+    assert m.outcome.exit_code == EXIT_ABORTED
+    assert "vehicle 1 (sysid 1): left GUIDED_NOGPS (now RTL)" in m.outcome.reason
+
+
+def test_abort_lands_with_the_land_mode_and_streams_until_guided_nogps_is_left():
+    m = machine(duration_s=60.0)
+    w = World(m, {1: 3, 2: 3})
+    while m.phase is not Phase.FORMATION:
+        w.tick()
+    w.reject.add((2, Cmd.LAND))  # vehicle 2 refuses LAND: it stays in GUIDED_NOGPS
+    m.request_abort("interrupted (Ctrl-C)")
+    w.run(2.0)
+    assert w.v[1].mode == "LAND" and 1 not in m.streaming
+    assert w.v[2].mode == "GUIDED_NOGPS" and 2 in m.streaming  # still fed, never abandoned
+    w.run(10.0)
+    assert m.outcome.exit_code == EXIT_INTERRUPTED
+    assert "vehicle 2: land not accepted" in m.outcome.reason
+
+
+def test_brake_refused_or_never_reported_before_priming_aborts():
+    # GIVEN an ArduPilot vehicle in the air in GUIDED that refuses BRAKE
+    m = machine(ids=(1,))
+    w = World(m, {1: 3}, in_air_mode="GUIDED")
+    w.reject.add((1, Cmd.HOLD))
+    w.run(10.0)
+    assert m.outcome.exit_code == EXIT_ABORTED
+    assert m.outcome.reason == "vehicle 1: hold failed: no"
+    # OR acknowledges it but keeps reporting GUIDED
+    m = machine(ids=(1,), hold_timeout_s=2.0)
+    w2 = World(m, {1: 3}, in_air_mode="GUIDED")
+    w2.ignore.add((1, Cmd.HOLD))
+    w2.run(10.0)
+    assert m.outcome.reason == "vehicles 1 (BRAKE) did not report their hold mode within 2 s"
+    # THEN no setpoint was streamed to a vehicle that would act on it, and no GUIDED_NOGPS
+    for world in (w, w2):
+        assert Cmd.OFFBOARD not in world.cmds() and world.acted_before_formation == []
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 400), st.sampled_from(["abort", "silent", "reject",
+                                                                  "fence", "mode"]),
+                          st.sampled_from([1, 2, 3])), max_size=4),
+       st.booleans())
+def test_mixed_team_invariants_under_random_failures(events, on_ground):
+    # GIVEN a PX4 vehicle and two ArduPilot vehicles, random failures at random ticks
+    m = machine(ids=(1, 2, 3), duration_s=8.0)
+    w = World(m, {1: 12, 2: 3, 3: 3}, on_ground=on_ground)
+    at: dict[int, list] = {}
+    for k, what, vid in events:
+        at.setdefault(k, []).append((what, vid))
+    for k in range(1600):
+        if m.done:
+            break
+        for what, vid in at.get(k, []):
+            if what == "abort":
+                m.request_abort("operator")
+            elif what == "silent":
+                w.silent.add(vid)
+            elif what == "reject":
+                w.reject.add((vid, Cmd.LAND))
+            elif what == "fence":
+                w.v[vid] = dataclasses.replace(w.v[vid], position_enu_m=(0.0, 0.0, 99.0))
+            else:
+                w.v[vid] = dataclasses.replace(w.v[vid], mode="LOITER")
+        w.tick()  # THEN World.tick's invariants hold
+    assert m.done and m.outcome is not None
+    assert w.acted_before_formation == []
