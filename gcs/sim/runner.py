@@ -148,74 +148,19 @@ def simulate(
     while done < n_steps + 1:
         count = min(chunk, n_steps + 1 - done)
         row0 = done // log_every
+        # The plant, fault and law arguments both kernels share, in their order.
+        shared = (p, v, rot, w, mass, inertia, drop_step, drop_factor, mhat, rhohat, nominal,
+                  adjacency, offsets, ref_c, ref_a, ref_w, ref_ph, gains, adaptive)
         if options.oracle:
-            chunk_min = run_oracle(
-                done,
-                count,
-                dt_s,
-                log_every,
-                p,
-                v,
-                rot,
-                w,
-                mass,
-                inertia,
-                drop_step,
-                drop_factor,
-                mhat,
-                rhohat,
-                nominal,
-                adjacency,
-                offsets,
-                ref_c,
-                ref_a,
-                ref_w,
-                ref_ph,
-                gains,
-                adaptive,
-                log,
-                row0,
-            )
+            chunk_min = run_oracle(done, count, dt_s, log_every, *shared, log, row0)
             singular = 0
         else:
             chunk_min, singular = run_sampled(
-                done,
-                count,
-                dt_s,
-                ctrl_every,
-                log_every,
-                p,
-                v,
-                rot,
-                w,
-                mass,
-                inertia,
-                drop_step,
-                drop_factor,
-                mhat,
-                rhohat,
-                nominal,
-                adjacency,
-                offsets,
-                ref_c,
-                ref_a,
-                ref_w,
-                ref_ph,
-                gains,
-                adaptive,
-                DERIVATIVE_METHODS[derivative],
-                levant_state,
-                u_prev,
+                done, count, dt_s, ctrl_every, log_every, *shared,
+                DERIVATIVE_METHODS[derivative], levant_state, u_prev,
                 team.controller.derivative.levant_lipschitz,
-                team.controller.derivative.levant_substep_s,
-                _MODES[mode],
-                options.rate_loop_gain_radps,
-                thrust_hold,
-                torque_hold,
-                rate_cmd,
-                diag,
-                log,
-                row0,
+                team.controller.derivative.levant_substep_s, _MODES[mode],
+                options.rate_loop_gain_radps, thrust_hold, torque_hold, rate_cmd, diag, log, row0,
             )
         min_uz = min(min_uz, chunk_min)
         if singular or not np.isfinite(p).all():

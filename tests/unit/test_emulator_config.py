@@ -24,10 +24,7 @@ def test_square4_team_file():
 
 
 def test_massdrop_team_file_has_the_scenario_ii_fault():
-    path = ROOT / "configs/square4_massdrop.yaml"
-    if not path.exists():
-        pytest.skip("configs/square4_massdrop.yaml not written yet")
-    team = load_team(path)
+    team = load_team(ROOT / "configs/square4_massdrop.yaml")
     drops = [f for f in team.faults if f.kind == "mass_drop"]
     assert [(f.vehicle_id, f.at_s, f.fraction) for f in drops] == [(1, 40.0, 0.3)]
 
