@@ -1,0 +1,491 @@
+"""Team configuration schema: constants, ConfigError and the frozen dataclasses (ENU metres).
+
+Every problem raises ConfigError with one line "<file>: <key path>: <problem>" (plus "(line N)"
+when the value came from a YAML file). The schema is documented in docs/configuration.md.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from gcs.control.gains import LawGains
+
+GRAVITY_MPS2 = 9.81
+THRUST_MARGIN = 1.2  # max collective thrust must be >= THRUST_MARGIN * m g when a plant is given
+LAWS = ("adaptive", "baseline")
+MODES = ("rates", "actuators")
+DERIVATIVE_METHODS = ("model", "levant")
+FAULT_KINDS = ("mass_drop", "link_loss", "packet_loss", "motor_efficiency")
+FLY_ACTIONS = ("land", "hold")  # what `gcs fly` tells vehicles to do when it stops flying them
+FLY_STARTS = ("auto", "in_air", "takeoff")
+
+Vec3 = tuple[float, float, float]
+ZERO3: Vec3 = (0.0, 0.0, 0.0)
+
+
+def _choices(options: Sequence[str]) -> str:
+    return ", ".join(repr(o) for o in options)
+
+
+class ConfigError(ValueError):
+    """A bad team config. str(e) is one line: "<file>: <key path>: <problem>[ (line N)]".
+
+    ConfigError(message) with a single argument is accepted too; then only str(e) is meaningful.
+    """
+
+    def __init__(
+        self,
+        source: str,
+        path: str | None = None,
+        problem: str | None = None,
+        line: int | None = None,
+    ) -> None:
+        if path is None or problem is None:
+            message = source
+        else:
+            message = f"{source}: {path}: {problem}" + (f" (line {line})" if line else "")
+        super().__init__(" ".join(message.splitlines()))
+        self.source, self.path, self.problem, self.line = source, path, problem, line
+
+
+# --------------------------------------------------------------------------------------------
+# The configuration, as dataclasses. Frames: ENU world (x east, y north, z up), FLU body.
+
+
+#: Gains of the paper's law (Section V; k_eps: attitude feedback of the rates mode [1/s]). The
+#: config holds the law's own record, so what is validated is exactly what the law receives.
+Gains = LawGains
+GAIN_NAMES = tuple(name for name in LawGains._fields if name != "gravity_mps2")
+
+
+@dataclass(frozen=True, slots=True)
+class DerivativeConfig:
+    """How u' and u'' are obtained: "model" (from the state and estimates) or "levant" (28)."""
+
+    method: str
+    levant_lipschitz: float = 1e4
+    levant_substep_s: float = 1e-4
+
+
+@dataclass(frozen=True, slots=True)
+class ControllerConfig:
+    law: str  # "adaptive" | "baseline"
+    mode: str  # "rates" (thrust + body rates) | "actuators" (thrust + torque, eq. 26)
+    gains: Gains
+    derivative: DerivativeConfig
+
+
+@dataclass(frozen=True, slots=True)
+class Cosine:
+    """amplitude * cos(2 pi t / period_s + phase_rad), amplitude in m/s."""
+
+    amplitude: float
+    period_s: float
+    phase_rad: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class AxisReference:
+    constant: float = 0.0
+    cosines: tuple[Cosine, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class ReferenceVelocity:
+    """v_r(t) [m/s, ENU] = constant + sum amplitude cos(omega t + phase), per axis."""
+
+    x: AxisReference
+    y: AxisReference
+    z: AxisReference
+
+    def max_abs_acceleration_z(self) -> float:
+        """varrho = sum |amp| 2 pi / period_s over z [m/s^2]: sup|v_r,z'| (exact for one cosine)."""
+        return sum(abs(c.amplitude) * 2.0 * math.pi / c.period_s for c in self.z.cosines)
+
+    def as_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(constant (3,), amplitude (3,K), omega_radps (3,K), phase_rad (3,K)), zero-padded."""
+        axes = (self.x, self.y, self.z)
+        k = max(len(a.cosines) for a in axes)
+        amplitude, omega, phase = np.zeros((3, k)), np.zeros((3, k)), np.zeros((3, k))
+        for r, axis in enumerate(axes):
+            for c, cos in enumerate(axis.cosines):
+                amplitude[r, c] = cos.amplitude
+                omega[r, c] = 2.0 * math.pi / cos.period_s
+                phase[r, c] = cos.phase_rad
+        return np.array([a.constant for a in axes]), amplitude, omega, phase
+
+    def evaluate(self, t_s: float, order: int = 0) -> np.ndarray:
+        """The order-th time derivative of v_r at t_s, shape (3,), ENU [m/s^(1+order)]."""
+        constant, amplitude, omega, phase = self.as_arrays()
+        terms = amplitude * omega**order * np.cos(omega * t_s + phase + order * math.pi / 2.0)
+        return terms.sum(axis=1) + (constant if order == 0 else 0.0)
+
+
+@dataclass(frozen=True, slots=True)
+class Edge:
+    """Undirected edge between vehicle ids i and j with weight a_ij = a_ji."""
+
+    i: int
+    j: int
+    weight: float = 1.0
+
+
+@dataclass(frozen=True, slots=True)
+class GraphConfig:
+    edges: tuple[Edge, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class SimConfig:
+    plant_rate_hz: float = 1000.0
+    controller_rate_hz: float = 1000.0
+
+    @property
+    def plant_dt_s(self) -> float:
+        return 1.0 / self.plant_rate_hz
+
+    @property
+    def controller_dt_s(self) -> float:
+        return 1.0 / self.controller_rate_hz
+
+    @property
+    def plant_steps_per_tick(self) -> int:
+        return round(self.plant_rate_hz / self.controller_rate_hz)
+
+
+@dataclass(frozen=True, slots=True)
+class MissionConfig:
+    duration_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class Airframe:
+    """Quadrotor geometry of eq. (51): d_i = arm_length_m, C_i = anti_torque_m."""
+
+    arm_length_m: float
+    anti_torque_m: float
+    rotor_thrust_max_n: float
+    motor_time_constant_s: float = 0.0  # first-order rotor lag in the emulator; 0: none
+
+    @property
+    def max_thrust_n(self) -> float:
+        return 4.0 * self.rotor_thrust_max_n
+
+
+@dataclass(frozen=True, slots=True)
+class PlantParams:
+    """True parameters: for the simulated plant and emulator only, never for the controller."""
+
+    mass_kg: float
+    inertia_kgm2: Vec3  # diag(Jx, Jy, Jz), body frame
+
+
+@dataclass(frozen=True, slots=True)
+class InitialState:
+    position_enu_m: Vec3
+    velocity_enu_mps: Vec3 = ZERO3
+    attitude_rpy_rad: Vec3 = ZERO3
+    body_rates_radps: Vec3 = ZERO3
+
+
+@dataclass(frozen=True, slots=True)
+class Estimates:
+    """Initial adaptive states: mhat = mhat_i(0) of (24) (NOT a mass: alpha_m mhat/phi is)."""
+
+    mhat: float
+    inertia_kgm2: Vec3  # rhohat(0) = Jhat(0) diagonal
+    mass_bound_kg: float | None = None  # mbar_i of Proposition 2
+
+
+@dataclass(frozen=True, slots=True)
+class LinkConfig:
+    """GCS side of a vehicle's MAVLink UDP link (local_port 0: any free port)."""
+
+    local_port: int
+    remote_host: str
+    remote_port: int
+
+    @classmethod
+    def px4_sitl(cls, sysid: int) -> LinkConfig:
+        """PX4 SITL instance sysid-1: GCS listens on 14540+i, vehicle listens on 14580+i."""
+        return cls(14540 + sysid - 1, "127.0.0.1", 14580 + sysid - 1)
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleConfig:
+    id: int
+    sysid: int
+    offset_enu_m: Vec3  # theta_i, so theta_ij = theta_i - theta_j
+    initial: InitialState
+    estimates: Estimates
+    airframe: Airframe
+    link: LinkConfig
+    plant: PlantParams | None = None
+    nominal_mass_kg: float | None = None  # the non-adaptive baseline's mass
+    # The baseline's frozen inertia (Jhat is not adapted); None: the initial estimate.
+    nominal_inertia_kgm2: Vec3 | None = None
+
+    @property
+    def baseline_inertia_kgm2(self) -> Vec3:
+        """The inertia the non-adaptive baseline uses: nominal_inertia_kgm2, else estimates."""
+        if self.nominal_inertia_kgm2 is not None:
+            return self.nominal_inertia_kgm2
+        return self.estimates.inertia_kgm2
+
+    @property
+    def mass_bound_kg(self) -> float | None:
+        """mbar_i for Proposition 2: estimates.mass_bound_kg, else the plant mass, else None."""
+        if self.estimates.mass_bound_kg is not None:
+            return self.estimates.mass_bound_kg
+        return self.plant.mass_kg if self.plant is not None else None
+
+
+# Faults: each kind is its own dataclass with kind, vehicle (an id) and at_s (s from the formation
+# start) first. The emulator (vehicle_emulator/team.py) reads the same keys.
+
+
+@dataclass(frozen=True, slots=True)
+class FaultConfig:
+    """Mass drop: at at_s the plant loses `fraction` of its mass (kind "mass_drop")."""
+
+    kind: str
+    vehicle: int
+    at_s: float
+    fraction: float
+
+    def summary(self) -> str:
+        return (
+            f"vehicle {self.vehicle} loses {self.fraction:.0%} of its mass at t = {self.at_s:g} s"
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class LinkLossFault:
+    """At at_s the vehicle's MAVLink link goes down for duration_s (kind "link_loss")."""
+
+    kind: str
+    vehicle: int
+    at_s: float
+    duration_s: float
+
+    def summary(self) -> str:
+        return f"vehicle {self.vehicle} link down for {self.duration_s:g} s at t = {self.at_s:g} s"
+
+
+@dataclass(frozen=True, slots=True)
+class PacketLossFault:
+    """From at_s each packet is lost with `probability` and delayed by latency_ms."""
+
+    kind: str
+    vehicle: int
+    at_s: float
+    probability: float
+    latency_ms: float = 0.0
+
+    def summary(self) -> str:
+        return (
+            f"vehicle {self.vehicle} loses {self.probability:.0%} of packets, "
+            f"+{self.latency_ms:g} ms latency, from t = {self.at_s:g} s"
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class MotorEfficiencyFault:
+    """From at_s rotor `motor` (1..4) gives `efficiency` (0..1) of its commanded thrust."""
+
+    kind: str
+    vehicle: int
+    at_s: float
+    motor: int
+    efficiency: float
+
+    def summary(self) -> str:
+        return (
+            f"vehicle {self.vehicle} motor {self.motor} at {self.efficiency:.0%} efficiency "
+            f"from t = {self.at_s:g} s"
+        )
+
+
+Fault = FaultConfig | LinkLossFault | PacketLossFault | MotorEfficiencyFault
+
+
+@dataclass(frozen=True, slots=True)
+class FlyModeConfig:
+    """`gcs fly` settings of one control mode: the tick rate over the link and, where the paper's
+    attitude gains are not stable at that rate (spec section 9), the gains flown instead."""
+
+    tick_rate_hz: float
+    alpha_eps: float | None = None  # None: controller.gains.alpha_eps (actuators mode)
+    alpha_omega: float | None = None  # None: controller.gains.alpha_omega (actuators mode)
+    max_rate_radps: float = 1.0  # rates mode: norm limit of the body-rate command
+
+
+@dataclass(frozen=True, slots=True)
+class GeofenceConfig:
+    """Axis-aligned box in the world ENU frame [m]; checked during the formation phase."""
+
+    min_enu_m: Vec3
+    max_enu_m: Vec3
+
+
+@dataclass(frozen=True, slots=True)
+class FlyConfig:
+    """The `fly:` section: flight sequence, safety rules and link timing of `gcs fly`."""
+
+    rates: FlyModeConfig = FlyModeConfig(100.0)
+    actuators: FlyModeConfig = FlyModeConfig(250.0)
+    start: str = "auto"  # auto: take off the vehicles that report being on the ground
+    takeoff_altitude_m: float = 2.5  # above home
+    end_action: str = "land"  # after the formation phase
+    abort_action: str = "land"  # Ctrl-C, abort key, geofence, failed check
+    link_loss_action: str = "hold"  # the other vehicles when one link is lost
+    stale_after_s: float = 0.1  # telemetry older than this is stale (see docs/gcs.md)
+    link_lost_after_s: float = 0.5  # a vehicle silent this long is lost
+    max_tilt_rad: float = 1.0  # abort above this tilt (formation phase)
+    geofence: GeofenceConfig | None = None
+    log_rate_hz: float = 50.0  # time-series samples; must divide every mode's tick rate
+    connect_timeout_s: float = 10.0
+    takeoff_timeout_s: float = 60.0
+    land_timeout_s: float = 120.0
+
+    def mode(self, name: str) -> FlyModeConfig:
+        """The settings of control mode `name` ('rates' or 'actuators')."""
+        return self.rates if name == "rates" else self.actuators
+
+
+@dataclass(frozen=True, slots=True)
+class TeamConfig:
+    name: str
+    source_path: str
+    mission: MissionConfig
+    controller: ControllerConfig
+    reference_velocity: ReferenceVelocity
+    graph: GraphConfig
+    sim: SimConfig
+    vehicles: tuple[VehicleConfig, ...]
+    faults: tuple[Fault, ...] = ()
+    fly: FlyConfig = FlyConfig()
+
+    @property
+    def n(self) -> int:
+        return len(self.vehicles)
+
+    def ids(self) -> tuple[int, ...]:
+        return tuple(v.id for v in self.vehicles)
+
+    def sysids(self) -> tuple[int, ...]:
+        return tuple(v.sysid for v in self.vehicles)
+
+    def index_of(self, vehicle_id: int) -> int:
+        """Row of vehicle_id in every (n, ...) array; KeyError if there is no such vehicle."""
+        for k, v in enumerate(self.vehicles):
+            if v.id == vehicle_id:
+                return k
+        raise KeyError(f"no vehicle with id {vehicle_id}; ids are {self.ids()}")
+
+    def vehicle(self, vehicle_id: int) -> VehicleConfig:
+        return self.vehicles[self.index_of(vehicle_id)]
+
+    def adjacency(self) -> np.ndarray:
+        """(n, n) symmetric weights a_ij, rows and columns in vehicle order."""
+        a = np.zeros((self.n, self.n))
+        for e in self.graph.edges:
+            i, j = self.index_of(e.i), self.index_of(e.j)
+            a[i, j] = a[j, i] = e.weight
+        return a
+
+    def laplacian(self) -> np.ndarray:
+        """L = D - A, (n, n)."""
+        a = self.adjacency()
+        return np.diag(a.sum(axis=1)) - a
+
+    def _rows(self, get: Callable[[VehicleConfig], Any]) -> np.ndarray:
+        return np.array([get(v) for v in self.vehicles], dtype=float)
+
+    def offsets_enu_m(self) -> np.ndarray:
+        return self._rows(lambda v: v.offset_enu_m).reshape(self.n, 3)
+
+    def initial_positions_enu_m(self) -> np.ndarray:
+        return self._rows(lambda v: v.initial.position_enu_m).reshape(self.n, 3)
+
+    def initial_velocities_enu_mps(self) -> np.ndarray:
+        return self._rows(lambda v: v.initial.velocity_enu_mps).reshape(self.n, 3)
+
+    def initial_attitudes_rpy_rad(self) -> np.ndarray:
+        return self._rows(lambda v: v.initial.attitude_rpy_rad).reshape(self.n, 3)
+
+    def initial_body_rates_radps(self) -> np.ndarray:
+        return self._rows(lambda v: v.initial.body_rates_radps).reshape(self.n, 3)
+
+    def initial_mhat(self) -> np.ndarray:
+        """(n,) mhat_i(0) of (24)."""
+        return self._rows(lambda v: v.estimates.mhat)
+
+    def initial_inertia_estimates_kgm2(self) -> np.ndarray:
+        return self._rows(lambda v: v.estimates.inertia_kgm2).reshape(self.n, 3)
+
+    def max_thrusts_n(self) -> np.ndarray:
+        return self._rows(lambda v: v.airframe.max_thrust_n)
+
+    def has_plants(self) -> bool:
+        return all(v.plant is not None for v in self.vehicles)
+
+    def _need(self, key: str, get: Callable[[VehicleConfig], Any], why: str) -> np.ndarray:
+        for k, v in enumerate(self.vehicles):
+            if get(v) is None:
+                raise ConfigError(
+                    self.source_path,
+                    f"vehicles[{k}].{key}",
+                    f"missing: {why} (vehicle {v.id}, sysid {v.sysid})",
+                )
+        return self._rows(get)
+
+    def true_masses_kg(self) -> np.ndarray:
+        """(n,) plant masses; ConfigError if a vehicle has no plant."""
+        return self._need(
+            "plant", lambda v: v.plant and v.plant.mass_kg, "the true mass is needed, give a plant"
+        )
+
+    def true_inertias_kgm2(self) -> np.ndarray:
+        get = lambda v: v.plant and v.plant.inertia_kgm2  # noqa: E731
+        return self._need("plant", get, "the true inertia is needed, give a plant").reshape(
+            self.n, 3
+        )
+
+    def nominal_masses_kg(self) -> np.ndarray:
+        return self._need(
+            "nominal_mass_kg", lambda v: v.nominal_mass_kg, "the baseline law needs nominal_mass_kg"
+        )
+
+    def with_law(self, law: str) -> TeamConfig:
+        """The same team flown with another law ("adaptive" | "baseline"), checked."""
+        if law not in LAWS:
+            raise ConfigError(
+                self.source_path, "controller.law", f"expected one of {_choices(LAWS)}, got {law!r}"
+            )
+        team = dataclasses.replace(self, controller=dataclasses.replace(self.controller, law=law))
+        if law == "baseline":
+            team.nominal_masses_kg()
+        return team
+
+
+def initial_phi(vehicle: VehicleConfig, gains: Gains) -> float:
+    """phi_i(0) = 2 + (1/(3 sigma_a)) sum_k sat(v_i,k(0)), sat(x) = sigma_a tanh(x / sigma_a).
+
+    (= 2 + sum_k tanh(v_i,k(0)) / 3 for the paper's sigma_a = 1; the law's sat in
+    gcs/control/position.py.)
+    """
+    s = gains.sigma_a
+    return 2.0 + sum(s * math.tanh(x / s) for x in vehicle.initial.velocity_enu_mps) / (3.0 * s)
+
+
+def proposition2_min_mhat(vehicle: VehicleConfig, gains: Gains) -> float | None:
+    """(phi_i(0) - 1) mbar_i / alpha_m, the least mhat_i(0) of Proposition 2; None: no mbar_i."""
+    mbar = vehicle.mass_bound_kg
+    return None if mbar is None else (initial_phi(vehicle, gains) - 1.0) * mbar / gains.alpha_m
