@@ -25,6 +25,9 @@ from pathlib import Path
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from vehicle_emulator.testing import free_udp_port_block  # noqa: E402
 
 
 def _team_yaml(n: int, path: Path, remote_base: int) -> None:
@@ -87,26 +90,6 @@ def _receiver(ports: list[int], duration_s: float, queue: mp.Queue) -> None:
     )
 
 
-def _free_block(n: int) -> int:
-    import random
-
-    for _ in range(100):
-        base = random.randrange(20000, 60000 - n)
-        socks = []
-        try:
-            for k in range(n):
-                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-                socks.append(s)
-                s.bind(("127.0.0.1", base + k))
-            return base
-        except OSError:
-            continue
-        finally:
-            for s in socks:
-                s.close()
-    raise OSError("no free port block")
-
-
 def _emu_cmd(args: list[str], cpu: int | None) -> list[str]:
     prog = (
         "import os, sys\n"
@@ -119,8 +102,8 @@ def _emu_cmd(args: list[str], cpu: int | None) -> list[str]:
 
 
 def run_fleet(n: int, duration_s: float, workdir: Path) -> dict:
-    remote_base = _free_block(n)
-    bind_base = _free_block(n)
+    remote_base = free_udp_port_block(n)
+    bind_base = free_udp_port_block(n)
     team = workdir / f"bench{n}.yaml"
     _team_yaml(n, team, remote_base)
     stats = workdir / "fleet.json"
@@ -158,7 +141,7 @@ def run_fleet(n: int, duration_s: float, workdir: Path) -> dict:
 
 
 def run_separate(k: int, duration_s: float, workdir: Path) -> list[dict]:
-    remote_base = _free_block(k)
+    remote_base = free_udp_port_block(k)
     q: mp.Queue = mp.Queue()
     rx = mp.Process(
         target=_receiver, args=(list(range(remote_base, remote_base + k)), duration_s + 15.0, q)
@@ -174,7 +157,7 @@ def run_separate(k: int, duration_s: float, workdir: Path) -> list[dict]:
                 str(i + 1),
                 "--in-air",
                 "--bind",
-                f"127.0.0.1:{_free_block(1)}",
+                f"127.0.0.1:{free_udp_port_block(1)}",
                 "--remote",
                 f"127.0.0.1:{remote_base + i}",
                 "--duration",

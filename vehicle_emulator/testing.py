@@ -46,6 +46,26 @@ def free_udp_port() -> int:
         return int(s.getsockname()[1])
 
 
+def free_udp_port_block(n: int, attempts: int = 200) -> int:
+    """A base port such that base .. base+n-1 on 127.0.0.1 were all free a moment ago."""
+    rng = random.Random()
+    for _ in range(attempts):
+        base = rng.randrange(20000, 60000 - n)
+        socks: list[socket.socket] = []
+        try:
+            for k in range(n):
+                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                socks.append(s)
+                s.bind(("127.0.0.1", base + k))
+            return base
+        except OSError:
+            continue
+        finally:
+            for s in socks:
+                s.close()
+    raise OSError(f"no block of {n} free UDP ports found in {attempts} attempts")
+
+
 @dataclass
 class EmulatorProcess:
     """A running ``vehicle-emu`` subprocess and the ports it uses."""

@@ -89,7 +89,8 @@ def limit_rate_command(rate_cmd_radps: np.ndarray,
 
     Returns (limited, clipped) with clipped (n,) True where a row was scaled. Rationale
     (docs/gcs.md): a rate step the airframe cannot follow saturates the autopilot's mixer, which
-    then trades collective thrust for torque and breaks the thrust the mass estimator assumes.
+    with airmode on trades collective thrust for torque and breaks the thrust the mass
+    estimator assumes.
     """
     norm = np.sqrt((rate_cmd_radps * rate_cmd_radps).sum(axis=1))
     scale = np.minimum(1.0, max_rate_radps / np.maximum(norm, 1e-300))

@@ -63,7 +63,13 @@ def _acceleration(rotation, thrust_n, mass_kg, g):
 
 
 @njit(cache=True)
-def _write_log(log, row, p, v, tr_err, we, kappa, mass, rhohat, thrust_n, u):
+def _norms(a):
+    """Row norms (n,) of an (n, 3) array."""
+    return np.sqrt((a * a).sum(axis=1))
+
+
+@njit(cache=True)
+def _write_log(log, row, p, v, tr_err, we_norm, kappa, mass, rhohat, thrust_n, u):
     n = p.shape[0]
     for i in range(n):
         for k in range(3):
@@ -72,7 +78,7 @@ def _write_log(log, row, p, v, tr_err, we, kappa, mass, rhohat, thrust_n, u):
             log[row, i, 10 + k] = rhohat[i, k]
             log[row, i, 14 + k] = u[i, k]
         log[row, i, 6] = tr_err[i]
-        log[row, i, 7] = np.sqrt(we[i, 0] ** 2 + we[i, 1] ** 2 + we[i, 2] ** 2)
+        log[row, i, 7] = we_norm[i]
         log[row, i, 8] = kappa[i]
         log[row, i, 9] = mass[i]
         log[row, i, 13] = thrust_n[i]
@@ -135,8 +141,7 @@ def run_sampled(
     min_uz = np.inf
     singular = 0
     tr_err = diag[:, 0].copy()
-    we = np.zeros((n, 3))
-    we[:, 0] = diag[:, 1]
+    we_norm = diag[:, 1].copy()
     kappa = diag[:, 2].copy()
     u = diag[:, 3:6].copy()
     for step in range(first_step, first_step + n_steps):
@@ -191,6 +196,7 @@ def run_sampled(
             rc, wc, dwc, tau, rho_rate, omega_cmd, eps, tr_err, we = attitude_stage(
                 rot, w, u, du, ddu, rhohat, gains, adaptive
             )
+            we_norm = _norms(we)
             thrust_hold[:] = t_n
             torque_hold[:, :] = tau
             rate_cmd[:, :] = omega_cmd
@@ -220,7 +226,7 @@ def run_sampled(
                 p,
                 v,
                 tr_err,
-                we,
+                we_norm,
                 kappa,
                 mass,
                 rhohat,
@@ -230,7 +236,7 @@ def run_sampled(
         rk4_step(p, v, rot, w, thrust_hold, torque_hold, mass, inertia, dt_s)
     for i in range(n):
         diag[i, 0] = tr_err[i]
-        diag[i, 1] = np.sqrt(we[i, 0] ** 2 + we[i, 1] ** 2 + we[i, 2] ** 2)
+        diag[i, 1] = we_norm[i]
         diag[i, 2] = kappa[i]
         for k in range(3):
             diag[i, 3 + k] = u[i, k]
@@ -348,7 +354,7 @@ def run_oracle(
                 p,
                 v,
                 k1[9],
-                k1[10],
+                _norms(k1[10]),
                 k1[7],
                 mass,
                 rhohat,

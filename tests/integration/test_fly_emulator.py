@@ -12,9 +12,7 @@ import contextlib
 import datetime as dt
 import json
 import os
-import random
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -26,38 +24,29 @@ import pytest
 import yaml
 from pymavlink import mavutil
 
+from vehicle_emulator.testing import free_udp_port_block
+
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(420)]
 
 ROOT = Path(__file__).resolve().parents[2]
 SQUARE4 = ROOT / "configs" / "square4.yaml"
 
 
-def _port_block(n: int) -> int:
-    """A base port with n consecutive free UDP ports on 127.0.0.1."""
-    for _ in range(200):
-        base = random.randrange(20000, 60000 - n)
-        socks = []
-        try:
-            for k in range(n):
-                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-                socks.append(s)
-                s.bind(("127.0.0.1", base + k))
-            return base
-        except OSError:
-            continue
-        finally:
-            for s in socks:
-                s.close()
-    raise RuntimeError("no block of free UDP ports")
-
-
-def team_file(tmp: Path, bind_base: int, *, duration_s: float, z_shift: float = 0.0,
-              faults: list | None = None, massdrop: bool = False) -> Path:
+def team_file(
+    tmp: Path,
+    bind_base: int,
+    *,
+    duration_s: float,
+    z_shift: float = 0.0,
+    faults: list | None = None,
+    massdrop: bool = False,
+) -> Path:
     """square4 (or its Scenario II variant) on free ports: vehicle i binds bind_base + i and the
     GCS listens on gcs_base + i (the team file's link keys, which the emulator reads too)."""
-    gcs_base = _port_block(4)
-    data = yaml.safe_load((ROOT / "configs" / ("square4_massdrop.yaml" if massdrop
-                                               else "square4.yaml")).read_text())
+    gcs_base = free_udp_port_block(4)
+    data = yaml.safe_load(
+        (ROOT / "configs" / ("square4_massdrop.yaml" if massdrop else "square4.yaml")).read_text()
+    )
     data["mission"]["duration_s"] = duration_s
     for k, v in enumerate(data["vehicles"]):
         v["link"] = {"local_port": gcs_base + k, "remote_port": bind_base + k}
@@ -70,16 +59,25 @@ def team_file(tmp: Path, bind_base: int, *, duration_s: float, z_shift: float = 
 
 
 @contextlib.contextmanager
-def emulators(team: Path, bind_base: int, tmp: Path, *, separate: bool = False,
-              n: int = 4) -> Iterator[list[subprocess.Popen]]:
+def emulators(
+    team: Path, bind_base: int, tmp: Path, *, separate: bool = False, n: int = 4
+) -> Iterator[list[subprocess.Popen]]:
     """`vehicle-emu --fleet` (or one process per vehicle) on the team file's ports; stopped on
     exit."""
-    cmd = [sys.executable, "-m", "vehicle_emulator.cli", "--team", str(team), "--log-level",
-           "WARNING"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "vehicle_emulator.cli",
+        "--team",
+        str(team),
+        "--log-level",
+        "WARNING",
+    ]
     argv = [cmd + ["--id", str(k + 1)] for k in range(n)] if separate else [cmd + ["--fleet"]]
-    procs = [subprocess.Popen(a, stdout=subprocess.DEVNULL,
-                              stderr=open(tmp / f"emu{k}.log", "w"))  # noqa: SIM115
-             for k, a in enumerate(argv)]
+    procs = [
+        subprocess.Popen(a, stdout=subprocess.DEVNULL, stderr=open(tmp / f"emu{k}.log", "w"))  # noqa: SIM115
+        for k, a in enumerate(argv)
+    ]
     try:
         yield procs
     finally:
@@ -100,9 +98,25 @@ class Gcs:
         self.log_path = out.parent / f"{out.name}.stderr"
         self.out = out
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "gcs.cli", "fly", "--team", str(team), "--out", str(out),
-             "--no-figures", "--status", "plain", "--log-level", "INFO", *args],
-            stdout=subprocess.PIPE, stderr=open(self.log_path, "w"), text=True,  # noqa: SIM115
+            [
+                sys.executable,
+                "-m",
+                "gcs.cli",
+                "fly",
+                "--team",
+                str(team),
+                "--out",
+                str(out),
+                "--no-figures",
+                "--status",
+                "plain",
+                "--log-level",
+                "INFO",
+                *args,
+            ],
+            stdout=subprocess.PIPE,
+            stderr=open(self.log_path, "w"),
+            text=True,  # noqa: SIM115
             env={**os.environ, "PYTHONUNBUFFERED": "1"},
         )
 
@@ -114,8 +128,9 @@ class Gcs:
             if self.proc.poll() is not None:
                 break
             time.sleep(0.05)  # polling a file written by another process, not synchronising
-        raise TimeoutError(f"gcs fly: no {text!r} within {timeout_s} s:\n"
-                           + self.log_path.read_text()[-3000:])
+        raise TimeoutError(
+            f"gcs fly: no {text!r} within {timeout_s} s:\n" + self.log_path.read_text()[-3000:]
+        )
 
     def finish(self, timeout_s: float) -> tuple[int, str]:
         out, _ = self.proc.communicate(timeout=timeout_s)
@@ -159,7 +174,7 @@ def check_scenario_one(report: dict, code: int, out: str) -> None:
 
 
 def test_scenario_one_rates_mode_at_100_hz(tmp_path):
-    base = _port_block(4)
+    base = free_udp_port_block(4)
     team = team_file(tmp_path, base, duration_s=32.0)
     with emulators(team, base, tmp_path):
         gcs = Gcs(team, tmp_path / "run", "--mode", "rates", "--end-action", "hold")
@@ -176,13 +191,17 @@ def test_scenario_one_rates_mode_at_100_hz(tmp_path):
         kinds.add(msg.get_type())
     assert want <= kinds
     # and `gcs plot` redraws the figures from the time series
-    plot = subprocess.run([sys.executable, "-m", "gcs.cli", "plot", str(tmp_path / "run")],
-                          capture_output=True, text=True, timeout=120)
+    plot = subprocess.run(
+        [sys.executable, "-m", "gcs.cli", "plot", str(tmp_path / "run")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert plot.returncode == 0 and ".png" in plot.stdout
 
 
 def test_scenario_one_actuators_mode_at_250_hz(tmp_path):
-    base = _port_block(4)
+    base = free_udp_port_block(4)
     team = team_file(tmp_path, base, duration_s=32.0)
     with emulators(team, base, tmp_path):
         gcs = Gcs(team, tmp_path / "run", "--mode", "actuators", "--end-action", "hold")
@@ -199,11 +218,12 @@ def test_scenario_two_over_the_link_adaptive_holds_baseline_climbs(tmp_path):
     drop = [{"kind": "mass_drop", "vehicle": 1, "at_s": 10.0, "fraction": 0.3}]
     vz = {}
     for law in ("adaptive", "baseline"):
-        base = _port_block(4)
+        base = free_udp_port_block(4)
         team = team_file(tmp_path, base, duration_s=31.0, faults=drop, massdrop=True)
         with emulators(team, base, tmp_path):
-            gcs = Gcs(team, tmp_path / law, "--mode", "rates", "--controller", law,
-                      "--end-action", "hold")
+            gcs = Gcs(
+                team, tmp_path / law, "--mode", "rates", "--controller", law, "--end-action", "hold"
+            )
             code, out = gcs.finish(180)
         assert code == 0, out
         t, v = series(gcs.report(), "velocity_ned_mps")
@@ -216,7 +236,7 @@ def test_scenario_two_over_the_link_adaptive_holds_baseline_climbs(tmp_path):
 
 
 def test_sigint_mid_flight_lands_and_disarms_every_vehicle(tmp_path):
-    base = _port_block(4)
+    base = free_udp_port_block(4)
     team = team_file(tmp_path, base, duration_s=60.0, z_shift=-6.0)
     with emulators(team, base, tmp_path):
         gcs = Gcs(team, tmp_path / "run", "--mode", "rates")
@@ -234,7 +254,7 @@ def test_sigint_mid_flight_lands_and_disarms_every_vehicle(tmp_path):
 
 
 def test_killing_one_emulator_is_detected_within_a_second_and_the_others_hold(tmp_path):
-    base = _port_block(4)
+    base = free_udp_port_block(4)
     team = team_file(tmp_path, base, duration_s=60.0)
     with emulators(team, base, tmp_path, separate=True) as procs:
         gcs = Gcs(team, tmp_path / "run", "--mode", "rates")
@@ -255,9 +275,10 @@ def test_killing_one_emulator_is_detected_within_a_second_and_the_others_hold(tm
 
 
 def test_ten_percent_packet_loss_on_every_link_still_converges(tmp_path):
-    base = _port_block(4)
-    loss = [{"kind": "packet_loss", "vehicle": k, "at_s": 0.0, "probability": 0.1}
-            for k in (1, 2, 3, 4)]
+    base = free_udp_port_block(4)
+    loss = [
+        {"kind": "packet_loss", "vehicle": k, "at_s": 0.0, "probability": 0.1} for k in (1, 2, 3, 4)
+    ]
     team = team_file(tmp_path, base, duration_s=25.0, faults=loss)
     with emulators(team, base, tmp_path):
         gcs = Gcs(team, tmp_path / "run", "--mode", "rates", "--end-action", "hold")
