@@ -4,11 +4,15 @@ No clock, no I/O: every call takes ``now_s`` (the emulator's simulated time) and
 ``Observation``; the result is a MAV_RESULT, the current ``demand`` (what the inner loops fly,
 see plant.ControlMode) and queued ``events`` (STATUSTEXT lines) that the runner drains.
 
-PX4 rules reproduced (spec/mavlink.md): custom_mode = main << 16 | sub << 24; OFFBOARD is accepted
-only when setpoints have streamed (gaps <= 0.5 s, i.e. >= 2 Hz) for more than 1 s, else
-TEMPORARILY_REJECTED; setpoint silence > COM_OF_LOSS_T leaves OFFBOARD and runs COM_OBL_RC_ACT;
-disarm in the air is refused unless forced (21196); auto-disarm COM_DISARM_LAND after landing and
-COM_DISARM_PRFLT after arming without takeoff.
+PX4 rules reproduced (spec/mavlink.md): custom_mode = main << 16 | sub << 24; offboard is
+available while the newest setpoint is younger than COM_OF_LOSS_T (PX4's offboardCheck.cpp:
+``now < last_setpoint + COM_OF_LOSS_T``), so a single setpoint just before DO_SET_MODE is enough
+(MAVSDK's ``set_attitude_rate`` then ``start``); without one, OFFBOARD is TEMPORARILY_REJECTED with
+"Switching to Offboard is currently not available", and arming in OFFBOARD is denied. There is no
+minimum stream duration or rate (PX4's docs ask for one; its code does not). Setpoint silence
+> COM_OF_LOSS_T leaves OFFBOARD and runs COM_OBL_RC_ACT; disarm in the air is refused unless
+forced (21196); auto-disarm COM_DISARM_LAND after landing and COM_DISARM_PRFLT after arming
+without takeoff.
 """
 
 from __future__ import annotations
@@ -36,8 +40,7 @@ __all__ = [
     "nav_state_of",
 ]
 
-STREAM_GAP_S = 0.5  # a gap longer than this (slower than 2 Hz) restarts the setpoint stream
-STREAM_MIN_S = 1.0  # the stream must have lasted longer than this to enter OFFBOARD
+OFFBOARD_UNAVAILABLE_TEXT = "Switching to Offboard is currently not available"  # PX4's wording
 FORCE_MAGIC = 21196
 TAKEOFF_DONE_M = 0.15
 
@@ -162,20 +165,6 @@ OffboardSetpoint = RatesSetpoint | AttitudeSetpoint | ActuatorSetpoint
 
 
 @dataclass(slots=True)
-class _Stream:
-    start_s: float = -math.inf
-    last_s: float = -math.inf
-
-    def feed(self, now_s: float) -> None:
-        if now_s - self.last_s > STREAM_GAP_S:
-            self.start_s = now_s
-        self.last_s = now_s
-
-    def ready(self, now_s: float) -> bool:
-        return now_s - self.last_s <= STREAM_GAP_S and self.last_s - self.start_s > STREAM_MIN_S
-
-
-@dataclass(slots=True)
 class Autopilot:
     """One vehicle's mode/arming state machine. Call ``tick`` regularly (>= 10 Hz)."""
 
@@ -189,7 +178,7 @@ class Autopilot:
     first_offboard_s: float | None = None
     setpoint: OffboardSetpoint | None = None
     home_enu_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    _stream: _Stream = field(default_factory=_Stream)
+    _last_setpoint_s: float = -math.inf  # time of the newest offboard setpoint (-inf: none yet)
     _armed_s: float = 0.0
     _taken_off: bool = False
     _landed_since_s: float | None = None
@@ -224,15 +213,16 @@ class Autopilot:
         """Human name of the current mode (QGroundControl's wording)."""
         return _MODE_NAMES[self.nav_state]
 
-    def offboard_stream_ready(self, now_s: float) -> bool:
-        """True when setpoints have streamed long enough to enter (or arm in) OFFBOARD."""
-        return self._stream.ready(now_s)
+    def offboard_available(self, now_s: float) -> bool:
+        """True while the newest setpoint is younger than COM_OF_LOSS_T (PX4's offboardCheck):
+        OFFBOARD may then be entered, or armed in."""
+        return now_s - self._last_setpoint_s < self.params["COM_OF_LOSS_T"]
 
     # --- inputs -------------------------------------------------------------------------------
 
     def on_setpoint(self, now_s: float, setpoint: OffboardSetpoint) -> None:
         """A valid offboard setpoint arrived (already range-checked by the codec layer)."""
-        self._stream.feed(now_s)
+        self._last_setpoint_s = now_s
         self.setpoint = setpoint
         if self.nav_state is NavState.OFFBOARD and self.armed:
             self._set_demand(setpoint)
@@ -245,7 +235,7 @@ class Autopilot:
             if not force:
                 if obs.battery_remaining < 0.1:
                     return self._deny("Arming denied: battery low")
-                if self.nav_state is NavState.OFFBOARD and not self._stream.ready(now_s):
+                if self.nav_state is NavState.OFFBOARD and not self.offboard_available(now_s):
                     return self._deny("Arming denied: no offboard setpoints")
                 if not obs.on_ground:
                     return self._deny("Arming denied: not landed")
@@ -272,8 +262,8 @@ class Autopilot:
         if target is None:
             return self._deny(f"Mode change denied: main {main_mode} sub {sub_mode} not available")
         if target is NavState.OFFBOARD:
-            if not self._stream.ready(now_s):
-                self._event(Severity.WARNING, "Offboard denied: setpoints not streaming > 1 s")
+            if not self.offboard_available(now_s):
+                self._event(Severity.CRITICAL, OFFBOARD_UNAVAILABLE_TEXT)
                 return MavResult.TEMPORARILY_REJECTED
             if self.first_offboard_s is None:
                 self.first_offboard_s = now_s
@@ -303,7 +293,7 @@ class Autopilot:
         """Failsafes and mode progress: offboard loss, takeoff done, landing, auto-disarm."""
         if self.nav_state is NavState.OFFBOARD:
             loss_s = self.params["COM_OF_LOSS_T"]
-            if now_s - self._stream.last_s > loss_s:
+            if now_s - self._last_setpoint_s > loss_s:
                 self._offboard_lost(obs)
         if not self.armed:
             return

@@ -7,8 +7,9 @@ the profile instead of PX4 constants. Facts: ../shared/spec/mavlink.md (docs/gcs
 mode was chosen).
 
 * PX4 (12): OFFBOARD; hold AUTO_LOITER; land with MAV_CMD_NAV_LAND; NAV_TAKEOFF with an AMSL
-  altitude, after which PX4 switches itself to AUTO_LOITER; the OFFBOARD switch needs > 1 s of
-  setpoints first (the PRIME phase).
+  altitude, after which PX4 switches itself to AUTO_LOITER; the OFFBOARD switch needs a setpoint
+  younger than COM_OF_LOSS_T (1 s); the PRIME phase streams for longer than that first, as good
+  practice.
 * ArduPilot Copter (3): GUIDED_NOGPS (20), the attitude-only guided mode; hold BRAKE (17); land
   with the LAND mode (9); take off in GUIDED (4) with NAV_TAKEOFF at a relative altitude, then
   BRAKE before the setpoint stream starts (ArduPilot acts on SET_ATTITUDE_TARGET at once in GUIDED

@@ -27,6 +27,7 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 UAV1_MASS_KG, UAV1_FMAX_N = 0.85, 6.0  # Table I UAV 1, the default airframe of --id 1
 OFFBOARD, POSCTL, AUTO = 6, 3, 4
 ACCEPTED, TEMP_REJECTED, DENIED, UNSUPPORTED = 0, 1, 2, 3
+PX4_NO_OFFBOARD = "Switching to Offboard is currently not available"  # PX4's STATUSTEXT
 
 
 def _start(args: list[str], tmp_path: Path):
@@ -91,18 +92,40 @@ def test_arming_acks_and_command_rules(ground_vehicle):
         client.wait("COMMAND_ACK", 1.0)
 
 
-def test_offboard_needs_a_setpoint_stream_for_more_than_1s(air_vehicle):
-    client, _ = air_vehicle
-    # GIVEN no setpoints WHEN OFFBOARD is requested THEN TEMPORARILY_REJECTED
-    assert client.command(176, 1 | 128, OFFBOARD, 0) == TEMP_REJECTED
-    with _hover_stream(client):
-        # a stream of 0.3 s is not enough
-        client.collect(0.3)
-        assert client.command(176, 1 | 128, OFFBOARD, 0) == TEMP_REJECTED
-        client.collect(1.2)
-        assert client.command(176, 1 | 128, OFFBOARD, 0) == ACCEPTED
+@pytest.mark.parametrize("where", ["ground-disarmed", "ground-armed", "in-air"])
+def test_one_setpoint_then_offboard_is_accepted_at_once(request, where):
+    # GIVEN a vehicle that never saw a setpoint WHEN one SET_ATTITUDE_TARGET is followed at once
+    # by DO_SET_MODE OFFBOARD THEN it is ACCEPTED (PX4 SITL entered OFFBOARD 2-4 ms later)
+    client, _ = request.getfixturevalue("air_vehicle" if where == "in-air" else "ground_vehicle")
+    armed = where != "ground-disarmed"
+    if where == "ground-armed":
+        assert client.command(400, 1) == ACCEPTED
+    thrust = hover_thrust(UAV1_MASS_KG, UAV1_FMAX_N)
+    client.send(rates_setpoint(1, 0.0, 0.0, 0.0, thrust))
+    sent = time.monotonic()
+    assert client.command(176, 1 | (128 if armed else 0), OFFBOARD, 0) == ACCEPTED
+    assert time.monotonic() - sent < 0.2
+    with _hover_stream(client):  # keep it in OFFBOARD (no setpoint loss) while we look
         hb = client.wait("HEARTBEAT", 3, lambda m: m.custom_mode == 393216)
-        assert hb.base_mode & 128
+        assert bool(hb.base_mode & 128) is armed
+
+
+def test_offboard_without_a_recent_setpoint_is_temporarily_rejected(air_vehicle):
+    client, _ = air_vehicle
+    # GIVEN no setpoint ever WHEN OFFBOARD is requested THEN TEMPORARILY_REJECTED + PX4's text
+    assert client.command(176, 1 | 128, OFFBOARD, 0) == TEMP_REJECTED
+    text = client.wait("STATUSTEXT", 2, lambda m: "Offboard" in m.text)
+    assert text.text == PX4_NO_OFFBOARD and text.severity == 2  # MAV_SEVERITY_CRITICAL
+    hb = client.wait("HEARTBEAT", 3)
+    assert (custom_main_mode(hb.custom_mode), custom_sub_mode(hb.custom_mode)) == (AUTO, 3)
+    # GIVEN one setpoint older than COM_OF_LOSS_T (1 s) THEN still refused
+    thrust = hover_thrust(UAV1_MASS_KG, UAV1_FMAX_N)
+    client.send(rates_setpoint(1, 0.0, 0.0, 0.0, thrust))
+    client.collect(1.3)
+    assert client.command(176, 1 | 128, OFFBOARD, 0) == TEMP_REJECTED
+    # and a fresh one is enough again
+    client.send(rates_setpoint(1, 0.0, 0.0, 0.0, thrust))
+    assert client.command(176, 1 | 128, OFFBOARD, 0) == ACCEPTED
 
 
 def test_rates_and_thrust_hold_hover_and_track_a_body_rate(air_vehicle):

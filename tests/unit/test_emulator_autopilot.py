@@ -14,6 +14,7 @@ from vehicle_emulator.autopilot import (
     Observation,
     PositionTarget,
     RatesSetpoint,
+    Severity,
     custom_mode_of,
 )
 from vehicle_emulator.params import ParamStore
@@ -41,21 +42,78 @@ def test_a_vehicle_in_the_air_starts_armed_holding_its_position():
     assert not Autopilot.start(1, ParamStore(), 0.0, GROUND).armed
 
 
-def test_offboard_needs_more_than_one_second_of_stream():
-    ap = Autopilot.start(1, ParamStore(), 0.0, AIR)
-    assert ap.set_mode(0.0, AIR, 6, 0) is MavResult.TEMPORARILY_REJECTED
-    _stream(ap, 0.0, 0.99)
-    assert ap.set_mode(0.99, AIR, 6, 0) is MavResult.TEMPORARILY_REJECTED
-    _stream(ap, 0.99, 1.1)
-    assert ap.set_mode(1.1, AIR, 6, 0) is MavResult.ACCEPTED
-    assert ap.nav_state is NavState.OFFBOARD and ap.demand == SP
-    assert ap.first_offboard_s == 1.1
+PX4_NO_OFFBOARD = "Switching to Offboard is currently not available"
 
 
-def test_a_stream_slower_than_2_hz_never_qualifies():
+def _armed_on_ground() -> Autopilot:
+    ap = Autopilot.start(1, ParamStore(), 0.0, GROUND)
+    assert ap.arm(0.0, GROUND, True) is MavResult.ACCEPTED
+    return ap
+
+
+@pytest.mark.parametrize(
+    "make, obs, armed",
+    [
+        (lambda: Autopilot.start(1, ParamStore(), 0.0, GROUND), GROUND, False),
+        (_armed_on_ground, GROUND, True),
+        (lambda: Autopilot.start(1, ParamStore(), 0.0, AIR), AIR, True),
+    ],
+    ids=["ground-disarmed", "ground-armed", "in-air"],
+)
+def test_one_setpoint_then_offboard_is_accepted_at_once(make, obs, armed):
+    # GIVEN a vehicle that never saw a setpoint WHEN one arrives and DO_SET_MODE follows in the
+    # same instant (MAVSDK's set_attitude_rate then start) THEN OFFBOARD is entered (PX4 SITL: 2-4 ms)
+    ap = make()
+    ap.on_setpoint(5.0, SP)
+    assert ap.set_mode(5.0, obs, 6, 0) is MavResult.ACCEPTED
+    assert ap.nav_state is NavState.OFFBOARD and ap.armed is armed
+    assert ap.demand == (SP if armed else MotorsOff())
+    assert ap.first_offboard_s == 5.0
+    assert not any(PX4_NO_OFFBOARD in text for _, text in ap.events)
+
+
+@pytest.mark.parametrize("now_s", [0.0, 3.0, 1000.0])
+def test_offboard_without_any_setpoint_is_temporarily_rejected_with_px4s_text(now_s):
     ap = Autopilot.start(1, ParamStore(), 0.0, AIR)
-    _stream(ap, 0.0, 5.0, hz=1.5)
-    assert ap.set_mode(5.0, AIR, 6, 0) is MavResult.TEMPORARILY_REJECTED
+    assert ap.set_mode(now_s, AIR, 6, 0) is MavResult.TEMPORARILY_REJECTED
+    assert ap.nav_state is NavState.AUTO_LOITER and ap.first_offboard_s is None
+    assert (Severity.CRITICAL, PX4_NO_OFFBOARD) in ap.events
+
+
+@pytest.mark.parametrize(
+    "age_s, accepted",
+    [(0.0, True), (0.5, True), (0.99, True), (1.0, False), (1.01, False), (30.0, False)],
+)
+def test_offboard_needs_a_setpoint_younger_than_com_of_loss_t(age_s, accepted):
+    # PX4: available iff now < last_setpoint + COM_OF_LOSS_T (default 1.0 s)
+    ap = Autopilot.start(1, ParamStore(), 0.0, AIR)
+    ap.on_setpoint(10.0, SP)
+    result = ap.set_mode(10.0 + age_s, AIR, 6, 0)
+    if accepted:
+        assert result is MavResult.ACCEPTED and ap.nav_state is NavState.OFFBOARD
+        assert ap.demand == SP
+    else:
+        assert result is MavResult.TEMPORARILY_REJECTED and ap.nav_state is NavState.AUTO_LOITER
+        assert (Severity.CRITICAL, PX4_NO_OFFBOARD) in ap.events
+
+
+def test_a_changed_com_of_loss_t_is_honoured():
+    params = ParamStore({"COM_OF_LOSS_T": 2.5})
+    ap = Autopilot.start(1, params, 0.0, AIR)
+    ap.on_setpoint(1.0, SP)
+    assert ap.set_mode(3.0, AIR, 6, 0) is MavResult.ACCEPTED  # 2.0 s old < 2.5 s
+    short = Autopilot.start(1, ParamStore(), 0.0, AIR)
+    short.on_setpoint(1.0, SP)
+    short.params.set("COM_OF_LOSS_T", 0.3)  # changed at run time (PARAM_SET): read on each check
+    assert short.set_mode(1.5, AIR, 6, 0) is MavResult.TEMPORARILY_REJECTED  # 0.5 s old > 0.3 s
+    assert short.set_mode(1.25, AIR, 6, 0) is MavResult.ACCEPTED
+
+
+def test_setpoint_rate_does_not_matter_only_recency():
+    # no ">= 2 Hz for > 1 s" rule: a 1.5 Hz trickle qualifies whenever its newest setpoint is young
+    ap = Autopilot.start(1, ParamStore(), 0.0, AIR)
+    _stream(ap, 0.0, 5.0, hz=1.5)  # the newest setpoint is at 4.67 s
+    assert ap.set_mode(5.0, AIR, 6, 0) is MavResult.ACCEPTED
 
 
 @pytest.mark.parametrize(
@@ -90,7 +148,13 @@ def test_arming_rules():
     assert Autopilot.start(1, ParamStore(), 0.0, GROUND).arm(0, low, True) is MavResult.DENIED
     ap2 = Autopilot.start(1, ParamStore(), 0.0, GROUND)
     ap2.nav_state = NavState.OFFBOARD
-    assert ap2.arm(0.0, GROUND, True) is MavResult.DENIED  # offboard without a stream
+    assert ap2.arm(0.0, GROUND, True) is MavResult.DENIED  # offboard without any setpoint
+    ap2.on_setpoint(1.0, SP)
+    assert ap2.arm(2.0, GROUND, True) is MavResult.DENIED  # newest setpoint 1.0 s old
+    assert ap2.arm(2.5, GROUND, True) is MavResult.DENIED
+    ap2.on_setpoint(3.0, SP)
+    assert ap2.arm(3.0, GROUND, True) is MavResult.ACCEPTED  # one fresh setpoint is enough
+    assert ap2.demand == SP
 
 
 def test_takeoff_hold_land_and_auto_disarm():
