@@ -113,6 +113,7 @@ class FlyOptions:
     figures: bool = True
     status: str = "auto"  # auto | rich | plain | off
     abort_key: bool = True
+    connect_timeout_s: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -216,7 +217,8 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
         start=fly.start,
         takeoff_altitude_m=fly.takeoff_altitude_m, end_action=end_action,
         abort_action=fly.abort_action, link_loss_action=fly.link_loss_action,
-        connect_timeout_s=fly.connect_timeout_s, takeoff_timeout_s=fly.takeoff_timeout_s,
+        connect_timeout_s=options.connect_timeout_s or fly.connect_timeout_s,
+        takeoff_timeout_s=fly.takeoff_timeout_s,
         land_timeout_s=fly.land_timeout_s,
     )
     return FlightSetup(team, mode, law, rate, gains, plan, required,
@@ -538,8 +540,9 @@ class Flight:
     def _log_notes(self) -> None:
         notes = self.machine.notes
         for text in notes[self._notes_logged:]:
-            logger.log(logging.WARNING if text.startswith(("stopping", "done: exit 1"))
-                       else logging.INFO, "mission: %s", text)
+            # the outcome itself is printed by the command line; its stop is worth a warning
+            logger.log(logging.WARNING if text.startswith("stopping") else logging.INFO,
+                       "mission: %s", text)
         self._notes_logged = len(notes)
 
     def _run_law(self, k: int, sample: TeamSample) -> TeamCommand | None:

@@ -58,6 +58,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_fly_parser(sub)
 
+    comp = sub.add_parser(
+        "compile",
+        help="compile the law, the simulator and the emulator physics into the on-disk cache "
+             "(make install runs it; otherwise the first run does, and says so)")
+    comp.add_argument("--no-emulator", action="store_true",
+                      help="only the ground station's parts (law and simulator)")
+
     check = sub.add_parser("check", help="validate a team config and print what it says")
     _add_team(check)
 
@@ -73,6 +80,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "check":
             team = load_team(args.team)
             print(describe(team))
+            return EXIT_OK
+        if args.command == "compile":
+            from gcs.precompile import compile_all
+
+            try:
+                compile_all(emulator=not args.no_emulator)
+            except RuntimeError as exc:
+                print(f"gcs compile: {exc}", file=sys.stderr)
+                return EXIT_FAILED
             return EXIT_OK
         if args.command == "sim":
             from gcs.sim.command import run_sim

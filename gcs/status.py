@@ -13,6 +13,8 @@ import sys
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, TextIO
 
+from gcs.mission.machine import Phase
+
 if TYPE_CHECKING:
     from gcs.app import Flight
 
@@ -41,6 +43,7 @@ class StatusSnapshot:
     late_pct: float
     vehicles: tuple[VehicleLine, ...]
     note: str
+    connecting: str = ""  # CONNECT phase: who has been heard, who not (MissionMachine)
 
 
 class _Rate:
@@ -80,6 +83,7 @@ def snapshot(flight: Flight, rates: _Rate, now_s: float) -> StatusSnapshot:
         phase=m.phase.value, t_s=flight.formation_t_s, duration_s=flight.setup.plan.duration_s,
         formation_error_m=flight.formation_error_m, late_pct=100.0 * flight.ticks.late_fraction(),
         vehicles=tuple(lines), note=m.notes[-1] if m.notes else "",
+        connecting=m.connect_progress() if m.phase is Phase.CONNECT else "",
     )
 
 
@@ -89,7 +93,9 @@ def _f(x: float, spec: str) -> str:
 
 def plain_line(s: StatusSnapshot) -> str:
     """One line: phase, time, formation error, then per vehicle
-    id:mode(* armed)/link/age/altitude/mass estimate."""
+    id:mode(* armed)/link/age/altitude/mass estimate; while connecting, who has been heard."""
+    if s.connecting:
+        return f"[{s.phase}] {s.connecting}"
     t = f"t={_f(s.t_s, '.1f')}/{s.duration_s:g}s" if s.t_s is not None else "t=-"
     parts = [f"[{s.phase}] {t} form_err={_f(s.formation_error_m, '.3g')}m "
              f"late={s.late_pct:.1f}%"]
@@ -106,7 +112,7 @@ def render_table(s: StatusSnapshot):  # -> rich Table (imported lazily)
     t = f"{_f(s.t_s, '.1f')} / {s.duration_s:g} s" if s.t_s is not None else "-"
     table = Table(title=f"gcs fly: {s.phase}   t {t}   formation error "
                         f"{_f(s.formation_error_m, '.4f')} m   late ticks {s.late_pct:.1f}%",
-                  caption=s.note[:100], expand=False)
+                  caption=s.connecting or s.note[:100], expand=False)
     for name in ("UAV", "sysid", "mode", "armed", "link", "msg/s", "age ms", "z m", "m_est kg",
                  "T N", "setpoints"):
         table.add_column(name, justify="right")

@@ -4,6 +4,10 @@ Ports follow PX4 SITL instance i = N-1: bind 127.0.0.1:14580+i, send to 127.0.0.
 (instances above 9 send to 14549), sysid N; ``--gcs`` adds a second link bound to 18570+i that
 sends to 14550. Team-file ``link`` keys override the defaults, command-line flags override both.
 Ctrl-C / SIGTERM stop it cleanly (exit status 0).
+
+Start-up: the physics kernels are compiled (announced on stderr when the cache is cold, see
+jitcache), then the links open and one line ``vehicle-emu: ready: ...`` goes to stdout; a parent
+process (``gcs fly --emulators``) waits for that line. ``--compile-only`` compiles and exits.
 """
 
 from __future__ import annotations
@@ -18,12 +22,17 @@ import sys
 import time
 from collections.abc import Sequence
 
+from vehicle_emulator.jitcache import compiling
 from vehicle_emulator.runner import Emulator, LinkPlan, RealtimeClock, RunStats
 from vehicle_emulator.team import TeamFileError, TeamSpec, VehicleSpec, default_vehicle, load_team
 
 log = logging.getLogger("vehicle_emulator")
 
-__all__ = ["main", "link_plan", "parse_address"]
+__all__ = ["main", "link_plan", "parse_address", "READY_PREFIX"]
+
+READY_PREFIX = "vehicle-emu: ready:"
+#: First-run compile of the physics on this 2-core machine (docs/benchmarks.md).
+COMPILE_ESTIMATE_S = 10.0
 
 
 def parse_address(text: str) -> tuple[str, int]:
@@ -66,6 +75,8 @@ def _parser() -> argparse.ArgumentParser:
     who = ap.add_mutually_exclusive_group(required=True)
     who.add_argument("--id", type=int, help="vehicle id N (sysid N, PX4 SITL instance N-1)")
     who.add_argument("--fleet", action="store_true", help="run every vehicle of --team")
+    who.add_argument("--compile-only", action="store_true",
+                     help="compile the physics kernels into the on-disk cache and exit")
     ap.add_argument("--team", help="team YAML file (airframes, plant, initial state, faults)")
     ap.add_argument("--bind", type=parse_address, help="local UDP address (default 14580+N-1)")
     ap.add_argument("--remote", type=parse_address, help="initial peer (default 14540+N-1)")
@@ -124,6 +135,12 @@ def _team(args: argparse.Namespace) -> tuple[list[VehicleSpec], TeamSpec | None]
         raise SystemExit(f"vehicle-emu: {exc.args[0]}") from None
 
 
+def compile_physics() -> None:
+    """Compile (or load from the cache) every kernel the emulator runs."""
+    with compiling("emulator", "the emulator physics", COMPILE_ESTIMATE_S, "vehicle-emu"):
+        Emulator([default_vehicle(1, on_ground=True)]).warm_up()
+
+
 async def _amain(args: argparse.Namespace) -> int:
     specs, team = _team(args)
     overrides: dict[str, float] = {}
@@ -141,7 +158,8 @@ async def _amain(args: argparse.Namespace) -> int:
         seed=args.seed,
         param_overrides=overrides,
     )
-    emu.warm_up()
+    with compiling("emulator", "the emulator physics", COMPILE_ESTIMATE_S, "vehicle-emu"):
+        emu.warm_up()
     clock = RealtimeClock(args.realtime_factor)
     plans = [link_plan(s, args, single=not args.fleet) for s in specs]
     await emu.open_links(plans, clock)
@@ -153,6 +171,9 @@ async def _amain(args: argparse.Namespace) -> int:
             *plan.bind,
             *plan.remote,
         )
+    sysids = ", ".join(str(s.sysid) for s in specs)
+    print(f"{READY_PREFIX} {len(specs)} vehicle{'s' if len(specs) != 1 else ''} (sysid {sysids})",
+          flush=True)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -216,6 +237,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
     try:
+        if args.compile_only:
+            compile_physics()
+            return 0
         return asyncio.run(_amain(args))
     except TeamFileError as exc:
         print(f"vehicle-emu: {exc}", file=sys.stderr)

@@ -350,7 +350,7 @@ class FlyConfig:
     max_tilt_rad: float = 1.0  # abort above this tilt (formation phase)
     geofence: GeofenceConfig | None = None
     log_rate_hz: float = 50.0  # time-series samples; must divide every mode's tick rate
-    connect_timeout_s: float = 10.0
+    connect_timeout_s: float = 60.0  # emulators compiling, autopilots booting (PX4 SITL 10-25 s)
     takeoff_timeout_s: float = 60.0
     land_timeout_s: float = 120.0
 

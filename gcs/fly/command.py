@@ -8,15 +8,21 @@ import contextlib
 import logging
 import subprocess
 import sys
+import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import TextIO
 
-from gcs.app import Flight, FlightSetupError, FlyOptions, fly
+from gcs.app import Flight, FlightSetupError, FlyOptions, prepare
 from gcs.config import TeamConfig, load_team
+from gcs.precompile import compile_law
 from gcs.report import summary_table
 from gcs.status import StatusView
+from vehicle_emulator.cli import READY_PREFIX
 
 EXIT_SETUP = 2
+EXIT_INTERRUPTED = 130
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -38,29 +44,108 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="live status: rich table on a terminal, one plain line otherwise")
     p.add_argument("--emulators", action="store_true",
                    help="start `vehicle-emu --fleet --team FILE` for the flight and stop it after")
+    p.add_argument("--connect-timeout-s", type=float, default=None,
+                   help="wait this long for every vehicle to be heard (default: "
+                        "fly.connect_timeout_s, 60 s)")
     p.add_argument("--log-level", default="WARNING", help="Python logging level (stderr)")
 
 
-@contextlib.contextmanager
-def emulator_fleet(team_path: Path, enabled: bool) -> Iterator[None]:
-    """Run the bundled emulator fleet for the team while flying (SIGTERM and wait on exit)."""
-    if not enabled:
-        yield
-        return
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "vehicle_emulator.cli", "--fleet", "--team", str(team_path),
-         "--log-level", "WARNING"],
-        stdin=subprocess.DEVNULL,
-    )
-    try:
-        yield
-    finally:
-        proc.terminate()
+class EmulatorFleetError(RuntimeError):
+    """The emulator fleet that `--emulators` started did not become ready; one line."""
+
+
+class EmulatorFleet:
+    """`vehicle-emu --fleet --team FILE` run for one flight (`--emulators`).
+
+    The fleet reports ready on its stdout (`vehicle-emu: ready: ...`) once its physics is
+    compiled and its links are open; `wait_ready` waits for that line, not a fixed time, and
+    fails at once, with its exit status, if the process dies first. A fleet that exits on its
+    own later is reported on stderr as soon as it happens (the flight's link checks then see
+    its vehicles fall silent). Its stderr (the compile notice, warnings) passes through.
+    """
+
+    def __init__(self, team_path: Path, stream: TextIO | None = None) -> None:
+        self.team_path = team_path
+        self.stream = stream if stream is not None else sys.stderr
+        self.proc: subprocess.Popen[str] | None = None
+        self.ready_line = ""
+        self._ready = threading.Event()
+        self._stopping = False
+
+    def start(self) -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "vehicle_emulator.cli", "--fleet", "--team",
+             str(self.team_path), "--log-level", "WARNING"],
+            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, text=True, bufsize=1,
+        )
+        threading.Thread(target=self._read, name="emulator fleet stdout", daemon=True).start()
+        threading.Thread(target=self._watch, name="emulator fleet exit", daemon=True).start()
+
+    def _read(self) -> None:
+        assert self.proc is not None and self.proc.stdout is not None
+        for line in self.proc.stdout:
+            if line.startswith(READY_PREFIX) and not self._ready.is_set():
+                self.ready_line = line.strip()
+                self._ready.set()
+            else:
+                print(line.rstrip(), file=self.stream, flush=True)
+
+    def _watch(self) -> None:
+        assert self.proc is not None
+        code = self.proc.wait()
+        if self._ready.is_set() and not self._stopping:
+            print(f"gcs fly: the emulator fleet (pid {self.proc.pid}) exited with status {code} "
+                  "during the flight; its vehicles fall silent", file=self.stream, flush=True)
+
+    def wait_ready(self, timeout_s: float, poll_s: float = 0.1,
+                   report_every_s: float = 5.0) -> float:
+        """Block until the fleet reported ready; returns the seconds waited here."""
+        assert self.proc is not None
+        t0 = time.monotonic()
+        next_report = t0 + report_every_s
+        while not self._ready.wait(poll_s):
+            now = time.monotonic()
+            code = self.proc.poll()
+            if code is not None and not self._ready.is_set():
+                raise EmulatorFleetError(
+                    f"the emulator fleet (vehicle-emu --fleet --team {self.team_path}) exited "
+                    f"with status {code} before it was ready; its messages are above")
+            if now - t0 > timeout_s:
+                raise EmulatorFleetError(
+                    f"the emulator fleet (pid {self.proc.pid}) did not report ready within "
+                    f"{timeout_s:g} s")
+            if now >= next_report:
+                print(f"gcs fly: waiting for the emulator fleet to report ready "
+                      f"({now - t0:.0f} s)", file=self.stream, flush=True)
+                next_report = now + report_every_s
+        return time.monotonic() - t0
+
+    def stop(self) -> None:
+        """SIGTERM, then wait (kill after 10 s)."""
+        if self.proc is None:
+            return
+        self._stopping = True
+        if self.proc.poll() is None:
+            self.proc.terminate()
         try:
-            proc.wait(timeout=10)
+            self.proc.wait(timeout=10)
         except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=5)
+            self.proc.kill()
+            self.proc.wait(timeout=5)
+
+
+@contextlib.contextmanager
+def emulator_fleet(team_path: Path, enabled: bool) -> Iterator[EmulatorFleet | None]:
+    """Run the bundled emulator fleet for the team while flying (stopped on exit)."""
+    if not enabled:
+        yield None
+        return
+    fleet = EmulatorFleet(team_path)
+    fleet.start()
+    try:
+        yield fleet
+    finally:
+        fleet.stop()
 
 
 def run_fly(args: argparse.Namespace) -> int:
@@ -72,24 +157,36 @@ def run_fly(args: argparse.Namespace) -> int:
     options = FlyOptions(
         out_dir=out, mode=args.mode, law=args.controller, tick_rate_hz=args.tick_rate_hz,
         duration_s=args.duration_s, end_action=args.end_action, figures=not args.no_figures,
-        status=args.status,
+        status=args.status, connect_timeout_s=args.connect_timeout_s,
     )
 
     def status(flight: Flight) -> StatusView:
         return StatusView(flight, args.status)
 
     try:
-        with emulator_fleet(args.team, args.emulators):
-            result = asyncio.run(fly(team, options, status))
-    except FlightSetupError as exc:
+        setup = prepare(team, options)
+        with emulator_fleet(args.team, args.emulators) as fleet:
+            # the law compiles (first run only) while the fleet boots and compiles beside it
+            compile_law(force=False)
+            flight = Flight(setup, options, status)
+            if fleet is not None:
+                fleet.wait_ready(setup.plan.connect_timeout_s)
+                up = fleet.ready_line.removeprefix(READY_PREFIX).strip()
+                print(f"gcs fly: emulator fleet up: {up}", file=sys.stderr, flush=True)
+            result = asyncio.run(flight.run())
+    except (FlightSetupError, EmulatorFleetError) as exc:
         print(f"gcs fly: {exc}", file=sys.stderr)
         return EXIT_SETUP
+    except KeyboardInterrupt:  # before the links opened: nothing was commanded
+        print("gcs fly: interrupted before connecting (exit 130)", file=sys.stderr)
+        return EXIT_INTERRUPTED
     if result.log is not None:
         print(summary_table(result.log))
         tick = result.log.extra["tick"]
         print(f"  tick {tick['rate_hz']:g} Hz: {tick['ticks']} ticks, late {tick['late_pct']:.2f}%"
               f", lateness p99 {tick['lateness_p99_ms']:.2f} ms; records in {result.out_dir}/")
     code, reason = result.outcome.exit_code, result.outcome.reason
-    print(f"gcs fly: {'done' if code == 0 else 'ABORTED'}: {reason} (exit {code})",
-          file=sys.stderr if code else sys.stdout)
+    first, _, details = reason.partition("\n")  # details: one line per vehicle, if any
+    print(f"gcs fly: {'done' if code == 0 else 'ABORTED'}: {first.rstrip(':')} (exit {code})"
+          + (f"\n{details}" if details else ""), file=sys.stderr if code else sys.stdout)
     return code

@@ -85,6 +85,12 @@ def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
                       finite)
 
 
+def listen_label(p: VehicleProxy) -> str:
+    """'udp 127.0.0.1:14540': where the ground station listens for the vehicle."""
+    host, port = p.local_address
+    return f"udp {host}:{port}"
+
+
 def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample: TeamSample,
                      want_rates: bool) -> list[VehicleStatus]:
     """What the mission machine sees of each vehicle (see gcs.mission.safety.VehicleStatus)."""
@@ -114,6 +120,6 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
             velocity_enu_mps=tuple(sample.velocity_mps[i].tolist()),
             tilt_rad=tilt_rad(sample.rotation[i]), data_age_s=float(sample.age_s[i]),
             autopilot=autopilot, vehicle_type=vtype, sysid_mismatch=p.sysid_mismatch,
-            rates_hz=rates,
+            rates_hz=rates, listen=listen_label(p),
         ))
     return out

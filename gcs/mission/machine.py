@@ -100,6 +100,10 @@ class Outcome:
     reason: str
 
 
+#: While connecting, the status names at most this many of the vehicles not heard yet.
+CONNECT_SHOW_WAITING = 4
+
+
 @dataclass(frozen=True, slots=True)
 class MissionPlan:
     """What to fly and the rules, from the team file's `mission:` and `fly:` sections."""
@@ -112,11 +116,13 @@ class MissionPlan:
     end_action: str = "land"
     abort_action: str = "land"
     link_loss_action: str = "hold"
-    connect_timeout_s: float = 10.0
+    connect_timeout_s: float = 60.0  # emulators compiling, autopilots booting (PX4 SITL 10-25 s)
     settle_s: float = 1.0  # after CONFIGURE, before the rates are judged
     takeoff_timeout_s: float = 60.0
     takeoff_tolerance_m: float = 0.3
-    prime_s: float = 1.5  # setpoint stream before OFFBOARD (PX4 needs > 1 s at >= 2 Hz)
+    prime_s: float = 1.5  # setpoints stream before the offboard switch: good practice, not a
+    # PX4 requirement (PX4 only needs one setpoint younger than COM_OF_LOSS_T); it also proves
+    # the stream reaches every vehicle before any of them acts on it
     hold_timeout_s: float = 10.0  # HOLD phase: vehicles reach their hold mode within this
     land_timeout_s: float = 120.0
     disarm_after_landed_s: float = 3.0  # PX4 auto-disarms after COM_DISARM_LAND (2 s)
@@ -150,6 +156,7 @@ class _Vehicle:
     profile: AutopilotProfile | None = None  # fixed at preflight
     params: dict[str, float] | None = None  # READ_PARAMS result
     params_asked: bool = False
+    heard: bool = False  # a message has arrived since the flight started (CONNECT)
 
 
 @dataclass(slots=True)
@@ -327,17 +334,44 @@ class MissionMachine:
         return all(self._v[vid].pending is None for vid in (vids or self.vehicle_ids))
 
     def _connect(self) -> list[Command]:
+        """Wait, up to connect_timeout_s, until every vehicle has been heard; nothing is
+        commanded before that, so a vehicle that never answers ends the flight at once, with a
+        line per missing vehicle (where the ground station listened, which sysid it expected)."""
         team = self._statuses()
+        for s in team:
+            v = self._v[s.vehicle_id]
+            if s.link == "alive" and not v.heard:
+                v.heard = True
+                self._note(f"heard {s.name} on {s.listen or 'its link'} after "
+                           f"{self._elapsed():.1f} s")
         if len(team) == len(self._v) and all(s.link == "alive" for s in team):
             self._enter(Phase.PREFLIGHT)
             return [self._send(vid, Cmd.CONFIGURE) for vid in self.vehicle_ids]
         if self._elapsed() > self.plan.connect_timeout_s:
-            silent = [f"vehicle {vid}" for vid, v in self._v.items()
-                      if v.status is None or v.status.link != "alive"]
-            self._begin_stop([Problem(None, f"no link to {', '.join(silent)} within "
-                                            f"{self.plan.connect_timeout_s:g} s", "link")],
-                             EXIT_ABORTED)
+            missing = [vid for vid, v in self._v.items()
+                       if v.status is None or v.status.link != "alive"]
+            lines = [connect_failure_line(vid, self._v[vid].status, self._v[vid].heard)
+                     for vid in missing]
+            self._finish(Outcome(EXIT_ABORTED, (
+                f"no link to {len(missing)} of {len(self._v)} vehicles within "
+                f"{self.plan.connect_timeout_s:g} s (nothing was commanded):\n"
+                + "\n".join(f"  {line}" for line in lines))))
         return []
+
+    def connect_progress(self) -> str:
+        """While connecting: who has been heard and who not, and how long is left."""
+        heard = [vid for vid, v in self._v.items() if v.heard]
+        waiting = [connect_waiting_label(vid, v.status) for vid, v in self._v.items()
+                   if not v.heard]
+        text = (f"connecting {self._elapsed():.0f}/{self.plan.connect_timeout_s:g} s: heard "
+                f"{len(heard)}/{len(self._v)}")
+        if heard:
+            text += f" ({', '.join(str(vid) for vid in heard)})"
+        if waiting:
+            shown = waiting[:CONNECT_SHOW_WAITING]
+            more = len(waiting) - len(shown)
+            text += "; waiting for " + ", ".join(shown) + (f" and {more} more" if more else "")
+        return text
 
     def _preflight(self) -> list[Command]:
         if not self._idle() or self._elapsed() < self.plan.settle_s:
@@ -553,3 +587,26 @@ class MissionMachine:
         self.outcome = outcome
         self._note(f"done: exit {outcome.exit_code}: {outcome.reason}")
         self._enter(Phase.DONE)
+
+
+def connect_waiting_label(vehicle_id: int, status: VehicleStatus | None) -> str:
+    """'vehicle 2 (sysid 2) on udp 127.0.0.1:14541' (plus a foreign sysid heard there)."""
+    if status is None:
+        return f"vehicle {vehicle_id}"
+    text = f"{status.name} on {status.listen}" if status.listen else status.name
+    if status.sysid_mismatch is not None:
+        text += f" [heard sysid {status.sysid_mismatch} there instead]"
+    return text
+
+
+def connect_failure_line(vehicle_id: int, status: VehicleStatus | None, heard: bool) -> str:
+    """One line per vehicle never heard: where the ground station listened and what it got."""
+    if status is None:
+        return f"vehicle {vehicle_id}: no status"
+    where = f" on {status.listen}" if status.listen else ""
+    if status.sysid_mismatch is not None:
+        return (f"{status.name}: only sysid {status.sysid_mismatch} was heard{where}; "
+                f"check the team file's sysid and link for this vehicle")
+    if heard:
+        return f"{status.name}: heard{where}, then silent"
+    return f"{status.name}: nothing heard{where}; is it running, and does it send there?"

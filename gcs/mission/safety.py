@@ -41,7 +41,8 @@ class VehicleStatus:
 
     link: 'waiting' | 'alive' | 'lost'; mode: e.g. 'OFFBOARD', 'AUTO_LOITER', 'GUIDED_NOGPS';
     landed: True on the ground, False in the air, None unknown; data_age_s: age of the older of
-    its position and attitude samples; rates_hz: measured receive rate per message type.
+    its position and attitude samples; rates_hz: measured receive rate per message type;
+    listen: where the ground station listens for it (e.g. 'udp 127.0.0.1:14540'), for messages.
     """
 
     vehicle_id: int
@@ -58,6 +59,7 @@ class VehicleStatus:
     vehicle_type: int = 0
     sysid_mismatch: int | None = None
     rates_hz: Mapping[str, float] = field(default_factory=dict)
+    listen: str = ""
 
     @property
     def name(self) -> str:

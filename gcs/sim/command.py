@@ -10,6 +10,7 @@ from pathlib import Path
 from gcs.config import TeamConfig, load_team
 from gcs.flightlog import FlightLog, load_timeseries, save_timeseries
 from gcs.plots import write_comparison_figures, write_figures
+from gcs.precompile import compile_sim
 from gcs.report import build_report, summary_table, write_report
 from gcs.sim.runner import SimOptions, SimResult, SimulationError, simulate
 
@@ -75,6 +76,7 @@ def run_sim(args: argparse.Namespace) -> int:
             "link or the emulator; the in-process simulation does not apply it",
             file=sys.stderr,
         )
+    compile_sim(force=False)  # announced on a cold cache, then loaded like any run
     logs: dict[str, FlightLog] = {}
     for law in laws:
         options = SimOptions(

@@ -215,12 +215,36 @@ def test_geofence_breach_aborts_naming_vehicle_axis_and_limit():
     assert "vehicle 1 (sysid 1): geofence breach: z = 55.00 m outside [1, 50] m" in m.outcome.reason
 
 
-def test_no_link_at_start_fails_after_the_connect_timeout():
+def test_no_link_at_start_fails_after_the_connect_timeout_commanding_nobody():
     m = machine(connect_timeout_s=2.0)
     w = World(m)
     w.silent.add(3)
+    w.run(1.0)
+    # while waiting, the progress names who was heard and who not
+    assert m.phase is Phase.CONNECT
+    assert m.connect_progress().startswith("connecting 1/2 s: heard 2/3 (1, 2); waiting for "
+                                           "vehicle 3 (sysid 3)")
     w.run(5.0)
-    assert m.done and "no link to vehicle 3 within 2 s" in m.outcome.reason
+    assert m.done and m.outcome.exit_code == EXIT_ABORTED
+    assert m.outcome.reason.splitlines() == [
+        "no link to 1 of 3 vehicles within 2 s (nothing was commanded):",
+        "  vehicle 3 (sysid 3): nothing heard; is it running, and does it send there?",
+    ]
+    assert w.sent == []  # the vehicles that answered were not landed, held or touched
+
+
+def test_connect_waits_as_long_as_the_timeout_for_a_slow_starter():
+    # GIVEN vehicle 2 silent for 50 s (an autopilot booting, an emulator compiling)
+    m = machine(connect_timeout_s=60.0)
+    w = World(m)
+    w.silent.add(2)
+    w.run(50.0)
+    assert m.phase is Phase.CONNECT and not m.done
+    # WHEN it answers THEN the flight goes on
+    w.silent.discard(2)
+    w.run(2.0)
+    assert m.phase is not Phase.CONNECT and not m.done
+    assert any(n.startswith("heard vehicle 2 (sysid 2) on its link after 5") for n in m.notes)
 
 
 @settings(max_examples=60, deadline=None)
@@ -229,7 +253,8 @@ def test_no_link_at_start_fails_after_the_connect_timeout():
                           st.sampled_from(IDS)), max_size=4))
 def test_never_offboard_without_setpoints_under_random_failures(events):
     # GIVEN random failures at random ticks THEN World.tick's invariant holds and the mission ends
-    m = machine(duration_s=8.0)
+    # (a vehicle silent from the start ends it at the connect timeout, within the 60 s run)
+    m = machine(duration_s=8.0, connect_timeout_s=10.0)
     w = World(m)
     at = {}
     for k, what, vid in events:

@@ -41,3 +41,16 @@ def test_rich_table_shows_every_vehicle_and_the_note():
     assert "OFFBOARD" in text and "AUTO_LOITER" in text and "lost" in text
     assert "0.851" in text and "12.35" in text
     assert "link lost" in text
+
+
+def test_while_connecting_the_status_shows_who_was_heard_instead_of_the_table_fields():
+    # GIVEN the CONNECT phase with the machine's progress text
+    text = ("connecting 12/60 s: heard 1/2 (1); waiting for vehicle 2 (sysid 2) on "
+            "udp 127.0.0.1:14541")
+    snap = StatusSnapshot(phase="connect", t_s=None, duration_s=60.0, formation_error_m=math.nan,
+                          late_pct=0.0, vehicles=_snapshot().vehicles, note="", connecting=text)
+    # THEN the plain line is that progress, and the table's caption carries it whole
+    assert plain_line(snap) == f"[connect] {text}"
+    console = Console(file=io.StringIO(), record=True, width=200)
+    console.print(render_table(snap))
+    assert "waiting for vehicle 2 (sysid 2) on udp 127.0.0.1:14541" in console.export_text()

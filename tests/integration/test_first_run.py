@@ -1,0 +1,159 @@
+"""A new user's first run: empty compile cache, vehicles that start late or never, `--emulators`.
+
+Real processes over 127.0.0.1 UDP: `vehicle-emu` and `gcs` as a user starts them. The compile
+cache is emptied by pointing NUMBA_CACHE_DIR at a new folder, exactly what a fresh machine has.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from pymavlink import mavutil
+from test_fly_emulator import Gcs, emulators, team_file
+
+from vehicle_emulator.testing import free_udp_port_block
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
+
+
+@pytest.fixture
+def empty_cache(tmp_path, monkeypatch) -> Path:
+    """A new, empty numba cache for every process this test starts."""
+    cache = tmp_path / "numba-cache"
+    cache.mkdir()
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
+    return cache
+
+
+def test_manual_path_on_an_empty_cache_fleet_and_gcs_started_together(tmp_path, empty_cache):
+    # GIVEN nothing compiled, WHEN `vehicle-emu --fleet` and `gcs fly` start at the same moment
+    base = free_udp_port_block(4)
+    team = team_file(tmp_path, base, duration_s=3.0)
+    with emulators(team, base, tmp_path) as procs:
+        gcs = Gcs(team, tmp_path / "run", "--mode", "rates", "--end-action", "hold")
+        code, out = gcs.finish(240)
+        assert procs[0].poll() is None, "the fleet died"
+    err = gcs.log_path.read_text()
+    emu = (tmp_path / "emu0.log").read_text()
+    # THEN both say they compile (first run only), and the flight waits for it and succeeds
+    assert code == 0, err[-3000:]
+    assert "gcs fly: done: formation complete (exit 0)" in out
+    assert "gcs: compiling the control law (first run" in err
+    assert "vehicle-emu: compiling the emulator physics (first run" in emu
+    assert "vehicle-emu: compiled the emulator physics in" in emu
+    # and the compiled code is cached: the next start compiles nothing and says nothing
+    again = subprocess.run([sys.executable, "-m", "vehicle_emulator.cli", "--compile-only"],
+                           capture_output=True, text=True, timeout=120)
+    assert again.returncode == 0 and "compiling" not in again.stderr
+
+
+def test_gcs_compile_leaves_every_program_ready(tmp_path, empty_cache):
+    # GIVEN `gcs compile` (what `make install` runs) on an empty cache
+    first = subprocess.run([sys.executable, "-m", "gcs.cli", "compile"], capture_output=True,
+                           text=True, timeout=240)
+    assert first.returncode == 0, first.stderr
+    for part in ("the control law", "the simulator", "the emulator physics"):
+        assert f"compiling {part}" in first.stderr and f"compiled {part} in" in first.stderr
+    assert len(list(empty_cache.rglob("*.nbi"))) > 20
+    # WHEN the programs run after it THEN none of them compiles again
+    sim = subprocess.run(
+        [sys.executable, "-m", "gcs.cli", "sim", "--team", str(Path("configs/square4.yaml")),
+         "--duration-s", "1", "--no-figures", "--quiet", "--out", str(tmp_path / "sim")],
+        capture_output=True, text=True, timeout=120, cwd=Path(__file__).resolve().parents[2])
+    assert sim.returncode == 0, sim.stderr
+    assert "compiling" not in sim.stderr
+    emu = subprocess.run([sys.executable, "-m", "vehicle_emulator.cli", "--compile-only"],
+                         capture_output=True, text=True, timeout=120)
+    assert emu.returncode == 0 and "compiling" not in emu.stderr
+
+
+def test_connect_names_who_was_heard_and_fails_with_a_line_per_missing_vehicle(tmp_path):
+    # GIVEN vehicles 1 and 3 running, nothing at vehicle 2's port, and a stranger (sysid 9)
+    # sending HEARTBEATs where vehicle 4 is expected
+    base = free_udp_port_block(4)
+    team = team_file(tmp_path, base, duration_s=3.0)
+    import yaml
+
+    ports = [v["link"]["local_port"] for v in yaml.safe_load(team.read_text())["vehicles"]]
+    stranger = mavutil.mavlink_connection(f"udpout:127.0.0.1:{ports[3]}", source_system=9,
+                                          source_component=1)
+    with emulators(team, base, tmp_path, separate=True, n=3) as procs:
+        procs[1].terminate()  # vehicle 2 is not running
+        procs[1].wait(timeout=10)
+        gcs = Gcs(team, tmp_path / "run", "--mode", "rates", "--connect-timeout-s", "8")
+        end = time.monotonic() + 60
+        while gcs.proc.poll() is None and time.monotonic() < end:
+            stranger.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_QUADROTOR,
+                                        mavutil.mavlink.MAV_AUTOPILOT_PX4, 0, 0, 0)
+            time.sleep(0.2)  # a 5 Hz heartbeat source, as a vehicle would send
+        code, _ = gcs.finish(30)
+    err = gcs.log_path.read_text()
+    # THEN while connecting, the status says who was heard and where it waits for the others
+    assert "heard 2/4 (1, 3); waiting for vehicle 2 (sysid 2) on udp 127.0.0.1:" in err
+    assert f"vehicle 4 (sysid 4) on udp 127.0.0.1:{ports[3]} [heard sysid 9 there instead]" in err
+    # AND it fails after the timeout with one line per missing vehicle, having commanded nobody
+    assert code == 1
+    assert ("gcs fly: ABORTED: no link to 2 of 4 vehicles within 8 s (nothing was commanded) "
+            "(exit 1)") in err
+    assert (f"  vehicle 2 (sysid 2): nothing heard on udp 127.0.0.1:{ports[1]}; is it running, "
+            "and does it send there?") in err
+    assert (f"  vehicle 4 (sysid 4): only sysid 9 was heard on udp 127.0.0.1:{ports[3]}; check "
+            "the team file's sysid and link for this vehicle") in err
+    tlog = mavutil.mavlink_connection(str(tmp_path / "run" / "flight.tlog"))
+    commands = []
+    while (msg := tlog.recv_match(type=["COMMAND_LONG", "SET_ATTITUDE_TARGET"])) is not None:
+        commands.append(msg.get_type())
+    assert commands == []
+
+
+def _gcs_fly_emulators(team: Path, out: Path, *args: str) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "gcs.cli", "fly", "--team", str(team), "--out", str(out),
+         "--no-figures", "--status", "plain", "--mode", "rates", "--emulators", *args],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"})
+
+
+def test_emulators_flag_reports_a_fleet_that_dies_before_it_is_ready(tmp_path):
+    # GIVEN vehicle 1's emulator port is taken, so the fleet cannot start
+    base = free_udp_port_block(4)
+    team = team_file(tmp_path, base, duration_s=3.0)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as squatter:
+        squatter.bind(("127.0.0.1", base))
+        proc = _gcs_fly_emulators(team, tmp_path / "run")
+        out, _ = proc.communicate(timeout=120)
+    # THEN gcs fly says the fleet died, with its status and its own message, and exits 2
+    assert proc.returncode == 2, out
+    assert "Address already in use" in out
+    assert (f"gcs fly: the emulator fleet (vehicle-emu --fleet --team {team}) exited with "
+            "status 3 before it was ready") in out
+
+
+def test_emulators_flag_reports_a_fleet_that_dies_during_the_flight(tmp_path):
+    base = free_udp_port_block(4)
+    team = team_file(tmp_path, base, duration_s=30.0)
+    proc = _gcs_fly_emulators(team, tmp_path / "run")
+    lines: list[str] = []
+    assert proc.stdout is not None
+    for line in proc.stdout:
+        lines.append(line)
+        if line.startswith("[formation]"):
+            break
+    # WHEN the fleet process is killed mid-formation
+    children = subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True, text=True)
+    pids = [int(p) for p in children.stdout.split()]
+    assert len(pids) == 1, children
+    os.kill(pids[0], signal.SIGKILL)
+    out, _ = proc.communicate(timeout=120)
+    text = "".join(lines) + out
+    # THEN gcs fly reports it at once and the flight ends aborted on the lost links
+    assert f"the emulator fleet (pid {pids[0]}) exited with status -9 during the flight" in text
+    assert proc.returncode == 1, text[-3000:]
+    assert "gcs fly: ABORTED:" in text and "link" in text
