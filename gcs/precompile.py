@@ -1,7 +1,8 @@
 """`gcs compile`: fill numba's on-disk cache before any flight (run by `make install`).
 
 The law, the in-process simulator and the emulator physics are numba-compiled. A cold cache
-costs about 6 s (law), 15 s (simulator) and 10 s (emulator physics) on a 2-core machine
+costs about 6 s (law), 17 s (simulator alone; 6 s after the law) and 10 s (emulator physics) on a
+2-core machine
 (docs/benchmarks.md). Compiling them here, once per source state, means neither `gcs fly` nor
 `vehicle-emu` nor `gcs sim` has to do it while a user, a link timeout or a vehicle waits. Each
 part is compiled through exactly the code path the programs run (a `Flight` of a small built-in
@@ -23,7 +24,7 @@ from vehicle_emulator.jitcache import compiling, is_compiled
 
 #: First-run compile times on this 2-core machine (docs/benchmarks.md), for the notice.
 LAW_COMPILE_S = 6.0
-SIM_COMPILE_S = 15.0
+SIM_COMPILE_S = 17.0  # alone; about 6 s when the law's kernels are cached
 
 # Two vehicles are enough: numba specialises on array types, not sizes. Both laws and both
 # derivative methods are compiled (placeholders filled in by `_team`).
