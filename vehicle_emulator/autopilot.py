@@ -4,15 +4,23 @@ No clock, no I/O: every call takes ``now_s`` (the emulator's simulated time) and
 ``Observation``; the result is a MAV_RESULT, the current ``demand`` (what the inner loops fly,
 see plant.ControlMode) and queued ``events`` (STATUSTEXT lines) that the runner drains.
 
-PX4 rules reproduced (spec/mavlink.md): custom_mode = main << 16 | sub << 24; offboard is
-available while the newest setpoint is younger than COM_OF_LOSS_T (PX4's offboardCheck.cpp:
-``now < last_setpoint + COM_OF_LOSS_T``), so a single setpoint just before DO_SET_MODE is enough
-(MAVSDK's ``set_attitude_rate`` then ``start``); without one, OFFBOARD is TEMPORARILY_REJECTED with
-"Switching to Offboard is currently not available", and arming in OFFBOARD is denied. There is no
+PX4 rules reproduced (spec/mavlink.md; recorded on PX4 v1.16.0 SITL): custom_mode = main << 16 |
+sub << 24; offboard is available while the newest setpoint is younger than COM_OF_LOSS_T (PX4's
+offboardCheck.cpp: ``now < last_setpoint + COM_OF_LOSS_T``), so a single setpoint just before
+DO_SET_MODE is enough (MAVSDK's ``set_attitude_rate`` then ``start``). Armed, OFFBOARD without one
+is TEMPORARILY_REJECTED with "Switching to Offboard is currently not available"; disarmed, every
+mode the emulator flies is accepted, OFFBOARD too, and arming in OFFBOARD without one is then
+TEMPORARILY_REJECTED with "Arming denied: Resolve system health failures first". There is no
 minimum stream duration or rate (PX4's docs ask for one; its code does not). Setpoint silence
-> COM_OF_LOSS_T leaves OFFBOARD and runs COM_OBL_RC_ACT; disarm in the air is refused unless
-forced (21196); auto-disarm COM_DISARM_LAND after landing and COM_DISARM_PRFLT after arming
-without takeoff.
+> COM_OF_LOSS_T while armed leaves OFFBOARD ("Failsafe activated") and runs COM_OBL_RC_ACT; disarm
+in the air is refused unless forced (21196); auto-disarm COM_DISARM_LAND after landing and
+COM_DISARM_PRFLT after arming without takeoff.
+
+Intended mode (PX4's ``user_intended_mode``): the mode last selected by a command (DO_SET_MODE,
+SET_MODE, NAV_TAKEOFF, NAV_LAND; and Hold after a takeoff, which PX4's navigator selects itself).
+Failsafes change the mode, not the intended mode. After "Disarmed by landing" a vehicle whose
+intended mode is OFFBOARD goes back to OFFBOARD (PX4 v1.16.0 did so after an offboard-loss
+failsafe had landed it), where arming is then refused until a fresh setpoint arrives.
 """
 
 from __future__ import annotations
@@ -40,7 +48,10 @@ __all__ = [
     "nav_state_of",
 ]
 
-OFFBOARD_UNAVAILABLE_TEXT = "Switching to Offboard is currently not available"  # PX4's wording
+# PX4's wording (recorded, v1.16.0)
+OFFBOARD_UNAVAILABLE_TEXT = "Switching to Offboard is currently not available"
+ARMING_HEALTH_TEXT = "Arming denied: Resolve system health failures first"
+FAILSAFE_TEXT = "Failsafe activated"
 FORCE_MAGIC = 21196
 TAKEOFF_DONE_M = 0.15
 
@@ -172,6 +183,7 @@ class Autopilot:
     params: ParamStore
     armed: bool = False
     nav_state: NavState = NavState.AUTO_LOITER
+    intended_state: NavState = NavState.AUTO_LOITER  # last mode a command selected (see module)
     demand: Demand = field(default_factory=MotorsOff)
     demand_version: int = 0
     events: list[tuple[Severity, str]] = field(default_factory=list)
@@ -215,7 +227,7 @@ class Autopilot:
 
     def offboard_available(self, now_s: float) -> bool:
         """True while the newest setpoint is younger than COM_OF_LOSS_T (PX4's offboardCheck):
-        OFFBOARD may then be entered, or armed in."""
+        OFFBOARD may then be entered while armed, or armed in."""
         return now_s - self._last_setpoint_s < self.params["COM_OF_LOSS_T"]
 
     # --- inputs -------------------------------------------------------------------------------
@@ -236,7 +248,8 @@ class Autopilot:
                 if obs.battery_remaining < 0.1:
                     return self._deny("Arming denied: battery low")
                 if self.nav_state is NavState.OFFBOARD and not self.offboard_available(now_s):
-                    return self._deny("Arming denied: no offboard setpoints")
+                    self._event(Severity.CRITICAL, ARMING_HEALTH_TEXT)
+                    return MavResult.TEMPORARILY_REJECTED
                 if not obs.on_ground:
                     return self._deny("Arming denied: not landed")
             self.armed = True
@@ -257,18 +270,20 @@ class Autopilot:
         return MavResult.ACCEPTED
 
     def set_mode(self, now_s: float, obs: Observation, main_mode: int, sub_mode: int) -> MavResult:
-        """DO_SET_MODE / SET_MODE with PX4 custom main and sub modes."""
+        """DO_SET_MODE / SET_MODE with PX4 custom main and sub modes; an accepted mode is also the
+        intended mode. OFFBOARD needs a recent setpoint only when armed (PX4 v1.16.0)."""
         target = nav_state_of(main_mode, sub_mode)
         if target is None:
             return self._deny(f"Mode change denied: main {main_mode} sub {sub_mode} not available")
         if target is NavState.OFFBOARD:
-            if not self.offboard_available(now_s):
+            if self.armed and not self.offboard_available(now_s):
                 self._event(Severity.CRITICAL, OFFBOARD_UNAVAILABLE_TEXT)
                 return MavResult.TEMPORARILY_REJECTED
             if self.first_offboard_s is None:
                 self.first_offboard_s = now_s
         if target is NavState.AUTO_TAKEOFF:
             self._takeoff_alt_m = self.params["MIS_TAKEOFF_ALT"]
+        self.intended_state = target
         self._enter(target, obs)
         return MavResult.ACCEPTED
 
@@ -278,30 +293,37 @@ class Autopilot:
         if not math.isfinite(alt) or alt < 0.5:
             alt = self.params["MIS_TAKEOFF_ALT"]
         self._takeoff_alt_m = alt
-        self.nav_state = NavState.AUTO_TAKEOFF
+        self.nav_state = self.intended_state = NavState.AUTO_TAKEOFF
         self._event(Severity.INFO, f"Takeoff to {alt:.1f} m")
         if self.armed:
             self._begin_takeoff(obs, alt)
         return MavResult.ACCEPTED
 
     def land(self, now_s: float, obs: Observation) -> MavResult:
-        """MAV_CMD_NAV_LAND: descend at MPC_LAND_SPEED, then disarm."""
+        """MAV_CMD_NAV_LAND: descend at MPC_LAND_SPEED, then disarm. A user mode selection in PX4:
+        Land becomes the intended mode (so the vehicle stays in Land after the disarm)."""
+        self.intended_state = NavState.AUTO_LAND
         self._enter(NavState.AUTO_LAND, obs)
         return MavResult.ACCEPTED
 
     def tick(self, now_s: float, obs: Observation) -> None:
-        """Failsafes and mode progress: offboard loss, takeoff done, landing, auto-disarm."""
+        """Failsafes and mode progress: offboard loss (armed only: PX4 v1.16.0 stayed in OFFBOARD
+        disarmed with no setpoint), takeoff done, landing, auto-disarm."""
+        if not self.armed:
+            return
         if self.nav_state is NavState.OFFBOARD:
             loss_s = self.params["COM_OF_LOSS_T"]
             if now_s - self._last_setpoint_s > loss_s:
                 self._offboard_lost(obs)
-        if not self.armed:
-            return
+                if not self.armed:  # COM_OBL_RC_ACT 7
+                    return
         if not obs.on_ground:
             self._taken_off = True
             self._landed_since_s = None
         elif self._landed_since_s is None:
             self._landed_since_s = now_s
+            if self._taken_off:
+                self._event(Severity.INFO, "Landing detected")
         if self.nav_state is NavState.AUTO_TAKEOFF and self._takeoff_climbing:
             self._takeoff_progress(obs)
         if obs.on_ground and self.nav_state is not NavState.OFFBOARD:
@@ -313,7 +335,8 @@ class Autopilot:
             if self._taken_off:
                 limit = self.params["COM_DISARM_LAND"]
                 if limit >= 0.0 and on_ground_s > limit:
-                    self._disarm("Landing detected, disarmed")
+                    self._disarm("Disarmed by landing")
+                    self._resume_intended(obs)
             else:
                 limit = self.params["COM_DISARM_PRFLT"]
                 if limit >= 0.0 and now_s - self._armed_s > limit:
@@ -338,6 +361,12 @@ class Autopilot:
         self._landed_since_s = None
         self._event(Severity.INFO, text)
         self._set_demand(MotorsOff())
+
+    def _resume_intended(self, obs: Observation) -> None:
+        """After "Disarmed by landing": back to the intended mode if that is OFFBOARD and a
+        failsafe had left it (PX4 v1.16.0: HEARTBEAT OFFBOARD, base_mode 1, after the landing)."""
+        if self.intended_state is NavState.OFFBOARD and self.nav_state is not NavState.OFFBOARD:
+            self._enter(NavState.OFFBOARD, obs)
 
     def _hold_demand(self, obs: Observation) -> Demand:
         if not self.armed:
@@ -399,22 +428,24 @@ class Autopilot:
         elif z >= alt - TAKEOFF_DONE_M:
             self._takeoff_climbing = False
             self._event(Severity.INFO, "Takeoff complete, holding")
-            self.nav_state = NavState.AUTO_LOITER
+            # PX4's navigator selects Hold itself: the intended mode follows (CURRENT_MODE, v1.16.0)
+            self.nav_state = self.intended_state = NavState.AUTO_LOITER
 
     def _offboard_lost(self, obs: Observation) -> None:
+        """COM_OBL_RC_ACT; PX4's STATUSTEXT, then the emulator's "Mode: ..." line names the
+        action. The intended mode stays OFFBOARD."""
         action = self.params.get_int("COM_OBL_RC_ACT")
+        self._event(Severity.CRITICAL, FAILSAFE_TEXT)
         if action in (3, 4):
-            target, name = NavState.AUTO_LAND, "land"
-        elif action == 7 and self.armed:
-            self._event(Severity.CRITICAL, "Failsafe: offboard setpoints lost, disarming")
+            target = NavState.AUTO_LAND
+        elif action == 7:
             self.nav_state = NavState.AUTO_LOITER
             self._disarm("Disarmed by failsafe")
             return
         elif action == 0:
-            target, name = NavState.POSCTL, "position hold"
+            target = NavState.POSCTL
         elif action == 1:
-            target, name = NavState.ALTCTL, "altitude hold"
+            target = NavState.ALTCTL
         else:
-            target, name = NavState.AUTO_LOITER, "hold"
-        self._event(Severity.CRITICAL, f"Failsafe: offboard setpoints lost, {name}")
+            target = NavState.AUTO_LOITER
         self._enter(target, obs)

@@ -95,6 +95,10 @@ PARAMS: tuple[ParamDef, ...] = (
     ParamDef(
         "EMU_THR_MAX_N", _F, 1.0, 0.0, 1e5, "max collective thrust 4 f_max [N]", read_only=True
     ),
+    ParamDef(
+        "EMU_ACK_TWICE", _I, 1, 0, 1,
+        "DO_SET_MODE command ACKs: 1 ACCEPTED at once, then the result (PX4 v1.16.0); 0 result",
+    ),
 )
 
 _BY_NAME = {p.name: p for p in PARAMS}

@@ -159,6 +159,7 @@ class Emulator:
         self.links: list[UdpLink] = []
         self._setpoint_event: asyncio.Event | None = None
         self._fault_nodes = [node for node in self.nodes if not node.faults.idle]
+        self._ack_nodes: list[VehicleNode] = []  # nodes with a second COMMAND_ACK queued
 
     def warm_up(self) -> None:
         """Load/compile the JIT kernels on a throwaway copy, so the first real tick is not
@@ -178,6 +179,8 @@ class Emulator:
     def advance_to(self, t_s: float) -> int:
         """Run physics up to ``t_s`` (whole steps), then autopilots, faults and telemetry.
         Returns the number of physics steps taken."""
+        if self._ack_nodes:
+            self.send_deferred_acks()
         steps = int(math.floor(t_s / self.plant.dt_s + 1e-9)) - self.plant.steps_done
         if steps <= 0:
             return 0
@@ -200,11 +203,20 @@ class Emulator:
             self.nodes[i].send_all(data)
         return steps
 
+    def send_deferred_acks(self) -> None:
+        """Second COMMAND_ACKs queued by the commands handled since the last tick (DO_SET_MODE
+        with EMU_ACK_TWICE = 1): the next tick, a tick period after the first ACK at most."""
+        nodes, self._ack_nodes = self._ack_nodes, []
+        for node in nodes:
+            node.send_deferred_acks(self.now_s)
+
     def on_messages(self, node: VehicleNode, link: Any, msgs: list[Any], addr: Any) -> None:
         """Decoded messages from one link of one vehicle."""
         now = self.now_s
         for msg in msgs:
             node.handle(now, msg, link, addr)
+        if node.deferred_acks and node not in self._ack_nodes:
+            self._ack_nodes.append(node)
         if self._setpoint_event is not None:
             self._setpoint_event.set()
         node.decode_rejected = sum(
@@ -289,6 +301,8 @@ class Emulator:
             if driving:
                 deadline = clock.now_s() + LOCKSTEP_TIMEOUT_S
                 while not all(n.setpoints_taken > seen[n.index] for n in driving):
+                    if self._ack_nodes:  # simulated time waits; the second ACK does not
+                        self.send_deferred_acks()
                     self._setpoint_event.clear()
                     left = deadline - clock.now_s()
                     if left <= 0 or stop.is_set():

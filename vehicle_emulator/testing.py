@@ -174,6 +174,26 @@ class MavClient:
             if cond is None or cond(m):
                 return m
 
+    def wait_text(
+        self, timeout_s: float = 5.0, cond: Callable[[str], bool] | None = None
+    ) -> tuple[int, str]:
+        """(severity, text) of the first STATUSTEXT from the target whose text satisfies
+        ``cond``; chunks with the same id != 0 are joined first (MAVLink 2: a chunk of 50 bytes
+        is continued, a shorter one ends the text). TimeoutError."""
+        deadline = time.monotonic() + timeout_s
+        parts: dict[int, list[str]] = {}
+        while True:
+            m = self.wait("STATUSTEXT", deadline - time.monotonic())
+            if m.id == 0:
+                text = m.text
+            else:
+                parts.setdefault(m.id, []).append(m.text)
+                if len(m.text.encode()) == 50:
+                    continue
+                text = "".join(parts.pop(m.id))
+            if cond is None or cond(text):
+                return int(m.severity), text
+
     def collect(self, duration_s: float, mtype: str | Sequence[str] | None = None) -> list[Any]:
         """Every message (of ``mtype``) from the target for ``duration_s``."""
         types = None if mtype is None else ({mtype} if isinstance(mtype, str) else set(mtype))
@@ -193,6 +213,28 @@ class MavClient:
         self.send(mavlink.MAVLink_command_long_message(self.target_system, 1, command, 0, *p))
         ack = self.wait("COMMAND_ACK", timeout_s, lambda m: m.command == command)
         return int(ack.result)
+
+    def command_acks(
+        self, command: int, *params: float, count: int, timeout_s: float = 5.0
+    ) -> list[int]:
+        """COMMAND_LONG; the MAV_RESULTs of its first ``count`` COMMAND_ACKs in arrival order
+        (PX4 v1.16.0 answers DO_SET_MODE twice: ACCEPTED, then the result). TimeoutError if
+        fewer arrive within ``timeout_s``; returns as soon as ``count`` have arrived."""
+        p = list(params) + [0.0] * (7 - len(params))
+        self.send(mavlink.MAVLink_command_long_message(self.target_system, 1, command, 0, *p))
+        deadline = time.monotonic() + timeout_s
+        results: list[int] = []
+        while len(results) < count:
+            left = deadline - time.monotonic()
+            try:
+                ack = self.wait("COMMAND_ACK", left, lambda m: m.command == command)
+            except TimeoutError:
+                raise TimeoutError(
+                    f"command {command}: {len(results)} of {count} COMMAND_ACKs {results} "
+                    f"within {timeout_s} s"
+                ) from None
+            results.append(int(ack.result))
+        return results
 
     def set_param(self, name: str, value: float, ptype: int = 9, timeout_s: float = 5.0) -> Any:
         """PARAM_SET; returns the PARAM_VALUE echoed for ``name``."""

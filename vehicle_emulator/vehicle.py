@@ -4,6 +4,10 @@
 link impairment) to the fleet arrays (plant, telemetry status) and to its links. Handlers get
 decoded pymavlink messages and answer through ``Link.send`` (bytes out); they never block, never
 raise on bad input (it is counted, logged and reported by STATUSTEXT), and never see sockets.
+
+With EMU_ACK_TWICE = 1 (default) a DO_SET_MODE COMMAND_LONG/INT is answered as PX4 v1.16.0 does:
+COMMAND_ACK ACCEPTED at once (its MAVLink receiver), then the real result (its commander) queued
+in ``deferred_acks``, which the runner sends on its next tick with the command's STATUSTEXTs.
 """
 
 from __future__ import annotations
@@ -46,12 +50,15 @@ from vehicle_emulator.telemetry import (
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Link", "VehicleNode", "InputCounters"]
+__all__ = ["DeferredAck", "Link", "VehicleNode", "InputCounters"]
 
 COMPID = 1
+CMD_DO_SET_MODE = 176
+HEARTBEAT_MSGID = 0  # PX4: its interval cannot be changed (SET_MESSAGE_INTERVAL -> FAILED)
 REPORT_PERIOD_S = 5.0
 LIMITED_TEXT_PERIOD_S = 1.0
 LIMITED_TEXT_BURST = 5
+STATUSTEXT_MAX_BYTES = 200  # 4 chunks
 PX4_VERSION = (1 << 24) | (14 << 16) | (0 << 8) | 255  # reported as PX4 v1.14.0 release
 # COMMAND_INT | PARAM_ENCODE_BYTEWISE | SET_ATTITUDE_TARGET | SET_ACTUATOR_TARGET | MAVLINK2
 CAPABILITIES = 0x8 | 0x10 | 0x40 | 0x400 | 0x2000
@@ -59,8 +66,8 @@ CAPABILITIES = 0x8 | 0x10 | 0x40 | 0x400 | 0x2000
 # PX4 base_mode flags per nav state (besides CUSTOM_MODE_ENABLED and SAFETY_ARMED).
 _BASE_FLAGS = {
     NavState.ALTCTL: 64 | 16,  # MANUAL_INPUT | STABILIZE
-    NavState.POSCTL: 64 | 16 | 8,  # + GUIDED
-    NavState.OFFBOARD: 4 | 16 | 8,  # AUTO | STABILIZE | GUIDED
+    NavState.POSCTL: 64 | 16,  # PX4 v1.16.0 recorded base_mode 209 armed
+    NavState.OFFBOARD: 0,  # PX4 v1.16.0 recorded base_mode 1 disarmed, 129 armed
 }
 
 
@@ -71,6 +78,18 @@ class Link(Protocol):
 
     def send(self, data: bytes, addr: Any = None) -> None:
         """Queue bytes to ``addr`` (None: the link's current remote). Never blocks."""
+
+
+@dataclass(frozen=True, slots=True)
+class DeferredAck:
+    """A COMMAND_ACK to send on the next tick: PX4's commander answering after its receiver."""
+
+    command: int
+    result: MavResult
+    link: Link
+    addr: Any
+    target_system: int
+    target_component: int
 
 
 @dataclass(slots=True)
@@ -116,8 +135,10 @@ class VehicleNode:
     decode_rejected: int = 0
     setpoints_taken: int = 0
     applied_version: int = -1
+    deferred_acks: list[DeferredAck] = field(default_factory=list)
     _next_report_s: float = REPORT_PERIOD_S
     _fault_clock_announced: bool = False
+    _text_id: int = 0  # id of the last chunked STATUSTEXT
     _limited_window_end_s: float = 0.0
     _limited_in_window: int = 0
     _limited_last: dict[str, float] = field(default_factory=dict)
@@ -195,9 +216,21 @@ class VehicleNode:
             link.send(data, addr)
 
     def statustext(self, severity: Severity, text: str) -> None:
-        """STATUSTEXT (50 characters max) to all links, and the log."""
+        """STATUSTEXT to all links, and the log. Up to 50 bytes: one message (id 0); longer
+        (up to STATUSTEXT_MAX_BYTES): MAVLink 2 chunks of 50 bytes with one id != 0 and chunk_seq
+        0, 1, ..., as PX4 sends "Arming denied: Resolve system health failures first"."""
         log.info("vehicle %d (sysid %d): %s", self.spec.vehicle_id, self.sysid, text)
-        self.send_msg(mavlink.MAVLink_statustext_message(int(severity), text.encode()[:50], 0, 0))
+        data = text.encode()[:STATUSTEXT_MAX_BYTES]
+        if len(data) <= 50:
+            self.send_msg(mavlink.MAVLink_statustext_message(int(severity), data, 0, 0))
+            return
+        self._text_id = self._text_id % 65535 + 1
+        chunks = [data[k : k + 50] for k in range(0, len(data), 50)]
+        if len(data) % 50 == 0:
+            chunks.append(b"")  # the last chunk must end with a NUL: an empty one
+        for seq, chunk in enumerate(chunks):
+            msg = mavlink.MAVLink_statustext_message(int(severity), chunk, self._text_id, seq)
+            self.send_msg(msg)
 
     def statustext_limited(self, now_s: float, severity: Severity, text: str) -> bool:
         """STATUSTEXT for rejected input: the same text at most once per
@@ -228,6 +261,18 @@ class VehicleNode:
                 self.statustext(severity, text)
             else:
                 self.statustext_limited(now_s, severity, text)
+
+    def send_deferred_acks(self, now_s: float) -> None:
+        """The queued second COMMAND_ACKs (see module docstring), then the STATUSTEXTs of those
+        commands (PX4 v1.16.0 sent "Switching to Offboard is currently not available" right
+        after its TEMPORARILY_REJECTED)."""
+        acks, self.deferred_acks = self.deferred_acks, []
+        for a in acks:
+            msg = mavlink.MAVLink_command_ack_message(
+                a.command, int(a.result), 0, 0, a.target_system, a.target_component
+            )
+            self.send_msg(msg, a.link, a.addr)
+        self.drain_events(now_s)
 
     def report_input(self, now_s: float) -> None:
         """Every REPORT_PERIOD_S: one STATUSTEXT if rejected/clamped input grew."""
@@ -380,14 +425,26 @@ class VehicleNode:
     def _on_command(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
         if not self._for_me(msg):
             return
-        p = [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7]
+        p = [msg.param1, msg.param2, msg.param3, msg.param4]
         if msg.get_msgId() == 75:  # COMMAND_INT: x, y are scaled integers, z a float
-            p[4], p[5] = msg.x * 1e-7, msg.y * 1e-7
+            p += [msg.x * 1e-7, msg.y * 1e-7, msg.z]
+        else:
+            p += [msg.param5, msg.param6, msg.param7]
+        twice = msg.command == CMD_DO_SET_MODE and self.params.get_int("EMU_ACK_TWICE") == 1
+        if twice:  # PX4 v1.16.0's MAVLink receiver ACKs before its commander has looked
+            self._ack(CMD_DO_SET_MODE, MavResult.ACCEPTED, link, addr, msg)
         try:
             result = self.command(now_s, int(msg.command), p, link, addr)
         except Exception:  # never leave a command unanswered
             log.exception("vehicle %d: command %d failed", self.spec.vehicle_id, msg.command)
             result = MavResult.FAILED
+        if twice:
+            self.deferred_acks.append(
+                DeferredAck(
+                    CMD_DO_SET_MODE, result, link, addr, msg.get_srcSystem(), msg.get_srcComponent()
+                )
+            )
+            return  # the commander's ACK and its STATUSTEXTs go out on the next tick
         self._ack(int(msg.command), result, link, addr, msg)
         self.drain_events(now_s)
 
@@ -416,6 +473,8 @@ class VehicleNode:
         if cmd == 511:  # SET_MESSAGE_INTERVAL
             if not (math.isfinite(p[0]) and math.isfinite(p[1])):
                 return MavResult.DENIED
+            if _int(p[0], -1) == HEARTBEAT_MSGID:
+                return MavResult.FAILED  # PX4 v1.16.0: recorded FAILED, stays at 1 Hz
             ok = self.telemetry.set_interval(self.index, _int(p[0], -1), p[1], now_s)
             return MavResult.ACCEPTED if ok else MavResult.UNSUPPORTED
         if cmd == 510:  # GET_MESSAGE_INTERVAL

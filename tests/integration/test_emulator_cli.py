@@ -57,7 +57,7 @@ def test_fleet_runs_every_vehicle_on_its_own_endpoint_and_exits_cleanly(tmp_path
         assert (pos.x, pos.y, pos.z) == pytest.approx((4.0, 4.0, -9.0), abs=0.05)
         # and every vehicle answers commands on its own port
         for c in clients:
-            assert c.command(176, 1 | 128, 3, 0) == 0
+            assert c.command_acks(176, 1 | 128, 3, 0, count=2) == [0, 0]  # PX4 v1.16.0: twice
         # WHEN SIGTERM THEN a clean exit
         t0 = time.monotonic()
         proc.send_signal(signal.SIGTERM)

@@ -26,8 +26,12 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 
 UAV1_MASS_KG, UAV1_FMAX_N = 0.85, 6.0  # Table I UAV 1, the default airframe of --id 1
 OFFBOARD, POSCTL, AUTO = 6, 3, 4
-ACCEPTED, TEMP_REJECTED, DENIED, UNSUPPORTED = 0, 1, 2, 3
-PX4_NO_OFFBOARD = "Switching to Offboard is currently not available"  # PX4's STATUSTEXT
+OFFBOARD_MODE, LOITER_MODE, LAND_MODE = 6 << 16, (4 << 16) | (3 << 24), (4 << 16) | (6 << 24)
+ACCEPTED, TEMP_REJECTED, DENIED, UNSUPPORTED, FAILED = 0, 1, 2, 3, 4
+# PX4 v1.16.0's STATUSTEXTs (recorded, ../shared/data/sitl/px4/modes_and_acks)
+PX4_NO_OFFBOARD = "Switching to Offboard is currently not available"
+PX4_ARMING_DENIED = "Arming denied: Resolve system health failures first"
+PX4_FAILSAFE = "Failsafe activated"
 
 
 def _start(args: list[str], tmp_path: Path):
@@ -55,6 +59,13 @@ def air_vehicle(tmp_path):
     client.close()
 
 
+def _set_mode(client: MavClient, base_mode: int, main: int, sub: int = 0) -> int:
+    """DO_SET_MODE as PX4 v1.16.0 answers it: ACCEPTED at once, then the result (returned)."""
+    first, result = client.command_acks(176, base_mode, main, sub, count=2)
+    assert first == ACCEPTED, "the first ACK (PX4's MAVLink receiver) is always ACCEPTED"
+    return result
+
+
 def _altitude_m(client: MavClient) -> float:
     return -client.wait("LOCAL_POSITION_NED", 2.0).z
 
@@ -72,10 +83,11 @@ def test_heartbeat_identifies_px4_quadrotor_with_custom_mode(ground_vehicle):
     assert hb.base_mode & 1 and not hb.base_mode & 128
     assert (custom_main_mode(hb.custom_mode), custom_sub_mode(hb.custom_mode)) == (AUTO, 3)
     # WHEN switched to Position mode THEN custom_mode reads main mode 3 (3 << 16)
-    assert client.command(176, 1, POSCTL, 0) == ACCEPTED
-    client.wait("HEARTBEAT", 3, lambda m: m.custom_mode == POSCTL << 16)
+    assert _set_mode(client, 1, POSCTL) == ACCEPTED
+    hb = client.wait("HEARTBEAT", 3, lambda m: m.custom_mode == POSCTL << 16)
+    assert hb.base_mode == 1 | 64 | 16  # PX4 v1.16.0: 209 armed, so 81 disarmed
     # and manual modes are refused without RC
-    assert client.command(176, 1, 1, 0) == DENIED
+    assert _set_mode(client, 1, 1) == DENIED
 
 
 def test_arming_acks_and_command_rules(ground_vehicle):
@@ -103,7 +115,7 @@ def test_one_setpoint_then_offboard_is_accepted_at_once(request, where):
     thrust = hover_thrust(UAV1_MASS_KG, UAV1_FMAX_N)
     client.send(rates_setpoint(1, 0.0, 0.0, 0.0, thrust))
     sent = time.monotonic()
-    assert client.command(176, 1 | (128 if armed else 0), OFFBOARD, 0) == ACCEPTED
+    assert _set_mode(client, 1 | (128 if armed else 0), OFFBOARD) == ACCEPTED
     assert time.monotonic() - sent < 0.2
     with _hover_stream(client):  # keep it in OFFBOARD (no setpoint loss) while we look
         hb = client.wait("HEARTBEAT", 3, lambda m: m.custom_mode == 393216)
@@ -112,8 +124,11 @@ def test_one_setpoint_then_offboard_is_accepted_at_once(request, where):
 
 def test_offboard_without_a_recent_setpoint_is_temporarily_rejected(air_vehicle):
     client, _ = air_vehicle
-    # GIVEN no setpoint ever WHEN OFFBOARD is requested THEN TEMPORARILY_REJECTED + PX4's text
-    assert client.command(176, 1 | 128, OFFBOARD, 0) == TEMP_REJECTED
+    # GIVEN armed, no setpoint ever WHEN OFFBOARD is requested THEN ACCEPTED (PX4's MAVLink
+    # receiver) then TEMPORARILY_REJECTED + PX4's text (its commander), as PX4 v1.16.0 at 30.74 s
+    sent = time.monotonic()
+    assert client.command_acks(176, 1 | 128, OFFBOARD, 0, count=2) == [ACCEPTED, TEMP_REJECTED]
+    assert time.monotonic() - sent < 0.2
     text = client.wait("STATUSTEXT", 2, lambda m: "Offboard" in m.text)
     assert text.text == PX4_NO_OFFBOARD and text.severity == 2  # MAV_SEVERITY_CRITICAL
     hb = client.wait("HEARTBEAT", 3)
@@ -122,10 +137,10 @@ def test_offboard_without_a_recent_setpoint_is_temporarily_rejected(air_vehicle)
     thrust = hover_thrust(UAV1_MASS_KG, UAV1_FMAX_N)
     client.send(rates_setpoint(1, 0.0, 0.0, 0.0, thrust))
     client.collect(1.3)
-    assert client.command(176, 1 | 128, OFFBOARD, 0) == TEMP_REJECTED
+    assert _set_mode(client, 1 | 128, OFFBOARD) == TEMP_REJECTED
     # and a fresh one is enough again
     client.send(rates_setpoint(1, 0.0, 0.0, 0.0, thrust))
-    assert client.command(176, 1 | 128, OFFBOARD, 0) == ACCEPTED
+    assert _set_mode(client, 1 | 128, OFFBOARD) == ACCEPTED
 
 
 def test_rates_and_thrust_hold_hover_and_track_a_body_rate(air_vehicle):
@@ -133,7 +148,7 @@ def test_rates_and_thrust_hold_hover_and_track_a_body_rate(air_vehicle):
     cmd = {"roll": 0.0}
     with _hover_stream(client, lambda: cmd["roll"]):
         client.collect(1.3)
-        assert client.command(176, 1 | 128, OFFBOARD, 0) == ACCEPTED
+        assert _set_mode(client, 1 | 128, OFFBOARD) == ACCEPTED
         z0 = _altitude_m(client)
         # hover: 2 s at hover thrust and zero rates keeps the altitude
         pos = client.collect(2.0, "LOCAL_POSITION_NED")
@@ -160,15 +175,18 @@ def test_setpoint_loss_runs_the_loss_action_in_time(air_vehicle, action, expect_
     stream = _hover_stream(client)
     with stream:
         client.collect(1.3)
-        assert client.command(176, 1 | 128, OFFBOARD, 0) == ACCEPTED
+        assert _set_mode(client, 1 | 128, OFFBOARD) == ACCEPTED
         client.wait("HEARTBEAT", 3, lambda m: m.custom_mode == 393216)
         z0 = _altitude_m(client)
     t_stop = time.monotonic()
-    # WHEN the stream stops THEN the loss action starts within COM_OF_LOSS_T (1 s) + 0.5 s
-    text = client.wait("STATUSTEXT", 3, lambda m: "offboard setpoints lost" in m.text)
-    assert time.monotonic() - t_stop < 1.5
+    # WHEN the stream stops THEN the loss action starts within COM_OF_LOSS_T (1 s) + 0.5 s, with
+    # PX4's STATUSTEXT (severity CRITICAL; PX4 v1.16.0: 1.12 s after the last setpoint)
+    text = client.wait("STATUSTEXT", 3, lambda m: m.text == PX4_FAILSAFE)
+    assert time.monotonic() - t_stop < 1.5 and text.severity == 2
     hb = client.wait("HEARTBEAT", 3)
     assert hb.custom_mode == expect_mode, text.text
+    # base_mode: POSCTL 209 armed as PX4 v1.16.0; AUTO modes 157 (AUTO | GUIDED | STABILIZE)
+    assert hb.base_mode == (209 if action == 0 else 157)
     if action == 0:
         # position hold: the altitude stays
         pos = client.collect(3.0, "LOCAL_POSITION_NED")
@@ -193,8 +211,9 @@ def test_takeoff_and_land_then_disarm(ground_vehicle):
     fast = client.collect(1.5, "LOCAL_POSITION_NED")
     assert all(p.vz < 1.0 for p in fast)
     client.wait("EXTENDED_SYS_STATE", 15, lambda m: m.landed_state == 1)
-    client.wait("STATUSTEXT", 5, lambda m: "disarmed" in m.text.lower())
-    client.wait("HEARTBEAT", 3, lambda m: not m.base_mode & 128)
+    client.wait("STATUSTEXT", 5, lambda m: m.text == "Disarmed by landing")
+    hb = client.wait("HEARTBEAT", 3, lambda m: not m.base_mode & 128)
+    assert hb.custom_mode == LAND_MODE  # NAV_LAND was the user's choice: it stays in Land
 
 
 def test_parameters_list_read_set_and_refuse_unknown(ground_vehicle):
@@ -235,7 +254,7 @@ def test_scheduled_mass_drop_happens_at_its_time(tmp_path):
         assert client.get_param("EMU_FLT_CLK").param_value == -1.0  # not started before OFFBOARD
         with _hover_stream(client):
             client.collect(1.3)
-            assert client.command(176, 1 | 128, OFFBOARD, 0) == ACCEPTED
+            assert _set_mode(client, 1 | 128, OFFBOARD) == ACCEPTED
             client.wait("STATUSTEXT", 3, lambda m: "Fault clock started" in m.text)
             text = client.wait("STATUSTEXT", 5, lambda m: m.text.startswith("Fault: mass"))
             at_s = float(re.search(r"at ([0-9.]+) s", text.text).group(1))
@@ -261,6 +280,122 @@ def test_message_interval_and_timesync(ground_vehicle):
     assert reply.tc1 > 0
 
 
+def test_heartbeat_stays_at_1_hz_whatever_is_requested(ground_vehicle):
+    # GIVEN PX4 v1.16.0: SET_MESSAGE_INTERVAL HEARTBEAT 5 Hz -> FAILED; GET -> 1000000 us; 1.00 Hz
+    client, _ = ground_vehicle
+    assert client.command(511, 0, 200_000) == FAILED
+    client.send(mavlink.MAVLink_command_long_message(1, 1, 510, 0, 0, 0, 0, 0, 0, 0, 0))
+    reply = client.wait("MESSAGE_INTERVAL", 3, lambda m: m.message_id == 0)
+    assert reply.interval_us == 1_000_000
+    assert client.wait("COMMAND_ACK", 3, lambda m: m.command == 510).result == ACCEPTED
+    beats = client.collect(4.0, "HEARTBEAT")
+    assert 3 <= len(beats) <= 5  # 1 Hz (at 5 Hz: 20)
+
+
+def test_do_set_mode_is_acked_twice_other_commands_once_and_emu_ack_twice_0_once(air_vehicle):
+    client, _ = air_vehicle
+    # GIVEN the default (PX4 v1.16.0) WHEN armed THEN one ACK (recorded: one for arming)
+    assert client.command(400, 1) == ACCEPTED
+    with pytest.raises(TimeoutError):
+        client.wait("COMMAND_ACK", 0.5)
+    # WHEN DO_SET_MODE THEN exactly two ACKs, both within 0.2 s (recorded: 0.4-3 ms, 4-11 ms)
+    sent = time.monotonic()
+    assert client.command_acks(176, 1 | 128, POSCTL, 0, count=2) == [ACCEPTED, ACCEPTED]
+    assert time.monotonic() - sent < 0.2
+    with pytest.raises(TimeoutError):
+        client.wait("COMMAND_ACK", 0.5)
+    # GIVEN EMU_ACK_TWICE = 0 WHEN OFFBOARD without a setpoint THEN one ACK, the real result
+    assert client.set_param("EMU_ACK_TWICE", 0, ptype=6).param_value == 0.0
+    assert client.command(176, 1 | 128, OFFBOARD, 0) == TEMP_REJECTED
+    assert client.command(176, 1 | 128, AUTO, 3) == ACCEPTED
+    with pytest.raises(TimeoutError):
+        client.wait("COMMAND_ACK", 0.5)
+
+
+def test_disarmed_offboard_without_a_setpoint_is_accepted_and_arming_there_refused(
+    ground_vehicle,
+):
+    # PX4 v1.16.0, modes_and_acks 6.44-12.51 s
+    client, _ = ground_vehicle
+    # GIVEN disarmed, no setpoint ever WHEN OFFBOARD THEN ACCEPTED twice, HEARTBEAT 393216 base 1
+    assert client.command_acks(176, 1, OFFBOARD, 0, count=2) == [ACCEPTED, ACCEPTED]
+    hb = client.wait("HEARTBEAT", 3, lambda m: m.custom_mode == OFFBOARD_MODE)
+    assert hb.base_mode == 1
+    # AND no failsafe while disarmed: still OFFBOARD after more than COM_OF_LOSS_T (1 s)
+    client.collect(1.2)
+    hb = client.wait("HEARTBEAT", 3)
+    assert (hb.custom_mode, hb.base_mode) == (OFFBOARD_MODE, 1)
+    # WHEN armed THEN TEMPORARILY_REJECTED with PX4's text (CRITICAL), still disarmed OFFBOARD
+    assert client.command(400, 1) == TEMP_REJECTED
+    text = client.wait_text(2, lambda t: t.startswith("Arming"))
+    assert text == (2, PX4_ARMING_DENIED)  # CRITICAL, in two chunks as PX4 sends it
+    hb = client.wait("HEARTBEAT", 3)
+    assert (hb.custom_mode, hb.base_mode) == (OFFBOARD_MODE, 1)
+    # WHEN switched to AUTO_LOITER THEN arming is ACCEPTED
+    assert _set_mode(client, 1, AUTO, 3) == ACCEPTED
+    assert client.command(400, 1) == ACCEPTED
+    client.wait("STATUSTEXT", 2, lambda m: m.text == "Armed by external command")
+    hb = client.wait("HEARTBEAT", 3, lambda m: m.base_mode & 128)
+    assert (hb.custom_mode, hb.base_mode) == (LOITER_MODE, 157)
+    assert client.command(400, 0) == ACCEPTED
+
+
+FAST_LAND = ["--param", "MPC_LAND_SPEED=2.5"]  # 10 m in 4 s
+
+
+def test_after_an_offboard_loss_landing_it_is_back_in_offboard_and_refuses_to_arm(tmp_path):
+    # PX4 v1.16.0, modes_and_acks 35.75-59.01 s; PX4's loss action there (POSCTL with no RC)
+    # sank to the ground, the emulator's POSCTL holds: COM_OBL_RC_ACT 4 lands instead
+    client, ctx = _start(
+        ["--id", "1", "--in-air", "--param", "COM_OBL_RC_ACT=4", *FAST_LAND], tmp_path
+    )
+    with ctx:
+        client.wait("HEARTBEAT", 60)
+        # GIVEN one setpoint then OFFBOARD at once, and nothing more
+        client.send(rates_setpoint(1, 0.0, 0.0, 0.0, hover_thrust(UAV1_MASS_KG, UAV1_FMAX_N)))
+        assert _set_mode(client, 1 | 128, OFFBOARD) == ACCEPTED
+        # THEN "Failsafe activated" (CRITICAL), it lands, "Disarmed by landing"
+        text = client.wait("STATUSTEXT", 3, lambda m: m.text == PX4_FAILSAFE)
+        assert text.severity == 2
+        client.wait("HEARTBEAT", 3, lambda m: m.custom_mode == LAND_MODE and m.base_mode & 128)
+        client.wait("STATUSTEXT", 15, lambda m: m.text == "Landing detected")
+        client.wait("STATUSTEXT", 5, lambda m: m.text == "Disarmed by landing")
+        # AND the HEARTBEAT is back in the intended OFFBOARD, disarmed, base_mode 1
+        hb = client.wait("HEARTBEAT", 3, lambda m: not m.base_mode & 128)
+        assert (hb.custom_mode, hb.base_mode) == (OFFBOARD_MODE, 1)
+        # WHEN armed THEN TEMPORARILY_REJECTED with PX4's text
+        assert client.command(400, 1) == TEMP_REJECTED
+        text = client.wait_text(2, lambda t: t.startswith("Arming"))
+        assert text == (2, PX4_ARMING_DENIED)  # CRITICAL, in two chunks as PX4 sends it
+        # AND after AUTO_LOITER is selected arming is ACCEPTED
+        assert _set_mode(client, 1, AUTO, 3) == ACCEPTED
+        assert client.command(400, 1) == ACCEPTED
+        hb = client.wait("HEARTBEAT", 3, lambda m: m.base_mode & 128)
+        assert hb.custom_mode == LOITER_MODE
+    client.close()
+
+
+def test_a_gcs_nav_land_from_offboard_stays_in_land_after_the_disarm(tmp_path):
+    # PX4: NAV_LAND is a user mode selection (AUTO_LAND becomes the intended mode), unlike a
+    # failsafe's: after the landing there is no return to OFFBOARD
+    client, ctx = _start(["--id", "1", "--in-air", *FAST_LAND], tmp_path)
+    with ctx:
+        client.wait("HEARTBEAT", 60)
+        client.send(rates_setpoint(1, 0.0, 0.0, 0.0, hover_thrust(UAV1_MASS_KG, UAV1_FMAX_N)))
+        with _hover_stream(client):
+            assert _set_mode(client, 1 | 128, OFFBOARD) == ACCEPTED
+            client.wait("HEARTBEAT", 3, lambda m: m.custom_mode == OFFBOARD_MODE)
+            assert client.command(21) == ACCEPTED
+        texts: list[str] = []
+        client.wait(
+            "STATUSTEXT", 15, lambda m: texts.append(m.text) or m.text == "Disarmed by landing"
+        )
+        assert PX4_FAILSAFE not in texts
+        beats = client.collect(2.5, "HEARTBEAT")
+        assert beats and all((hb.custom_mode, hb.base_mode & 128) == (LAND_MODE, 0) for hb in beats)
+    client.close()
+
+
 def test_actuator_control_target_flies_through_the_mixer(air_vehicle):
     client, _ = air_vehicle
     thrust = hover_thrust(UAV1_MASS_KG, UAV1_FMAX_N)
@@ -273,7 +408,7 @@ def test_actuator_control_target_flies_through_the_mixer(air_vehicle):
 
     with SetpointStreamer(client, make, rate_hz=100):
         client.collect(1.3)
-        assert client.command(176, 1 | 128, OFFBOARD, 0) == ACCEPTED
+        assert _set_mode(client, 1 | 128, OFFBOARD) == ACCEPTED
         z0 = _altitude_m(client)
         pos = client.collect(1.0, "LOCAL_POSITION_NED")
         assert max(abs(-p.z - z0) for p in pos) < 0.1
@@ -290,7 +425,7 @@ def test_attitude_branch_wins_over_rates(air_vehicle):
     make = lambda: rates_setpoint(1, 2.0, 2.0, 0.0, thrust, type_mask=0)  # noqa: E731
     with SetpointStreamer(client, make):
         client.collect(1.3)
-        assert client.command(176, 1 | 128, OFFBOARD, 0) == ACCEPTED
+        assert _set_mode(client, 1 | 128, OFFBOARD) == ACCEPTED
         att = client.collect(1.0, "ATTITUDE")
         assert max(abs(a.roll) + abs(a.pitch) for a in att) < 0.02
         targets = client.collect(0.5, "ATTITUDE_TARGET")
@@ -304,7 +439,7 @@ def test_lockstep_advances_one_tick_per_setpoint(tmp_path):
         client.wait("HEARTBEAT", 60)
         with SetpointStreamer(client, lambda: rates_setpoint(1, 0.0, 0.0, 0.0, thrust)):
             client.collect(1.3)  # not in OFFBOARD yet: real time
-            assert client.command(176, 1 | 128, OFFBOARD, 0) == ACCEPTED
+            assert _set_mode(client, 1 | 128, OFFBOARD) == ACCEPTED
             client.collect(0.2)
             t0 = client.wait("ATTITUDE", 2).time_boot_ms
             sent0 = time.monotonic()
@@ -315,5 +450,5 @@ def test_lockstep_advances_one_tick_per_setpoint(tmp_path):
         # a tenth of wall time
         assert 0.05 * wall_ms < t1 - t0 < 0.2 * wall_ms
         # WHEN the GCS goes silent THEN time follows the clock again and the failsafe holds
-        client.wait("STATUSTEXT", 5, lambda m: "offboard setpoints lost" in m.text)
+        client.wait("STATUSTEXT", 5, lambda m: m.text == PX4_FAILSAFE)
     client.close()

@@ -1,4 +1,5 @@
-"""Pure autopilot logic: PX4 offboard rules, loss actions, arming, takeoff/land, auto-disarm."""
+"""Pure autopilot logic: PX4 offboard rules, loss actions, arming, takeoff/land, auto-disarm,
+intended mode (PX4 v1.16.0 as recorded in ../shared/data/sitl/px4/modes_and_acks)."""
 
 from __future__ import annotations
 
@@ -43,6 +44,8 @@ def test_a_vehicle_in_the_air_starts_armed_holding_its_position():
 
 
 PX4_NO_OFFBOARD = "Switching to Offboard is currently not available"
+PX4_ARMING_DENIED = "Arming denied: Resolve system health failures first"
+PX4_FAILSAFE = "Failsafe activated"
 
 
 def _armed_on_ground() -> Autopilot:
@@ -73,11 +76,55 @@ def test_one_setpoint_then_offboard_is_accepted_at_once(make, obs, armed):
 
 
 @pytest.mark.parametrize("now_s", [0.0, 3.0, 1000.0])
-def test_offboard_without_any_setpoint_is_temporarily_rejected_with_px4s_text(now_s):
+def test_armed_offboard_without_any_setpoint_is_temporarily_rejected_with_px4s_text(now_s):
     ap = Autopilot.start(1, ParamStore(), 0.0, AIR)
     assert ap.set_mode(now_s, AIR, 6, 0) is MavResult.TEMPORARILY_REJECTED
     assert ap.nav_state is NavState.AUTO_LOITER and ap.first_offboard_s is None
+    assert ap.intended_state is NavState.AUTO_LOITER
     assert (Severity.CRITICAL, PX4_NO_OFFBOARD) in ap.events
+
+
+@pytest.mark.parametrize(
+    "main, sub, state",
+    [
+        (6, 0, NavState.OFFBOARD),
+        (3, 0, NavState.POSCTL),
+        (2, 0, NavState.ALTCTL),
+        (4, 3, NavState.AUTO_LOITER),
+        (4, 6, NavState.AUTO_LAND),
+        (4, 2, NavState.AUTO_TAKEOFF),
+    ],
+)
+def test_disarmed_every_available_mode_is_accepted_offboard_without_a_setpoint_too(
+    main, sub, state
+):
+    # GIVEN a disarmed vehicle that never saw a setpoint (PX4 v1.16.0, 6.44 s: ACCEPTED)
+    ap = Autopilot.start(1, ParamStore(), 0.0, GROUND)
+    ap.set_mode(0.0, GROUND, 3, 0)  # start from another mode than the target
+    # WHEN a mode is selected THEN it is accepted, current and intended, motors off
+    assert ap.set_mode(5.0, GROUND, main, sub) is MavResult.ACCEPTED
+    assert ap.nav_state is state and ap.intended_state is state
+    assert not ap.armed and ap.demand == MotorsOff()
+    assert not any(sev is Severity.CRITICAL for sev, _ in ap.events)
+
+
+def test_disarmed_offboard_without_setpoints_has_no_failsafe_and_refuses_to_arm():
+    ap = Autopilot.start(1, ParamStore(), 0.0, GROUND)
+    assert ap.set_mode(1.0, GROUND, 6, 0) is MavResult.ACCEPTED
+    # GIVEN disarmed in OFFBOARD, no setpoint WHEN time passes THEN it stays in OFFBOARD (PX4
+    # v1.16.0's HEARTBEAT showed OFFBOARD until the next mode command, 4 s later)
+    for t in np.arange(1.0, 10.0, 0.02):
+        ap.tick(float(t), GROUND)
+    assert ap.nav_state is NavState.OFFBOARD and not ap.armed
+    ap.events.clear()
+    # WHEN armed THEN TEMPORARILY_REJECTED with PX4's text, severity CRITICAL
+    assert ap.arm(10.0, GROUND, True) is MavResult.TEMPORARILY_REJECTED
+    assert ap.events == [(Severity.CRITICAL, PX4_ARMING_DENIED)] and not ap.armed
+    # a setpoint older than COM_OF_LOSS_T does not help; a fresh one does
+    ap.on_setpoint(10.0, SP)
+    assert ap.arm(11.0, GROUND, True) is MavResult.TEMPORARILY_REJECTED
+    ap.on_setpoint(12.0, SP)
+    assert ap.arm(12.5, GROUND, True) is MavResult.ACCEPTED and ap.demand == SP
 
 
 @pytest.mark.parametrize(
@@ -134,7 +181,83 @@ def test_setpoint_loss_after_com_of_loss_t_runs_the_action(action, state):
         assert ap.demand.mask[2] == 0.0 and ap.demand.velocity_ff_enu_mps[2] < 0
     else:
         assert ap.demand.position_enu_m == AIR.position_enu_m  # holds where it was
-    assert any("offboard setpoints lost" in text for _, text in ap.events)
+    assert (Severity.CRITICAL, PX4_FAILSAFE) in ap.events  # PX4's text
+    assert ap.intended_state is NavState.OFFBOARD  # a failsafe is not a user's choice
+
+
+def _offboard_in_the_air(params: ParamStore) -> Autopilot:
+    """Armed at 10 m, streamed setpoints until 1.18 s, OFFBOARD since 1.2 s."""
+    ap = Autopilot.start(1, params, 0.0, AIR)
+    _stream(ap, 0.0, 1.2)
+    assert ap.set_mode(1.2, AIR, 6, 0) is MavResult.ACCEPTED
+    return ap
+
+
+def _land_and_wait(ap: Autopilot, t0: float, t1: float) -> None:
+    """Ground contact from t0 on, ticks at 50 Hz until t1."""
+    for t in np.arange(t0, t1, 0.02):
+        ap.tick(float(t), GROUND)
+
+
+def test_after_a_failsafe_landing_the_vehicle_returns_to_the_intended_offboard():
+    # GIVEN OFFBOARD in the air and a loss action that lands (COM_OBL_RC_ACT 4)
+    ap = _offboard_in_the_air(ParamStore({"COM_OBL_RC_ACT": 4}))
+    # WHEN the setpoints stop THEN the failsafe lands it; OFFBOARD stays the intended mode
+    ap.tick(2.3, AIR)
+    assert ap.nav_state is NavState.AUTO_LAND and ap.intended_state is NavState.OFFBOARD
+    # WHEN it touches down THEN "Landing detected", and COM_DISARM_LAND (2 s) later "Disarmed by
+    # landing" and the mode is OFFBOARD again, disarmed (PX4 v1.16.0: HEARTBEAT 393216, base 1)
+    ap.events.clear()
+    _land_and_wait(ap, 10.0, 11.9)
+    assert ap.armed and ap.nav_state is NavState.AUTO_LAND
+    assert ap.events == [(Severity.INFO, "Landing detected")]
+    _land_and_wait(ap, 11.9, 12.2)
+    assert not ap.armed and ap.nav_state is NavState.OFFBOARD
+    assert ap.demand == MotorsOff()
+    assert (Severity.INFO, "Disarmed by landing") in ap.events
+    # AND arming there is refused (no setpoint younger than COM_OF_LOSS_T)
+    assert ap.arm(15.0, GROUND, True) is MavResult.TEMPORARILY_REJECTED
+    assert ap.events[-1] == (Severity.CRITICAL, PX4_ARMING_DENIED)
+    # AND a user mode selection ends it (PX4 v1.16.0: AUTO_LOITER then arming ACCEPTED)
+    assert ap.set_mode(16.0, GROUND, 4, 3) is MavResult.ACCEPTED
+    assert ap.arm(17.0, GROUND, True) is MavResult.ACCEPTED
+
+
+def test_a_gcs_commanded_land_from_offboard_is_the_users_choice_and_stays_land():
+    # GIVEN OFFBOARD in the air WHEN the GCS sends NAV_LAND THEN Land is the intended mode
+    ap = _offboard_in_the_air(ParamStore())
+    assert ap.land(1.2, AIR) is MavResult.ACCEPTED
+    assert ap.nav_state is ap.intended_state is NavState.AUTO_LAND
+    # AND after the landing and the auto-disarm it stays in Land
+    _land_and_wait(ap, 10.0, 12.2)
+    assert not ap.armed and ap.nav_state is NavState.AUTO_LAND
+    assert (Severity.INFO, "Disarmed by landing") in ap.events
+
+
+def test_a_failsafe_that_holds_then_a_gcs_land_stays_land():
+    # GIVEN the default loss action (Position) WHEN the GCS then lands it THEN no return to OFFBOARD
+    ap = _offboard_in_the_air(ParamStore())
+    ap.tick(2.3, AIR)
+    assert ap.nav_state is NavState.POSCTL and ap.intended_state is NavState.OFFBOARD
+    assert ap.land(3.0, AIR) is MavResult.ACCEPTED and ap.intended_state is NavState.AUTO_LAND
+    _land_and_wait(ap, 10.0, 12.2)
+    assert not ap.armed and ap.nav_state is NavState.AUTO_LAND
+
+
+def test_intended_mode_follows_commands_and_the_takeoff_completion():
+    ap = Autopilot.start(1, ParamStore(), 0.0, GROUND)
+    assert ap.intended_state is NavState.AUTO_LOITER  # the boot mode
+    ap.arm(0.0, GROUND, True)
+    ap.takeoff(0.1, GROUND, 3.0)
+    assert ap.intended_state is NavState.AUTO_TAKEOFF
+    ap.tick(2.0, Observation((1.0, 2.0, 2.0), (0, 0, 1.0), 0.3, False))
+    ap.tick(3.0, Observation((1.0, 2.0, 2.9), (0, 0, 0), 0.3, False))
+    # PX4's navigator selects Hold after the takeoff: CURRENT_MODE's intended mode follows
+    assert ap.nav_state is ap.intended_state is NavState.AUTO_LOITER
+    assert ap.set_mode(4.0, AIR, 3, 0) is MavResult.ACCEPTED
+    assert ap.intended_state is NavState.POSCTL
+    assert ap.set_mode(4.1, AIR, 1, 0) is MavResult.DENIED  # refused: intended unchanged
+    assert ap.intended_state is NavState.POSCTL
 
 
 def test_arming_rules():
@@ -147,11 +270,14 @@ def test_arming_rules():
     low = Observation(GROUND.position_enu_m, (0, 0, 0), 0.0, True, battery_remaining=0.05)
     assert Autopilot.start(1, ParamStore(), 0.0, GROUND).arm(0, low, True) is MavResult.DENIED
     ap2 = Autopilot.start(1, ParamStore(), 0.0, GROUND)
-    ap2.nav_state = NavState.OFFBOARD
-    assert ap2.arm(0.0, GROUND, True) is MavResult.DENIED  # offboard without any setpoint
+    assert ap2.set_mode(0.0, GROUND, 6, 0) is MavResult.ACCEPTED  # disarmed: any mode
+    # offboard without any setpoint: PX4 v1.16.0 answered TEMPORARILY_REJECTED
+    assert ap2.arm(0.0, GROUND, True) is MavResult.TEMPORARILY_REJECTED
     ap2.on_setpoint(1.0, SP)
-    assert ap2.arm(2.0, GROUND, True) is MavResult.DENIED  # newest setpoint 1.0 s old
-    assert ap2.arm(2.5, GROUND, True) is MavResult.DENIED
+    assert ap2.arm(2.0, GROUND, True) is MavResult.TEMPORARILY_REJECTED  # 1.0 s old
+    assert ap2.arm(2.5, GROUND, True) is MavResult.TEMPORARILY_REJECTED
+    assert ap2.arm(2.5, GROUND, True, force=True) is MavResult.ACCEPTED  # 21196 skips checks
+    assert ap2.arm(2.6, GROUND, False) is MavResult.ACCEPTED
     ap2.on_setpoint(3.0, SP)
     assert ap2.arm(3.0, GROUND, True) is MavResult.ACCEPTED  # one fresh setpoint is enough
     assert ap2.demand == SP

@@ -162,6 +162,107 @@ def test_commands_for_other_systems_are_ignored_and_counted():
     assert emu.nodes[0].counters.other_target == 1
 
 
+def _acks(link: FakeLink) -> list[tuple[int, int]]:
+    return [(m.command, m.result) for m in link.msgs if m.get_type() == "COMMAND_ACK"]
+
+
+def _set_offboard(target_system=1, base_mode=1 | 128):
+    return mavlink.MAVLink_command_long_message(
+        target_system, 1, 176, 0, base_mode, 6, 0, 0, 0, 0, 0
+    )
+
+
+@pytest.mark.parametrize(
+    "in_air, result", [(True, 1), (False, 0)], ids=["armed-no-setpoint", "disarmed"]
+)
+def test_do_set_mode_gets_accepted_at_once_then_the_commanders_result_on_the_next_tick(
+    in_air, result
+):
+    # GIVEN PX4 v1.16.0's double ACK (EMU_ACK_TWICE = 1, the default) and no setpoint ever
+    emu, (link,) = _emu(in_air=in_air)
+    assert emu.nodes[0].params["EMU_ACK_TWICE"] == 1
+    _run(emu, 0.1)
+    link.msgs.clear()
+    # WHEN DO_SET_MODE OFFBOARD arrives THEN ACCEPTED goes out at once (the MAVLink receiver)
+    _send(emu, 0, _set_offboard(base_mode=1 | (128 if in_air else 0)), link)
+    assert _acks(link) == [(176, 0)]
+    assert link.types()["STATUSTEXT"] == 0
+    # AND on the next tick the real result: armed TEMPORARILY_REJECTED then PX4's STATUSTEXT
+    # (in that order, as recorded), disarmed ACCEPTED
+    emu.advance_to(emu.now_s + emu.tick_s)
+    assert _acks(link) == [(176, 0), (176, result)]
+    ack = [m for m in link.msgs if m.get_type() == "COMMAND_ACK"][1]
+    assert (ack.target_system, ack.target_component) == (245, 190)
+    kinds = [m.get_type() for m in link.msgs if m.get_type() in ("COMMAND_ACK", "STATUSTEXT")]
+    texts = [m.text for m in link.msgs if m.get_type() == "STATUSTEXT"]
+    if in_air:
+        assert kinds[:3] == ["COMMAND_ACK", "COMMAND_ACK", "STATUSTEXT"]
+        assert "Switching to Offboard is currently not available" in texts
+    # AND nothing more
+    _run(emu, emu.now_s + 1.0)
+    assert len(_acks(link)) == 2
+    assert emu.nodes[0].autopilot.custom_mode == (393216 if not in_air else (4 << 16) | (3 << 24))
+
+
+def test_emu_ack_twice_0_answers_do_set_mode_once_with_the_result():
+    emu, (link,) = _emu(param_overrides={"EMU_ACK_TWICE": 0})
+    _send(emu, 0, _set_offboard(), link)
+    assert _acks(link) == [(176, 1)]  # TEMPORARILY_REJECTED at once, nothing later
+    _run(emu, 0.5)
+    assert _acks(link) == [(176, 1)]
+
+
+def test_only_do_set_mode_commands_are_acked_twice():
+    emu, (link,) = _emu(in_air=False)
+    # COMMAND_INT 176 goes through the same PX4 receiver path: twice
+    _send(
+        emu, 0, mavlink.MAVLink_command_int_message(1, 1, 0, 176, 0, 0, 1, 3, 0, 0, 0, 0, 0), link
+    )
+    _run(emu, 0.01)
+    assert _acks(link) == [(176, 0), (176, 0)]
+    # SET_MODE (the message) is PX4's commander alone: one ACK; arming: one ACK
+    link.msgs.clear()
+    _send(emu, 0, mavlink.MAVLink_set_mode_message(1, 1, (4 << 16) | (3 << 24)), link)
+    _send(emu, 0, mavlink.MAVLink_command_long_message(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0), link)
+    _run(emu, 0.1)
+    assert _acks(link) == [(176, 0), (400, 0)]
+
+
+def test_heartbeat_interval_cannot_be_changed():
+    # GIVEN PX4 v1.16.0: SET_MESSAGE_INTERVAL for HEARTBEAT (0) -> FAILED, GET -> 1000000 us
+    emu, (link,) = _emu()
+    for interval_us in (200_000, 0, -1):
+        cmd = mavlink.MAVLink_command_long_message(1, 1, 511, 0, 0, interval_us, 0, 0, 0, 0, 0)
+        _send(emu, 0, cmd, link)
+    assert _acks(link) == [(511, 4)] * 3
+    _send(emu, 0, mavlink.MAVLink_command_long_message(1, 1, 510, 0, 0, 0, 0, 0, 0, 0, 0), link)
+    reply = [m for m in link.msgs if m.get_type() == "MESSAGE_INTERVAL"]
+    assert [(m.message_id, m.interval_us) for m in reply] == [(0, 1_000_000)]
+    assert _acks(link)[-1] == (510, 0)
+    link.msgs.clear()
+    _run(emu, 5.0)
+    assert link.types()["HEARTBEAT"] == pytest.approx(5, abs=1)
+
+
+def test_a_statustext_longer_than_50_bytes_goes_in_mavlink2_chunks():
+    # GIVEN PX4 v1.16.0's 51-character arming refusal (recorded: 2 chunks, one id)
+    emu, (link,) = _emu(in_air=False)
+    node = emu.nodes[0]
+    text = "Arming denied: Resolve system health failures first"
+    node.statustext(2, "short one")
+    node.statustext(2, text)
+    node.statustext(2, "x" * 100)  # a multiple of 50: an empty chunk ends it
+    msgs = [m for m in link.msgs if m.get_type() == "STATUSTEXT"]
+    assert [(m.text, m.id, m.chunk_seq) for m in msgs] == [
+        ("short one", 0, 0),
+        (text[:50], 1, 0),
+        ("t", 1, 1),
+        ("x" * 50, 2, 0),
+        ("x" * 50, 2, 1),
+        ("", 2, 2),
+    ]
+
+
 PURE = ["autopilot", "inner", "plant", "setpoints", "frames", "faults", "params", "team"]
 IMPURE = {"asyncio", "socket", "time", "pymavlink", "mavsdk", "select", "threading", "gcs"}
 
