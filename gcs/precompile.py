@@ -2,13 +2,12 @@
 
 The law, the in-process simulator and the emulator physics are numba-compiled. A cold cache
 costs about 6 s (law), 17 s (simulator alone; 6 s after the law) and 10 s (emulator physics) on a
-2-core machine
-(docs/benchmarks.md). Compiling them here, once per source state, means neither `gcs fly` nor
-`vehicle-emu` nor `gcs sim` has to do it while a user, a link timeout or a vehicle waits. Each
-part is compiled through exactly the code path the programs run (a `Flight` of a small built-in
-team, a short `simulate`, `vehicle-emu --compile-only`), so what is cached is what they load.
-The emulator compiles in its own process, beside this one: it is an independent peer, and the
-two cores finish sooner that way.
+2-core machine (docs/benchmarks.md). Compiling them here, once per source state, means neither
+`gcs fly` nor `vehicle-emu` nor `gcs sim` has to do it while a user, a link timeout or a vehicle
+waits. Each part is compiled through exactly the code path the programs run (a `Flight` of a
+small built-in team, a short `simulate`, `vehicle-emu --compile-only`), so what is cached is what
+they load. The emulator compiles in its own process, beside this one: it is an independent peer,
+and the two cores finish sooner that way.
 """
 
 from __future__ import annotations
@@ -17,7 +16,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
 from pathlib import Path
 
 from vehicle_emulator.jitcache import compiling, is_compiled
@@ -107,10 +105,9 @@ def _font_cache() -> None:
     import matplotlib.font_manager  # noqa: F401
 
 
-def compile_all(emulator: bool = True, log: Callable[[str], None] | None = None) -> float:
-    """Compile every part into the cache; returns the wall time [s]. Raises RuntimeError if the
+def compile_all(emulator: bool = True) -> None:
+    """Compile every part into the cache and say so on stderr. Raises RuntimeError if the
     emulator's compile failed."""
-    say = log or (lambda text: print(text, file=sys.stderr, flush=True))
     t0 = time.monotonic()
     proc = None
     if emulator:
@@ -126,8 +123,8 @@ def compile_all(emulator: bool = True, log: Callable[[str], None] | None = None)
         raise RuntimeError(f"vehicle-emu --compile-only failed with exit status {code}")
     wall = time.monotonic() - t0
     parts = "the law, the simulator" + (" and the emulator physics" if emulator else "")
-    say(f"gcs compile: {parts} are compiled and cached ({wall:.1f} s)")
-    return wall
+    print(f"gcs compile: {parts} are compiled and cached ({wall:.1f} s)", file=sys.stderr,
+          flush=True)
 
 
 __all__ = ["compile_all", "compile_law", "compile_sim"]

@@ -135,10 +135,10 @@ def _team(args: argparse.Namespace) -> tuple[list[VehicleSpec], TeamSpec | None]
         raise SystemExit(f"vehicle-emu: {exc.args[0]}") from None
 
 
-def compile_physics() -> None:
-    """Compile (or load from the cache) every kernel the emulator runs."""
+def warm_up(emu: Emulator) -> None:
+    """Compile (or load from the cache) every kernel the emulator runs; announced when cold."""
     with compiling("emulator", "the emulator physics", COMPILE_ESTIMATE_S, "vehicle-emu"):
-        Emulator([default_vehicle(1, on_ground=True)]).warm_up()
+        emu.warm_up()
 
 
 async def _amain(args: argparse.Namespace) -> int:
@@ -158,8 +158,7 @@ async def _amain(args: argparse.Namespace) -> int:
         seed=args.seed,
         param_overrides=overrides,
     )
-    with compiling("emulator", "the emulator physics", COMPILE_ESTIMATE_S, "vehicle-emu"):
-        emu.warm_up()
+    warm_up(emu)
     clock = RealtimeClock(args.realtime_factor)
     plans = [link_plan(s, args, single=not args.fleet) for s in specs]
     await emu.open_links(plans, clock)
@@ -238,7 +237,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     try:
         if args.compile_only:
-            compile_physics()
+            warm_up(Emulator([default_vehicle(1, on_ground=True)]))
             return 0
         return asyncio.run(_amain(args))
     except TeamFileError as exc:

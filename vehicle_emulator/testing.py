@@ -208,11 +208,8 @@ class MavClient:
         return out
 
     def command(self, command: int, *params: float, timeout_s: float = 5.0) -> int:
-        """COMMAND_LONG; returns the MAV_RESULT of its COMMAND_ACK (TimeoutError if none)."""
-        p = list(params) + [0.0] * (7 - len(params))
-        self.send(mavlink.MAVLink_command_long_message(self.target_system, 1, command, 0, *p))
-        ack = self.wait("COMMAND_ACK", timeout_s, lambda m: m.command == command)
-        return int(ack.result)
+        """COMMAND_LONG; returns the MAV_RESULT of its first COMMAND_ACK (TimeoutError if none)."""
+        return self.command_acks(command, *params, count=1, timeout_s=timeout_s)[0]
 
     def command_acks(
         self, command: int, *params: float, count: int, timeout_s: float = 5.0
