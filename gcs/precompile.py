@@ -22,7 +22,8 @@ from vehicle_emulator.jitcache import compiling, is_compiled
 
 #: First-run compile times on this 2-core machine (docs/benchmarks.md), for the notice.
 LAW_COMPILE_S = 6.0
-SIM_COMPILE_S = 17.0  # alone; about 6 s when the law's kernels are cached
+SIM_COMPILE_S = 17.0  # alone
+SIM_AFTER_LAW_S = 6.0  # when the law's kernels are cached already
 
 # Two vehicles are enough: numba specialises on array types, not sizes. Both laws and both
 # derivative methods are compiled (placeholders filled in by `_team`).
@@ -91,7 +92,8 @@ def compile_sim(prog: str = "gcs", force: bool = True) -> None:
 
     if not force and is_compiled("sim"):
         return
-    with compiling("sim", "the simulator", SIM_COMPILE_S, prog):
+    estimate = SIM_AFTER_LAW_S if is_compiled("law") else SIM_COMPILE_S
+    with compiling("sim", "the simulator", estimate, prog):
         for law, derivative in _VARIANTS:
             for mode in ("rates", "actuators"):
                 simulate(_team(law, derivative), SimOptions(duration_s=0.01, mode=mode))

@@ -7,7 +7,13 @@ checks), describe (what `gcs check` prints).
 """
 
 from gcs.config.describe import describe
-from gcs.config.reader import load_team, team_from_dict, team_from_yaml, team_to_dict
+from gcs.config.reader import (
+    load_team,
+    team_from_dict,
+    team_from_yaml,
+    team_to_dict,
+    team_to_yaml,
+)
 from gcs.config.schema import (
     DERIVATIVE_METHODS,
     FAULT_KINDS,
@@ -91,4 +97,5 @@ __all__ = [
     "team_from_dict",
     "team_from_yaml",
     "team_to_dict",
+    "team_to_yaml",
 ]

@@ -75,12 +75,18 @@ class _Loader(yaml.SafeLoader):
     """yaml.SafeLoader (nothing but plain data) that records the line of every key and item."""
 
 
-# pyyaml follows YAML 1.1, which reads 1e4 and 1.0e4 as strings; here they are numbers (YAML 1.2).
-_Loader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
-    list("-+0123456789."),
-)
+class _Dumper(yaml.SafeDumper):
+    """yaml.SafeDumper that quotes every string `_Loader` would read as something else."""
+
+
+# pyyaml follows YAML 1.1, which reads 1e4 and 1.0e4 as strings; here they are numbers (YAML 1.2),
+# and the dumper quotes such strings (a name "1e4") so that what it writes reads back the same.
+for _cls in (_Loader, _Dumper):
+    _cls.add_implicit_resolver(
+        "tag:yaml.org,2002:float",
+        re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+        list("-+0123456789."),
+    )
 
 
 def _construct_map(loader: _Loader, node: yaml.MappingNode) -> _YamlMap:
@@ -715,3 +721,8 @@ def team_to_dict(team: TeamConfig) -> dict[str, Any]:
     data = plain(team)
     del data["source_path"]
     return data
+
+
+def team_to_yaml(team: TeamConfig) -> str:
+    """`team_to_dict` as YAML text that `team_from_yaml` reads back to the same team."""
+    return yaml.dump(team_to_dict(team), Dumper=_Dumper, sort_keys=False)

@@ -28,6 +28,7 @@ from gcs.config import (
     team_from_dict,
     team_from_yaml,
     team_to_dict,
+    team_to_yaml,
 )
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -837,8 +838,7 @@ def test_valid_teams_load_round_trip_and_rescale(data, scale):
     assert all(team.index_of(vid) == k for k, vid in enumerate(team.ids()))
     # AND writing it out and reading it back (as data and as YAML) gives the same team
     assert team_from_dict(team_to_dict(team), "gen") == team
-    text = yaml.safe_dump(team_to_dict(team), sort_keys=False)
-    assert team_from_yaml(text, "gen") == team
+    assert team_from_yaml(team_to_yaml(team), "gen") == team
     # AND scaling every mass, mass estimate and thrust by the same factor keeps it valid
     scaled = copy.deepcopy(data)
     for v in scaled["vehicles"]:
@@ -857,3 +857,13 @@ def test_valid_teams_load_round_trip_and_rescale(data, scale):
     if team.has_plants():
         np.testing.assert_allclose(rescaled.true_masses_kg(), scale * team.true_masses_kg())
     assert isinstance(describe(team), str)
+
+
+def test_a_name_that_reads_as_a_number_round_trips_through_yaml():
+    # GIVEN a team named like a YAML 1.2 float ("0E0": the loader reads 1e4 as a number)
+    data = {**team_to_dict(load_team(CONFIGS / "square4.yaml")), "name": "0E0"}
+    team = team_from_dict(data, "gen")
+    # WHEN written with team_to_yaml THEN the name is quoted and reads back as the same string
+    text = team_to_yaml(team)
+    assert "name: '0E0'" in text
+    assert team_from_yaml(text, "gen") == team
