@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import json
 import logging
 import resource
@@ -23,6 +24,7 @@ import time
 from collections.abc import Sequence
 
 from vehicle_emulator.jitcache import compiling
+from vehicle_emulator.personality import AUTOPILOT_NAMES, DEFAULT_AUTOPILOT
 from vehicle_emulator.runner import Emulator, LinkPlan, RealtimeClock, RunStats
 from vehicle_emulator.team import TeamFileError, TeamSpec, VehicleSpec, default_vehicle, load_team
 
@@ -78,6 +80,11 @@ def _parser() -> argparse.ArgumentParser:
     who.add_argument("--compile-only", action="store_true",
                      help="compile the physics kernels into the on-disk cache and exit")
     ap.add_argument("--team", help="team YAML file (airframes, plant, initial state, faults)")
+    ap.add_argument(
+        "--autopilot",
+        choices=AUTOPILOT_NAMES,
+        help=f"personality of every vehicle (default: the team file's, else {DEFAULT_AUTOPILOT})",
+    )
     ap.add_argument("--bind", type=parse_address, help="local UDP address (default 14580+N-1)")
     ap.add_argument("--remote", type=parse_address, help="initial peer (default 14540+N-1)")
     ap.add_argument("--gcs", action="store_true", help="second link: bind 18570+i, send to 14550")
@@ -122,6 +129,13 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _team(args: argparse.Namespace) -> tuple[list[VehicleSpec], TeamSpec | None]:
+    specs, team = _team_specs(args)
+    if args.autopilot is not None:
+        specs = [dataclasses.replace(s, autopilot=args.autopilot) for s in specs]
+    return specs, team
+
+
+def _team_specs(args: argparse.Namespace) -> tuple[list[VehicleSpec], TeamSpec | None]:
     if args.team is None:
         if args.fleet:
             raise SystemExit("vehicle-emu: --fleet needs --team FILE")

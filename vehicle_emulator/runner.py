@@ -22,6 +22,7 @@ from vehicle_emulator.autopilot import Autopilot, NavState, Severity
 from vehicle_emulator.codec import GenericEncoder
 from vehicle_emulator.faults import FaultSchedule, LinkImpairment
 from vehicle_emulator.params import ParamStore
+from vehicle_emulator.personality import personality_of
 from vehicle_emulator.plant import FleetPlant
 from vehicle_emulator.server import UdpLink
 from vehicle_emulator.team import FaultSpec, VehicleSpec
@@ -127,8 +128,11 @@ class Emulator:
         self.nodes: list[VehicleNode] = []
         self._next_autopilot_s = 0.0
         for i, spec in enumerate(specs):
+            personality = personality_of(spec.autopilot)
+            self.status.mav_autopilot[i] = personality.protocol.mav_autopilot
             params = ParamStore()
             params.set("MAV_SYS_ID", spec.sysid, force=True)
+            params.set("EMU_ACK_TWICE", 1.0 if personality.protocol.ack_twice else 0.0)
             params.set("EMU_SEED", seed)
             params.set("MPC_THR_HOVER", float(self.plant.hover_thrust_norm[i]))
             params.set("EMU_MOT_TAU", spec.motor_time_constant_s)
@@ -142,6 +146,7 @@ class Emulator:
             node = VehicleNode(
                 index=i,
                 spec=spec,
+                personality=personality,
                 plant=self.plant,
                 telemetry=self.telemetry,
                 status=self.status,

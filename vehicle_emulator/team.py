@@ -6,7 +6,8 @@ it uses with a wrong type or value raises ``TeamFileError`` naming the key path,
 ``vehicles[2].plant.mass_kg: expected > 0, got -1.0``.
 
 Keys read: ``sim.plant_rate_hz``; ``vehicles[].id / sysid / initial / airframe / plant / link``;
-top-level ``faults`` (``{kind, vehicle, at_s, ...}``). Positions are ENU metres, z up.
+top-level ``faults`` (``{kind, vehicle, at_s, ...}``); ``emulator.autopilot / origin`` and
+``vehicles[].emulator.autopilot / origin_enu_m`` (personality.py). Positions are ENU metres, z up.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from typing import Any
 
 import yaml
 
+from vehicle_emulator.personality import AUTOPILOT_NAMES, DEFAULT_AUTOPILOT
 from vehicle_emulator.physics import TABLE_I
 
 __all__ = [
@@ -33,6 +35,7 @@ __all__ = [
 ]
 
 FAULT_KINDS = ("mass_drop", "link_loss", "packet_loss", "motor_efficiency")
+ORIGIN_KINDS = ("own", "shared")
 
 # Arm length, anti-torque coefficient and rotor limit per Table I airframe (the values of
 # configs/square4.yaml), used when no team file is given.
@@ -72,11 +75,25 @@ class VehicleSpec:
     velocity_enu_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
     yaw_enu_rad: float = 0.0
     link: LinkSpec = field(default_factory=LinkSpec)
+    autopilot: str = DEFAULT_AUTOPILOT  # personality name (personality.py)
+    # EKF origin in the team frame; None: the personality decides (its own boot position below
+    # the vehicle, or the team frame's origin for a personality without own origins)
+    origin_enu_m: tuple[float, float, float] | None = None
 
     @property
     def starts_in_air(self) -> bool:
         """True when the initial position is above the ground plane (z > 0.05 m)."""
         return self.position_enu_m[2] > 0.05
+
+    def local_origin_enu_m(self, own_origin: bool) -> tuple[float, float, float]:
+        """Where this vehicle's LOCAL_POSITION_NED is zero, in the team frame: the configured
+        origin, else (with ``own_origin``) the ground point below its boot position, else the
+        team frame's origin."""
+        if self.origin_enu_m is not None:
+            return self.origin_enu_m
+        if own_origin:
+            return (self.position_enu_m[0], self.position_enu_m[1], 0.0)
+        return (0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -178,7 +195,13 @@ def _address(value: Any, path: str) -> tuple[str, int]:
     raise TeamFileError(f"{path}: expected 'host:port' or a port number, got {value!r}")
 
 
-def _vehicle(raw: Any, index: int) -> VehicleSpec:
+def _autopilot(value: Any, path: str) -> str:
+    if value not in AUTOPILOT_NAMES:
+        raise TeamFileError(f"{path}: expected one of {', '.join(AUTOPILOT_NAMES)}, got {value!r}")
+    return value
+
+
+def _vehicle(raw: Any, index: int, team_emulator: dict[str, Any]) -> VehicleSpec:
     path = f"vehicles[{index}]"
     vid_raw = _get(raw, "id", path)
     if vid_raw is None:
@@ -192,6 +215,7 @@ def _vehicle(raw: Any, index: int) -> VehicleSpec:
     airframe = _get(raw, "airframe", path) or {}
     initial = _get(raw, "initial", path) or {}
     link = _get(raw, "link", path) or {}
+    emulator = _get(raw, "emulator", path) or {}
 
     def opt(section: Any, name: str, key: str, default: float, **kw: Any) -> float:
         value = _get(section, key, f"{path}.{name}")
@@ -250,7 +274,46 @@ def _vehicle(raw: Any, index: int) -> VehicleSpec:
         ),
         yaw_enu_rad=rpy[2],
         link=LinkSpec(bind=bind, remote=remote),
+        **_emulator_keys(emulator, f"{path}.emulator", team_emulator),
     )
+
+
+def _emulator_keys(
+    section: Any, path: str, team_emulator: dict[str, Any]
+) -> dict[str, Any]:
+    """``autopilot`` and ``origin_enu_m`` of a vehicle from its own and the team's
+    ``emulator:`` sections (the vehicle's win)."""
+    autopilot = _get(section, "autopilot", path)
+    if autopilot is None:
+        autopilot = team_emulator["autopilot"]
+    else:
+        autopilot = _autopilot(autopilot, f"{path}.autopilot")
+    origin_raw = _get(section, "origin_enu_m", path)
+    if origin_raw is not None:
+        origin = _vec3(origin_raw, f"{path}.origin_enu_m")
+    elif team_emulator["origin"] == "shared":
+        origin = (0.0, 0.0, 0.0)
+    else:
+        origin = None
+    return {"autopilot": autopilot, "origin_enu_m": origin}
+
+
+def _team_emulator(raw: Any) -> dict[str, Any]:
+    """The top-level ``emulator:`` section: default personality and origin rule."""
+    section = raw.get("emulator") or {}
+    if not isinstance(section, dict):
+        raise TeamFileError(f"emulator: expected a mapping, got {section!r}")
+    autopilot = section.get("autopilot")
+    origin = section.get("origin", "own")
+    if origin not in ORIGIN_KINDS:
+        raise TeamFileError(f"emulator.origin: expected one of {', '.join(ORIGIN_KINDS)}, "
+                            f"got {origin!r}")
+    return {
+        "autopilot": DEFAULT_AUTOPILOT
+        if autopilot is None
+        else _autopilot(autopilot, "emulator.autopilot"),
+        "origin": origin,
+    }
 
 
 def _fault(raw: Any, index: int, vehicle_ids: set[int]) -> FaultSpec:
@@ -295,7 +358,8 @@ def parse_team(raw: Any, name: str = "team") -> TeamSpec:
     vehicles_raw = raw.get("vehicles")
     if not isinstance(vehicles_raw, list) or not vehicles_raw:
         raise TeamFileError("vehicles: expected a non-empty list")
-    vehicles = tuple(_vehicle(v, i) for i, v in enumerate(vehicles_raw))
+    team_emulator = _team_emulator(raw)
+    vehicles = tuple(_vehicle(v, i, team_emulator) for i, v in enumerate(vehicles_raw))
     ids = [v.vehicle_id for v in vehicles]
     sysids = [v.sysid for v in vehicles]
     if len(set(ids)) != len(ids):

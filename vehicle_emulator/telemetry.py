@@ -60,6 +60,8 @@ class FleetStatus:
     custom_mode: np.ndarray  # uint32
     base_mode_flags: np.ndarray  # uint8, without SAFETY_ARMED
     landed_state: np.ndarray  # uint8 MAV_LANDED_STATE
+    system_status: np.ndarray  # uint8 MAV_STATE
+    mav_autopilot: np.ndarray  # uint8 MAV_AUTOPILOT of the personality
     noise: np.ndarray  # bool
     battery_remaining: np.ndarray  # 0..1
     battery_voltage_v: np.ndarray
@@ -76,6 +78,8 @@ class FleetStatus:
             custom_mode=np.zeros(n, dtype=np.uint32),
             base_mode_flags=np.ones(n, dtype=np.uint8),
             landed_state=np.ones(n, dtype=np.uint8),
+            system_status=np.full(n, 3, dtype=np.uint8),
+            mav_autopilot=np.full(n, 12, dtype=np.uint8),
             noise=np.zeros(n, dtype=bool),
             battery_remaining=np.ones(n),
             battery_voltage_v=np.full(n, 16.8),
@@ -258,9 +262,9 @@ class Telemetry:
         armed = status.armed[idx]
         rows["custom_mode"] = status.custom_mode[idx]
         rows["type"] = 2  # MAV_TYPE_QUADROTOR
-        rows["autopilot"] = 12  # MAV_AUTOPILOT_PX4
+        rows["autopilot"] = status.mav_autopilot[idx]
         rows["base_mode"] = status.base_mode_flags[idx] | np.where(armed, 128, 0).astype(np.uint8)
-        rows["system_status"] = np.where(armed, 4, 3)  # ACTIVE / STANDBY
+        rows["system_status"] = status.system_status[idx]
         rows["mavlink_version"] = 3
 
     def _attitude(self, rows, idx, now_s, plant, status) -> None:

@@ -37,6 +37,7 @@ from vehicle_emulator.autopilot import (
 from vehicle_emulator.codec import GenericEncoder, mavlink
 from vehicle_emulator.faults import FaultSchedule, LinkImpairment
 from vehicle_emulator.params import ParamError, ParamStore, decode_value, encode_value
+from vehicle_emulator.personality import Personality
 from vehicle_emulator.plant import ControlMode, FleetPlant
 from vehicle_emulator.setpoints import from_actuator_control_target, from_attitude_target
 from vehicle_emulator.team import FaultSpec, VehicleSpec
@@ -59,9 +60,10 @@ REPORT_PERIOD_S = 5.0
 LIMITED_TEXT_PERIOD_S = 1.0
 LIMITED_TEXT_BURST = 5
 STATUSTEXT_MAX_BYTES = 200  # 4 chunks
-PX4_VERSION = (1 << 24) | (14 << 16) | (0 << 8) | 255  # reported as PX4 v1.14.0 release
-# COMMAND_INT | PARAM_ENCODE_BYTEWISE | SET_ATTITUDE_TARGET | SET_ACTUATOR_TARGET | MAVLINK2
-CAPABILITIES = 0x8 | 0x10 | 0x40 | 0x400 | 0x2000
+# COMMAND_INT | PARAM_ENCODE_BYTEWISE | SET_ATTITUDE_TARGET | MAVLINK2 (+ SET_ACTUATOR_TARGET
+# where the personality honours it)
+CAPABILITIES = 0x8 | 0x10 | 0x40 | 0x2000
+CAP_SET_ACTUATOR_TARGET = 0x400
 
 # PX4 base_mode flags per nav state (besides CUSTOM_MODE_ENABLED and SAFETY_ARMED).
 _BASE_FLAGS = {
@@ -100,6 +102,7 @@ class InputCounters:
     own_echo: int = 0
     setpoints_rejected: int = 0
     setpoints_clamped: int = 0
+    setpoints_ignored: int = 0  # a setpoint message this autopilot does not act on (not an error)
     unhandled: int = 0
     params_refused: int = 0
     last_reject_reason: str = ""
@@ -122,6 +125,7 @@ class VehicleNode:
 
     index: int
     spec: VehicleSpec
+    personality: Personality
     plant: FleetPlant
     telemetry: Telemetry
     status: FleetStatus
@@ -396,6 +400,10 @@ class VehicleNode:
     def _on_actuator_target(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
         if not self._for_me(msg):
             return
+        if not self.personality.protocol.actuator_setpoints:
+            # PX4 >= 1.14 dropped the message from its MAVLink receiver: no answer, no effect
+            self.counters.setpoints_ignored += 1
+            return
         self._take_setpoint(now_s, from_actuator_control_target(msg.group_mlx, msg.controls))
 
     def _take_setpoint(self, now_s: float, d: Any) -> None:
@@ -495,9 +503,11 @@ class VehicleNode:
 
     def _send_requested(self, now_s: float, msgid: int, link: Link, addr: Any) -> MavResult:
         if msgid == 148:
+            protocol = self.personality.protocol
+            caps = CAPABILITIES | (CAP_SET_ACTUATOR_TARGET if protocol.actuator_setpoints else 0)
             msg = mavlink.MAVLink_autopilot_version_message(
-                CAPABILITIES,
-                PX4_VERSION,
+                caps,
+                protocol.version_word,
                 0,
                 0,
                 0,

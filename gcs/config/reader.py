@@ -338,11 +338,29 @@ def _axis(node: _Node) -> AxisReference:
     return AxisReference(node.child("constant").number(0.0), tuple(cosines))
 
 
+# vehicle-emu's personalities and origin rules (its `emulator:` sections; the ground station
+# checks them so that `gcs check` catches a typo, and otherwise leaves them to the emulator)
+EMULATOR_AUTOPILOTS = ("nominal", "px4", "ardupilot")
+EMULATOR_ORIGINS = ("own", "shared")
+
+
+def _emulator_section(node: _Node, allowed: str) -> None:
+    if node.absent:
+        return
+    node.keys("", allowed)
+    node.child("autopilot").string(None, choices=EMULATOR_AUTOPILOTS)
+    if "origin" in allowed.split():
+        node.child("origin").string(None, choices=EMULATOR_ORIGINS)
+    if "origin_enu_m" in allowed.split() and not node.child("origin_enu_m").absent:
+        node.child("origin_enu_m").vec3()
+
+
 def _vehicle(node: _Node, gains: Gains) -> VehicleConfig:
     node.keys(
         "id sysid offset_enu_m initial estimates airframe",
-        "link plant nominal_mass_kg nominal_inertia_kgm2",
+        "link plant nominal_mass_kg nominal_inertia_kgm2 emulator",
     )
+    _emulator_section(node.child("emulator"), "autopilot origin_enu_m")
     vehicle_id = node.child("id").integer(ge=1)
     sysid = node.child("sysid").integer(ge=1, le=255)
     ini = node.child("initial").keys(
@@ -596,7 +614,10 @@ def _fly(node: _Node) -> FlyConfig:
 
 
 def _team(root: _Node) -> TeamConfig:
-    root.keys("name mission controller reference_velocity graph vehicles", "sim faults fly")
+    root.keys(
+        "name mission controller reference_velocity graph vehicles", "sim faults fly emulator"
+    )
+    _emulator_section(root.child("emulator"), "autopilot origin")
     name = root.child("name").string()
     mission = MissionConfig(
         root.child("mission").keys("duration_s").child("duration_s").number(gt=0.0)

@@ -396,8 +396,39 @@ def test_a_gcs_nav_land_from_offboard_stays_in_land_after_the_disarm(tmp_path):
     client.close()
 
 
-def test_actuator_control_target_flies_through_the_mixer(air_vehicle):
+def test_actuator_control_target_flies_through_the_mixer(tmp_path):
+    """The nominal personality honours SET_ACTUATOR_CONTROL_TARGET as PX4 <= 1.13 did."""
+    client, ctx = _start(["--id", "1", "--in-air", "--autopilot", "nominal"], tmp_path)
+    with ctx:
+        client.wait("HEARTBEAT", 60)
+        _fly_actuator_roll(client)
+    client.close()
+
+
+def test_px4_personality_ignores_actuator_setpoints(air_vehicle):
+    """PX4 v1.16.0 drops SET_ACTUATOR_CONTROL_TARGET: no setpoint counts, so an armed OFFBOARD
+    request is refused (the first ACK is still ACCEPTED), and AUTOPILOT_VERSION says 1.16.0
+    without the SET_ACTUATOR_TARGET capability."""
     client, _ = air_vehicle
+    thrust = hover_thrust(UAV1_MASS_KG, UAV1_FMAX_N)
+
+    def make():
+        return mavlink.MAVLink_set_actuator_control_target_message(
+            0, 0, 1, 1, [0.0, 0.0, 0.0, thrust, 0, 0, 0, 0]
+        )
+
+    with SetpointStreamer(client, make, rate_hz=100):
+        client.collect(0.5)
+        assert _set_mode(client, 1 | 128, OFFBOARD) == TEMP_REJECTED
+    beats = client.collect(1.5, "HEARTBEAT")
+    assert beats and all(hb.custom_mode != OFFBOARD_MODE for hb in beats)
+    client.send(mavlink.MAVLink_command_long_message(1, 1, 512, 0, 148, 0, 0, 0, 0, 0, 0))
+    version = client.wait("AUTOPILOT_VERSION", 2)
+    assert version.flight_sw_version >> 8 == (1 << 16) | (16 << 8) | 0
+    assert not version.capabilities & 0x400
+
+
+def _fly_actuator_roll(client: MavClient) -> None:
     thrust = hover_thrust(UAV1_MASS_KG, UAV1_FMAX_N)
     cmd = {"roll": 0.0}
 

@@ -53,6 +53,9 @@ def team_file(
         v["initial"]["position_enu_m"][2] += z_shift
     data["fly"]["geofence"]["min_enu_m"][2] = 0.5
     data["faults"] = faults if faults is not None else data.get("faults", [])
+    # The law and the link against the paper's nominal model (actuator setpoints honoured, no
+    # sensor noise); the px4 and ardupilot personalities are flown in test_fly_personalities.py
+    data["emulator"] = {"autopilot": "nominal", "origin": "shared"}
     path = tmp / "team.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path

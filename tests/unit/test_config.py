@@ -267,7 +267,7 @@ ERRORS = [
         "nmae",
         "x",
         r"^<dict>: nmae: unknown key; did you mean 'name'\? allowed keys: name, "
-        r"mission, controller, reference_velocity, graph, vehicles, sim, faults, fly$",
+        r"mission, controller, reference_velocity, graph, vehicles, sim, faults, fly, emulator$",
     ),
     (
         "vehicles.2.plant.mas_kg",

@@ -263,7 +263,9 @@ def test_a_statustext_longer_than_50_bytes_goes_in_mavlink2_chunks():
     ]
 
 
-PURE = ["autopilot", "inner", "plant", "setpoints", "frames", "faults", "params", "team"]
+PURE = [
+    "autopilot", "inner", "plant", "setpoints", "frames", "faults", "params", "team", "personality"
+]
 IMPURE = {"asyncio", "socket", "time", "pymavlink", "mavsdk", "select", "threading", "gcs"}
 
 
