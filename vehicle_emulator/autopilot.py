@@ -172,7 +172,7 @@ class Idle:
 
 
 Demand = MotorsOff | Idle | PositionTarget | RatesSetpoint | AttitudeSetpoint | ActuatorSetpoint
-OffboardSetpoint = RatesSetpoint | AttitudeSetpoint | ActuatorSetpoint
+OffboardSetpoint = RatesSetpoint | AttitudeSetpoint | ActuatorSetpoint | PositionTarget
 
 
 @dataclass(slots=True)
