@@ -147,16 +147,20 @@ class Telemetry:
 
     # --- schedule -----------------------------------------------------------------------------
 
-    def set_defaults(self, vehicle: int, rates_hz: dict[str, float], now_s: float = 0.0) -> None:
+    def set_defaults(
+        self, vehicle: int, rates_hz: dict[str, float], delayed: tuple[str, ...] = (),
+        now_s: float = 0.0,
+    ) -> None:
         """A vehicle's default rates (0: not sent unless requested), which also become its
-        current ones; a message not named keeps PX4's rate."""
+        current ones; a message not named keeps PX4's rate. The first of a ``delayed`` message
+        comes one interval after ``now_s`` (ArduPilot's first TIMESYNC request: 10 s)."""
         for name, hz in rates_hz.items():
             k = self.index[name]
             interval = math.inf if hz <= 0.0 else 1.0 / hz
             self.default_interval_s[vehicle, k] = interval
             self.interval_s[vehicle, k] = interval
-            if math.isinf(interval):
-                self.next_due_s[vehicle, k] = math.inf
+            if math.isinf(interval) or name in delayed:
+                self.next_due_s[vehicle, k] = now_s + interval
 
     def set_interval(self, vehicle: int, msgid: int, interval_us: float, now_s: float) -> bool:
         """MAV_CMD_SET_MESSAGE_INTERVAL semantics: -1 off, 0 default, > 0 period in us.

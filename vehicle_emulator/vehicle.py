@@ -480,6 +480,8 @@ class VehicleNode:
         except Exception:  # never leave a command unanswered
             log.exception("vehicle %d: command %d failed", self.spec.vehicle_id, msg.command)
             result = MavResult.FAILED
+        log.info("vehicle %d (sysid %d): command %d (%s) -> %s", self.spec.vehicle_id,
+                 self.sysid, msg.command, ", ".join(f"{x:g}" for x in p), result.name)
         if twice:
             self.deferred_acks.append(
                 DeferredAck(

@@ -1,5 +1,5 @@
-"""SET_POSITION_TARGET_LOCAL_NED as PX4 reads it (setpoints.py), and the one local-NED <->
-team-ENU conversion (frames.py)."""
+"""SET_POSITION_TARGET_LOCAL_NED as PX4 (setpoints.py) and ArduCopter (ardupilot_targets.py)
+read it, and the one local-NED <-> team-ENU conversion (frames.py)."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from vehicle_emulator import frames
+from vehicle_emulator.ardupilot_targets import guided_position_target
 from vehicle_emulator.autopilot import PositionTarget
 from vehicle_emulator.setpoints import PositionTargetFields, from_position_target_local_ned
 
@@ -93,3 +94,34 @@ def test_px4_body_frame_velocity_is_rotated_by_the_heading():
 def test_px4_refusals_name_the_reason(f, text):
     d = from_position_target_local_ned(f, ORIGIN, HERE, HEADING)
     assert d.setpoint is None and d.rejected == text
+
+
+def test_ardupilot_position_velocity_and_offsets():
+    # GIVEN ArduCopter's reading WHEN position + velocity in LOCAL_NED THEN both, not timed out
+    target, velocity_only = guided_position_target(
+        fields(ACC | YAW | YAW_RATE, pos=(2.0, 1.0, -12.0), vel=(0.5, 0, 0)), ORIGIN, HERE,
+        HEADING)
+    assert target.position_enu_m == (5.0, -1.0, 12.0) and not velocity_only
+    assert target.velocity_ff_enu_mps == (0.0, 0.5, 0.0)
+    # any one ignore bit ignores the whole vector (ArduPilot), unlike PX4
+    target, velocity_only = guided_position_target(
+        fields(4 | ACC | YAW | YAW_RATE, pos=(2.0, 1.0, -12.0), vel=(0.5, 0, 0)), ORIGIN, HERE,
+        HEADING)
+    assert target.mask == (0.0, 0.0, 0.0) and velocity_only
+    # LOCAL_OFFSET_NED is relative to the vehicle; BODY_NED also rotated by the heading
+    target, _ = guided_position_target(fields(POSITION_ONLY, frame=7, pos=(1.0, 0.0, 0.0)),
+                                       ORIGIN, HERE, HEADING)
+    assert np.allclose(target.position_enu_m, (5.0, 0.0, 10.0))
+    target, _ = guided_position_target(fields(POSITION_ONLY, frame=8, pos=(1.0, 0.0, 0.0)),
+                                       ORIGIN, HERE, 0.0)  # facing east
+    assert np.allclose(target.position_enu_m, (6.0, -1.0, 10.0))
+
+
+@pytest.mark.parametrize("f", [
+    fields(POS | VEL | ACC | YAW | YAW_RATE),  # nothing
+    fields(POSITION_ONLY, frame=3),  # not a local frame
+    fields(POS | VEL | 512),  # force
+    fields(VELOCITY_ONLY, vel=(math.nan, 0, 0)),  # not sane
+])
+def test_ardupilot_invalid_targets_stop_the_vehicle(f):
+    assert guided_position_target(f, ORIGIN, HERE, HEADING) == (None, False)
