@@ -156,7 +156,17 @@ class Emulator:
                 impairment=LinkImpairment(np.random.default_rng(seed + i)),
                 encoder=GenericEncoder(spec.sysid, 1, self.telemetry.seq, i),
             )
-            node.autopilot = Autopilot.start(spec.vehicle_id, params, 0.0, node.observe())
+            node.autopilot = Autopilot.start(
+                spec.vehicle_id,
+                params,
+                0.0,
+                node.observe(),
+                ready_after_s=personality.protocol.arming_ready_s,
+            )
+            origin = spec.local_origin_enu_m(personality.protocol.own_origin)
+            home = node.autopilot.home_enu_m
+            self.status.origin_ned_m[i] = (origin[1], origin[0], -origin[2])
+            self.status.home_ned_m[i] = (home[1], home[0], -home[2])
             node.sync_all_params()
             node.apply_demand()
             node.refresh_status(0.0)
@@ -201,6 +211,7 @@ class Emulator:
                 node.drain_events()
                 node.refresh_status(now)
                 node.report_input(now)
+                node.announce_origin(now)
                 self.link_up[node.index] = not node.impairment.is_down(now)
             self._fault_nodes = [node for node in self.nodes if not node.faults.idle]
         out = self.telemetry.collect(now, self.plant, self.status, self.link_up)

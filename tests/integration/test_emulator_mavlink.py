@@ -12,6 +12,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from vehicle_emulator.testing import (
+    PREARM_CHECK,
     MavClient,
     SetpointStreamer,
     custom_main_mode,
@@ -43,10 +44,37 @@ def _start(args: list[str], tmp_path: Path):
 
 @pytest.fixture
 def ground_vehicle(tmp_path):
+    """A vehicle booted on the ground, once its pre-arm checks pass (as a GCS waits for it)."""
     client, ctx = _start(["--id", "1"], tmp_path)
     with ctx as emu:
         client.wait("HEARTBEAT", 60)
+        client.wait_ready_to_arm()
         yield client, emu
+    client.close()
+
+
+def test_arming_is_refused_until_the_vehicle_is_ready_after_boot(tmp_path):
+    # PX4 v1.16.0 SIH: three TEMPORARILY_REJECTED with "Arming denied: Resolve system health
+    # failures first", HEARTBEAT system_status UNINIT (0), then ACCEPTED 3.0 s after its first
+    # HEARTBEAT, when SYS_STATUS shows the pre-arm check healthy and system_status STANDBY (3)
+    client, ctx = _start(["--id", "1"], tmp_path)
+    with ctx:
+        first = client.wait("HEARTBEAT", 60)
+        t_first = time.monotonic()
+        assert first.system_status == 0
+        assert client.command(400, 1) == TEMP_REJECTED
+        assert client.wait_text(2, lambda t: t.startswith("Arming denied"))[1] == (
+            "Arming denied: Resolve system health failures first"
+        )
+        status = client.wait("SYS_STATUS", 2)
+        assert not status.onboard_control_sensors_health & PREARM_CHECK
+        assert status.onboard_control_sensors_present & PREARM_CHECK
+        client.wait_ready_to_arm(10)
+        ready_after_s = time.monotonic() - t_first
+        assert 2.0 < ready_after_s < 4.5
+        assert client.wait("HEARTBEAT", 2).system_status == 3
+        assert client.command(400, 1) == ACCEPTED
+        assert client.wait("HEARTBEAT", 2, lambda m: m.base_mode & 128).system_status == 4
     client.close()
 
 
