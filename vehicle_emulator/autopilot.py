@@ -104,6 +104,8 @@ def nav_state_of(main_mode: int, sub_mode: int) -> NavState | None:
     return {2: NavState.ALTCTL, 3: NavState.POSCTL, 6: NavState.OFFBOARD}.get(main_mode)
 
 
+_MANUAL = frozenset({NavState.POSCTL, NavState.ALTCTL})  # modes flown from (RC) sticks
+
 _MODE_NAMES = {
     NavState.ALTCTL: "Altitude",
     NavState.POSCTL: "Position",
@@ -415,13 +417,18 @@ class Autopilot:
         if self.nav_state is NavState.OFFBOARD:
             return self.setpoint if self.setpoint is not None else self._hold_demand(obs)
         if self.nav_state is NavState.AUTO_LAND:
-            if obs.on_ground:
-                return Idle()
-            speed = self.params["MPC_LAND_SPEED"]
-            return PositionTarget(
-                obs.position_enu_m, (0.0, 0.0, -speed), (1.0, 1.0, 0.0), obs.yaw_enu_rad
-            )
+            return self._descent_demand(obs, self.params["MPC_LAND_SPEED"])
+        if self.nav_state in _MANUAL and self.params.get_int("COM_RC_IN_MODE") == 4:
+            # no manual control input: PX4 reads the throttle stick as full down
+            return self._descent_demand(obs, self.params["MPC_Z_VEL_MAX_DN"])
         return self._hold_demand(obs)
+
+    def _descent_demand(self, obs: Observation, speed_mps: float) -> Demand:
+        if obs.on_ground:
+            return Idle()
+        return PositionTarget(
+            obs.position_enu_m, (0.0, 0.0, -speed_mps), (1.0, 1.0, 0.0), obs.yaw_enu_rad
+        )
 
     def _enter(self, target: NavState, obs: Observation) -> None:
         if target is not self.nav_state:

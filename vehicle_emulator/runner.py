@@ -133,6 +133,8 @@ class Emulator:
             params = ParamStore()
             params.set("MAV_SYS_ID", spec.sysid, force=True)
             params.set("EMU_ACK_TWICE", 1.0 if personality.protocol.ack_twice else 0.0)
+            for name, value in personality.protocol.param_defaults:
+                params.set(name, value)
             params.set("EMU_SEED", seed)
             params.set("MPC_THR_HOVER", float(self.plant.hover_thrust_norm[i]))
             params.set("EMU_MOT_TAU", spec.motor_time_constant_s)
