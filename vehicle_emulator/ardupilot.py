@@ -259,9 +259,11 @@ class ArduCopter:
 
     @classmethod
     def start(
-        cls, vehicle_id: int, params: ParamStore, now_s: float, obs: Observation
+        cls, vehicle_id: int, params: ParamStore, now_s: float, obs: Observation,
+        ready_after_s: float = 0.0,
     ) -> ArduCopter:
-        """At boot on the ground: disarmed in STABILIZE, the boot timeline ahead (EMU_BOOT_SCALE).
+        """At boot on the ground: disarmed in STABILIZE, the boot timeline ahead (EMU_BOOT_SCALE;
+        ``ready_after_s``, the personality's single readiness time, is PX4's, unused here).
         In the air: past boot, armed in GUIDED, holding its position."""
         ap = cls(vehicle_id, params, BootTimeline(params["EMU_BOOT_SCALE"]))
         ap.home_enu_m = (obs.position_enu_m[0], obs.position_enu_m[1], 0.0)
@@ -295,6 +297,11 @@ class ArduCopter:
     def position_ok(self, now_s: float) -> bool:
         """The EKF has a position estimate (LOCAL_POSITION_NED is sent, GUIDED is armable)."""
         return self.boot.position_ok(now_s)
+
+    def prearm_ok(self, now_s: float) -> bool:
+        """SYS_STATUS pre-arm check bit: the pre-arm checks pass (recorded: set at 23.5 s, when
+        the gyros became consistent, in STABILIZE)."""
+        return not self.arm_failures(now_s, mode_check=False)
 
     def system_status(self, now_s: float) -> int:
         """HEARTBEAT system_status: BOOT (1) before "ArduPilot Ready", STANDBY (3) landed,

@@ -37,7 +37,6 @@ from vehicle_emulator.autopilot import MavResult, Severity
 from vehicle_emulator.codec import mavlink
 from vehicle_emulator.setpoints import PositionTargetFields
 from vehicle_emulator.telemetry import DEFAULT_RATES_HZ as PX4_RATES_HZ
-from vehicle_emulator.telemetry import HOME_ALT_M, HOME_LAT_DEG, HOME_LON_DEG
 from vehicle_emulator.vehicle import Link, VehicleNode, _int
 
 log = logging.getLogger(__name__)
@@ -94,6 +93,12 @@ class ArduPilotNode(VehicleNode):
         st.system_status[i] = ap.system_status(now_s)
         st.position_valid[i] = ap.position_ok(now_s)
         st.vtol_state[i] = 3  # MAV_VTOL_STATE_MC, as ArduCopter reports it
+        home = ap.home_enu_m  # ArduPilot sets home where it arms
+        st.home_ned_m[i] = (home[1], home[0], -home[2])
+
+    def announce_origin(self, now_s: float) -> None:
+        """ArduPilot sends GPS_GLOBAL_ORIGIN when its EKF sets the origin (the boot timeline,
+        drain_events), not PX4's once-after-boot."""
 
     def setpoint_driven(self) -> bool:
         return self.autopilot.setpoint_driven()
@@ -212,11 +217,6 @@ class ArduPilotNode(VehicleNode):
             )
         elif msgid in (MSG_HOME_POSITION, MSG_GPS_GLOBAL_ORIGIN) and not ap.boot.origin_set(now_s):
             return MavResult.ACCEPTED  # ArduPilot: nothing to send before the EKF origin
-        elif msgid == MSG_GPS_GLOBAL_ORIGIN:
-            lat_e7, lon_e7 = _lat_lon_e7(self.local_origin_enu_m)
-            alt_mm = int(round((HOME_ALT_M + self.local_origin_enu_m[2]) * 1e3))
-            msg = mavlink.MAVLink_gps_global_origin_message(lat_e7, lon_e7, alt_mm,
-                                                            int(now_s * 1e6))
         else:
             return super()._send_requested(now_s, msgid, link, addr)  # type: ignore[arg-type]
         self.send_msg(msg, link, addr)
@@ -262,12 +262,3 @@ class ArduPilotNode(VehicleNode):
         else:
             self.counters.setpoints_ignored += 1
 
-
-def _lat_lon_e7(position_enu_m: tuple[float, float, float]) -> tuple[int, int]:
-    """Flat-earth latitude / longitude (1e-7 deg) of a team-frame point (as telemetry.py's
-    GLOBAL_POSITION_INT)."""
-    lat = HOME_LAT_DEG + math.degrees(position_enu_m[1] / 6378137.0)
-    lon = HOME_LON_DEG + math.degrees(
-        position_enu_m[0] / (6378137.0 * math.cos(math.radians(HOME_LAT_DEG)))
-    )
-    return int(round(lat * 1e7)), int(round(lon * 1e7))

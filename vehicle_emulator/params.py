@@ -70,6 +70,11 @@ PARAMS: tuple[ParamDef, ...] = (
     ParamDef("MIS_TAKEOFF_ALT", _F, 2.5, 0.5, 100.0, "default takeoff altitude above ground [m]"),
     ParamDef("MPC_LAND_SPEED", _F, 0.7, 0.2, 3.0, "landing descent speed [m/s]"),
     ParamDef("MPC_TKO_SPEED", _F, 1.5, 0.2, 5.0, "takeoff climb speed [m/s]"),
+    ParamDef("MPC_Z_VEL_MAX_DN", _F, 1.0, 0.5, 4.0, "max descent speed, full-down stick [m/s]"),
+    ParamDef(
+        "COM_RC_IN_MODE", _I, 3, 0, 4,
+        "manual control input; 4 none: in Position/Altitude the stick reads full down (descend)",
+    ),
     ParamDef(
         "MPC_THR_HOVER", _F, 0.5, 0.05, 0.95, "hover thrust of the onboard controllers [0..1]"
     ),

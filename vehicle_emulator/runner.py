@@ -156,6 +156,8 @@ class Emulator:
             params.set(sysid_param, spec.sysid, force=True)
             if "EMU_ACK_TWICE" in params:
                 params.set("EMU_ACK_TWICE", 1.0 if personality.protocol.ack_twice else 0.0)
+            for name, value in personality.protocol.param_defaults:
+                params.set(name, value)
             params.set("EMU_SEED", seed)
             params.set(hover_param, float(self.plant.hover_thrust_norm[i]))
             params.set("EMU_MOT_TAU", spec.motor_time_constant_s)
@@ -186,7 +188,17 @@ class Emulator:
                 impairment=LinkImpairment(np.random.default_rng(seed + i)),
                 encoder=GenericEncoder(spec.sysid, 1, self.telemetry.seq, i),
             )
-            node.autopilot = autopilot_cls.start(spec.vehicle_id, params, 0.0, node.observe())
+            node.autopilot = autopilot_cls.start(
+                spec.vehicle_id,
+                params,
+                0.0,
+                node.observe(),
+                ready_after_s=personality.protocol.arming_ready_s,
+            )
+            origin = node.local_origin_enu_m
+            home = node.autopilot.home_enu_m
+            self.status.origin_ned_m[i] = (origin[1], origin[0], -origin[2])
+            self.status.home_ned_m[i] = (home[1], home[0], -home[2])
             node.sync_all_params()
             node.apply_demand()
             node.refresh_status(0.0)
@@ -231,6 +243,7 @@ class Emulator:
                 node.drain_events()
                 node.refresh_status(now)
                 node.report_input(now)
+                node.announce_origin(now)
                 self.link_up[node.index] = not node.impairment.is_down(now)
             self._fault_nodes = [node for node in self.nodes if not node.faults.idle]
         out = self.telemetry.collect(now, self.plant, self.status, self.link_up)

@@ -21,6 +21,7 @@ from numba import njit
 
 from vehicle_emulator import frames
 from vehicle_emulator.codec import BatchEncoder, mavlink
+from vehicle_emulator.geodesy import enu_to_geodetic
 from vehicle_emulator.plant import FleetPlant
 
 __all__ = ["DEFAULT_RATES_HZ", "FleetStatus", "Telemetry", "HOME_LAT_DEG", "HOME_LON_DEG"]
@@ -38,12 +39,13 @@ DEFAULT_RATES_HZ: dict[str, float] = {
     "SYS_STATUS": 5.0,
     "TIMESYNC": 10.0,
     "BATTERY_STATUS": 0.5,
+    "HOME_POSITION": 0.5,
 }
-# PX4 SITL's default home (Zurich), used for GLOBAL_POSITION_INT / HOME_POSITION.
+# The team frame's origin on the globe: PX4 SITL's default home (Zurich). Geodetic coordinates
+# (GLOBAL_POSITION_INT, HOME_POSITION, GPS_GLOBAL_ORIGIN) are exact WGS-84 (geodesy.py).
 HOME_LAT_DEG = 47.397742
 HOME_LON_DEG = 8.545594
 HOME_ALT_M = 488.0
-EARTH_RADIUS_M = 6378137.0
 # Noise standard deviations when EMU_NOISE = 1.
 NOISE_POS_M = 0.01
 NOISE_VEL_MPS = 0.02
@@ -53,6 +55,7 @@ NOISE_ACC_MPS2 = 0.05
 
 _NEED_POSITION = frozenset({"LOCAL_POSITION_NED"})
 _SENSORS = 0x1 | 0x2 | 0x4 | 0x8 | 0x20 | 0x400 | 0x800 | 0x1000 | 0x8000 | 0x200000
+_PREARM_CHECK = 0x10000000  # MAV_SYS_STATUS_PREARM_CHECK: health set while arming would pass
 
 
 @dataclass(slots=True)
@@ -65,7 +68,10 @@ class FleetStatus:
     base_mode_flags: np.ndarray  # uint8, without SAFETY_ARMED
     landed_state: np.ndarray  # uint8 MAV_LANDED_STATE
     system_status: np.ndarray  # uint8 MAV_STATE
+    prearm_ok: np.ndarray  # bool: SYS_STATUS pre-arm check health bit
     mav_autopilot: np.ndarray  # uint8 MAV_AUTOPILOT of the personality
+    origin_ned_m: np.ndarray  # (n, 3) EKF origin in the team frame (NED): LOCAL_POSITION_NED zero
+    home_ned_m: np.ndarray  # (n, 3) home in the team frame (NED)
     noise: np.ndarray  # bool
     position_valid: np.ndarray  # bool: the estimator has a position (LOCAL_POSITION_NED sent)
     vtol_state: np.ndarray  # uint8 EXTENDED_SYS_STATE.vtol_state (ArduCopter: MC, 3)
@@ -85,7 +91,10 @@ class FleetStatus:
             base_mode_flags=np.ones(n, dtype=np.uint8),
             landed_state=np.ones(n, dtype=np.uint8),
             system_status=np.full(n, 3, dtype=np.uint8),
+            prearm_ok=np.ones(n, dtype=bool),
             mav_autopilot=np.full(n, 12, dtype=np.uint8),
+            origin_ned_m=np.zeros((n, 3)),
+            home_ned_m=np.zeros((n, 3)),
             noise=np.zeros(n, dtype=bool),
             position_valid=np.ones(n, dtype=bool),
             vtol_state=np.zeros(n, dtype=np.uint8),
@@ -105,6 +114,14 @@ def _scatter(out, ln, idx, buf, cursor):
         for j in range(ln[r]):
             buf[c + j] = out[r, j]
         cursor[v] = c + ln[r]
+
+
+def geodetic_of_ned(ned_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Team-frame NED points (..., 3) -> (lat deg, lon deg, altitude m) on the WGS-84
+    ellipsoid (the emulator reports ellipsoid heights as AMSL: no geoid model)."""
+    ned = np.asarray(ned_m, dtype=float)
+    enu = np.stack((ned[..., 1], ned[..., 0], -ned[..., 2]), axis=-1)
+    return enu_to_geodetic(enu, HOME_LAT_DEG, HOME_LON_DEG, HOME_ALT_M)
 
 
 def _msg_class(name: str) -> Any:
@@ -143,6 +160,7 @@ class Telemetry:
             "SYS_STATUS": self._sys_status,
             "TIMESYNC": self._timesync,
             "BATTERY_STATUS": self._battery_status,
+            "HOME_POSITION": self._home_position,
         }
 
     # --- schedule -----------------------------------------------------------------------------
@@ -309,14 +327,14 @@ class Telemetry:
 
     def _local_position(self, rows, idx, now_s, plant, status) -> None:
         d = self._d
-        p, v = d["pos_ned"][idx], d["vel_ned"][idx]
+        p, v = d["pos_ned"][idx] - status.origin_ned_m[idx], d["vel_ned"][idx]
         rows["time_boot_ms"] = int(now_s * 1e3)
         rows["x"], rows["y"], rows["z"] = p[:, 0], p[:, 1], p[:, 2]
         rows["vx"], rows["vy"], rows["vz"] = v[:, 0], v[:, 1], v[:, 2]
 
     def _odometry(self, rows, idx, now_s, plant, status) -> None:
         d = self._d
-        p, v, w = d["pos_ned"][idx], d["vel_frd"][idx], d["w_frd"][idx]
+        p, v, w = d["pos_ned"][idx] - status.origin_ned_m[idx], d["vel_frd"][idx], d["w_frd"][idx]
         rows["time_usec"] = int(now_s * 1e6)
         rows["frame_id"] = 1  # MAV_FRAME_LOCAL_NED
         rows["child_frame_id"] = 12  # MAV_FRAME_BODY_FRD: the twist is in the body frame
@@ -344,15 +362,12 @@ class Telemetry:
         d = self._d
         p = d["pos_ned"][idx]
         v = d["vel_ned"][idx]
-        lat = HOME_LAT_DEG + np.degrees(p[:, 0] / EARTH_RADIUS_M)
-        lon = HOME_LON_DEG + np.degrees(
-            p[:, 1] / (EARTH_RADIUS_M * math.cos(math.radians(HOME_LAT_DEG)))
-        )
+        lat, lon, alt = geodetic_of_ned(p)
         rows["time_boot_ms"] = int(now_s * 1e3)
         rows["lat"] = np.round(lat * 1e7)
         rows["lon"] = np.round(lon * 1e7)
-        rows["alt"] = np.round((HOME_ALT_M - p[:, 2]) * 1e3)
-        rows["relative_alt"] = np.round(-p[:, 2] * 1e3)
+        rows["alt"] = np.round(alt * 1e3)
+        rows["relative_alt"] = np.round((status.home_ned_m[idx, 2] - p[:, 2]) * 1e3)
         rows["vx"] = np.round(v[:, 0] * 100)
         rows["vy"] = np.round(v[:, 1] * 100)
         rows["vz"] = np.round(v[:, 2] * 100)
@@ -372,9 +387,11 @@ class Telemetry:
         rows["vtol_state"] = status.vtol_state[idx]
 
     def _sys_status(self, rows, idx, now_s, plant, status) -> None:
-        rows["onboard_control_sensors_present"] = _SENSORS
-        rows["onboard_control_sensors_enabled"] = _SENSORS
-        rows["onboard_control_sensors_health"] = _SENSORS
+        rows["onboard_control_sensors_present"] = _SENSORS | _PREARM_CHECK
+        rows["onboard_control_sensors_enabled"] = _SENSORS | _PREARM_CHECK
+        rows["onboard_control_sensors_health"] = _SENSORS | np.where(
+            status.prearm_ok[idx], _PREARM_CHECK, 0
+        ).astype(np.uint32)
         rows["load"] = 200
         rows["voltage_battery"] = np.round(status.battery_voltage_v[idx] * 1e3).astype(np.uint16)
         rows["current_battery"] = np.round(status.battery_current_a[idx] * 100).astype(np.int16)
@@ -384,6 +401,17 @@ class Telemetry:
     def _timesync(self, rows, idx, now_s, plant, status) -> None:
         rows["tc1"] = 0
         rows["ts1"] = int(now_s * 1e9)
+
+    def _home_position(self, rows, idx, now_s, plant, status) -> None:
+        home = status.home_ned_m[idx]
+        lat, lon, alt = geodetic_of_ned(home)
+        local = home - status.origin_ned_m[idx]
+        rows["latitude"] = np.round(lat * 1e7)
+        rows["longitude"] = np.round(lon * 1e7)
+        rows["altitude"] = np.round(alt * 1e3)
+        rows["x"], rows["y"], rows["z"] = local[:, 0], local[:, 1], local[:, 2]
+        rows["q"] = np.array([1.0, 0.0, 0.0, 0.0])
+        rows["time_usec"] = int(now_s * 1e6)
 
     def _battery_status(self, rows, idx, now_s, plant, status) -> None:
         rows["current_consumed"] = np.round(plant.charge_used_c[idx] / 3.6).astype(np.int32)

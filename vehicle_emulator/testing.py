@@ -17,6 +17,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -26,6 +27,8 @@ from pymavlink.dialects.v20 import common as mavlink
 
 __all__ = [
     "MavClient",
+    "RecordingLink",
+    "run_until",
     "clients_on_port_block",
     "SetpointStreamer",
     "custom_main_mode",
@@ -37,8 +40,36 @@ __all__ = [
 ]
 
 GCS_SYSID = 245
+PREARM_CHECK = 0x10000000  # MAV_SYS_STATUS_PREARM_CHECK
 GCS_COMPID = 190
 HISTORY_MAX = 200_000
+
+
+class RecordingLink:
+    """An in-process stand-in for a UDP link: decodes and keeps everything the emulator sends
+    (for tests of ``runner.Emulator`` without sockets)."""
+
+    name = "recording"
+
+    def __init__(self) -> None:
+        from vehicle_emulator.codec import PeerDecoder
+
+        self.decoder = PeerDecoder()
+        self.msgs: list = []
+
+    def send(self, data: bytes, addr: Any = None) -> None:
+        self.msgs.extend(self.decoder.feed(data, "emu"))
+
+    def types(self) -> Counter:
+        return Counter(m.get_type() for m in self.msgs)
+
+
+def run_until(emu: Any, until_s: float, tick_s: float = 0.002) -> None:
+    """Advance an in-process ``Emulator`` tick by tick to simulated time ``until_s``."""
+    t = emu.now_s
+    while t < until_s - 1e-9:
+        t += tick_s
+        emu.advance_to(t)
 
 
 def free_udp_port() -> int:
@@ -191,6 +222,12 @@ class MavClient:
                 continue
             if cond is None or cond(m):
                 return m
+
+    def wait_ready_to_arm(self, timeout_s: float = 10.0) -> Any:
+        """The first SYS_STATUS whose pre-arm check (MAV_SYS_STATUS_PREARM_CHECK) is healthy:
+        how a ground station knows a PX4 vehicle may be armed. TimeoutError."""
+        return self.wait("SYS_STATUS", timeout_s, lambda m: m.onboard_control_sensors_health
+                         & PREARM_CHECK)
 
     def wait_text(
         self, timeout_s: float = 5.0, cond: Callable[[str], bool] | None = None

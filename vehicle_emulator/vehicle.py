@@ -19,7 +19,6 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from vehicle_emulator import frames
 from vehicle_emulator.autopilot import (
     ActuatorSetpoint,
     AttitudeSetpoint,
@@ -46,13 +45,7 @@ from vehicle_emulator.setpoints import (
     from_position_target_local_ned,
 )
 from vehicle_emulator.team import FaultSpec, VehicleSpec
-from vehicle_emulator.telemetry import (
-    HOME_ALT_M,
-    HOME_LAT_DEG,
-    HOME_LON_DEG,
-    FleetStatus,
-    Telemetry,
-)
+from vehicle_emulator.telemetry import HOME_ALT_M, FleetStatus, Telemetry, geodetic_of_ned
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +53,8 @@ __all__ = ["DeferredAck", "Link", "VehicleNode", "InputCounters"]
 
 COMPID = 1
 CMD_DO_SET_MODE = 176
+GPS_GLOBAL_ORIGIN_MSGID = 49
+ORIGIN_ANNOUNCE_S = 0.1  # PX4 v1.16.0 sent GPS_GLOBAL_ORIGIN once, 0.1 s after its first HEARTBEAT
 HEARTBEAT_MSGID = 0  # PX4: its interval cannot be changed (SET_MESSAGE_INTERVAL -> FAILED)
 REPORT_PERIOD_S = 5.0
 LIMITED_TEXT_PERIOD_S = 1.0
@@ -148,6 +143,7 @@ class VehicleNode:
     deferred_acks: list[DeferredAck] = field(default_factory=list)
     _next_report_s: float = REPORT_PERIOD_S
     _fault_clock_announced: bool = False
+    _origin_announced: bool = False
     _text_id: int = 0  # id of the last chunked STATUSTEXT
     _limited_window_end_s: float = 0.0
     _limited_in_window: int = 0
@@ -199,6 +195,8 @@ class VehicleNode:
         """Status arrays for telemetry, the battery model and the fault clock parameter."""
         i, ap, st = self.index, self.autopilot, self.status
         st.armed[i] = ap.armed
+        st.system_status[i] = ap.system_status(now_s)
+        st.prearm_ok[i] = ap.prearm_ok(now_s)
         st.custom_mode[i] = ap.custom_mode
         st.base_mode_flags[i] = 1 | _BASE_FLAGS.get(ap.nav_state, 4 | 16 | 8)
         on_ground = bool(self.plant.on_ground[i])
@@ -297,6 +295,22 @@ class VehicleNode:
             )
             self.send_msg(msg, a.link, a.addr)
         self.drain_events(now_s)
+
+    def origin_message(self, now_s: float) -> Any:
+        """GPS_GLOBAL_ORIGIN: where this vehicle's LOCAL_POSITION_NED is zero."""
+        lat, lon, alt = geodetic_of_ned(self.status.origin_ned_m[self.index])
+        return mavlink.MAVLink_gps_global_origin_message(
+            int(round(float(lat) * 1e7)),
+            int(round(float(lon) * 1e7)),
+            int(round(float(alt) * 1e3)),
+            int(now_s * 1e6),
+        )
+
+    def announce_origin(self, now_s: float) -> None:
+        """GPS_GLOBAL_ORIGIN once, shortly after boot (as PX4 does when its EKF sets it)."""
+        if not self._origin_announced and now_s >= ORIGIN_ANNOUNCE_S:
+            self._origin_announced = True
+            self.send_msg(self.origin_message(now_s))
 
     def report_input(self, now_s: float) -> None:
         """Every REPORT_PERIOD_S: one STATUSTEXT if rejected/clamped input grew."""
@@ -514,7 +528,8 @@ class VehicleNode:
                 return MavResult.DENIED
             return ap.set_mode(now_s, obs, _int(p[1]), _int(p[2]))
         if cmd == 22:  # NAV_TAKEOFF: param7 altitude AMSL (PX4)
-            alt = p[6] - HOME_ALT_M if math.isfinite(p[6]) else math.nan
+            home_amsl_m = HOME_ALT_M - float(self.status.home_ned_m[self.index, 2])
+            alt = p[6] - home_amsl_m if math.isfinite(p[6]) else math.nan
             return ap.takeoff(now_s, obs, alt)
         if cmd == 21:  # NAV_LAND
             return ap.land(now_s, obs)
@@ -559,26 +574,8 @@ class VehicleNode:
                 self.sysid,
                 [0] * 18,
             )
-        elif msgid == 242:
-            home = self.autopilot.home_enu_m
-            lat = HOME_LAT_DEG + math.degrees(home[1] / 6378137.0)
-            lon = HOME_LON_DEG + math.degrees(
-                home[0] / (6378137.0 * math.cos(math.radians(HOME_LAT_DEG)))
-            )
-            ned = frames.enu_to_ned(np.array(home))
-            msg = mavlink.MAVLink_home_position_message(
-                int(lat * 1e7),
-                int(lon * 1e7),
-                int(HOME_ALT_M * 1e3),
-                float(ned[0]),
-                float(ned[1]),
-                float(ned[2]),
-                [1, 0, 0, 0],
-                0,
-                0,
-                0,
-                int(now_s * 1e6),
-            )
+        elif msgid == GPS_GLOBAL_ORIGIN_MSGID:
+            msg = self.origin_message(now_s)
         elif msgid in self.telemetry.msgids:
             k = self.telemetry.msgids[msgid]
             self.telemetry.next_due_s[self.index, k] = now_s  # sent on the next tick

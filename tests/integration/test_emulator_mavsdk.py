@@ -90,6 +90,10 @@ async def _fly(port: int, ardupilot: bool = False) -> dict:
         att = await _first(telemetry.subscribe_attitude_euler(), 10)
         out["start_rel_alt_m"] = pos.relative_altitude_m
         out["start_roll_deg"] = att.roll_deg
+        # as MAVSDK's examples do: wait for the health checks before arming (PX4 refuses to
+        # arm for its first seconds after boot; health.is_armable is the pre-arm check bit)
+        health = await _first(telemetry.subscribe_health(), 15, lambda h: h.is_armable)
+        out["home_position_ok"] = health.is_home_position_ok
         await action.arm()
         await _first(telemetry.subscribe_armed(), 5, bool)
         if ardupilot:  # GUIDED + NAV_TAKEOFF (MAVSDK's action.takeoff for ArduPilot)
@@ -144,6 +148,7 @@ def test_mavsdk_discovers_arms_and_flies_offboard_with_attitude_rate(tmp_path):
     with run_emulator(["--id", "1"], remote_port=port, log_dir=str(tmp_path)):
         out = asyncio.run(_fly(port))
     assert out["autopilot"] == Autopilot.PX4
+    assert out["home_position_ok"]
     assert abs(out["start_rel_alt_m"]) < 0.05 and abs(out["start_roll_deg"]) < 1.0
     ack_s, mode_s = out["offboard_timing_s"]
     assert ack_s < ACK_WITHIN_S and mode_s < MODE_SEEN_WITHIN_S

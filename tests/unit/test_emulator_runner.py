@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import ast
-from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -15,25 +14,13 @@ from vehicle_emulator.faults import LinkImpairment
 from vehicle_emulator.runner import Emulator
 from vehicle_emulator.team import FaultSpec, default_vehicle
 from vehicle_emulator.telemetry import DEFAULT_RATES_HZ
+from vehicle_emulator.testing import RecordingLink, run_until
 
 ROOT = Path(__file__).resolve().parents[2]
 GCS = mavlink.MAVLink(None, srcSystem=245, srcComponent=190)
 
 
-class FakeLink:
-    """Collects what the emulator sends; decodes it for assertions."""
-
-    name = "fake"
-
-    def __init__(self) -> None:
-        self.decoder = PeerDecoder()
-        self.msgs: list = []
-
-    def send(self, data: bytes, addr=None) -> None:
-        self.msgs.extend(self.decoder.feed(data, "emu"))
-
-    def types(self) -> Counter:
-        return Counter(m.get_type() for m in self.msgs)
+FakeLink = RecordingLink
 
 
 def _emu(n=1, in_air=True, **kw) -> tuple[Emulator, list[FakeLink]]:
@@ -46,11 +33,7 @@ def _emu(n=1, in_air=True, **kw) -> tuple[Emulator, list[FakeLink]]:
     return emu, links
 
 
-def _run(emu: Emulator, until_s: float, tick_s: float = 0.002) -> None:
-    t = emu.now_s
-    while t < until_s - 1e-9:
-        t += tick_s
-        emu.advance_to(t)
+_run = run_until
 
 
 def _send(emu: Emulator, i: int, msg, link) -> None:
@@ -214,17 +197,18 @@ def test_emu_ack_twice_0_answers_do_set_mode_once_with_the_result():
 
 def test_only_do_set_mode_commands_are_acked_twice():
     emu, (link,) = _emu(in_air=False)
+    _run(emu, 3.1)  # past PX4's arming readiness after boot
     # COMMAND_INT 176 goes through the same PX4 receiver path: twice
     _send(
         emu, 0, mavlink.MAVLink_command_int_message(1, 1, 0, 176, 0, 0, 1, 3, 0, 0, 0, 0, 0), link
     )
-    _run(emu, 0.01)
+    _run(emu, emu.now_s + 0.01)
     assert _acks(link) == [(176, 0), (176, 0)]
     # SET_MODE (the message) is PX4's commander alone: one ACK; arming: one ACK
     link.msgs.clear()
     _send(emu, 0, mavlink.MAVLink_set_mode_message(1, 1, (4 << 16) | (3 << 24)), link)
     _send(emu, 0, mavlink.MAVLink_command_long_message(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0), link)
-    _run(emu, 0.1)
+    _run(emu, emu.now_s + 0.1)
     assert _acks(link) == [(176, 0), (400, 0)]
 
 
