@@ -14,6 +14,9 @@ ArduCopter 4.7.0-dev SITL as recorded (../shared/data/sitl/README.md, ArduPilot 
 * STATUSTEXT up to 50 bytes, never chunked. Parameters: ArduCopter's names, integers cast to
   float. HOME_POSITION and GPS_GLOBAL_ORIGIN when the EKF origin is set and at each arming.
 * A plain-text boot banner (EMU_BANNER) on each link before the first packet.
+* SET_POSITION_TARGET_GLOBAL_INT in GUIDED: latitude/longitude (WGS-84) and an altitude above
+  mean sea level (frames GLOBAL, GLOBAL_INT) or above home (GLOBAL_RELATIVE_ALT[_INT]), flown like
+  the local target it amounts to; terrain frames and invalid coordinates stop the vehicle.
 
 Links: ArduPilot SITL's ``udpclient`` sends from an ephemeral port, new for each process, and
 hears only its peer; runner.py / cli.py open such a link unless a bind is forced (``--bind``).
@@ -25,6 +28,9 @@ import logging
 import math
 from typing import Any
 
+import numpy as np
+
+from vehicle_emulator import frames, geodesy
 from vehicle_emulator.ardupilot import (
     MSG_GPS_GLOBAL_ORIGIN,
     MSG_HOME_POSITION,
@@ -35,8 +41,13 @@ from vehicle_emulator.ardupilot import (
 from vehicle_emulator.ardupilot_targets import guided_attitude_target, guided_position_target
 from vehicle_emulator.autopilot import MavResult, Severity
 from vehicle_emulator.codec import mavlink
-from vehicle_emulator.setpoints import PositionTargetFields
+from vehicle_emulator.setpoints import (
+    MAV_FRAME_LOCAL_NED,
+    POS_IGNORE_BITS,
+    PositionTargetFields,
+)
 from vehicle_emulator.telemetry import DEFAULT_RATES_HZ as PX4_RATES_HZ
+from vehicle_emulator.telemetry import HOME_ALT_M, HOME_LAT_DEG, HOME_LON_DEG
 from vehicle_emulator.vehicle import Link, VehicleNode, _int
 
 log = logging.getLogger(__name__)
@@ -65,8 +76,11 @@ BANNER = (
     b"------------------------------\n",
 )
 # AUTOPILOT_VERSION: MISSION_FLOAT | MISSION_INT | COMMAND_INT | SET_ATTITUDE_TARGET |
-# SET_POSITION_TARGET_LOCAL_NED | FLIGHT_TERMINATION | MAVLINK2 | PARAM_ENCODE_C_CAST
-CAPABILITIES = 0x1 | 0x4 | 0x8 | 0x40 | 0x80 | 0x800 | 0x2000 | 0x20000
+# SET_POSITION_TARGET_LOCAL_NED | SET_POSITION_TARGET_GLOBAL_INT | FLIGHT_TERMINATION |
+# MAVLINK2 | PARAM_ENCODE_C_CAST
+CAPABILITIES = 0x1 | 0x4 | 0x8 | 0x40 | 0x80 | 0x100 | 0x800 | 0x2000 | 0x20000
+GLOBAL_AMSL_FRAMES = (0, 5)  # MAV_FRAME_GLOBAL, _GLOBAL_INT
+GLOBAL_RELATIVE_FRAMES = (3, 6)  # MAV_FRAME_GLOBAL_RELATIVE_ALT, _RELATIVE_ALT_INT
 FIRMWARE_TYPE_DEV = 0
 
 
@@ -249,6 +263,46 @@ class ArduPilotNode(VehicleNode):
         )
         used = self.autopilot.on_position_target(now_s, obs, target, velocity_only)
         self._count_target(target is not None, used, "position target")
+
+    def _on_position_target_global(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
+        """SET_POSITION_TARGET_GLOBAL_INT (module docstring): the same target in the vehicle's
+        local NED frame, then ArduCopter's rules for it."""
+        if not self._for_me(msg):
+            return
+        obs = self.observe()
+        mask = int(msg.type_mask)
+        pos_ned = (0.0, 0.0, 0.0)
+        valid = True
+        if not any(mask & b for b in POS_IGNORE_BITS):
+            enu = self._team_enu_of_global(msg)
+            valid = enu is not None
+            if enu is not None:
+                ned = frames.local_ned_from_enu(enu, self.local_origin_enu_m)
+                pos_ned = (float(ned[0]), float(ned[1]), float(ned[2]))
+        fields = PositionTargetFields(
+            mask, MAV_FRAME_LOCAL_NED, pos_ned, (float(msg.vx), float(msg.vy), float(msg.vz)),
+            (float(msg.afx), float(msg.afy), float(msg.afz)), float(msg.yaw),
+            float(msg.yaw_rate))
+        target, velocity_only = (None, False)
+        if valid:
+            target, velocity_only = guided_position_target(
+                fields, self.local_origin_enu_m, obs.position_enu_m, obs.yaw_enu_rad)
+        used = self.autopilot.on_position_target(now_s, obs, target, velocity_only)
+        self._count_target(target is not None, used, "global position target")
+
+    def _team_enu_of_global(self, msg: Any) -> np.ndarray | None:
+        """Team-frame ENU of a SET_POSITION_TARGET_GLOBAL_INT position; None if invalid."""
+        lat, lon, alt = msg.lat_int * 1e-7, msg.lon_int * 1e-7, float(msg.alt)
+        if not (abs(lat) <= 90.0 and abs(lon) <= 180.0 and math.isfinite(alt)):
+            return None
+        if msg.coordinate_frame in GLOBAL_AMSL_FRAMES:
+            amsl = alt
+        elif msg.coordinate_frame in GLOBAL_RELATIVE_FRAMES:
+            amsl = HOME_ALT_M + self.autopilot.home_enu_m[2] + alt
+        else:
+            return None  # terrain frames: no terrain data
+        return geodesy.geodetic_to_enu(np.array(lat), np.array(lon), np.array(amsl),
+                                       HOME_LAT_DEG, HOME_LON_DEG, HOME_ALT_M)
 
     def _count_target(self, valid: bool, used: bool, what: str) -> None:
         mode = self.autopilot.mode.name

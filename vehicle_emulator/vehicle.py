@@ -454,6 +454,10 @@ class VehicleNode:
             self.statustext_limited(now_s, Severity.CRITICAL, d.rejected or "")
         self._take_setpoint(now_s, d)
 
+    def _on_position_target_global(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
+        """SET_POSITION_TARGET_GLOBAL_INT: not emulated for PX4 (counted, ignored)."""
+        self.counters.unhandled += 1
+
     def _take_setpoint(self, now_s: float, d: Any) -> None:
         if d.setpoint is None:
             self.counters.setpoints_rejected += 1
@@ -719,6 +723,7 @@ def write_demand(plant: FleetPlant, i: int, demand: Demand) -> None:
 _HANDLERS = {  # msgid -> VehicleNode method name (looked up on the node: overridable)
     82: "_on_attitude_target",
     84: "_on_position_target_local",
+    86: "_on_position_target_global",
     139: "_on_actuator_target",
     11: "_on_set_mode",
     76: "_on_command",

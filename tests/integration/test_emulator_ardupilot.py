@@ -36,7 +36,7 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 STABILIZE, GUIDED, LAND, BRAKE, GUIDED_NOGPS = 0, 4, 9, 17, 20
 ACCEPTED, DENIED, UNSUPPORTED, FAILED = 0, 2, 3, 4
 MSG = {"HEARTBEAT": 0, "ATTITUDE": 30, "ATTITUDE_QUATERNION": 31, "LOCAL_POSITION_NED": 32,
-       "ATTITUDE_TARGET": 83, "TIMESYNC": 111, "ODOMETRY": 331, "EXTENDED_SYS_STATE": 245}
+       "GLOBAL_POSITION_INT": 33, "ATTITUDE_TARGET": 83, "TIMESYNC": 111, "ODOMETRY": 331, "EXTENDED_SYS_STATE": 245}
 POSITION_ONLY = 8 | 16 | 32 | 64 | 128 | 256 | 2048
 VELOCITY_ONLY = 1 | 2 | 4 | 64 | 128 | 256 | 1024 | 2048
 HOVER = struct.unpack("<f", struct.pack("<f", hover_thrust(0.85, 6.0)))[0]  # a float32
@@ -338,6 +338,16 @@ def test_guided_position_and_velocity_targets_past_boot_with_a_forced_bind(tmp_p
         stopped = client.wait("LOCAL_POSITION_NED", 10, lambda m: m.time_boot_ms
                               > moving.time_boot_ms + 3000 and abs(m.vx) < 0.05)
         assert 2.5 < stopped.x - 3.0 < 4.5
+        # WHEN a global target: 2 m further north (WGS-84), 8 m above home THEN it goes there
+        request(client, "GLOBAL_POSITION_INT", 20)
+        here = client.wait("GLOBAL_POSITION_INT", 1)
+        north_2m = here.lat + round(2.0 / 111_132.954 * 1e7)  # metres per degree at 47.4 N
+        client.send(mavlink.MAVLink_set_position_target_global_int_message(
+            0, 1, 1, 6, POSITION_ONLY, north_2m, here.lon, 8.0, 0, 0, 0, 0, 0, 0, 0, 0))
+        there = client.wait("LOCAL_POSITION_NED", 20, lambda m: abs(m.z + 8.0) < 0.1
+                            and math.hypot(m.vx, m.vy, m.vz) < 0.05)
+        assert there.x - stopped.x == pytest.approx(2.0, abs=0.15)
+        assert there.y == pytest.approx(stopped.y, abs=0.15)
         # WHEN a SET_ATTITUDE_TARGET in GUIDED THEN it is flown at once (angle control)
         client.send(rates_setpoint(1, 0.0, 0.0, 0.0, HOVER))
         request(client, "ATTITUDE_TARGET", 20)
