@@ -6,7 +6,8 @@ on the loopback interface. MAVSDK 4.1 with ArduPilot (what these tests rely on):
 vehicle on its ephemeral port and answers there, reports ``Autopilot.ARDUPILOT``, arms, takes off
 (GUIDED, then NAV_TAKEOFF at a relative altitude), shows GUIDED as ``FlightMode.OFFBOARD`` (so
 ``offboard.start()`` means GUIDED), sends its attitude-rate setpoints as SET_ATTITUDE_TARGET;
-telemetry needs its ``set_rate_*`` calls (ArduPilot streams nothing until asked). It has no flight
+telemetry needs its ``set_rate_*`` calls (ArduPilot streams nothing until asked), and none of
+them asks for SYS_STATUS, so ``health.is_armable`` (its pre-arm bit) never arrives. It has no flight
 mode for GUIDED_NOGPS, and ArduPilot's GUIDED does not lift a landed vehicle on thrust alone (a
 takeoff comes first), so the ardupilot flight takes off before its offboard part.
 """
@@ -91,9 +92,11 @@ async def _fly(port: int, ardupilot: bool = False) -> dict:
         out["start_rel_alt_m"] = pos.relative_altitude_m
         out["start_roll_deg"] = att.roll_deg
         # as MAVSDK's examples do: wait for the health checks before arming (PX4 refuses to
-        # arm for its first seconds after boot; health.is_armable is the pre-arm check bit)
-        health = await _first(telemetry.subscribe_health(), 15, lambda h: h.is_armable)
-        out["home_position_ok"] = health.is_home_position_ok
+        # arm for its first seconds after boot; health.is_armable is the pre-arm check bit).
+        # Not on ArduPilot: the bit is in SYS_STATUS, which MAVSDK never asks ArduPilot for
+        if not ardupilot:
+            health = await _first(telemetry.subscribe_health(), 15, lambda h: h.is_armable)
+            out["home_position_ok"] = health.is_home_position_ok
         await action.arm()
         await _first(telemetry.subscribe_armed(), 5, bool)
         if ardupilot:  # GUIDED + NAV_TAKEOFF (MAVSDK's action.takeoff for ArduPilot)
