@@ -48,6 +48,7 @@ class Protocol:
     arming_ready_s: float  # a vehicle booted on the ground refuses to arm before this [s]
     own_origin: bool  # LOCAL_POSITION_NED relative to the vehicle's own EKF origin
     param_defaults: tuple[tuple[str, float], ...] = ()  # parameter defaults as recorded
+    statustext_end: str = ""  # appended to every STATUSTEXT (PX4 v1.16.0 ends each in a TAB)
 
     @property
     def version_word(self) -> int:
@@ -98,7 +99,8 @@ PERSONALITIES: dict[str, Personality] = {
         # it: Position and Altitude then descend at MPC_Z_VEL_MAX_DN (1.04 m/s recorded after
         # the offboard-loss failsafe) instead of holding
         Protocol("px4", MAV_AUTOPILOT_PX4, (1, 16, 0), actuator_setpoints=False, ack_twice=True,
-                 arming_ready_s=3.0, own_origin=True, param_defaults=(("COM_RC_IN_MODE", 4),)),
+                 arming_ready_s=3.0, own_origin=True, param_defaults=(("COM_RC_IN_MODE", 4),),
+                 statustext_end="\t"),
     ),
     "ardupilot": Personality(
         "ardupilot",

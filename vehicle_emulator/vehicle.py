@@ -240,9 +240,10 @@ class VehicleNode:
     def statustext(self, severity: Severity, text: str) -> None:
         """STATUSTEXT to all links, and the log. Up to 50 bytes: one message (id 0); longer
         (up to STATUSTEXT_MAX_BYTES): MAVLink 2 chunks of 50 bytes with one id != 0 and chunk_seq
-        0, 1, ..., as PX4 sends "Arming denied: Resolve system health failures first"."""
+        0, 1, ..., as PX4 sends "Arming denied: Resolve system health failures first". The
+        personality's ending follows the text (px4: a TAB, as PX4 v1.16.0 sent every text)."""
         log.info("vehicle %d (sysid %d): %s", self.spec.vehicle_id, self.sysid, text)
-        data = text.encode()[:STATUSTEXT_MAX_BYTES]
+        data = (text + self.personality.protocol.statustext_end).encode()[:STATUSTEXT_MAX_BYTES]
         if len(data) <= 50:
             self.send_msg(mavlink.MAVLink_statustext_message(int(severity), data, 0, 0))
             return

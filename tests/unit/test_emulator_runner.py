@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -180,7 +181,7 @@ def test_do_set_mode_gets_accepted_at_once_then_the_commanders_result_on_the_nex
     texts = [m.text for m in link.msgs if m.get_type() == "STATUSTEXT"]
     if in_air:
         assert kinds[:3] == ["COMMAND_ACK", "COMMAND_ACK", "STATUSTEXT"]
-        assert "Switching to Offboard is currently not available" in texts
+        assert "Switching to Offboard is currently not available\t" in texts  # PX4: a TAB
     # AND nothing more
     _run(emu, emu.now_s + 1.0)
     assert len(_acks(link)) == 2
@@ -228,9 +229,24 @@ def test_heartbeat_interval_cannot_be_changed():
     assert link.types()["HEARTBEAT"] == pytest.approx(5, abs=1)
 
 
-def test_a_statustext_longer_than_50_bytes_goes_in_mavlink2_chunks():
-    # GIVEN PX4 v1.16.0's 51-character arming refusal (recorded: 2 chunks, one id)
+def test_px4_statustexts_end_in_a_tab_as_recorded():
+    # PX4 v1.16.0: "Arming denied: Resolve system health failures first" + TAB, in 2 chunks
     emu, (link,) = _emu(in_air=False)
+    emu.nodes[0].statustext(2, "Arming denied: Resolve system health failures first")
+    emu.nodes[0].statustext(6, "Armed by external command")
+    msgs = [m for m in link.msgs if m.get_type() == "STATUSTEXT"]
+    assert [(m.text, m.chunk_seq) for m in msgs] == [
+        ("Arming denied: Resolve system health failures firs", 0), ("t\t", 1),
+        ("Armed by external command\t", 0),
+    ]
+
+
+def test_a_statustext_longer_than_50_bytes_goes_in_mavlink2_chunks():
+    # GIVEN PX4 v1.16.0's 51-character arming refusal (recorded: 2 chunks, one id), from a
+    # personality that adds no ending
+    emu = Emulator([dataclasses.replace(default_vehicle(1), autopilot="nominal")])
+    link = RecordingLink()
+    emu.nodes[0].links.append(link)
     node = emu.nodes[0]
     text = "Arming denied: Resolve system health failures first"
     node.statustext(2, "short one")
