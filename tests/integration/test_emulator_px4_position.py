@@ -18,6 +18,7 @@ OFFBOARD_MODE = 6 << 16
 ACCEPTED, TEMP_REJECTED = 0, 1
 POSITION_ONLY = 8 | 16 | 32 | 64 | 128 | 256 | 2048  # x, y, z, yaw
 ALL_IGNORED = 1 | 2 | 4 | 8 | 16 | 32 | 64 | 128 | 256 | 1024 | 2048
+PX4_TEXT = "%s\t"  # PX4 v1.16.0 ends every STATUSTEXT in a TAB (its mavlink_log_critical texts)
 
 
 def position_target(x: float, y: float, z: float, yaw: float, mask: int = POSITION_ONLY):
@@ -52,7 +53,7 @@ def test_position_setpoints_fly_offboard_and_count_for_the_loss_timeout(px4_in_a
         assert client.wait("HEARTBEAT", 2).custom_mode == OFFBOARD_MODE
     # WHEN the stream stops THEN COM_OF_LOSS_T (1 s) later PX4's failsafe leaves OFFBOARD
     stopped = time.monotonic()
-    client.wait_text(5, lambda t: t == "Failsafe activated")
+    client.wait_text(5, lambda t: t == PX4_TEXT % "Failsafe activated")
     assert 0.9 < time.monotonic() - stopped < 1.5
     assert client.wait("HEARTBEAT", 3).custom_mode != OFFBOARD_MODE
     assert p.z == pytest.approx(-12.0, abs=0.15)
@@ -62,6 +63,7 @@ def test_an_invalid_position_target_is_reported_and_is_no_setpoint(px4_in_air):
     client = px4_in_air
     # GIVEN a target that ignores everything THEN PX4's text, and OFFBOARD stays unavailable
     client.send(position_target(0, 0, 0, 0, mask=ALL_IGNORED))
-    severity, _ = client.wait_text(3, lambda t: t == "SET_POSITION_TARGET_LOCAL_NED invalid")
+    severity, _ = client.wait_text(
+        3, lambda t: t == PX4_TEXT % "SET_POSITION_TARGET_LOCAL_NED invalid")
     assert severity == 2  # MAV_SEVERITY_CRITICAL
     assert client.command_acks(176, 1 | 128, 6, 0, count=2) == [ACCEPTED, TEMP_REJECTED]
