@@ -174,7 +174,7 @@ class Idle:
 
 
 Demand = MotorsOff | Idle | PositionTarget | RatesSetpoint | AttitudeSetpoint | ActuatorSetpoint
-OffboardSetpoint = RatesSetpoint | AttitudeSetpoint | ActuatorSetpoint
+OffboardSetpoint = RatesSetpoint | AttitudeSetpoint | ActuatorSetpoint | PositionTarget
 
 
 @dataclass(slots=True)

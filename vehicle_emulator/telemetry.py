@@ -1,9 +1,12 @@
 """Telemetry scheduler: which message is due for which vehicle, built and framed in batches.
 
-Rates are PX4's onboard-link defaults (spec/mavlink.md), per vehicle and message, changeable with
-MAV_CMD_SET_MESSAGE_INTERVAL. Each ``collect`` builds every due message type for all vehicles at
-once from the fleet arrays (NED/FRD via frames.py), frames them with ``BatchEncoder`` and returns
-one byte string per vehicle (PX4 also packs several messages into one UDP datagram).
+Rates are PX4's onboard-link defaults (spec/mavlink.md) unless a vehicle's personality sets its
+own (``set_defaults``: ArduPilot streams almost nothing until asked), per vehicle and message,
+changeable with MAV_CMD_SET_MESSAGE_INTERVAL. LOCAL_POSITION_NED is sent only for vehicles whose
+``FleetStatus.position_valid`` is set (ArduPilot: once its EKF has a position). Each
+``collect`` builds every due message type for all vehicles at once from the fleet arrays
+(NED/FRD via frames.py), frames them with ``BatchEncoder`` and returns one byte string per
+vehicle (PX4 also packs several messages into one UDP datagram).
 Pure: time is an argument; noise comes from an injected numpy Generator.
 """
 
@@ -50,6 +53,7 @@ NOISE_ATT_RAD = 0.002
 NOISE_GYRO_RADPS = 0.003
 NOISE_ACC_MPS2 = 0.05
 
+_NEED_POSITION = frozenset({"LOCAL_POSITION_NED"})
 _SENSORS = 0x1 | 0x2 | 0x4 | 0x8 | 0x20 | 0x400 | 0x800 | 0x1000 | 0x8000 | 0x200000
 _PREARM_CHECK = 0x10000000  # MAV_SYS_STATUS_PREARM_CHECK: health set while arming would pass
 
@@ -69,6 +73,8 @@ class FleetStatus:
     origin_ned_m: np.ndarray  # (n, 3) EKF origin in the team frame (NED): LOCAL_POSITION_NED zero
     home_ned_m: np.ndarray  # (n, 3) home in the team frame (NED)
     noise: np.ndarray  # bool
+    position_valid: np.ndarray  # bool: the estimator has a position (LOCAL_POSITION_NED sent)
+    vtol_state: np.ndarray  # uint8 EXTENDED_SYS_STATE.vtol_state (ArduCopter: MC, 3)
     battery_remaining: np.ndarray  # 0..1
     battery_voltage_v: np.ndarray
     battery_current_a: np.ndarray
@@ -90,6 +96,8 @@ class FleetStatus:
             origin_ned_m=np.zeros((n, 3)),
             home_ned_m=np.zeros((n, 3)),
             noise=np.zeros(n, dtype=bool),
+            position_valid=np.ones(n, dtype=bool),
+            vtol_state=np.zeros(n, dtype=np.uint8),
             battery_remaining=np.ones(n),
             battery_voltage_v=np.full(n, 16.8),
             battery_current_a=np.zeros(n),
@@ -129,8 +137,9 @@ class Telemetry:
         self.msgids = {int(_msg_class(nm).id): k for k, nm in enumerate(self.names)}
         self.n = n
         self.rng = rng
-        self.default_interval_s = np.array([1.0 / DEFAULT_RATES_HZ[nm] for nm in self.names])
-        self.interval_s = np.tile(self.default_interval_s, (n, 1))
+        default = np.array([1.0 / DEFAULT_RATES_HZ[nm] for nm in self.names])
+        self.default_interval_s = np.tile(default, (n, 1))  # per vehicle: set_defaults
+        self.interval_s = self.default_interval_s.copy()
         # one random phase per vehicle: a vehicle's messages fall on the same ticks (fewer
         # datagrams), different vehicles' messages do not (an even load)
         self.next_due_s = start_s + rng.random((n, 1)) * 0.01 + 0.0 * self.interval_s
@@ -156,6 +165,21 @@ class Telemetry:
 
     # --- schedule -----------------------------------------------------------------------------
 
+    def set_defaults(
+        self, vehicle: int, rates_hz: dict[str, float], delayed: tuple[str, ...] = (),
+        now_s: float = 0.0,
+    ) -> None:
+        """A vehicle's default rates (0: not sent unless requested), which also become its
+        current ones; a message not named keeps PX4's rate. The first of a ``delayed`` message
+        comes one interval after ``now_s`` (ArduPilot's first TIMESYNC request: 10 s)."""
+        for name, hz in rates_hz.items():
+            k = self.index[name]
+            interval = math.inf if hz <= 0.0 else 1.0 / hz
+            self.default_interval_s[vehicle, k] = interval
+            self.interval_s[vehicle, k] = interval
+            if math.isinf(interval) or name in delayed:
+                self.next_due_s[vehicle, k] = now_s + interval
+
     def set_interval(self, vehicle: int, msgid: int, interval_us: float, now_s: float) -> bool:
         """MAV_CMD_SET_MESSAGE_INTERVAL semantics: -1 off, 0 default, > 0 period in us.
         Returns False for a message the emulator does not stream."""
@@ -165,7 +189,7 @@ class Telemetry:
         if interval_us < 0:
             self.interval_s[vehicle, k] = math.inf
         elif interval_us == 0:
-            self.interval_s[vehicle, k] = self.default_interval_s[k]
+            self.interval_s[vehicle, k] = self.default_interval_s[vehicle, k]
         else:
             self.interval_s[vehicle, k] = max(interval_us * 1e-6, 1e-3)
         self.next_due_s[vehicle, k] = now_s + min(self.interval_s[vehicle, k], 1e9)
@@ -194,9 +218,11 @@ class Telemetry:
             nxt = self.next_due_s[idx, k] + self.interval_s[idx, k]
             self.next_due_s[idx, k] = np.where(nxt <= now_s, now_s + self.interval_s[idx, k], nxt)
             idx = idx[enabled[idx]]
+            name = self.names[k]
+            if name in _NEED_POSITION:
+                idx = idx[status.position_valid[idx]]
             if idx.size == 0:
                 continue
-            name = self.names[k]
             enc = self.encoders[name]
             rows = enc.empty(idx.size)
             self._builders[name](rows, idx, now_s, plant, status)
@@ -358,6 +384,7 @@ class Telemetry:
 
     def _extended_sys_state(self, rows, idx, now_s, plant, status) -> None:
         rows["landed_state"] = status.landed_state[idx]
+        rows["vtol_state"] = status.vtol_state[idx]
 
     def _sys_status(self, rows, idx, now_s, plant, status) -> None:
         rows["onboard_control_sensors_present"] = _SENSORS | _PREARM_CHECK
