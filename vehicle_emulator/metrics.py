@@ -15,6 +15,7 @@ __all__ = [
     "euler_from_quaternions",
     "fopdt_fit",
     "hover_std",
+    "latency_above_envelope_ms",
     "step_response",
     "thrust_edge",
 ]
@@ -106,3 +107,26 @@ def fopdt_fit(t_rel_s: np.ndarray, y: np.ndarray) -> dict:
                         "rms": rms}
     assert best is not None
     return best
+
+
+def latency_above_envelope_ms(streams: dict[str, tuple[np.ndarray, np.ndarray]],
+                              window_s: float = 0.5) -> dict[str, float]:
+    """Median latency above the envelope [ms] per stream (the README's "Signal definitions"):
+    offset = receive time - sample time, envelope = the smallest offset of all the streams
+    received in the next ``window_s``; ``streams``: name -> (receive times, sample times)."""
+    rx = np.concatenate([r for r, _ in streams.values()])
+    off = np.concatenate([r - t for r, t in streams.values()])
+    order = np.argsort(rx)
+    rx, off = rx[order], off[order]
+    # forward-looking minimum over the window: the smallest offset in [t, t + window]
+    env = np.empty_like(off)
+    j = len(off) - 1
+    for i in range(len(off) - 1, -1, -1):
+        while j > i and rx[j] > rx[i] + window_s:
+            j -= 1
+        env[i] = off[i : j + 1].min()
+    out = {}
+    for name, (r, t) in streams.items():
+        e = np.interp(r, rx, env)
+        out[name] = float(np.median((r - t) - e) * 1e3)
+    return out

@@ -377,7 +377,9 @@ LPN_FIELDS = ("x", "y", "z", "vx", "vy", "vz")
 
 def recorded_figures(rec: Recording) -> dict[str, float | None]:
     """The recorded figures, read from the JSON summaries: rate steps (ATTITUDE_QUATERNION,
-    sample time, mean of the two repetitions), hover noise stds, thrust-step gain and fit."""
+    sample time, mean of the two repetitions), hover noise stds, thrust-step gain and fit, and
+    how much older LOCAL_POSITION_NED's samples are than ATTITUDE_QUATERNION's (the median
+    latencies above the envelope, timing.json)."""
     out: dict[str, float | None] = {}
     summary = rec.summaries["rate_steps"]["summary"]
     for axis in AXES:
@@ -407,17 +409,22 @@ def recorded_figures(rec: Recording) -> dict[str, float | None]:
     drag = thrust.get("drag_corrected_gain_mps2_per_unit")
     if drag is not None:
         out["thrust.gain_drag_corrected"] = drag
+    per = rec.summaries["timing"]["per_message"]
+    out["timing.position_age_ms"] = (
+        per["LOCAL_POSITION_NED"]["latency_above_envelope_ms"]["p50"]
+        - per["ATTITUDE_QUATERNION"]["latency_above_envelope_ms"]["p50"]
+    )
     return out
 
 
 def emulated_figures(
     traces: Sequence[Trace],
     rec: Recording,
-    parts: tuple[str, ...] = ("rates", "hover", "thrust"),
+    parts: tuple[str, ...] = ("rates", "hover", "thrust", "timing"),
 ) -> dict[str, float | None]:
     """The same figures from replayed traces: means over every vehicle (and repetition); a
     delay that no repetition reached is None. ``<key>.n`` counts the values averaged.
-    ``parts`` limits the figures to rate steps, hover noise and/or thrust steps."""
+    ``parts`` limits the figures to rate steps, hover noise, thrust steps and/or timing."""
     acc: dict[str, list[float]] = {}
 
     def add(key: str, value: float | None) -> None:
@@ -430,6 +437,8 @@ def emulated_figures(
         aq, imu, lpn = (tr.streams[k] for k in ("ATTITUDE_QUATERNION", "HIGHRES_IMU",
                                                   "LOCAL_POSITION_NED"))
         for d in rec.doublets if "rates" in parts else ():
+            if aq.shape[0] == 0 or aq[-1, 1] < d.edges_s[2] + mx.PEAK_AFTER_NEXT_EDGE_S:
+                continue  # a replay stopped before this doublet (until_s)
             r = mx.step_response(aq[:, 1], aq[:, 2 + d.axis], d.edges_s, d.amp_radps)
             axis = AXES[d.axis]
             for key in ("t10_ms", "t63_ms", "t90_ms", "peak", "overshoot_pct"):
@@ -440,6 +449,10 @@ def emulated_figures(
             _hover_figures(add, aq, imu, lpn, w)
         if "thrust" in parts:
             _thrust_figures(add, imu, lpn, rec)
+        if "timing" in parts:
+            lat = mx.latency_above_envelope_ms(
+                {k: (a[:, 0], a[:, 1]) for k, a in tr.streams.items()})
+            add("timing.position_age_ms", lat["LOCAL_POSITION_NED"] - lat["ATTITUDE_QUATERNION"])
     out: dict[str, float | None] = {}
     for key, values in acc.items():
         out[key] = float(np.mean(values)) if values else None
