@@ -3,9 +3,9 @@
 ``Onboard`` turns each vehicle's personality.Dynamics and personality.Sensors into the arrays
 the plant kernel reads (no per-vehicle Python work per physics step) and holds the onboard
 states: IMU filters, noise generators, rate-loop integrators, the reference model, estimate
-errors and the latched estimates telemetry reports (with their sample steps). ``onboard_control``
-is the per-vehicle step the fleet kernel (plant.py) calls for vehicles whose rate loop is not the
-nominal one: every control period an IMU sample (sensors.py), the estimates, the cascade
+errors and the latched estimates telemetry reports (with their sample steps). ``onboard_step``
+is the step the fleet kernel (plant.py) takes each physics step for the vehicles whose rate loop
+is not the nominal one: every control period an IMU sample (sensors.py), the estimates, the cascade
 (inner.py) and the personality's rate loop; in between, the outputs hold.
 Pure: no clock, no I/O.
 """
@@ -28,7 +28,7 @@ from vehicle_emulator.inner import (
 )
 from vehicle_emulator.personality import Personality, RateLoop
 
-__all__ = ["REF_DELAY_MAX", "Onboard", "onboard_control"]
+__all__ = ["REF_DELAY_MAX", "Onboard", "onboard_step"]
 
 REF_DELAY_MAX = 32  # control periods of dead time the reference model can hold
 
@@ -41,6 +41,8 @@ class Onboard:
         n, dt = plant.n, plant.dt_s
         self.n = n
         self.sysid = plant.sysid
+        self._params: tuple | None = None
+        self._states: tuple | None = None
         dyn = [p.dynamics for p in personalities]
         sen = [p.sensors for p in personalities]
         f = np.float64
@@ -166,7 +168,19 @@ class Onboard:
         self.noise_rng[i] = sn.noise_seed(seed, int(self.sysid[i]))
 
     def params(self) -> tuple:
-        """The parameter arrays, in onboard_control's (and the fleet kernel's) order."""
+        """The parameter arrays, in onboard_step's (and the fleet kernel's) order (built once:
+        the arrays are only ever changed in place)."""
+        if self._params is None:
+            self._params = self._param_tuple()
+        return self._params
+
+    def states(self) -> tuple:
+        """The state arrays, in onboard_step's order (built once, like params)."""
+        if self._states is None:
+            self._states = self._state_tuple()
+        return self._states
+
+    def _param_tuple(self) -> tuple:
         return (
             self.rate_loop,
             self.angular_damping_per_s,
@@ -205,8 +219,7 @@ class Onboard:
             self.disturbance_std,
         )
 
-    def states(self) -> tuple:
-        """The state arrays, in onboard_control's order."""
+    def _state_tuple(self) -> tuple:
         return (
             self.noise_rng,
             self.gyro_filter_state,
@@ -243,12 +256,11 @@ class Onboard:
 
 
 @njit(cache=True)
-def onboard_control(
-    i,
+def onboard_step(
     step,
     dt,
-    m,
-    landed,
+    mode,
+    on_ground,
     thrust_cmd,
     rate_cmd,
     att_cmd,
@@ -275,9 +287,11 @@ def onboard_control(
     cal_par,
     cal_st,
 ):
-    """Vehicle i of a calibrated personality at physics step ``step``: every control period,
-    an IMU sample, the latched estimates, the cascade and the personality's rate loop; in
-    between, thrust_sp and torque_sp stay as they are."""
+    """Physics step ``step`` of every calibrated vehicle (rate loop not nominal) whose control
+    period it starts (``step % ctrl_div[i] == 0``; in between, thrust_sp and torque_sp hold): an
+    IMU sample, the latched estimates, the cascade and the personality's rate loop. One call per
+    physics step for the whole fleet (the fleet kernel's), so the parameter and state tuples
+    are unpacked once per step, not per vehicle."""
     (
         loop, _damping, _decay, _drag, _scale, ctrl_div, noise_on, gyro_std, accel_std, off_std,
         gyro_coef, dterm_coef, accel_coef, imu_mode, pos_delay, out_delay, gain_p, gain_i,
@@ -291,93 +305,101 @@ def onboard_control(
         thrust_next, torque_new, rot_est, pos_est, vel_est, pos_prev, vel_prev, att_step,
         pos_step, pos_prev_step, delay_buf, delay_idx, att_err, vel_err, pos_err,
     ) = cal_st
-    div = ctrl_div[i]
-    if step % div != 0:
-        return
-    dt_c = div * dt
-    sn.sample_sensors(
-        i, dt_c, noise_on, m != 0, omega, sf_body, gyro_std, accel_std, off_std, gyro_coef,
-        dterm_coef, accel_coef, imu_mode, rng, gyro_state, dterm_state, accel_state, gyro_raw,
-        accel_raw, rate_meas, dgyro, gyro_imu, accel_imu,
-    )
-    # estimates as the autopilot reports them (truth plus the estimate errors), with their
-    # sample steps; LOCAL_POSITION_NED optionally one period older
-    sn.estimate_errors(
-        i, dt_c, noise_on, att_err_std, att_phi, vel_err_std, vel_phi, pos_phi, rng, att_err,
-        vel_err, pos_err,
-    )
-    sn.rotate_body(rot[i], att_err[i, 0], att_err[i, 1], att_err[i, 2], rot_est[i])
-    att_step[i] = step
-    if pos_delay[i] > 0:
-        pos_step[i] = pos_prev_step[i]
-        pos_prev_step[i] = step
-        for k in range(3):
-            pos_est[i, k], pos_prev[i, k] = pos_prev[i, k] + pos_err[i, k], pos[i, k]
-            vel_est[i, k], vel_prev[i, k] = vel_prev[i, k] + vel_err[i, k], vel[i, k]
-    else:
-        pos_step[i] = step
-        for k in range(3):
-            pos_est[i, k] = pos[i, k] + pos_err[i, k]
-            vel_est[i, k] = vel[i, k] + vel_err[i, k]
-    if m == 0 or m == 1:
-        thrust_sp[i] = 0.0 if m == 0 else 0.05
-        thrust_next[i] = thrust_sp[i]
-        yaw_lpf[i] = 0.0
-        for k in range(3):
-            torque_sp[i, k] = 0.0
-            torque_next[i, k] = 0.0
-            rate_int[i, k] = 0.0
-            vel_int[i, k] = 0.0
-            rate_sp[i, k] = 0.0
-            shaped[i, k] = 0.0
-            ref[i, k, 0] = 0.0
-            ref[i, k, 1] = 0.0
-            angle_err[i, k] = 0.0
-            track_int[i, k] = 0.0
-        return
-    if m == 4:
-        thrust_sp[i] = thrust_cmd[i]
-        for k in range(3):
-            torque_sp[i, k] = torque_cmd[i, k] * tmax[i, k]
-        return
-    if m == 5:
-        thr = position_control(
-            i, pos, vel, rot, pos_sp, vel_ff, pos_mask, yaw_sp, vel_int, hover, landed, dt_c,
-            att_sp,
+    for i in range(loop.shape[0]):
+        if loop[i] == 0 or step % ctrl_div[i] != 0:
+            continue
+        m = mode[i]
+        landed = on_ground[i]
+        dt_c = ctrl_div[i] * dt
+        sn.sample_sensors(
+            i, dt_c, noise_on, m != 0, omega, sf_body, gyro_std, accel_std, off_std, gyro_coef,
+            dterm_coef, accel_coef, imu_mode, rng, gyro_state, dterm_state, accel_state, gyro_raw,
+            accel_raw, rate_meas, dgyro, gyro_imu, accel_imu,
         )
-        attitude_control(i, rot, att_sp, yaw_rate_ff, rate_sp)
-    elif m == 3:
-        thr = thrust_cmd[i]
-        att_sp[i] = att_cmd[i]
-        attitude_control(i, rot, att_sp, yaw_rate_ff, rate_sp)
-    else:  # m == 2
-        thr = thrust_cmd[i]
-        for k in range(3):
-            rate_sp[i, k] = rate_cmd[i, k]
-    if loop[i] == 1:
-        px4_rate_control(
-            i, rate_sp, rate_meas, dgyro, rate_int, yaw_lpf, gain_p, gain_i, gain_d, int_limit,
-            yaw_alpha, accel_per_unit, inertia, landed, dt_c, torque_new,
+        # estimates as the autopilot reports them (truth plus the estimate errors), with their
+        # sample steps; LOCAL_POSITION_NED optionally one period older
+        sn.estimate_errors(
+            i, dt_c, noise_on, att_err_std, att_phi, vel_err_std, vel_phi, pos_phi, rng, att_err,
+            vel_err, pos_err,
         )
-    else:
-        reference_rate_control(
-            i, rate_sp, rate_meas, gyro_raw, omega, shaped, ref, angle_err, track_int,
-            accel_max, ref_gain, ref_phi, ref_gamma, angle_p, track, ref_delay, delay_buf,
-            delay_idx, inertia, landed, dt_c, torque_new,
-        )
-    if noise_on[i] and m != 0:  # process noise: an angular-acceleration disturbance
-        d0, d1 = sn.gauss_pair(rng, i)
-        d2, _ = sn.gauss_pair(rng, i)
-        dist = (d0, d1, d2)
-        for k in range(3):
-            torque_new[i, k] += inertia[i, k] * disturbance[i, k] * dist[k]
-    if out_delay[i] > 0:  # what the motors get now was computed one period ago
-        thrust_sp[i] = thrust_next[i]
-        thrust_next[i] = thr
-        for k in range(3):
-            torque_sp[i, k] = torque_next[i, k]
-            torque_next[i, k] = torque_new[i, k]
-    else:
-        thrust_sp[i] = thr
-        for k in range(3):
-            torque_sp[i, k] = torque_new[i, k]
+        if att_err[i, 0] == 0.0 and att_err[i, 1] == 0.0 and att_err[i, 2] == 0.0:
+            for a in range(3):
+                for b in range(3):
+                    rot_est[i, a, b] = rot[i, a, b]
+        else:
+            sn.rotate_body(rot[i], att_err[i, 0], att_err[i, 1], att_err[i, 2], rot_est[i])
+        att_step[i] = step
+        if pos_delay[i] > 0:
+            pos_step[i] = pos_prev_step[i]
+            pos_prev_step[i] = step
+            for k in range(3):
+                pos_est[i, k], pos_prev[i, k] = pos_prev[i, k] + pos_err[i, k], pos[i, k]
+                vel_est[i, k], vel_prev[i, k] = vel_prev[i, k] + vel_err[i, k], vel[i, k]
+        else:
+            pos_step[i] = step
+            for k in range(3):
+                pos_est[i, k] = pos[i, k] + pos_err[i, k]
+                vel_est[i, k] = vel[i, k] + vel_err[i, k]
+        if m == 0 or m == 1:
+            thrust_sp[i] = 0.0 if m == 0 else 0.05
+            thrust_next[i] = thrust_sp[i]
+            yaw_lpf[i] = 0.0
+            for k in range(3):
+                torque_sp[i, k] = 0.0
+                torque_next[i, k] = 0.0
+                rate_int[i, k] = 0.0
+                vel_int[i, k] = 0.0
+                rate_sp[i, k] = 0.0
+                shaped[i, k] = 0.0
+                ref[i, k, 0] = 0.0
+                ref[i, k, 1] = 0.0
+                angle_err[i, k] = 0.0
+                track_int[i, k] = 0.0
+            continue
+        if m == 4:
+            thrust_sp[i] = thrust_cmd[i]
+            for k in range(3):
+                torque_sp[i, k] = torque_cmd[i, k] * tmax[i, k]
+            continue
+        if m == 5:
+            thr = position_control(
+                i, pos, vel, rot, pos_sp, vel_ff, pos_mask, yaw_sp, vel_int, hover, landed, dt_c,
+                att_sp,
+            )
+            attitude_control(i, rot, att_sp, yaw_rate_ff, rate_sp)
+        elif m == 3:
+            thr = thrust_cmd[i]
+            att_sp[i] = att_cmd[i]
+            attitude_control(i, rot, att_sp, yaw_rate_ff, rate_sp)
+        else:  # m == 2
+            thr = thrust_cmd[i]
+            for k in range(3):
+                rate_sp[i, k] = rate_cmd[i, k]
+        if loop[i] == 1:
+            px4_rate_control(
+                i, rate_sp, rate_meas, dgyro, rate_int, yaw_lpf, gain_p, gain_i, gain_d, int_limit,
+                yaw_alpha, accel_per_unit, inertia, landed, dt_c, torque_new,
+            )
+        else:
+            reference_rate_control(
+                i, rate_sp, rate_meas, gyro_raw, omega, shaped, ref, angle_err, track_int,
+                accel_max, ref_gain, ref_phi, ref_gamma, angle_p, track, ref_delay, delay_buf,
+                delay_idx, inertia, landed, dt_c, torque_new,
+            )
+        if noise_on[i] and m != 0 and (disturbance[i, 0] != 0.0 or disturbance[i, 1] != 0.0
+                                       or disturbance[i, 2] != 0.0):  # process noise
+            d0, d1 = sn.gauss_pair(rng, i)
+            d2, _ = sn.gauss_pair(rng, i)
+            dist = (d0, d1, d2)
+            for k in range(3):
+                torque_new[i, k] += inertia[i, k] * disturbance[i, k] * dist[k]
+        if out_delay[i] > 0:  # what the motors get now was computed one period ago
+            thrust_sp[i] = thrust_next[i]
+            thrust_next[i] = thr
+            for k in range(3):
+                torque_sp[i, k] = torque_next[i, k]
+                torque_next[i, k] = torque_new[i, k]
+        else:
+            thrust_sp[i] = thr
+            for k in range(3):
+                torque_sp[i, k] = torque_new[i, k]

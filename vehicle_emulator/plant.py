@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit
 
 from vehicle_emulator.inner import attitude_control, position_control, rate_control
-from vehicle_emulator.onboard import Onboard, onboard_control
+from vehicle_emulator.onboard import Onboard, onboard_step
 from vehicle_emulator.personality import Personality, personality_of
 from vehicle_emulator.physics import (
     GRAVITY_MPS2,
@@ -122,18 +122,22 @@ def _step_kernel(
     drag_decay = cal_par[2]
     drag_k = cal_par[3]
     thrust_scale = cal_par[4]
+    calibrated = False
+    for i in range(n):
+        calibrated = calibrated or loop[i] != 0
     for st in range(steps):
+        if calibrated:
+            onboard_step(
+                step0 + st, dt, mode, on_ground, thrust_cmd, rate_cmd, att_cmd, yaw_rate_ff,
+                torque_cmd, pos_sp, vel_ff, pos_mask, yaw_sp, hover, att_sp, rate_sp, thrust_sp,
+                torque_sp, rate_int, vel_int, pos, vel, rot, omega, inertia, tmax, sf_body,
+                cal_par, cal_st,
+            )
         for i in range(n):
             m = mode[i]
             landed = on_ground[i]
             t_max = 4.0 * fmax[i]
-            if loop[i] != 0:
-                onboard_control(
-                    i, step0 + st, dt, m, landed, thrust_cmd, rate_cmd, att_cmd, yaw_rate_ff,
-                    torque_cmd, pos_sp, vel_ff, pos_mask, yaw_sp, hover, att_sp, rate_sp,
-                    thrust_sp, torque_sp, rate_int, vel_int, pos, vel, rot, omega, inertia, tmax,
-                    sf_body, cal_par, cal_st,
-                )
+            if loop[i] != 0:  # calibrated: onboard_step above, holding between its periods
                 t_sp_n[i] = thrust_sp[i] * t_max * thrust_scale[i]
                 continue
             if m == 0 or m == 1:

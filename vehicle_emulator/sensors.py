@@ -135,7 +135,9 @@ def sample_sensors(
     ``off_std`` (gyro, accel) with them off, none when ``noise_on[i]`` is False."""
     ng = (0.0, 0.0, 0.0)
     na = (0.0, 0.0, 0.0)
-    if noise_on[i]:
+    std_sum = gyro_std[i, 0] + gyro_std[i, 1] + gyro_std[i, 2] + accel_std[i, 0]
+    std_sum += accel_std[i, 1] + accel_std[i, 2] + off_std[i, 0] + off_std[i, 1]
+    if noise_on[i] and std_sum > 0.0:
         g0, g1 = gauss_pair(rng, i)
         g2, a0 = gauss_pair(rng, i)
         a1, a2 = gauss_pair(rng, i)
@@ -180,17 +182,22 @@ def estimate_errors(i, dt_c, noise_on, att_std, att_phi, vel_std, vel_phi, pos_p
             pos_err[i, k] = 0.0
         return
     pa, pv = att_phi[i], vel_phi[i]
-    ka, kv = math.sqrt(max(0.0, 1.0 - pa * pa)), math.sqrt(max(0.0, 1.0 - pv * pv))
-    n0, n1 = gauss_pair(rng, i)
-    n2, n3 = gauss_pair(rng, i)
-    n4, n5 = gauss_pair(rng, i)
-    na = (n0, n1, n2)
-    nv = (n3, n4, n5)
-    for k in range(3):
-        att_err[i, k] = pa * att_err[i, k] + ka * att_std[i, k] * na[k]
-        s = vel_std[i, 1] if k == 2 else vel_std[i, 0]
-        vel_err[i, k] = pv * vel_err[i, k] + kv * s * nv[k]
-        pos_err[i, k] = pos_phi[i] * pos_err[i, k] + vel_err[i, k] * dt_c
+    if att_std[i, 0] != 0.0 or att_std[i, 1] != 0.0 or att_std[i, 2] != 0.0:
+        ka = math.sqrt(max(0.0, 1.0 - pa * pa))
+        n0, n1 = gauss_pair(rng, i)
+        n2, _ = gauss_pair(rng, i)
+        na = (n0, n1, n2)
+        for k in range(3):
+            att_err[i, k] = pa * att_err[i, k] + ka * att_std[i, k] * na[k]
+    if vel_std[i, 0] != 0.0 or vel_std[i, 1] != 0.0:
+        kv = math.sqrt(max(0.0, 1.0 - pv * pv))
+        n3, n4 = gauss_pair(rng, i)
+        n5, _ = gauss_pair(rng, i)
+        nv = (n3, n4, n5)
+        for k in range(3):
+            s = vel_std[i, 1] if k == 2 else vel_std[i, 0]
+            vel_err[i, k] = pv * vel_err[i, k] + kv * s * nv[k]
+            pos_err[i, k] = pos_phi[i] * pos_err[i, k] + vel_err[i, k] * dt_c
 
 
 @njit(cache=True)
