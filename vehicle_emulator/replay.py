@@ -270,8 +270,14 @@ def replay(
         decoded = PeerDecoder().feed(msg.pack(gcs), "gcs")
         emu.on_messages(emu.nodes[i], collectors[i], decoded, ("127.0.0.1", 14550))
 
-    # the experiment's streams at 100 Hz, the others off (they cost decoding, nothing else)
+    # the experiment's streams at 100 Hz, the others off (they cost decoding, nothing else),
+    # requested at staggered times so that the vehicles sample at different phases of the
+    # setpoint stream (the 10 ms sampling's quantisation of the delays then averages out)
+    t_tick = 0.0
     for i, node in enumerate(emu.nodes):
+        while t_tick < 0.1 + i * (1.0 / STREAM_HZ) / len(specs) - 1e-9:
+            t_tick += TICK_S
+            emu.advance_to(t_tick)
         for msgid in node.telemetry.msgids:
             if msgid == 0:
                 continue  # HEARTBEAT
@@ -290,7 +296,6 @@ def replay(
     sent: list[list[tuple[float, ...]]] = [[] for _ in specs]
     switched = False
     end = rec.t_s[-1] if until_s is None else min(until_s, rec.t_s[-1])
-    t_tick = 0.0
     for k, t_rec in enumerate(rec.t_s):
         if t_rec > end:
             break
