@@ -67,7 +67,7 @@ from gcs.link import (
     check_unique_sysids,
 )
 from gcs.link.enums import MSG_ID
-from gcs.mission.autopilots import AutopilotProfile, ModeSpec
+from gcs.mission.autopilots import AutopilotProfile, ModeSpec, version_text
 from gcs.mission.machine import (
     EXIT_ABORTED,
     Cmd,
@@ -429,6 +429,10 @@ class Flight:
                 for name in c.names:
                     values.append((name, await p.param_read(name)))
                 detail = ", ".join(f"{name} = {value:g}" for name, value in values)
+            elif c.cmd is Cmd.IDENTIFY:
+                word = await p.autopilot_version()
+                values.append(("flight_sw_version", float(word)))
+                detail = f"{profile.name} {version_text(word)}"
             elif c.cmd is Cmd.ARM:
                 if profile.takeoff_mode is not None:  # ArduPilot: NAV_TAKEOFF needs GUIDED
                     await self._set_mode(p, profile, profile.takeoff_mode)

@@ -104,6 +104,8 @@ def nav_state_of(main_mode: int, sub_mode: int) -> NavState | None:
     return {2: NavState.ALTCTL, 3: NavState.POSCTL, 6: NavState.OFFBOARD}.get(main_mode)
 
 
+_MANUAL = frozenset({NavState.POSCTL, NavState.ALTCTL})  # modes flown from (RC) sticks
+
 _MODE_NAMES = {
     NavState.ALTCTL: "Altitude",
     NavState.POSCTL: "Position",
@@ -172,7 +174,7 @@ class Idle:
 
 
 Demand = MotorsOff | Idle | PositionTarget | RatesSetpoint | AttitudeSetpoint | ActuatorSetpoint
-OffboardSetpoint = RatesSetpoint | AttitudeSetpoint | ActuatorSetpoint
+OffboardSetpoint = RatesSetpoint | AttitudeSetpoint | ActuatorSetpoint | PositionTarget
 
 
 @dataclass(slots=True)
@@ -190,6 +192,8 @@ class Autopilot:
     first_offboard_s: float | None = None
     setpoint: OffboardSetpoint | None = None
     home_enu_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    ready_s: float = 0.0  # arming is refused before this time (estimator not ready after boot)
+    failsafe_active: bool = False  # a failsafe chose the mode; cleared by a mode command or disarm
     _last_setpoint_s: float = -math.inf  # time of the newest offboard setpoint (-inf: none yet)
     _armed_s: float = 0.0
     _taken_off: bool = False
@@ -201,10 +205,18 @@ class Autopilot:
 
     @classmethod
     def start(
-        cls, vehicle_id: int, params: ParamStore, now_s: float, obs: Observation
+        cls,
+        vehicle_id: int,
+        params: ParamStore,
+        now_s: float,
+        obs: Observation,
+        ready_after_s: float = 0.0,
     ) -> Autopilot:
-        """A vehicle at boot: in the air -> armed, holding position (Hold); else disarmed."""
+        """A vehicle at boot: in the air -> armed, holding position (Hold); else disarmed, and
+        unable to arm for ``ready_after_s`` (PX4 v1.16.0 SIH: 3.0 s after its first HEARTBEAT).
+        """
         ap = cls(vehicle_id=vehicle_id, params=params)
+        ap.ready_s = now_s + (ready_after_s if obs.on_ground else 0.0)
         ap.home_enu_m = (obs.position_enu_m[0], obs.position_enu_m[1], 0.0)
         if not obs.on_ground:
             ap.armed = True
@@ -214,6 +226,23 @@ class Autopilot:
         return ap
 
     # --- queries ------------------------------------------------------------------------------
+
+    def prearm_ok(self, now_s: float) -> bool:
+        """PX4's pre-arm check result (SYS_STATUS MAV_SYS_STATUS_PREARM_CHECK health bit):
+        what ``arm`` would refuse with TEMPORARILY_REJECTED is failing."""
+        if now_s < self.ready_s:
+            return False
+        return not (self.nav_state is NavState.OFFBOARD and not self.offboard_available(now_s))
+
+    def system_status(self, now_s: float) -> int:
+        """HEARTBEAT system_status as PX4 v1.16.0 sent it: UNINIT (0) disarmed before the
+        estimator is ready and disarmed in OFFBOARD, CRITICAL (5) while a failsafe holds the
+        mode, ACTIVE (4) armed, STANDBY (3) otherwise."""
+        if self.armed:
+            return 5 if self.failsafe_active else 4
+        if now_s < self.ready_s or self.nav_state is NavState.OFFBOARD:
+            return 0
+        return 3
 
     @property
     def custom_mode(self) -> int:
@@ -247,6 +276,9 @@ class Autopilot:
             if not force:
                 if obs.battery_remaining < 0.1:
                     return self._deny("Arming denied: battery low")
+                if now_s < self.ready_s:  # recorded: three refusals in the first 3 s after boot
+                    self._event(Severity.CRITICAL, ARMING_HEALTH_TEXT)
+                    return MavResult.TEMPORARILY_REJECTED
                 if self.nav_state is NavState.OFFBOARD and not self.offboard_available(now_s):
                     self._event(Severity.CRITICAL, ARMING_HEALTH_TEXT)
                     return MavResult.TEMPORARILY_REJECTED
@@ -284,6 +316,7 @@ class Autopilot:
         if target is NavState.AUTO_TAKEOFF:
             self._takeoff_alt_m = self.params["MIS_TAKEOFF_ALT"]
         self.intended_state = target
+        self.failsafe_active = False
         self._enter(target, obs)
         return MavResult.ACCEPTED
 
@@ -294,6 +327,7 @@ class Autopilot:
             alt = self.params["MIS_TAKEOFF_ALT"]
         self._takeoff_alt_m = alt
         self.nav_state = self.intended_state = NavState.AUTO_TAKEOFF
+        self.failsafe_active = False
         self._event(Severity.INFO, f"Takeoff to {alt:.1f} m")
         if self.armed:
             self._begin_takeoff(obs, alt)
@@ -303,6 +337,7 @@ class Autopilot:
         """MAV_CMD_NAV_LAND: descend at MPC_LAND_SPEED, then disarm. A user mode selection in PX4:
         Land becomes the intended mode (so the vehicle stays in Land after the disarm)."""
         self.intended_state = NavState.AUTO_LAND
+        self.failsafe_active = False
         self._enter(NavState.AUTO_LAND, obs)
         return MavResult.ACCEPTED
 
@@ -357,6 +392,7 @@ class Autopilot:
 
     def _disarm(self, text: str) -> None:
         self.armed = False
+        self.failsafe_active = False
         self._takeoff_climbing = False
         self._landed_since_s = None
         self._event(Severity.INFO, text)
@@ -381,13 +417,18 @@ class Autopilot:
         if self.nav_state is NavState.OFFBOARD:
             return self.setpoint if self.setpoint is not None else self._hold_demand(obs)
         if self.nav_state is NavState.AUTO_LAND:
-            if obs.on_ground:
-                return Idle()
-            speed = self.params["MPC_LAND_SPEED"]
-            return PositionTarget(
-                obs.position_enu_m, (0.0, 0.0, -speed), (1.0, 1.0, 0.0), obs.yaw_enu_rad
-            )
+            return self._descent_demand(obs, self.params["MPC_LAND_SPEED"])
+        if self.nav_state in _MANUAL and self.params.get_int("COM_RC_IN_MODE") == 4:
+            # no manual control input: PX4 reads the throttle stick as full down
+            return self._descent_demand(obs, self.params["MPC_Z_VEL_MAX_DN"])
         return self._hold_demand(obs)
+
+    def _descent_demand(self, obs: Observation, speed_mps: float) -> Demand:
+        if obs.on_ground:
+            return Idle()
+        return PositionTarget(
+            obs.position_enu_m, (0.0, 0.0, -speed_mps), (1.0, 1.0, 0.0), obs.yaw_enu_rad
+        )
 
     def _enter(self, target: NavState, obs: Observation) -> None:
         if target is not self.nav_state:
@@ -436,6 +477,7 @@ class Autopilot:
         action. The intended mode stays OFFBOARD."""
         action = self.params.get_int("COM_OBL_RC_ACT")
         self._event(Severity.CRITICAL, FAILSAFE_TEXT)
+        self.failsafe_active = True
         if action in (3, 4):
             target = NavState.AUTO_LAND
         elif action == 7:

@@ -3,6 +3,8 @@
 Ports follow PX4 SITL instance i = N-1: bind 127.0.0.1:14580+i, send to 127.0.0.1:14540+i
 (instances above 9 send to 14549), sysid N; ``--gcs`` adds a second link bound to 18570+i that
 sends to 14550. Team-file ``link`` keys override the defaults, command-line flags override both.
+An ``ardupilot`` vehicle sends from an ephemeral port instead (ArduPilot SITL's udpclient), unless
+``--bind`` / ``--bind-base`` (``--gcs-bind``) force one; the ready line names the port.
 Ctrl-C / SIGTERM stop it cleanly (exit status 0).
 
 Start-up: the physics kernels are compiled (announced on stderr when the cache is cold, see
@@ -22,11 +24,13 @@ import signal
 import sys
 import time
 from collections.abc import Sequence
+from pathlib import Path
 
 from vehicle_emulator.jitcache import compiling
-from vehicle_emulator.personality import AUTOPILOT_NAMES, DEFAULT_AUTOPILOT
+from vehicle_emulator.personality import AUTOPILOT_NAMES, DEFAULT_AUTOPILOT, personality_of
 from vehicle_emulator.runner import Emulator, LinkPlan, RealtimeClock, RunStats
 from vehicle_emulator.team import TeamFileError, TeamSpec, VehicleSpec, default_vehicle, load_team
+from vehicle_emulator.vehicle import VehicleNode
 
 log = logging.getLogger("vehicle_emulator")
 
@@ -52,9 +56,13 @@ def parse_address(text: str) -> tuple[str, int]:
 
 
 def link_plan(spec: VehicleSpec, args: argparse.Namespace, single: bool) -> LinkPlan:
-    """Addresses of a vehicle: PX4 SITL defaults < team file < command line."""
+    """Addresses of a vehicle: PX4 SITL defaults < team file < command line. An ardupilot
+    vehicle binds port 0 (ephemeral, connected to its remote) unless the command line forces a
+    bind; the team file's bind (its ``link.remote_port``) does not apply to it."""
     i = spec.vehicle_id - 1
-    bind = ("127.0.0.1", args.bind_base + i)
+    udpclient = personality_of(spec.autopilot).protocol.family == "ardupilot"
+    forced = args.bind is not None if single else args.bind_base is not None
+    bind = ("127.0.0.1", (args.bind_base or 14580) + i)
     remote = ("127.0.0.1", args.remote_base + min(i, 9))
     gcs_bind = ("127.0.0.1", 18570 + i)
     gcs_remote = ("127.0.0.1", 14550)
@@ -67,7 +75,13 @@ def link_plan(spec: VehicleSpec, args: argparse.Namespace, single: bool) -> Link
         gcs_bind = args.gcs_bind or gcs_bind
         gcs_remote = args.gcs_remote or gcs_remote
     use_gcs = args.gcs or args.gcs_bind is not None
-    return LinkPlan(bind, remote, gcs_bind if use_gcs else None, gcs_remote if use_gcs else None)
+    if udpclient:
+        if not forced:
+            bind = (bind[0], 0)
+        if args.gcs_bind is None:
+            gcs_bind = (gcs_bind[0], 0)
+    return LinkPlan(bind, remote, gcs_bind if use_gcs else None, gcs_remote if use_gcs else None,
+                    connect=udpclient)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -90,9 +104,16 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--gcs", action="store_true", help="second link: bind 18570+i, send to 14550")
     ap.add_argument("--gcs-bind", type=parse_address, help="second link's local address")
     ap.add_argument("--gcs-remote", type=parse_address, help="second link's peer")
-    ap.add_argument("--bind-base", type=int, default=14580, help="fleet: bind base port")
+    ap.add_argument("--bind-base", type=int, default=None,
+                    help="fleet: bind base port (default 14580; forces a bind for ardupilot)")
     ap.add_argument("--remote-base", type=int, default=14540, help="fleet: remote base port")
     ap.add_argument("--in-air", action="store_true", help="without --team: start at 10 m, holding")
+    ap.add_argument(
+        "--message-intervals",
+        metavar="FILE",
+        help="ardupilot: ArduPilot's message-intervals file (lines 'msgid interval_ms'), the "
+        "streams its vehicles send from boot",
+    )
     pace = ap.add_mutually_exclusive_group()
     pace.add_argument(
         "--lockstep",
@@ -149,6 +170,28 @@ def _team_specs(args: argparse.Namespace) -> tuple[list[VehicleSpec], TeamSpec |
         raise SystemExit(f"vehicle-emu: {exc.args[0]}") from None
 
 
+def read_message_intervals(path: str) -> dict[int, float]:
+    """ArduPilot's message-intervals file: one 'msgid interval_ms' a line ('#' comments);
+    ValueError naming the file and line otherwise."""
+    out: dict[int, float] = {}
+    try:
+        lines = Path(path).read_text().splitlines()
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read the message intervals: {exc}") from None
+    for n, line in enumerate(lines, start=1):
+        words = line.split("#", 1)[0].split()
+        if not words:
+            continue
+        try:
+            msgid, ms = int(words[0]), float(words[1])
+            if len(words) != 2 or msgid < 0 or not ms > 0:
+                raise ValueError
+        except (ValueError, IndexError):
+            raise ValueError(f"{path}:{n}: expected 'msgid interval_ms', got {line!r}") from None
+        out[msgid] = ms
+    return out
+
+
 def warm_up(emu: Emulator) -> None:
     """Compile (or load from the cache) every kernel the emulator runs; announced when cold."""
     with compiling("emulator", "the emulator physics", COMPILE_ESTIMATE_S, "vehicle-emu"):
@@ -164,6 +207,7 @@ async def _amain(args: argparse.Namespace) -> int:
             raise SystemExit(f"vehicle-emu: --param expects NAME=VALUE, got {item!r}")
         overrides[name.strip()] = float(value)
     rate = args.physics_rate or (team.physics_rate_hz if team else 1000.0)
+    intervals = read_message_intervals(args.message_intervals) if args.message_intervals else None
     emu = Emulator(
         specs,
         faults=team.faults if team else (),
@@ -171,22 +215,28 @@ async def _amain(args: argparse.Namespace) -> int:
         tick_s=args.tick_ms * 1e-3,
         seed=args.seed,
         param_overrides=overrides,
+        message_intervals_ms=intervals,
     )
     warm_up(emu)
     clock = RealtimeClock(args.realtime_factor)
     plans = [link_plan(s, args, single=not args.fleet) for s in specs]
     await emu.open_links(plans, clock)
-    for s, plan in zip(specs, plans, strict=True):
-        log.info(
-            "vehicle %d sysid %d: bind %s:%d -> %s:%d",
-            s.vehicle_id,
-            s.sysid,
-            *plan.bind,
-            *plan.remote,
-        )
+    ephemeral = []
+    for node, plan in zip(emu.nodes, plans, strict=True):
+        s = node.spec
+        for link in node.links:
+            host, port = link.local_address or plan.bind
+            kind = "sends from an ephemeral port" if link.connected else "binds"
+            log.info("vehicle %d sysid %d: %s %s:%d -> %s:%d", s.vehicle_id, s.sysid, kind,
+                     host, port, *link.remote)
+            if link.connected:
+                ephemeral.append(f"sysid {s.sysid} sends from {host}:{port} to "
+                                 f"{link.remote[0]}:{link.remote[1]}")
     sysids = ", ".join(str(s.sysid) for s in specs)
-    print(f"{READY_PREFIX} {len(specs)} vehicle{'s' if len(specs) != 1 else ''} (sysid {sysids})",
-          flush=True)
+    udpclient = (f"; ephemeral ports (ArduPilot SITL udpclient): {', '.join(ephemeral)}"
+                 if ephemeral else "")
+    print(f"{READY_PREFIX} {len(specs)} vehicle{'s' if len(specs) != 1 else ''} (sysid {sysids})"
+          f"{udpclient}", flush=True)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -222,6 +272,7 @@ async def _amain(args: argparse.Namespace) -> int:
             zip(emu.telemetry.names, emu.telemetry.sent.tolist(), strict=True)
         ),
         "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "by_vehicle": [_vehicle_summary(node) for node in emu.nodes],
     }
     if args.stats_json:
         with open(args.stats_json, "w") as fh:
@@ -233,6 +284,22 @@ async def _amain(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     return 0
+
+
+def _vehicle_summary(node: VehicleNode) -> dict[str, object]:
+    """What a vehicle ended in and what it made of its input (``--stats-json``)."""
+    ap, c = node.autopilot, node.counters
+    return {
+        "sysid": node.sysid,
+        "autopilot": node.personality.name,
+        "mode": ap.mode_name,
+        "armed": bool(ap.armed),
+        "setpoints_taken": node.setpoints_taken,
+        "setpoints_rejected": c.setpoints_rejected,
+        "setpoints_ignored": c.setpoints_ignored,
+        "setpoints_by_mode": dict(c.setpoints_by_mode),
+        "guided_timeouts": getattr(ap, "guided_timeouts", None),
+    }
 
 
 def _percentile(xs: list[float], q: float) -> float:

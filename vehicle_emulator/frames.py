@@ -29,8 +29,10 @@ F_FLU_FRD: FloatArray = np.diag([1.0, -1.0, -1.0])
 __all__ = [
     "F_FLU_FRD",
     "P_ENU_NED",
+    "enu_from_local_ned",
     "enu_to_ned",
     "fleet_to_ned_frd",
+    "local_ned_from_enu",
     "quat_from_matrix",
     "euler_ned_frd_from_rotation",
     "flu_to_frd",
@@ -42,6 +44,8 @@ __all__ = [
     "rotation_ned_frd_from_enu_flu",
     "yaw_ned_from_rotation_enu_flu",
     "rotation_enu_flu_from_yaw_ned",
+    "yaw_enu_from_yaw_ned",
+    "yaw_ned_from_yaw_enu",
 ]
 
 
@@ -52,6 +56,30 @@ def enu_to_ned(vector_enu: FloatArray) -> FloatArray:
 
 
 ned_to_enu = enu_to_ned  # P is its own inverse
+
+
+def enu_from_local_ned(
+    position_ned_m: FloatArray, origin_enu_m: tuple[float, float, float]
+) -> FloatArray:
+    """A position in a vehicle's local NED frame (LOCAL_POSITION_NED, position targets) ->
+    team ENU, given where that frame's zero is in the team frame
+    (``VehicleSpec.local_origin_enu_m``)."""
+    return ned_to_enu(position_ned_m) + np.asarray(origin_enu_m, dtype=np.float64)
+
+
+def local_ned_from_enu(
+    position_enu_m: FloatArray, origin_enu_m: tuple[float, float, float]
+) -> FloatArray:
+    """Team ENU position -> the vehicle's local NED frame (inverse of ``enu_from_local_ned``)."""
+    return enu_to_ned(np.asarray(position_enu_m, dtype=np.float64) - np.asarray(origin_enu_m))
+
+
+def yaw_enu_from_yaw_ned(yaw_ned_rad: float) -> float:
+    """Heading NED (0 north, +east, MAVLink) -> ENU yaw (0 east, +north), wrapped to (-pi, pi]."""
+    return math.remainder(0.5 * math.pi - yaw_ned_rad, 2.0 * math.pi)
+
+
+yaw_ned_from_yaw_enu = yaw_enu_from_yaw_ned  # the map is its own inverse
 
 
 def flu_to_frd(vector_flu: FloatArray) -> FloatArray:

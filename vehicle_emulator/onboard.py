@@ -361,10 +361,10 @@ def onboard_step(
             for k in range(3):
                 torque_sp[i, k] = torque_cmd[i, k] * tmax[i, k]
             continue
-        if m == 5:
+        if m == 5:  # the autopilot's own position loop flies on its estimates, as PX4's does
             thr = position_control(
-                i, pos, vel, rot, pos_sp, vel_ff, pos_mask, yaw_sp, vel_int, hover, landed, dt_c,
-                att_sp,
+                i, pos_est, vel_est, rot, pos_sp, vel_ff, pos_mask, yaw_sp, vel_int, hover, landed,
+                dt_c, att_sp,
             )
             attitude_control(i, rot, att_sp, yaw_rate_ff, rate_sp)
         elif m == 3:

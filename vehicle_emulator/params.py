@@ -1,8 +1,10 @@
-"""The emulator's parameter table (PX4 names where PX4 has one, EMU_* for emulator settings).
+"""The emulator's parameter tables: per autopilot family (``PARAMS``: PX4's names; ``ARDUCOPTER
+PARAMS``: ArduCopter's), each with the EMU_* emulator settings.
 
 Pure: a ``ParamStore`` per vehicle holds typed values with limits; ``set`` returns the stored value
 or raises ``ParamError`` (unknown name, read-only, out of range, not finite). MAVLink encoding of
-INT32 values follows PX4 (bytewise in the float field): ``encode_value`` / ``decode_value``.
+integer values follows the autopilot: PX4 puts the bits of an INT32 in the float field
+(bytewise), ArduPilot casts the integer to float (``encode_value`` / ``decode_value``).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 __all__ = [
+    "ARDUCOPTER_PARAMS",
     "PARAMS",
     "ParamDef",
     "ParamError",
@@ -20,12 +23,15 @@ __all__ = [
     "ParamType",
     "decode_value",
     "encode_value",
+    "param_table",
 ]
 
 
 class ParamType(IntEnum):
     """MAV_PARAM_TYPE values used here."""
 
+    INT8 = 2
+    INT16 = 4
     INT32 = 6
     REAL32 = 9
 
@@ -64,6 +70,11 @@ PARAMS: tuple[ParamDef, ...] = (
     ParamDef("MIS_TAKEOFF_ALT", _F, 2.5, 0.5, 100.0, "default takeoff altitude above ground [m]"),
     ParamDef("MPC_LAND_SPEED", _F, 0.7, 0.2, 3.0, "landing descent speed [m/s]"),
     ParamDef("MPC_TKO_SPEED", _F, 1.5, 0.2, 5.0, "takeoff climb speed [m/s]"),
+    ParamDef("MPC_Z_VEL_MAX_DN", _F, 1.0, 0.5, 4.0, "max descent speed, full-down stick [m/s]"),
+    ParamDef(
+        "COM_RC_IN_MODE", _I, 3, 0, 4,
+        "manual control input; 4 none: in Position/Altitude the stick reads full down (descend)",
+    ),
     ParamDef(
         "MPC_THR_HOVER", _F, 0.5, 0.05, 0.95, "hover thrust of the onboard controllers [0..1]"
     ),
@@ -101,31 +112,81 @@ PARAMS: tuple[ParamDef, ...] = (
     ),
 )
 
-_BY_NAME = {p.name: p for p in PARAMS}
+_I8, _I16 = ParamType.INT8, ParamType.INT16
+_AP_ONLY_EMU = (
+    ParamDef(
+        "EMU_BOOT_SCALE", _F, 1.0, 0.0, 10.0,
+        "time scale of the recorded ArduCopter boot timeline (0: booted at once)",
+    ),
+    ParamDef("EMU_BANNER", _I, 1, 0, 1, "1: plain-text boot banner before the first packet"),
+)
+
+#: ArduCopter 4.7 names, types, firmware defaults and ranges (the recording's params.txt), the
+#: ones the ardupilot personality reads; then the emulator's settings (EMU_ACK_TWICE and the
+#: PX4 mixer option excepted).
+ARDUCOPTER_PARAMS: tuple[ParamDef, ...] = (
+    ParamDef("GUID_OPTIONS", _I, 0, 0, 2**16 - 1,
+             "guided options bitmask; bit 3 (8): SET_ATTITUDE_TARGET thrust is thrust"),
+    ParamDef("GUID_TIMEOUT", _F, 3.0, 0.1, 5.0, "guided attitude/velocity target timeout [s]"),
+    ParamDef("DISARM_DELAY", _I8, 10, 0, 127, "auto-disarm after this long landed [s], 0 off"),
+    ParamDef("LAND_SPEED", _I16, 50, 30, 200, "landing speed below LAND_ALT_LOW [cm/s]"),
+    ParamDef("LAND_ALT_LOW", _I16, 1000, 100, 10000, "altitude where LAND slows down [cm]"),
+    ParamDef("WPNAV_SPEED_UP", _F, 250.0, 10.0, 1000.0, "climb speed [cm/s]"),
+    ParamDef("WPNAV_SPEED_DN", _F, 150.0, 10.0, 500.0, "descent speed [cm/s]"),
+    ParamDef("WPNAV_ACCEL_Z", _F, 100.0, 50.0, 500.0, "vertical acceleration [cm/s^2]"),
+    ParamDef("PILOT_SPEED_UP", _I16, 250, 50, 500, "pilot climb rate [cm/s]"),
+    ParamDef("PILOT_SPEED_DN", _I16, 0, 0, 500, "pilot descent rate [cm/s], 0: PILOT_SPEED_UP"),
+    ParamDef("ARMING_CHECK", _I, 1, 0, 2**31 - 1, "pre-arm checks bitmask, 0: mandatory only"),
+    ParamDef("MOT_THST_HOVER", _F, 0.35, 0.05, 0.95, "hover thrust [0..1] (set from the plant)"),
+    ParamDef("MAV_SYSID", _I16, 1, 1, 255, "system id (set at start)", read_only=True),
+    *_AP_ONLY_EMU,
+    *(p for p in PARAMS if p.name.startswith("EMU_") and p.name != "EMU_ACK_TWICE"),
+)
+
+_TABLES = {"px4": PARAMS, "ardupilot": ARDUCOPTER_PARAMS}
+
+
+def param_table(family: str) -> tuple[ParamDef, ...]:
+    """The parameter table of an autopilot family ('px4', 'ardupilot')."""
+    return _TABLES[family]
 
 
 class ParamStore:
-    """Typed parameter values of one vehicle; ``on_change`` hooks are called after a write."""
+    """Typed parameter values of one vehicle, from one table (default PX4's)."""
 
-    __slots__ = ("_values",)
+    __slots__ = ("_values", "_defs", "_names", "bytewise_ints")
 
-    def __init__(self, overrides: dict[str, float] | None = None) -> None:
-        self._values: dict[str, float] = {p.name: float(p.default) for p in PARAMS}
+    def __init__(
+        self,
+        overrides: dict[str, float] | None = None,
+        table: tuple[ParamDef, ...] = PARAMS,
+        bytewise_ints: bool = True,
+    ) -> None:
+        self._defs = {p.name: p for p in table}
+        self._names = [p.name for p in table]
+        self._values: dict[str, float] = {p.name: float(p.default) for p in table}
+        self.bytewise_ints = bytewise_ints  # PX4 True, ArduPilot False (see encode_value)
         for name, value in (overrides or {}).items():
             self.set(name, value, force=True)
 
-    @staticmethod
-    def definition(name: str) -> ParamDef:
+    @classmethod
+    def for_family(cls, family: str) -> ParamStore:
+        """The table and integer encoding of an autopilot family ('px4', 'ardupilot')."""
+        return cls(table=param_table(family), bytewise_ints=family == "px4")
+
+    def definition(self, name: str) -> ParamDef:
         """The definition of ``name``; ParamError if unknown."""
         try:
-            return _BY_NAME[name]
+            return self._defs[name]
         except KeyError:
             raise ParamError(f"unknown parameter {name!r}") from None
 
-    @staticmethod
-    def names() -> list[str]:
+    def names(self) -> list[str]:
         """Parameter names in table order (the PARAM_VALUE index order)."""
-        return [p.name for p in PARAMS]
+        return self._names
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._defs
 
     def __getitem__(self, name: str) -> float:
         return self._values[name]
@@ -145,7 +206,7 @@ class ParamStore:
         x = float(value)
         if not math.isfinite(x):
             raise ParamError(f"parameter {name}: value {value!r} is not finite")
-        if p.ptype is ParamType.INT32:
+        if p.ptype is not ParamType.REAL32:
             x = float(round(x))
         if not p.minimum <= x <= p.maximum:
             raise ParamError(
@@ -155,22 +216,27 @@ class ParamStore:
         return x
 
 
-def encode_value(ptype: ParamType, value: float) -> float:
-    """PARAM_VALUE.param_value: REAL32 as is; INT32 bytewise in the float (PX4 convention)."""
-    if ptype is ParamType.INT32:
+def encode_value(ptype: ParamType, value: float, bytewise: bool = True) -> float:
+    """PARAM_VALUE.param_value: REAL32 as is; an integer bytewise in the float (PX4 convention)
+    or, with ``bytewise=False``, cast to float (ArduPilot)."""
+    if ptype is not ParamType.REAL32 and bytewise:
         return struct.unpack("<f", struct.pack("<i", int(value)))[0]
     return float(value)
 
 
-def decode_value(ptype: ParamType, wire_value: float, wire_type: int) -> float:
+def decode_value(
+    ptype: ParamType, wire_value: float, wire_type: int, bytewise: bool = True
+) -> float:
     """PARAM_SET.param_value -> number.
 
     INT32 parameters: PX4 clients (MAVSDK, QGroundControl) send the integer bytewise in the float
     (a tiny denormal for small integers); pymavlink scripts often send the plain float. A whole
     non-zero float below 2**24 cannot be a bytewise small integer, so it is taken as is; anything
-    else is read bytewise.
+    else is read bytewise. With ``bytewise=False`` (ArduPilot) the float is the value.
     """
-    if ptype is ParamType.INT32:
+    if not bytewise:
+        return float(wire_value)
+    if ptype is not ParamType.REAL32:
         f = float(wire_value)
         if math.isfinite(f) and f != 0.0 and f == int(f) and abs(f) < 2**24:
             return f

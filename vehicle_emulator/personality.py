@@ -50,6 +50,8 @@ class Protocol:
     ack_twice: bool  # default of EMU_ACK_TWICE (PX4 v1.16.0 answers DO_SET_MODE twice)
     arming_ready_s: float  # a vehicle booted on the ground refuses to arm before this [s]
     own_origin: bool  # LOCAL_POSITION_NED relative to the vehicle's own EKF origin
+    param_defaults: tuple[tuple[str, float], ...] = ()  # parameter defaults as recorded
+    statustext_end: str = ""  # appended to every STATUSTEXT (PX4 v1.16.0 ends each in a TAB)
 
     @property
     def version_word(self) -> int:
@@ -248,8 +250,12 @@ PERSONALITIES: dict[str, Personality] = {
     "px4": Personality(
         "px4",
         # arming: refused until 3.0 s after the first HEARTBEAT (boot 1.36 s, armed at 4.36 s)
+        # COM_RC_IN_MODE 4 (no manual control), as the recordings and the team's SITL runs set
+        # it: Position and Altitude then descend at MPC_Z_VEL_MAX_DN (1.04 m/s recorded after
+        # the offboard-loss failsafe) instead of holding
         Protocol("px4", MAV_AUTOPILOT_PX4, (1, 16, 0), actuator_setpoints=False, ack_twice=True,
-                 arming_ready_s=3.0, own_origin=True),
+                 arming_ready_s=3.0, own_origin=True, param_defaults=(("COM_RC_IN_MODE", 4),),
+                 statustext_end="\t"),
         dynamics=PX4_DYNAMICS,
         sensors=PX4_SENSORS,
     ),

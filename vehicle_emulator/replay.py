@@ -30,7 +30,6 @@ from pymavlink.dialects.v20 import common as mavlink
 from vehicle_emulator import metrics as mx
 from vehicle_emulator.codec import PeerDecoder
 from vehicle_emulator.personality import personality_of
-from vehicle_emulator.plant import ControlMode
 from vehicle_emulator.runner import Emulator
 from vehicle_emulator.team import VehicleSpec
 
@@ -265,11 +264,20 @@ def replay(
         node.links.append(c)
         collectors.append(c)
     family = personality_of(specs[0].autopilot).protocol.family
+    if any(personality_of(s.autopilot).protocol.family != family for s in specs):
+        raise ValueError("replay: every vehicle needs the same autopilot family")
 
     def send(i: int, msg: Any) -> None:
         decoded = PeerDecoder().feed(msg.pack(gcs), "gcs")
         emu.on_messages(emu.nodes[i], collectors[i], decoded, ("127.0.0.1", 14550))
 
+    if family == "ardupilot":  # the recording's vehicle1.parm: the attitude target's thrust is
+        for i, node in enumerate(emu.nodes):  # thrust (GUID_OPTIONS bit 3), not a climb rate
+            ptype = node.params.definition("GUID_OPTIONS").ptype
+            send(i, mavlink.MAVLink_param_set_message(node.sysid, 1, b"GUID_OPTIONS", 8.0,
+                                                      int(ptype)))
+            if node.params.get_int("GUID_OPTIONS") != 8:
+                raise RuntimeError(f"vehicle {node.sysid}: GUID_OPTIONS not set")
     # the experiment's streams at 100 Hz, the others off (they cost decoding, nothing else),
     # requested at staggered times so that the vehicles sample at different phases of the
     # setpoint stream (the 10 ms sampling's quantisation of the delays then averages out)
@@ -358,17 +366,16 @@ def _thrust_doublet_offsets(rec: Recording) -> dict[int, tuple[float, bool]]:
 
 def _enter_setpoint_mode(emu: Emulator, i: int, family: str, send: Any, link: _Collector) -> None:
     """DO_SET_MODE into the mode that flies SET_ATTITUDE_TARGET, as the recorded GCS did: PX4
-    OFFBOARD (129, 6, 0); ArduPilot GUIDED_NOGPS (1, 20), or OFFBOARD where this emulator's
-    ArduPilot personality still speaks PX4's modes. RuntimeError if neither is accepted."""
+    OFFBOARD (129, 6, 0), ArduPilot GUIDED_NOGPS (1, 20); the last COMMAND_ACK for it must be
+    ACCEPTED (PX4 answers twice: the second is the result). RuntimeError otherwise."""
     node = emu.nodes[i]
-    tries = [(129.0, 6.0)] if family == "px4" else [(1.0, 20.0), (129.0, 6.0)]
-    for p1, p2 in tries:
-        send(i, mavlink.MAVLink_command_long_message(
-            node.sysid, 1, 176, 0, p1, p2, 0, 0, 0, 0, 0))
-        emu.send_deferred_acks()
-        if emu.plant.mode[i] == ControlMode.RATES:
-            return
-    raise RuntimeError(f"vehicle {node.sysid}: no setpoint mode accepted (ACKs {link.acks})")
+    p1, p2 = (129.0, 6.0) if family == "px4" else (1.0, 20.0)
+    send(i, mavlink.MAVLink_command_long_message(node.sysid, 1, 176, 0, p1, p2, 0, 0, 0, 0, 0))
+    emu.send_deferred_acks()
+    results = [r for c, r in link.acks if c == 176]
+    if not results or results[-1] != 0:
+        raise RuntimeError(f"vehicle {node.sysid}: DO_SET_MODE {p2:.0f} not accepted "
+                           f"(ACKs {results})")
 
 
 # --- figures: the same keys from the recording's JSON summaries and from replayed traces ------

@@ -18,10 +18,13 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from vehicle_emulator.autopilot import Autopilot, NavState, Severity
+from vehicle_emulator.ardupilot import ArduCopter
+from vehicle_emulator.ardupilot_node import DEFAULT_RATES_HZ as ARDUPILOT_RATES_HZ
+from vehicle_emulator.ardupilot_node import ArduPilotNode
+from vehicle_emulator.autopilot import Autopilot, Severity
 from vehicle_emulator.codec import GenericEncoder
 from vehicle_emulator.faults import FaultSchedule, LinkImpairment
-from vehicle_emulator.params import ParamStore
+from vehicle_emulator.params import ParamStore, param_table
 from vehicle_emulator.personality import personality_of
 from vehicle_emulator.plant import FleetPlant
 from vehicle_emulator.server import UdpLink
@@ -67,12 +70,22 @@ class RealtimeClock:
 
 @dataclass(frozen=True, slots=True)
 class LinkPlan:
-    """UDP addresses of one vehicle: the API link and an optional GCS link."""
+    """UDP addresses of one vehicle: the API link and an optional GCS link. ``connect``: a link
+    whose bind port is 0 is a connected socket on an ephemeral port (ArduPilot SITL's
+    udpclient); one with a port binds it and answers whoever sent last (as PX4)."""
 
     bind: tuple[str, int]
     remote: tuple[str, int]
     gcs_bind: tuple[str, int] | None = None
     gcs_remote: tuple[str, int] | None = None
+    connect: bool = False
+
+
+# per autopilot family: the node class, the autopilot state machine, parameter names
+_FAMILIES: dict[str, tuple[type[VehicleNode], Any, str, str]] = {
+    "px4": (VehicleNode, Autopilot, "MAV_SYS_ID", "MPC_THR_HOVER"),
+    "ardupilot": (ArduPilotNode, ArduCopter, "MAV_SYSID", "MOT_THST_HOVER"),
+}
 
 
 @dataclass(slots=True)
@@ -115,7 +128,10 @@ class Emulator:
         tick_s: float = 0.002,
         seed: int = 0,
         param_overrides: dict[str, float] | None = None,
+        message_intervals_ms: dict[int, float] | None = None,
     ) -> None:
+        """``message_intervals_ms``: ArduPilot's message-intervals file (msgid -> interval),
+        preloaded into every ardupilot vehicle's streams."""
         sysids = [s.sysid for s in specs]
         if len(set(sysids)) != len(sysids):
             raise ValueError(f"duplicate sysids {sysids}: ground stations would merge them")
@@ -127,24 +143,40 @@ class Emulator:
         self.link_up = np.ones(len(specs), dtype=bool)
         self.nodes: list[VehicleNode] = []
         self._next_autopilot_s = 0.0
+        families = {personality_of(s.autopilot).protocol.family for s in specs}
+        for name in param_overrides or {}:  # an unknown name is refused once, not per vehicle
+            if not any(name in {p.name for p in param_table(f)} for f in families):
+                ParamStore.for_family(sorted(families)[0]).definition(name)
         for i, spec in enumerate(specs):
             personality = personality_of(spec.autopilot)
+            family = personality.protocol.family
+            node_cls, autopilot_cls, sysid_param, hover_param = _FAMILIES[family]
             self.status.mav_autopilot[i] = personality.protocol.mav_autopilot
-            params = ParamStore()
-            params.set("MAV_SYS_ID", spec.sysid, force=True)
-            params.set("EMU_ACK_TWICE", 1.0 if personality.protocol.ack_twice else 0.0)
+            params = ParamStore.for_family(family)
+            params.set(sysid_param, spec.sysid, force=True)
+            if "EMU_ACK_TWICE" in params:
+                params.set("EMU_ACK_TWICE", 1.0 if personality.protocol.ack_twice else 0.0)
+            for name, value in personality.protocol.param_defaults:
+                params.set(name, value)
             params.set("EMU_SEED", seed)
-            params.set("MPC_THR_HOVER", float(self.plant.hover_thrust_norm[i]))
+            params.set(hover_param, float(self.plant.hover_thrust_norm[i]))
             params.set("EMU_MOT_TAU", float(self.plant.motor_time_constant_s[i]))
             params.set("EMU_NOISE", 1.0 if personality.sensors.noise_default else 0.0)
             params.set("EMU_MASS_KG", spec.mass_kg, force=True)
             params.set("EMU_THR_MAX_N", 4.0 * spec.rotor_thrust_max_n, force=True)
             for name, value in (param_overrides or {}).items():
-                params.set(name, value)
+                if name in params:  # a mixed team: each vehicle takes the names it has
+                    params.set(name, value)
+            if family == "ardupilot":
+                self.telemetry.set_defaults(i, ARDUPILOT_RATES_HZ, delayed=("TIMESYNC",))
+                for msgid, ms in (message_intervals_ms or {}).items():
+                    if not self.telemetry.set_interval(i, msgid, ms * 1e3, 0.0):
+                        raise ValueError(f"message intervals: message id {msgid} is not one "
+                                         "the emulator streams")
             if spec.starts_in_air:
                 self.plant.hold_here(i)
             obs_spec = [f for f in faults if f.vehicle_id == spec.vehicle_id]
-            node = VehicleNode(
+            node = node_cls(
                 index=i,
                 spec=spec,
                 personality=personality,
@@ -157,7 +189,17 @@ class Emulator:
                 impairment=LinkImpairment(np.random.default_rng(seed + i)),
                 encoder=GenericEncoder(spec.sysid, 1, self.telemetry.seq, i),
             )
-            node.autopilot = Autopilot.start(spec.vehicle_id, params, 0.0, node.observe())
+            node.autopilot = autopilot_cls.start(
+                spec.vehicle_id,
+                params,
+                0.0,
+                node.observe(),
+                ready_after_s=personality.protocol.arming_ready_s,
+            )
+            origin = node.local_origin_enu_m
+            home = node.autopilot.home_enu_m
+            self.status.origin_ned_m[i] = (origin[1], origin[0], -origin[2])
+            self.status.home_ned_m[i] = (home[1], home[0], -home[2])
             node.sync_all_params()
             node.apply_demand()
             node.refresh_status(0.0)
@@ -202,6 +244,7 @@ class Emulator:
                 node.drain_events()
                 node.refresh_status(now)
                 node.report_input(now)
+                node.announce_origin(now)
                 self.link_up[node.index] = not node.impairment.is_down(now)
             self._fault_nodes = [node for node in self.nodes if not node.faults.idle]
         out = self.telemetry.collect(now, self.plant, self.status, self.link_up)
@@ -245,10 +288,16 @@ class Emulator:
 
                 try:
                     link = await UdpLink.open(
-                        bind, remote, node.impairment, clock.now_s, deliver, name=name
+                        bind, remote, node.impairment, clock.now_s, deliver, name=name,
+                        connect=plan.connect and bind[1] == 0,
                     )
                 except OSError as exc:
                     raise OSError(f"{name}: cannot bind: {exc}") from exc
+                if link.connected:
+                    host, port = link.local_address or bind
+                    link.name = f"vehicle {node.spec.vehicle_id} {kind} {host}:{port}"
+                for data in node.boot_banner():  # before any MAVLink (ArduPilot SITL)
+                    link.send(data)
                 node.links.append(link)
                 self.links.append(link)
 
@@ -298,11 +347,7 @@ class Emulator:
         for node in self.nodes:
             node.statustext(Severity.INFO, f"vehicle-emu {node.spec.vehicle_id} ready, lockstep")
         while not stop.is_set():
-            driving = [
-                n
-                for n in self.nodes
-                if n.autopilot.armed and n.autopilot.nav_state is NavState.OFFBOARD
-            ]
+            driving = [n for n in self.nodes if n.setpoint_driven()]
             step = self.tick_s
             if driving:
                 deadline = clock.now_s() + LOCKSTEP_TIMEOUT_S

@@ -1,7 +1,9 @@
 """asyncio UDP endpoint of one vehicle link: datagrams in/out, impairments, remote tracking.
 
 Like PX4 SITL's UDP link, the endpoint sends to its configured remote (127.0.0.1:14540+i by
-default) until a valid MAVLink message arrives, then to the address that last sent one. Link
+default) until a valid MAVLink message arrives, then to the address that last sent one. A
+``connect``ed endpoint (ArduPilot SITL's ``udpclient``) binds an ephemeral port unless one is
+given, sends only to its remote and receives only from it (a connected UDP socket). Link
 impairments (loss window, seeded loss, added latency) apply to both directions. Bytes are
 decoded by a per-link ``PeerDecoder`` (one parser per peer address) and handed to a callback.
 """
@@ -45,6 +47,7 @@ class UdpLink(asyncio.DatagramProtocol):
         self.transport: asyncio.DatagramTransport | None = None
         self.sent_datagrams = 0
         self.send_errors = 0
+        self.connected = False
         self._loop: asyncio.AbstractEventLoop | None = None
 
     @classmethod
@@ -56,13 +59,18 @@ class UdpLink(asyncio.DatagramProtocol):
         now_s: Callable[[], float],
         on_messages: Callable[[UdpLink, list[Any], Address], None],
         name: str = "link",
+        connect: bool = False,
     ) -> UdpLink:
-        """Bind ``bind`` and return the endpoint (OSError if the port is taken)."""
+        """Bind ``bind`` (port 0: an ephemeral one) and return the endpoint (OSError if the port
+        is taken); ``connect``: a connected socket to ``remote`` (see the module docstring)."""
         loop = asyncio.get_running_loop()
         _, proto = await loop.create_datagram_endpoint(
-            lambda: cls(name, remote, impairment, now_s, on_messages), local_addr=bind
+            lambda: cls(name, remote, impairment, now_s, on_messages, follow_sender=not connect),
+            local_addr=bind,
+            remote_addr=remote if connect else None,
         )
         proto._loop = loop
+        proto.connected = connect
         return proto
 
     @property
@@ -117,7 +125,10 @@ class UdpLink(asyncio.DatagramProtocol):
         if self.transport is None or self.transport.is_closing():
             return
         try:
-            self.transport.sendto(data, target)
+            if self.connected:  # the connected peer only
+                self.transport.sendto(data)
+            else:
+                self.transport.sendto(data, target)
             self.sent_datagrams += 1
         except OSError as exc:
             self.send_errors += 1

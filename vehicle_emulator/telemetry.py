@@ -1,11 +1,14 @@
 """Telemetry scheduler: which message is due for which vehicle, built and framed in batches.
 
-Rates are PX4's onboard-link defaults (spec/mavlink.md), per vehicle and message, changeable with
-MAV_CMD_SET_MESSAGE_INTERVAL. Each ``collect`` builds every due message type for all vehicles at
-once from the fleet arrays (NED/FRD via frames.py), frames them with ``BatchEncoder`` and returns
-one byte string per vehicle (PX4 also packs several messages into one UDP datagram). Nominal
-vehicles report the true state at ``now``; calibrated personalities (onboard.sensor_model) report
-their sensor model's measured rates, HIGHRES_IMU and estimates, stamped with their sample times.
+Rates are PX4's onboard-link defaults (spec/mavlink.md) unless a vehicle's personality sets its
+own (``set_defaults``: ArduPilot streams almost nothing until asked), per vehicle and message,
+changeable with MAV_CMD_SET_MESSAGE_INTERVAL. LOCAL_POSITION_NED is sent only for vehicles whose
+``FleetStatus.position_valid`` is set (ArduPilot: once its EKF has a position). Each
+``collect`` builds every due message type for all vehicles at once from the fleet arrays
+(NED/FRD via frames.py), frames them with ``BatchEncoder`` and returns one byte string per
+vehicle (PX4 also packs several messages into one UDP datagram). Nominal vehicles report the
+true state at ``now``; calibrated personalities (onboard.sensor_model) report their sensor
+model's measured rates, HIGHRES_IMU and estimates, stamped with their sample times.
 Pure: time is an argument; noise comes from an injected numpy Generator.
 """
 
@@ -20,6 +23,7 @@ from numba import njit
 
 from vehicle_emulator import frames
 from vehicle_emulator.codec import BatchEncoder, mavlink
+from vehicle_emulator.geodesy import enu_to_geodetic
 from vehicle_emulator.plant import FleetPlant
 
 __all__ = ["DEFAULT_RATES_HZ", "FleetStatus", "Telemetry", "HOME_LAT_DEG", "HOME_LON_DEG"]
@@ -37,12 +41,13 @@ DEFAULT_RATES_HZ: dict[str, float] = {
     "SYS_STATUS": 5.0,
     "TIMESYNC": 10.0,
     "BATTERY_STATUS": 0.5,
+    "HOME_POSITION": 0.5,
 }
-# PX4 SITL's default home (Zurich), used for GLOBAL_POSITION_INT / HOME_POSITION.
+# The team frame's origin on the globe: PX4 SITL's default home (Zurich). Geodetic coordinates
+# (GLOBAL_POSITION_INT, HOME_POSITION, GPS_GLOBAL_ORIGIN) are exact WGS-84 (geodesy.py).
 HOME_LAT_DEG = 47.397742
 HOME_LON_DEG = 8.545594
 HOME_ALT_M = 488.0
-EARTH_RADIUS_M = 6378137.0
 # Noise standard deviations when EMU_NOISE = 1.
 NOISE_POS_M = 0.01
 NOISE_VEL_MPS = 0.02
@@ -50,7 +55,9 @@ NOISE_ATT_RAD = 0.002
 NOISE_GYRO_RADPS = 0.003
 NOISE_ACC_MPS2 = 0.05
 
+_NEED_POSITION = frozenset({"LOCAL_POSITION_NED"})
 _SENSORS = 0x1 | 0x2 | 0x4 | 0x8 | 0x20 | 0x400 | 0x800 | 0x1000 | 0x8000 | 0x200000
+_PREARM_CHECK = 0x10000000  # MAV_SYS_STATUS_PREARM_CHECK: health set while arming would pass
 
 
 @dataclass(slots=True)
@@ -63,8 +70,13 @@ class FleetStatus:
     base_mode_flags: np.ndarray  # uint8, without SAFETY_ARMED
     landed_state: np.ndarray  # uint8 MAV_LANDED_STATE
     system_status: np.ndarray  # uint8 MAV_STATE
+    prearm_ok: np.ndarray  # bool: SYS_STATUS pre-arm check health bit
     mav_autopilot: np.ndarray  # uint8 MAV_AUTOPILOT of the personality
+    origin_ned_m: np.ndarray  # (n, 3) EKF origin in the team frame (NED): LOCAL_POSITION_NED zero
+    home_ned_m: np.ndarray  # (n, 3) home in the team frame (NED)
     noise: np.ndarray  # bool
+    position_valid: np.ndarray  # bool: the estimator has a position (LOCAL_POSITION_NED sent)
+    vtol_state: np.ndarray  # uint8 EXTENDED_SYS_STATE.vtol_state (ArduCopter: MC, 3)
     battery_remaining: np.ndarray  # 0..1
     battery_voltage_v: np.ndarray
     battery_current_a: np.ndarray
@@ -81,8 +93,13 @@ class FleetStatus:
             base_mode_flags=np.ones(n, dtype=np.uint8),
             landed_state=np.ones(n, dtype=np.uint8),
             system_status=np.full(n, 3, dtype=np.uint8),
+            prearm_ok=np.ones(n, dtype=bool),
             mav_autopilot=np.full(n, 12, dtype=np.uint8),
+            origin_ned_m=np.zeros((n, 3)),
+            home_ned_m=np.zeros((n, 3)),
             noise=np.zeros(n, dtype=bool),
+            position_valid=np.ones(n, dtype=bool),
+            vtol_state=np.zeros(n, dtype=np.uint8),
             battery_remaining=np.ones(n),
             battery_voltage_v=np.full(n, 16.8),
             battery_current_a=np.zeros(n),
@@ -117,6 +134,14 @@ def _scatter(out, ln, idx, buf, cursor):
         cursor[v] = c + ln[r]
 
 
+def geodetic_of_ned(ned_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Team-frame NED points (..., 3) -> (lat deg, lon deg, altitude m) on the WGS-84
+    ellipsoid (the emulator reports ellipsoid heights as AMSL: no geoid model)."""
+    ned = np.asarray(ned_m, dtype=float)
+    enu = np.stack((ned[..., 1], ned[..., 0], -ned[..., 2]), axis=-1)
+    return enu_to_geodetic(enu, HOME_LAT_DEG, HOME_LON_DEG, HOME_ALT_M)
+
+
 def _msg_class(name: str) -> Any:
     return getattr(mavlink, f"MAVLink_{name.lower()}_message")
 
@@ -130,8 +155,9 @@ class Telemetry:
         self.msgids = {int(_msg_class(nm).id): k for k, nm in enumerate(self.names)}
         self.n = n
         self.rng = rng
-        self.default_interval_s = np.array([1.0 / DEFAULT_RATES_HZ[nm] for nm in self.names])
-        self.interval_s = np.tile(self.default_interval_s, (n, 1))
+        default = np.array([1.0 / DEFAULT_RATES_HZ[nm] for nm in self.names])
+        self.default_interval_s = np.tile(default, (n, 1))  # per vehicle: set_defaults
+        self.interval_s = self.default_interval_s.copy()
         # one random phase per vehicle: a vehicle's messages fall on the same ticks (fewer
         # datagrams), different vehicles' messages do not (an even load)
         self.next_due_s = start_s + rng.random((n, 1)) * 0.01 + 0.0 * self.interval_s
@@ -152,9 +178,25 @@ class Telemetry:
             "SYS_STATUS": self._sys_status,
             "TIMESYNC": self._timesync,
             "BATTERY_STATUS": self._battery_status,
+            "HOME_POSITION": self._home_position,
         }
 
     # --- schedule -----------------------------------------------------------------------------
+
+    def set_defaults(
+        self, vehicle: int, rates_hz: dict[str, float], delayed: tuple[str, ...] = (),
+        now_s: float = 0.0,
+    ) -> None:
+        """A vehicle's default rates (0: not sent unless requested), which also become its
+        current ones; a message not named keeps PX4's rate. The first of a ``delayed`` message
+        comes one interval after ``now_s`` (ArduPilot's first TIMESYNC request: 10 s)."""
+        for name, hz in rates_hz.items():
+            k = self.index[name]
+            interval = math.inf if hz <= 0.0 else 1.0 / hz
+            self.default_interval_s[vehicle, k] = interval
+            self.interval_s[vehicle, k] = interval
+            if math.isinf(interval) or name in delayed:
+                self.next_due_s[vehicle, k] = now_s + interval
 
     def set_interval(self, vehicle: int, msgid: int, interval_us: float, now_s: float) -> bool:
         """MAV_CMD_SET_MESSAGE_INTERVAL semantics: -1 off, 0 default, > 0 period in us.
@@ -165,7 +207,7 @@ class Telemetry:
         if interval_us < 0:
             self.interval_s[vehicle, k] = math.inf
         elif interval_us == 0:
-            self.interval_s[vehicle, k] = self.default_interval_s[k]
+            self.interval_s[vehicle, k] = self.default_interval_s[vehicle, k]
         else:
             self.interval_s[vehicle, k] = max(interval_us * 1e-6, 1e-3)
         self.next_due_s[vehicle, k] = now_s + min(self.interval_s[vehicle, k], 1e9)
@@ -194,9 +236,11 @@ class Telemetry:
             nxt = self.next_due_s[idx, k] + self.interval_s[idx, k]
             self.next_due_s[idx, k] = np.where(nxt <= now_s, now_s + self.interval_s[idx, k], nxt)
             idx = idx[enabled[idx]]
+            name = self.names[k]
+            if name in _NEED_POSITION:
+                idx = idx[status.position_valid[idx]]
             if idx.size == 0:
                 continue
-            name = self.names[k]
             enc = self.encoders[name]
             rows = enc.empty(idx.size)
             self._builders[name](rows, idx, now_s, plant, status)
@@ -343,14 +387,14 @@ class Telemetry:
 
     def _local_position(self, rows, idx, now_s, plant, status) -> None:
         d = self._d
-        p, v = d["pos_ned"][idx], d["vel_ned"][idx]
+        p, v = d["pos_ned"][idx] - status.origin_ned_m[idx], d["vel_ned"][idx]
         rows["time_boot_ms"] = d["t_pos_ms"][idx]
         rows["x"], rows["y"], rows["z"] = p[:, 0], p[:, 1], p[:, 2]
         rows["vx"], rows["vy"], rows["vz"] = v[:, 0], v[:, 1], v[:, 2]
 
     def _odometry(self, rows, idx, now_s, plant, status) -> None:
         d = self._d
-        p, v, w = d["pos_ned"][idx], d["vel_frd"][idx], d["w_frd"][idx]
+        p, v, w = d["pos_ned"][idx] - status.origin_ned_m[idx], d["vel_frd"][idx], d["w_frd"][idx]
         rows["time_usec"] = d["t_pos_us"][idx]
         rows["frame_id"] = 1  # MAV_FRAME_LOCAL_NED
         rows["child_frame_id"] = 12  # MAV_FRAME_BODY_FRD: the twist is in the body frame
@@ -378,15 +422,12 @@ class Telemetry:
         d = self._d
         p = d["pos_ned"][idx]
         v = d["vel_ned"][idx]
-        lat = HOME_LAT_DEG + np.degrees(p[:, 0] / EARTH_RADIUS_M)
-        lon = HOME_LON_DEG + np.degrees(
-            p[:, 1] / (EARTH_RADIUS_M * math.cos(math.radians(HOME_LAT_DEG)))
-        )
+        lat, lon, alt = geodetic_of_ned(p)
         rows["time_boot_ms"] = d["t_pos_ms"][idx]
         rows["lat"] = np.round(lat * 1e7)
         rows["lon"] = np.round(lon * 1e7)
-        rows["alt"] = np.round((HOME_ALT_M - p[:, 2]) * 1e3)
-        rows["relative_alt"] = np.round(-p[:, 2] * 1e3)
+        rows["alt"] = np.round(alt * 1e3)
+        rows["relative_alt"] = np.round((status.home_ned_m[idx, 2] - p[:, 2]) * 1e3)
         rows["vx"] = np.round(v[:, 0] * 100)
         rows["vy"] = np.round(v[:, 1] * 100)
         rows["vz"] = np.round(v[:, 2] * 100)
@@ -403,11 +444,14 @@ class Telemetry:
 
     def _extended_sys_state(self, rows, idx, now_s, plant, status) -> None:
         rows["landed_state"] = status.landed_state[idx]
+        rows["vtol_state"] = status.vtol_state[idx]
 
     def _sys_status(self, rows, idx, now_s, plant, status) -> None:
-        rows["onboard_control_sensors_present"] = _SENSORS
-        rows["onboard_control_sensors_enabled"] = _SENSORS
-        rows["onboard_control_sensors_health"] = _SENSORS
+        rows["onboard_control_sensors_present"] = _SENSORS | _PREARM_CHECK
+        rows["onboard_control_sensors_enabled"] = _SENSORS | _PREARM_CHECK
+        rows["onboard_control_sensors_health"] = _SENSORS | np.where(
+            status.prearm_ok[idx], _PREARM_CHECK, 0
+        ).astype(np.uint32)
         rows["load"] = 200
         rows["voltage_battery"] = np.round(status.battery_voltage_v[idx] * 1e3).astype(np.uint16)
         rows["current_battery"] = np.round(status.battery_current_a[idx] * 100).astype(np.int16)
@@ -417,6 +461,17 @@ class Telemetry:
     def _timesync(self, rows, idx, now_s, plant, status) -> None:
         rows["tc1"] = 0
         rows["ts1"] = int(now_s * 1e9)
+
+    def _home_position(self, rows, idx, now_s, plant, status) -> None:
+        home = status.home_ned_m[idx]
+        lat, lon, alt = geodetic_of_ned(home)
+        local = home - status.origin_ned_m[idx]
+        rows["latitude"] = np.round(lat * 1e7)
+        rows["longitude"] = np.round(lon * 1e7)
+        rows["altitude"] = np.round(alt * 1e3)
+        rows["x"], rows["y"], rows["z"] = local[:, 0], local[:, 1], local[:, 2]
+        rows["q"] = np.array([1.0, 0.0, 0.0, 0.0])
+        rows["time_usec"] = int(now_s * 1e6)
 
     def _battery_status(self, rows, idx, now_s, plant, status) -> None:
         rows["current_consumed"] = np.round(plant.charge_used_c[idx] / 3.6).astype(np.int32)

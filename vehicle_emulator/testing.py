@@ -7,6 +7,7 @@ Every wait raises ``TimeoutError`` naming what it waited for.
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import os
 import random
@@ -16,6 +17,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -25,6 +27,8 @@ from pymavlink.dialects.v20 import common as mavlink
 
 __all__ = [
     "MavClient",
+    "RecordingLink",
+    "run_until",
     "clients_on_port_block",
     "SetpointStreamer",
     "custom_main_mode",
@@ -36,7 +40,36 @@ __all__ = [
 ]
 
 GCS_SYSID = 245
+PREARM_CHECK = 0x10000000  # MAV_SYS_STATUS_PREARM_CHECK
 GCS_COMPID = 190
+HISTORY_MAX = 200_000
+
+
+class RecordingLink:
+    """An in-process stand-in for a UDP link: decodes and keeps everything the emulator sends
+    (for tests of ``runner.Emulator`` without sockets)."""
+
+    name = "recording"
+
+    def __init__(self) -> None:
+        from vehicle_emulator.codec import PeerDecoder
+
+        self.decoder = PeerDecoder()
+        self.msgs: list = []
+
+    def send(self, data: bytes, addr: Any = None) -> None:
+        self.msgs.extend(self.decoder.feed(data, "emu"))
+
+    def types(self) -> Counter:
+        return Counter(m.get_type() for m in self.msgs)
+
+
+def run_until(emu: Any, until_s: float, tick_s: float = 0.002) -> None:
+    """Advance an in-process ``Emulator`` tick by tick to simulated time ``until_s``."""
+    t = emu.now_s
+    while t < until_s - 1e-9:
+        t += tick_s
+        emu.advance_to(t)
 
 
 def free_udp_port() -> int:
@@ -68,10 +101,11 @@ def free_udp_port_block(n: int, attempts: int = 200) -> int:
 
 @dataclass
 class EmulatorProcess:
-    """A running ``vehicle-emu`` subprocess and the ports it uses."""
+    """A running ``vehicle-emu`` subprocess and the ports it uses (``bind_port`` None: not
+    forced, an ardupilot vehicle then sends from an ephemeral port)."""
 
     proc: subprocess.Popen
-    bind_port: int
+    bind_port: int | None
     remote_port: int
     log_path: str
 
@@ -99,21 +133,17 @@ def run_emulator(
     remote_port: int | None = None,
     bind_port: int | None = None,
     log_dir: str = "/tmp",
+    bind: bool = True,
 ) -> Iterator[EmulatorProcess]:
-    """``vehicle-emu ARGS --bind 127.0.0.1:B --remote 127.0.0.1:R`` for the ``with`` body."""
-    bind_port = bind_port or free_udp_port()
+    """``vehicle-emu ARGS --bind 127.0.0.1:B --remote 127.0.0.1:R`` for the ``with`` body;
+    ``bind=False`` leaves ``--bind`` out (an ardupilot vehicle then binds an ephemeral port)."""
+    bind_port = (bind_port or free_udp_port()) if bind else None
     remote_port = remote_port or free_udp_port()
-    log_path = os.path.join(log_dir, f"vehicle-emu-{bind_port}.log")
-    cmd = [
-        sys.executable,
-        "-m",
-        "vehicle_emulator.cli",
-        *args,
-        "--bind",
-        f"127.0.0.1:{bind_port}",
-        "--remote",
-        f"127.0.0.1:{remote_port}",
-    ]
+    log_path = os.path.join(log_dir, f"vehicle-emu-{bind_port or remote_port}.log")
+    cmd = [sys.executable, "-m", "vehicle_emulator.cli", *args]
+    if bind_port is not None:
+        cmd += ["--bind", f"127.0.0.1:{bind_port}"]
+    cmd += ["--remote", f"127.0.0.1:{remote_port}"]
     with open(log_path, "w") as log:
         proc = subprocess.Popen(cmd, stderr=log, stdout=log)
     emu = EmulatorProcess(proc, bind_port, remote_port, log_path)
@@ -125,12 +155,18 @@ def run_emulator(
 
 @dataclass
 class MavClient:
-    """pymavlink UDP client listening on 127.0.0.1:``port`` (the emulator's remote)."""
+    """pymavlink UDP client listening on 127.0.0.1:``port`` (the emulator's remote). Like
+    MAVProxy's ``udpin``, it answers the addresses packets come from (``peers``), so it reaches
+    a vehicle on an ephemeral port (ArduPilot SITL's udpclient) once it has heard it."""
 
     port: int
     target_system: int = 1
     conn: Any = field(init=False)
     lock: threading.Lock = field(default_factory=threading.Lock, init=False)
+    # every message received so far (waits skip what they do not look for; this keeps it)
+    history: collections.deque = field(
+        default_factory=lambda: collections.deque(maxlen=HISTORY_MAX), init=False
+    )
 
     def __post_init__(self) -> None:
         self.conn = mavutil.mavlink_connection(
@@ -144,14 +180,27 @@ class MavClient:
         """Close the socket."""
         self.conn.close()
 
+    @property
+    def peers(self) -> set[tuple[str, int]]:
+        """The (host, port) addresses packets came from (pymavlink's udpin sends to them)."""
+        return {(str(a[0]), int(a[1])) for a in self.conn.clients}
+
     def send(self, msg: Any) -> None:
         """Send a pymavlink message object (thread-safe)."""
         with self.lock:
             self.conn.mav.send(msg)
 
     def recv(self, timeout_s: float) -> Any | None:
-        """Next message or None after the timeout."""
-        return self.conn.recv_match(blocking=True, timeout=timeout_s)
+        """Next message or None after the timeout (also kept in ``history``)."""
+        m = self.conn.recv_match(blocking=True, timeout=timeout_s)
+        if m is not None:
+            self.history.append(m)
+        return m
+
+    def seen(self, mtype: str) -> list[Any]:
+        """Messages of ``mtype`` from the target received so far (``history``)."""
+        return [m for m in self.history
+                if m.get_type() == mtype and m.get_srcSystem() == self.target_system]
 
     def wait(
         self,
@@ -166,13 +215,19 @@ class MavClient:
             left = deadline - time.monotonic()
             if left <= 0:
                 raise TimeoutError(f"no {sorted(types)} within {timeout_s} s")
-            m = self.conn.recv_match(blocking=True, timeout=min(left, 0.5))
+            m = self.recv(min(left, 0.5))
             if m is None or m.get_type() not in types:
                 continue
             if m.get_srcSystem() != self.target_system:
                 continue
             if cond is None or cond(m):
                 return m
+
+    def wait_ready_to_arm(self, timeout_s: float = 10.0) -> Any:
+        """The first SYS_STATUS whose pre-arm check (MAV_SYS_STATUS_PREARM_CHECK) is healthy:
+        how a ground station knows a PX4 vehicle may be armed. TimeoutError."""
+        return self.wait("SYS_STATUS", timeout_s, lambda m: m.onboard_control_sensors_health
+                         & PREARM_CHECK)
 
     def wait_text(
         self, timeout_s: float = 5.0, cond: Callable[[str], bool] | None = None
@@ -200,7 +255,7 @@ class MavClient:
         out = []
         deadline = time.monotonic() + duration_s
         while (left := deadline - time.monotonic()) > 0:
-            m = self.conn.recv_match(blocking=True, timeout=min(left, 0.2))
+            m = self.recv(min(left, 0.2))
             if m is None or m.get_srcSystem() != self.target_system:
                 continue
             if types is None or m.get_type() in types:

@@ -19,7 +19,6 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from vehicle_emulator import frames
 from vehicle_emulator.autopilot import (
     ActuatorSetpoint,
     AttitudeSetpoint,
@@ -39,15 +38,14 @@ from vehicle_emulator.faults import FaultSchedule, LinkImpairment
 from vehicle_emulator.params import ParamError, ParamStore, decode_value, encode_value
 from vehicle_emulator.personality import Personality
 from vehicle_emulator.plant import ControlMode, FleetPlant
-from vehicle_emulator.setpoints import from_actuator_control_target, from_attitude_target
-from vehicle_emulator.team import FaultSpec, VehicleSpec
-from vehicle_emulator.telemetry import (
-    HOME_ALT_M,
-    HOME_LAT_DEG,
-    HOME_LON_DEG,
-    FleetStatus,
-    Telemetry,
+from vehicle_emulator.setpoints import (
+    PositionTargetFields,
+    from_actuator_control_target,
+    from_attitude_target,
+    from_position_target_local_ned,
 )
+from vehicle_emulator.team import FaultSpec, VehicleSpec
+from vehicle_emulator.telemetry import HOME_ALT_M, FleetStatus, Telemetry, geodetic_of_ned
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +53,8 @@ __all__ = ["DeferredAck", "Link", "VehicleNode", "InputCounters"]
 
 COMPID = 1
 CMD_DO_SET_MODE = 176
+GPS_GLOBAL_ORIGIN_MSGID = 49
+ORIGIN_ANNOUNCE_S = 0.1  # PX4 v1.16.0 sent GPS_GLOBAL_ORIGIN once, 0.1 s after its first HEARTBEAT
 HEARTBEAT_MSGID = 0  # PX4: its interval cannot be changed (SET_MESSAGE_INTERVAL -> FAILED)
 REPORT_PERIOD_S = 5.0
 LIMITED_TEXT_PERIOD_S = 1.0
@@ -107,6 +107,7 @@ class InputCounters:
     params_refused: int = 0
     last_reject_reason: str = ""
     reported_total: int = 0
+    setpoints_by_mode: dict[str, int] = field(default_factory=dict)  # by the mode they met
 
     def total(self, decode_rejected: int) -> int:
         """Everything suspicious so far (for SYS_STATUS.errors_comm and the reports)."""
@@ -142,6 +143,7 @@ class VehicleNode:
     deferred_acks: list[DeferredAck] = field(default_factory=list)
     _next_report_s: float = REPORT_PERIOD_S
     _fault_clock_announced: bool = False
+    _origin_announced: bool = False
     _text_id: int = 0  # id of the last chunked STATUSTEXT
     _limited_window_end_s: float = 0.0
     _limited_in_window: int = 0
@@ -151,6 +153,20 @@ class VehicleNode:
     def sysid(self) -> int:
         """MAVLink system id."""
         return self.spec.sysid
+
+    @property
+    def local_origin_enu_m(self) -> tuple[float, float, float]:
+        """Where this vehicle's local NED frame (LOCAL_POSITION_NED, position targets) is zero,
+        in the team frame; frames.enu_from_local_ned / local_ned_from_enu convert."""
+        return self.spec.local_origin_enu_m(self.personality.protocol.own_origin)
+
+    def setpoint_driven(self) -> bool:
+        """Armed and flying the ground station's setpoints (lockstep waits for these)."""
+        return self.autopilot.armed and self.autopilot.nav_state is NavState.OFFBOARD
+
+    def boot_banner(self) -> list[bytes]:
+        """Datagrams sent when a link opens, before any MAVLink (PX4: none)."""
+        return []
 
     # --- state exchange with the fleet arrays ------------------------------------------------
 
@@ -179,6 +195,8 @@ class VehicleNode:
         """Status arrays for telemetry, the battery model and the fault clock parameter."""
         i, ap, st = self.index, self.autopilot, self.status
         st.armed[i] = ap.armed
+        st.system_status[i] = ap.system_status(now_s)
+        st.prearm_ok[i] = ap.prearm_ok(now_s)
         st.custom_mode[i] = ap.custom_mode
         st.base_mode_flags[i] = 1 | _BASE_FLAGS.get(ap.nav_state, 4 | 16 | 8)
         on_ground = bool(self.plant.on_ground[i])
@@ -222,9 +240,10 @@ class VehicleNode:
     def statustext(self, severity: Severity, text: str) -> None:
         """STATUSTEXT to all links, and the log. Up to 50 bytes: one message (id 0); longer
         (up to STATUSTEXT_MAX_BYTES): MAVLink 2 chunks of 50 bytes with one id != 0 and chunk_seq
-        0, 1, ..., as PX4 sends "Arming denied: Resolve system health failures first"."""
+        0, 1, ..., as PX4 sends "Arming denied: Resolve system health failures first". The
+        personality's ending follows the text (px4: a TAB, as PX4 v1.16.0 sent every text)."""
         log.info("vehicle %d (sysid %d): %s", self.spec.vehicle_id, self.sysid, text)
-        data = text.encode()[:STATUSTEXT_MAX_BYTES]
+        data = (text + self.personality.protocol.statustext_end).encode()[:STATUSTEXT_MAX_BYTES]
         if len(data) <= 50:
             self.send_msg(mavlink.MAVLink_statustext_message(int(severity), data, 0, 0))
             return
@@ -277,6 +296,22 @@ class VehicleNode:
             )
             self.send_msg(msg, a.link, a.addr)
         self.drain_events(now_s)
+
+    def origin_message(self, now_s: float) -> Any:
+        """GPS_GLOBAL_ORIGIN: where this vehicle's LOCAL_POSITION_NED is zero."""
+        lat, lon, alt = geodetic_of_ned(self.status.origin_ned_m[self.index])
+        return mavlink.MAVLink_gps_global_origin_message(
+            int(round(float(lat) * 1e7)),
+            int(round(float(lon) * 1e7)),
+            int(round(float(alt) * 1e3)),
+            int(now_s * 1e6),
+        )
+
+    def announce_origin(self, now_s: float) -> None:
+        """GPS_GLOBAL_ORIGIN once, shortly after boot (as PX4 does when its EKF sets it)."""
+        if not self._origin_announced and now_s >= ORIGIN_ANNOUNCE_S:
+            self._origin_announced = True
+            self.send_msg(self.origin_message(now_s))
 
     def report_input(self, now_s: float) -> None:
         """Every REPORT_PERIOD_S: one STATUSTEXT if rejected/clamped input grew."""
@@ -345,7 +380,7 @@ class VehicleNode:
         elif name == "EMU_SEED":
             self.impairment.rng = np.random.default_rng(int(v) + self.index)
             self.plant.seed_noise(i, int(v))
-        elif name == "MPC_THR_HOVER":
+        elif name in ("MPC_THR_HOVER", "MOT_THST_HOVER"):
             self.plant.hover_thrust_norm[i] = v
         elif name in ("EMU_MDROP_T", "EMU_MDROP_FRAC"):
             self.faults.mass_drop_done = False
@@ -372,12 +407,12 @@ class VehicleNode:
             self.counters.own_echo += 1
             return
         mid = msg.get_msgId()
-        handler = _HANDLERS.get(mid)
-        if handler is None:
+        name = _HANDLERS.get(mid)
+        if name is None:
             self.counters.unhandled += 1
             return
         try:
-            handler(self, now_s, msg, link, addr)
+            getattr(self, name)(now_s, msg, link, addr)  # by name: a personality may override
         except Exception:  # a handler bug must not kill the vehicle: count and log it
             self.counters.unhandled += 1
             self.counters.last_reject_reason = f"handler error on {msg.get_type()}"
@@ -406,6 +441,24 @@ class VehicleNode:
             self.counters.setpoints_ignored += 1
             return
         self._take_setpoint(now_s, from_actuator_control_target(msg.group_mlx, msg.controls))
+
+    def _on_position_target_local(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
+        """SET_POSITION_TARGET_LOCAL_NED, PX4's rules (setpoints.py): an offboard setpoint (proof
+        of life for COM_OF_LOSS_T), flown in OFFBOARD; PX4's texts for refused ones."""
+        if not self._for_me(msg):
+            return
+        obs = self.observe()
+        d = from_position_target_local_ned(
+            PositionTargetFields.of(msg), self.local_origin_enu_m, obs.position_enu_m,
+            obs.yaw_enu_rad,
+        )
+        if d.setpoint is None and (d.rejected or "").startswith("SET_POSITION_TARGET"):
+            self.statustext_limited(now_s, Severity.CRITICAL, d.rejected or "")
+        self._take_setpoint(now_s, d)
+
+    def _on_position_target_global(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
+        """SET_POSITION_TARGET_GLOBAL_INT: not emulated for PX4 (counted, ignored)."""
+        self.counters.unhandled += 1
 
     def _take_setpoint(self, now_s: float, d: Any) -> None:
         if d.setpoint is None:
@@ -439,7 +492,7 @@ class VehicleNode:
             p += [msg.x * 1e-7, msg.y * 1e-7, msg.z]
         else:
             p += [msg.param5, msg.param6, msg.param7]
-        twice = msg.command == CMD_DO_SET_MODE and self.params.get_int("EMU_ACK_TWICE") == 1
+        twice = msg.command == CMD_DO_SET_MODE and self._ack_twice()
         if twice:  # PX4 v1.16.0's MAVLink receiver ACKs before its commander has looked
             self._ack(CMD_DO_SET_MODE, MavResult.ACCEPTED, link, addr, msg)
         try:
@@ -447,6 +500,8 @@ class VehicleNode:
         except Exception:  # never leave a command unanswered
             log.exception("vehicle %d: command %d failed", self.spec.vehicle_id, msg.command)
             result = MavResult.FAILED
+        log.info("vehicle %d (sysid %d): command %d (%s) -> %s", self.spec.vehicle_id,
+                 self.sysid, msg.command, ", ".join(f"{x:g}" for x in p), result.name)
         if twice:
             self.deferred_acks.append(
                 DeferredAck(
@@ -456,6 +511,10 @@ class VehicleNode:
             return  # the commander's ACK and its STATUSTEXTs go out on the next tick
         self._ack(int(msg.command), result, link, addr, msg)
         self.drain_events(now_s)
+
+    def _ack_twice(self) -> bool:
+        """DO_SET_MODE answered twice (PX4 v1.16.0, EMU_ACK_TWICE = 1)."""
+        return self.params.get_int("EMU_ACK_TWICE") == 1
 
     def _ack(self, command: int, result: MavResult, link: Link, addr: Any, msg: Any) -> None:
         ack = mavlink.MAVLink_command_ack_message(
@@ -475,7 +534,8 @@ class VehicleNode:
                 return MavResult.DENIED
             return ap.set_mode(now_s, obs, _int(p[1]), _int(p[2]))
         if cmd == 22:  # NAV_TAKEOFF: param7 altitude AMSL (PX4)
-            alt = p[6] - HOME_ALT_M if math.isfinite(p[6]) else math.nan
+            home_amsl_m = HOME_ALT_M - float(self.status.home_ned_m[self.index, 2])
+            alt = p[6] - home_amsl_m if math.isfinite(p[6]) else math.nan
             return ap.takeoff(now_s, obs, alt)
         if cmd == 21:  # NAV_LAND
             return ap.land(now_s, obs)
@@ -520,26 +580,8 @@ class VehicleNode:
                 self.sysid,
                 [0] * 18,
             )
-        elif msgid == 242:
-            home = self.autopilot.home_enu_m
-            lat = HOME_LAT_DEG + math.degrees(home[1] / 6378137.0)
-            lon = HOME_LON_DEG + math.degrees(
-                home[0] / (6378137.0 * math.cos(math.radians(HOME_LAT_DEG)))
-            )
-            ned = frames.enu_to_ned(np.array(home))
-            msg = mavlink.MAVLink_home_position_message(
-                int(lat * 1e7),
-                int(lon * 1e7),
-                int(HOME_ALT_M * 1e3),
-                float(ned[0]),
-                float(ned[1]),
-                float(ned[2]),
-                [1, 0, 0, 0],
-                0,
-                0,
-                0,
-                int(now_s * 1e6),
-            )
+        elif msgid == GPS_GLOBAL_ORIGIN_MSGID:
+            msg = self.origin_message(now_s)
         elif msgid in self.telemetry.msgids:
             k = self.telemetry.msgids[msgid]
             self.telemetry.next_due_s[self.index, k] = now_s  # sent on the next tick
@@ -565,6 +607,9 @@ class VehicleNode:
             return MavResult.ACCEPTED
         return MavResult.UNSUPPORTED
 
+    def _on_heartbeat(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
+        """A GCS heartbeat: nothing to do."""
+
     def _on_timesync(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
         if msg.tc1 == 0:
             self.send_msg(mavlink.MAVLink_timesync_message(int(now_s * 1e9), msg.ts1), link, addr)
@@ -576,7 +621,7 @@ class VehicleNode:
         names = self.params.names()
         return mavlink.MAVLink_param_value_message(
             name.encode(),
-            encode_value(d.ptype, self.params[name]),
+            encode_value(d.ptype, self.params[name], self.params.bytewise_ints),
             int(d.ptype),
             len(names),
             names.index(name),
@@ -616,7 +661,8 @@ class VehicleNode:
         name = self._param_name(msg.param_id)
         try:
             d = self.params.definition(name)
-            value = decode_value(d.ptype, msg.param_value, msg.param_type)
+            value = decode_value(d.ptype, msg.param_value, msg.param_type,
+                                 self.params.bytewise_ints)
             self.params.set(name, value)
         except ParamError as exc:
             self._param_refused(now_s, str(exc))
@@ -676,15 +722,17 @@ def write_demand(plant: FleetPlant, i: int, demand: Demand) -> None:
         plant.mode[i] = ControlMode.ACTUATOR
 
 
-_HANDLERS = {
-    82: VehicleNode._on_attitude_target,
-    139: VehicleNode._on_actuator_target,
-    11: VehicleNode._on_set_mode,
-    76: VehicleNode._on_command,
-    75: VehicleNode._on_command,
-    111: VehicleNode._on_timesync,
-    21: VehicleNode._on_param_request_list,
-    20: VehicleNode._on_param_request_read,
-    23: VehicleNode._on_param_set,
-    0: lambda self, now_s, msg, link, addr: None,  # GCS heartbeat: nothing to do
+_HANDLERS = {  # msgid -> VehicleNode method name (looked up on the node: overridable)
+    82: "_on_attitude_target",
+    84: "_on_position_target_local",
+    86: "_on_position_target_global",
+    139: "_on_actuator_target",
+    11: "_on_set_mode",
+    76: "_on_command",
+    75: "_on_command",
+    111: "_on_timesync",
+    21: "_on_param_request_list",
+    20: "_on_param_request_read",
+    23: "_on_param_set",
+    0: "_on_heartbeat",
 }

@@ -43,6 +43,7 @@ logger = logging.getLogger(__name__)
 
 TYPE_MASK_RATES_THRUST = 128  # ATTITUDE_IGNORE: body rates + thrust
 TYPE_MASK_ATTITUDE_THRUST = 7  # roll/pitch/yaw rates ignored: attitude + thrust
+AUTOPILOT_VERSION_ID = 148  # REQUEST_MESSAGE param1
 FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 forcing arm/disarm (PX4; ArduPilot disarm)
 #: q of rate setpoints: ignored (type_mask 128), but ArduPilot drops a non-unit one, so unit.
 _IDENTITY_Q = (1.0, 0.0, 0.0, 0.0)
@@ -346,6 +347,29 @@ class VehicleProxy:
                 fut.cancel()
         raise ParamTimeoutError(f"{self.name}: PARAM_REQUEST_READ {name} got no PARAM_VALUE in "
                                 f"{retries + 1} attempts of {timeout_s} s")
+
+    async def autopilot_version(self, timeout_s: float = 1.0, retries: int = 2) -> int:
+        """AUTOPILOT_VERSION.flight_sw_version (major << 24 | minor << 16 | patch << 8 | type),
+        asked for with REQUEST_MESSAGE (148). The reply is awaited before the request is sent;
+        raises CommandRejectedError if the request is refused, TimeoutError naming the vehicle
+        if no AUTOPILOT_VERSION arrives."""
+        fut: asyncio.Future[Received] = asyncio.get_running_loop().create_future()
+        entry = ("AUTOPILOT_VERSION", lambda _m: True, fut)
+        self._waiters.append(entry)
+        try:
+            await self._checked(MavCmd.REQUEST_MESSAGE, (AUTOPILOT_VERSION_ID,), True, timeout_s,
+                                retries)
+            async with asyncio.timeout(timeout_s):
+                received = await fut
+            return int(received.msg.flight_sw_version)
+        except TimeoutError:
+            raise TimeoutError(f"{self.name}: no AUTOPILOT_VERSION within {timeout_s} s of an "
+                               "accepted REQUEST_MESSAGE") from None
+        finally:
+            if entry in self._waiters:
+                self._waiters.remove(entry)
+            if not fut.done():
+                fut.cancel()
 
     async def set_message_interval(self, msg_id: int, rate_hz: float, *, check: bool = True,
                                    timeout_s: float = 0.5, retries: int = 2) -> MavResult:

@@ -79,6 +79,9 @@ class AutopilotProfile:
     hold_before_prime: bool  # airborne vehicles in setpoint_modes go to `hold` before priming
     control_modes: frozenset[str]  # `gcs fly --mode` values whose setpoints it acts on
     required_params: tuple[ParamRequirement, ...] = ()
+    # newest firmware (major, minor) that acts on SET_ACTUATOR_CONTROL_TARGET; None: never. The
+    # version is read from AUTOPILOT_VERSION before an `actuators` flight (`needs_version`)
+    actuators_until: tuple[int, int] | None = None
     force_arm_magic: int = 21196  # COMPONENT_ARM_DISARM param2 (gcs fly never forces)
     force_disarm_magic: int = 21196
 
@@ -86,15 +89,31 @@ class AutopilotProfile:
         """Name of a HEARTBEAT custom_mode, e.g. 'OFFBOARD', 'AUTO_LOITER', 'GUIDED_NOGPS'."""
         return mode_name(self.autopilot, custom_mode)
 
+    def needs_version(self, control_mode: str) -> bool:
+        """True when flying `control_mode` depends on the firmware version (AUTOPILOT_VERSION)."""
+        return control_mode == "actuators" and self.actuators_until is not None
+
     def preflight_problems(self, vehicle: str, control_mode: str,
-                           params: Mapping[str, float] | None) -> list[str]:
+                           params: Mapping[str, float] | None,
+                           version: int | None = None) -> list[str]:
         """What this autopilot needs before flying `control_mode`, given the parameters read from
-        the vehicle (`required_params`); one line per problem, naming the vehicle and the fix."""
+        the vehicle (`required_params`) and its AUTOPILOT_VERSION.flight_sw_version (None: not
+        read or no answer); one line per problem, naming the vehicle and the fix."""
         out: list[str] = []
         if control_mode not in self.control_modes:
             allowed = " or ".join(sorted(self.control_modes))
             out.append(f"{vehicle}: {self.name} does not act on {control_mode} setpoints; fly "
                        f"it with --mode {allowed}")
+        elif self.needs_version(control_mode):
+            until = ".".join(map(str, self.actuators_until or ()))
+            if version is None:
+                out.append(f"{vehicle}: no AUTOPILOT_VERSION: cannot confirm that {self.name} "
+                           f"acts on actuator setpoints (only <= {until} does); fly it with "
+                           "--mode rates")
+            elif (version >> 24 & 0xFF, version >> 16 & 0xFF) > (self.actuators_until or ()):
+                out.append(f"{vehicle}: {self.name} {version_text(version)} ignores "
+                           f"SET_ACTUATOR_CONTROL_TARGET (only <= {until} acts on it); fly it "
+                           "with --mode rates")
         for req in self.required_params:
             text = req.problem(vehicle, None if params is None else params.get(req.name))
             if text is not None:
@@ -112,7 +131,8 @@ PX4 = AutopilotProfile(
     takeoff_altitude_amsl=True,
     setpoint_modes=frozenset({"OFFBOARD"}),
     hold_before_prime=False,
-    control_modes=frozenset({"rates", "actuators"}),  # actuators: PX4 <= 1.13 and the emulator
+    control_modes=frozenset({"rates", "actuators"}),  # actuators: PX4 <= 1.13 only
+    actuators_until=(1, 13),  # PX4 1.14 moved actuator control to its ROS 2 bridge
 )
 
 #: GUID_OPTIONS bit 3: SET_ATTITUDE_TARGET `thrust` is normalised thrust, not a climb rate.
@@ -135,6 +155,12 @@ ARDUPILOT = AutopilotProfile(
     force_arm_magic=2989,
     force_disarm_magic=21196,
 )
+
+def version_text(flight_sw_version: int) -> str:
+    """'1.16.0' from AUTOPILOT_VERSION.flight_sw_version (major, minor, patch in the top bytes)."""
+    v = int(flight_sw_version)
+    return f"{v >> 24 & 0xFF}.{v >> 16 & 0xFF}.{v >> 8 & 0xFF}"
+
 
 PROFILES: dict[int, AutopilotProfile] = {p.autopilot: p for p in (PX4, ARDUPILOT)}
 

@@ -20,7 +20,9 @@ while `law_active`. Rules (docs/gcs.md):
 * Priming is inert: before PRIME, an airborne vehicle whose autopilot would act on the priming
   setpoints at once (ArduPilot in GUIDED, e.g. after its takeoff) is switched to hold (HOLD phase).
 * Autopilot parameters the profile requires (ArduPilot GUID_OPTIONS) are read in PREFLIGHT
-  (READ_PARAMS) and checked with the other preflight rules.
+  (READ_PARAMS) and checked with the other preflight rules; so is the firmware version
+  (IDENTIFY, AUTOPILOT_VERSION) when the control mode depends on it (PX4 >= 1.14 ignores
+  actuator setpoints: `actuators` is refused there).
 * Any problem (failed check, rejected command, geofence, tilt, lost link, operator abort) moves to
   STOPPING: the lost vehicles are left to their failsafe, the others get `abort_action` (or
   `link_loss_action` when the cause is a lost link), and the outcome is non-zero with the reason.
@@ -69,6 +71,7 @@ class Cmd(Enum):
 
     CONFIGURE = "configure"  # telemetry rates (SET_MESSAGE_INTERVAL)
     READ_PARAMS = "read_params"  # the profile's required parameters (`names`), values in result
+    IDENTIFY = "identify"  # AUTOPILOT_VERSION; result values (("flight_sw_version", word),)
     ARM = "arm"  # (ArduPilot: GUIDED first, the profile's takeoff_mode)
     TAKEOFF = "takeoff"  # altitude_m above home
     OFFBOARD = "offboard"  # the profile's offboard mode (PX4 OFFBOARD, ArduPilot GUIDED_NOGPS)
@@ -156,6 +159,8 @@ class _Vehicle:
     profile: AutopilotProfile | None = None  # fixed at preflight
     params: dict[str, float] | None = None  # READ_PARAMS result
     params_asked: bool = False
+    version: int | None = None  # AUTOPILOT_VERSION.flight_sw_version (IDENTIFY result)
+    version_asked: bool = False
     heard: bool = False  # a message has arrived since the flight started (CONNECT)
 
 
@@ -244,6 +249,8 @@ class MissionMachine:
             self._note(f"vehicle {result.vehicle_id}: {result.cmd.value} failed: {result.detail}")
         if result.cmd is Cmd.READ_PARAMS and result.ok:
             v.params = dict(result.values)
+        if result.cmd is Cmd.IDENTIFY and result.ok:
+            v.version = int(dict(result.values)["flight_sw_version"])
         if result.cmd is Cmd.OFFBOARD:
             v.offboard_acked = result.ok
             if not result.ok and self.phase is Phase.FORMATION:
@@ -384,8 +391,9 @@ class MissionMachine:
         for s in team:
             profile = self._v[s.vehicle_id].profile
             if profile is not None:
+                v = self._v[s.vehicle_id]
                 problems += [Problem(s.vehicle_id, text) for text in profile.preflight_problems(
-                    s.name, self.plan.control_mode, self._v[s.vehicle_id].params)]
+                    s.name, self.plan.control_mode, v.params, v.version)]
         ground = [s.vehicle_id for s in team if s.landed is True]
         airborne = [s.vehicle_id for s in team if s.in_air]
         if self.plan.start == "in_air" and ground:
@@ -408,7 +416,8 @@ class MissionMachine:
 
     def _read_params(self, team: Sequence[VehicleStatus]) -> list[Command]:
         """Fix each live vehicle's profile from its HEARTBEAT; ask once for the parameters the
-        profile requires (the checks run when every answer is in)."""
+        profile requires, then once for AUTOPILOT_VERSION where the control mode depends on it
+        (the checks run when every answer is in)."""
         out = []
         for s in team:
             v = self._v[s.vehicle_id]
@@ -420,6 +429,9 @@ class MissionMachine:
             if names and not v.params_asked:
                 v.params_asked = True
                 out.append(self._send(s.vehicle_id, Cmd.READ_PARAMS, names=names))
+            elif profile.needs_version(self.plan.control_mode) and not v.version_asked:
+                v.version_asked = True
+                out.append(self._send(s.vehicle_id, Cmd.IDENTIFY))
         return out
 
     def _to_prime(self) -> list[Command]:

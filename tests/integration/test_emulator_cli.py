@@ -10,7 +10,11 @@ import time
 from pathlib import Path
 
 import pytest
+import yaml
+from pymavlink.dialects.v20 import common as mavlink
 
+from vehicle_emulator.geodesy import geodetic_to_enu
+from vehicle_emulator.telemetry import HOME_ALT_M, HOME_LAT_DEG, HOME_LON_DEG
 from vehicle_emulator.testing import clients_on_port_block, free_udp_port
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
@@ -70,6 +74,43 @@ def test_fleet_runs_every_vehicle_on_its_own_endpoint_and_exits_cleanly(tmp_path
         for c in clients:
             c.close()
     assert "Traceback" not in (tmp_path / "fleet.log").read_text()
+
+
+def test_fleet_vehicles_with_own_origins_report_local_positions_from_them(tmp_path):
+    # GIVEN the Scenario I team with the real-vehicle default, each vehicle's own EKF origin
+    data = yaml.safe_load((ROOT / "configs/square4.yaml").read_text())
+    data["emulator"] = {"origin": "own"}
+    team = tmp_path / "team.yaml"
+    team.write_text(yaml.safe_dump(data))
+    clients = clients_on_port_block(4)
+    proc = subprocess.Popen(
+        [*EMU, "--fleet", "--team", str(team), "--bind-base", str(free_udp_port()),
+         "--remote-base", str(clients[0].port)],
+        stdout=subprocess.DEVNULL, stderr=open(tmp_path / "fleet.log", "w"),  # noqa: SIM115
+    )
+    try:
+        for c, v in zip(clients, data["vehicles"], strict=True):
+            x, y, z = v["initial"]["position_enu_m"]
+            # THEN LOCAL_POSITION_NED is zero on the ground below where the vehicle booted
+            pos = c.wait("LOCAL_POSITION_NED", 60)
+            assert (pos.x, pos.y, pos.z) == pytest.approx((0.0, 0.0, -z), abs=0.05)
+            # AND GPS_GLOBAL_ORIGIN places that origin in the team frame, on the WGS-84
+            # ellipsoid; GLOBAL_POSITION_INT the vehicle
+            c.send(mavlink.MAVLink_command_long_message(c.target_system, 1, 512, 0, 49, 0, 0, 0,
+                                                        0, 0, 0))
+            origin = c.wait("GPS_GLOBAL_ORIGIN", 3)
+            enu = geodetic_to_enu(origin.latitude * 1e-7, origin.longitude * 1e-7,
+                                  origin.altitude * 1e-3, HOME_LAT_DEG, HOME_LON_DEG, HOME_ALT_M)
+            assert enu == pytest.approx((x, y, 0.0), abs=0.02)
+            gp = c.wait("GLOBAL_POSITION_INT", 3)
+            enu = geodetic_to_enu(gp.lat * 1e-7, gp.lon * 1e-7, gp.alt * 1e-3, HOME_LAT_DEG,
+                                  HOME_LON_DEG, HOME_ALT_M)
+            assert enu == pytest.approx((x, y, z), abs=0.05)
+    finally:
+        proc.terminate()
+        proc.wait(10)
+        for c in clients:
+            c.close()
 
 
 def test_sigint_stops_a_single_vehicle_cleanly(tmp_path):

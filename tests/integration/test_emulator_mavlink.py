@@ -12,6 +12,7 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from vehicle_emulator.testing import (
+    PREARM_CHECK,
     MavClient,
     SetpointStreamer,
     custom_main_mode,
@@ -32,6 +33,7 @@ ACCEPTED, TEMP_REJECTED, DENIED, UNSUPPORTED, FAILED = 0, 1, 2, 3, 4
 PX4_NO_OFFBOARD = "Switching to Offboard is currently not available"
 PX4_ARMING_DENIED = "Arming denied: Resolve system health failures first"
 PX4_FAILSAFE = "Failsafe activated"
+PX4_TEXT = "%s\t"  # PX4 v1.16.0 ends every STATUSTEXT in a TAB (the px4 personality does)
 
 
 def _start(args: list[str], tmp_path: Path):
@@ -43,10 +45,37 @@ def _start(args: list[str], tmp_path: Path):
 
 @pytest.fixture
 def ground_vehicle(tmp_path):
+    """A vehicle booted on the ground, once its pre-arm checks pass (as a GCS waits for it)."""
     client, ctx = _start(["--id", "1"], tmp_path)
     with ctx as emu:
         client.wait("HEARTBEAT", 60)
+        client.wait_ready_to_arm()
         yield client, emu
+    client.close()
+
+
+def test_arming_is_refused_until_the_vehicle_is_ready_after_boot(tmp_path):
+    # PX4 v1.16.0 SIH: three TEMPORARILY_REJECTED with "Arming denied: Resolve system health
+    # failures first", HEARTBEAT system_status UNINIT (0), then ACCEPTED 3.0 s after its first
+    # HEARTBEAT, when SYS_STATUS shows the pre-arm check healthy and system_status STANDBY (3)
+    client, ctx = _start(["--id", "1"], tmp_path)
+    with ctx:
+        first = client.wait("HEARTBEAT", 60)
+        t_first = time.monotonic()
+        assert first.system_status == 0
+        assert client.command(400, 1) == TEMP_REJECTED
+        assert client.wait_text(2, lambda t: t.startswith("Arming denied"))[1] == (
+            "Arming denied: Resolve system health failures first\t"
+        )
+        status = client.wait("SYS_STATUS", 2)
+        assert not status.onboard_control_sensors_health & PREARM_CHECK
+        assert status.onboard_control_sensors_present & PREARM_CHECK
+        client.wait_ready_to_arm(10)
+        ready_after_s = time.monotonic() - t_first
+        assert 2.0 < ready_after_s < 4.5
+        assert client.wait("HEARTBEAT", 2).system_status == 3
+        assert client.command(400, 1) == ACCEPTED
+        assert client.wait("HEARTBEAT", 2, lambda m: m.base_mode & 128).system_status == 4
     client.close()
 
 
@@ -141,7 +170,7 @@ def test_offboard_without_a_recent_setpoint_is_temporarily_rejected(air_vehicle)
     assert client.command_acks(176, 1 | 128, OFFBOARD, 0, count=2) == [ACCEPTED, TEMP_REJECTED]
     assert time.monotonic() - sent < 0.2
     text = client.wait("STATUSTEXT", 2, lambda m: "Offboard" in m.text)
-    assert text.text == PX4_NO_OFFBOARD and text.severity == 2  # MAV_SEVERITY_CRITICAL
+    assert text.text == PX4_TEXT % PX4_NO_OFFBOARD and text.severity == 2  # MAV_SEVERITY_CRITICAL
     hb = client.wait("HEARTBEAT", 3)
     assert (custom_main_mode(hb.custom_mode), custom_sub_mode(hb.custom_mode)) == (AUTO, 3)
     # GIVEN one setpoint older than COM_OF_LOSS_T (1 s) THEN still refused
@@ -192,22 +221,23 @@ def test_setpoint_loss_runs_the_loss_action_in_time(air_vehicle, action, expect_
     t_stop = time.monotonic()
     # WHEN the stream stops THEN the loss action starts within COM_OF_LOSS_T (1 s) + 0.5 s, with
     # PX4's STATUSTEXT (severity CRITICAL; PX4 v1.16.0: 1.12 s after the last setpoint)
-    text = client.wait("STATUSTEXT", 3, lambda m: m.text == PX4_FAILSAFE)
+    text = client.wait("STATUSTEXT", 3, lambda m: m.text == PX4_TEXT % PX4_FAILSAFE)
     assert time.monotonic() - t_stop < 1.5 and text.severity == 2
     hb = client.wait("HEARTBEAT", 3)
     assert hb.custom_mode == expect_mode, text.text
     # base_mode: POSCTL 209 armed as PX4 v1.16.0; AUTO modes 157 (AUTO | GUIDED | STABILIZE)
     assert hb.base_mode == (209 if action == 0 else 157)
+    assert hb.system_status == 5  # CRITICAL while the failsafe holds the mode, as recorded
+    pos = client.collect(2.0, "LOCAL_POSITION_NED")
     if action == 0:
-        # position hold: the altitude stays
-        pos = client.collect(3.0, "LOCAL_POSITION_NED")
-        assert min(-p.z for p in pos) > z0 - 0.3
+        # Position with no manual control (COM_RC_IN_MODE 4): the stick reads full down, so it
+        # descends at MPC_Z_VEL_MAX_DN (PX4 v1.16.0 recorded 1.04 m/s) while holding x, y
+        assert 0.8 < pos[-1].vz < 1.2 and -pos[-1].z < z0 - 0.5
     else:
-        # land: a gentle descent to the ground, then disarm
-        pos = client.collect(2.0, "LOCAL_POSITION_NED")
-        assert max(p.vz for p in pos) < 1.0  # NED: descent speed below 1 m/s
-        client.wait("EXTENDED_SYS_STATE", 30, lambda m: m.landed_state == 1)
-        client.wait("HEARTBEAT", 10, lambda m: not m.base_mode & 128)
+        # land: a gentle descent (MPC_LAND_SPEED 0.7 m/s) to the ground, then disarm
+        assert 0.5 < pos[-1].vz < 0.9
+    client.wait("EXTENDED_SYS_STATE", 30, lambda m: m.landed_state == 1)
+    client.wait("HEARTBEAT", 10, lambda m: not m.base_mode & 128)
 
 
 def test_takeoff_and_land_then_disarm(ground_vehicle):
@@ -222,7 +252,7 @@ def test_takeoff_and_land_then_disarm(ground_vehicle):
     fast = client.collect(1.5, "LOCAL_POSITION_NED")
     assert all(p.vz < 1.0 for p in fast)
     client.wait("EXTENDED_SYS_STATE", 15, lambda m: m.landed_state == 1)
-    client.wait("STATUSTEXT", 5, lambda m: m.text == "Disarmed by landing")
+    client.wait("STATUSTEXT", 5, lambda m: m.text == PX4_TEXT % "Disarmed by landing")
     hb = client.wait("HEARTBEAT", 3, lambda m: not m.base_mode & 128)
     assert hb.custom_mode == LAND_MODE  # NAV_LAND was the user's choice: it stays in Land
 
@@ -339,13 +369,13 @@ def test_disarmed_offboard_without_a_setpoint_is_accepted_and_arming_there_refus
     # WHEN armed THEN TEMPORARILY_REJECTED with PX4's text (CRITICAL), still disarmed OFFBOARD
     assert client.command(400, 1) == TEMP_REJECTED
     text = client.wait_text(2, lambda t: t.startswith("Arming"))
-    assert text == (2, PX4_ARMING_DENIED)  # CRITICAL, in two chunks as PX4 sends it
+    assert text == (2, PX4_TEXT % PX4_ARMING_DENIED)  # CRITICAL, in two chunks as PX4 sends it
     hb = client.wait("HEARTBEAT", 3)
     assert (hb.custom_mode, hb.base_mode) == (OFFBOARD_MODE, 1)
     # WHEN switched to AUTO_LOITER THEN arming is ACCEPTED
     assert _set_mode(client, 1, AUTO, 3) == ACCEPTED
     assert client.command(400, 1) == ACCEPTED
-    client.wait("STATUSTEXT", 2, lambda m: m.text == "Armed by external command")
+    client.wait("STATUSTEXT", 2, lambda m: m.text == PX4_TEXT % "Armed by external command")
     hb = client.wait("HEARTBEAT", 3, lambda m: m.base_mode & 128)
     assert (hb.custom_mode, hb.base_mode) == (LOITER_MODE, 157)
     assert client.command(400, 0) == ACCEPTED
@@ -355,29 +385,31 @@ FAST_LAND = ["--param", "MPC_LAND_SPEED=2.5"]  # 10 m in 4 s
 
 
 def test_after_an_offboard_loss_landing_it_is_back_in_offboard_and_refuses_to_arm(tmp_path):
-    # PX4 v1.16.0, modes_and_acks 35.75-59.01 s; PX4's loss action there (POSCTL with no RC)
-    # sank to the ground, the emulator's POSCTL holds: COM_OBL_RC_ACT 4 lands instead
+    # PX4 v1.16.0, modes_and_acks 35.75-59.01 s: the default loss action (Position, with no
+    # manual control) sinks to the ground; MPC_Z_VEL_MAX_DN 2.5 m/s makes 10 m last 4 s
     client, ctx = _start(
-        ["--id", "1", "--in-air", "--param", "COM_OBL_RC_ACT=4", *FAST_LAND], tmp_path
+        ["--id", "1", "--in-air", "--param", "MPC_Z_VEL_MAX_DN=2.5"], tmp_path
     )
     with ctx:
         client.wait("HEARTBEAT", 60)
         # GIVEN one setpoint then OFFBOARD at once, and nothing more
         client.send(rates_setpoint(1, 0.0, 0.0, 0.0, hover_thrust(UAV1_MASS_KG, UAV1_FMAX_N)))
         assert _set_mode(client, 1 | 128, OFFBOARD) == ACCEPTED
-        # THEN "Failsafe activated" (CRITICAL), it lands, "Disarmed by landing"
-        text = client.wait("STATUSTEXT", 3, lambda m: m.text == PX4_FAILSAFE)
+        # THEN "Failsafe activated" (CRITICAL), Position (CRITICAL), it sinks, lands and
+        # "Disarmed by landing"
+        text = client.wait("STATUSTEXT", 3, lambda m: m.text == PX4_TEXT % PX4_FAILSAFE)
         assert text.severity == 2
-        client.wait("HEARTBEAT", 3, lambda m: m.custom_mode == LAND_MODE and m.base_mode & 128)
-        client.wait("STATUSTEXT", 15, lambda m: m.text == "Landing detected")
-        client.wait("STATUSTEXT", 5, lambda m: m.text == "Disarmed by landing")
+        hb = client.wait("HEARTBEAT", 3, lambda m: m.custom_mode == POSCTL << 16)
+        assert (hb.base_mode, hb.system_status) == (209, 5)
+        client.wait("STATUSTEXT", 15, lambda m: m.text == PX4_TEXT % "Landing detected")
+        client.wait("STATUSTEXT", 5, lambda m: m.text == PX4_TEXT % "Disarmed by landing")
         # AND the HEARTBEAT is back in the intended OFFBOARD, disarmed, base_mode 1
         hb = client.wait("HEARTBEAT", 3, lambda m: not m.base_mode & 128)
         assert (hb.custom_mode, hb.base_mode) == (OFFBOARD_MODE, 1)
         # WHEN armed THEN TEMPORARILY_REJECTED with PX4's text
         assert client.command(400, 1) == TEMP_REJECTED
         text = client.wait_text(2, lambda t: t.startswith("Arming"))
-        assert text == (2, PX4_ARMING_DENIED)  # CRITICAL, in two chunks as PX4 sends it
+        assert text == (2, PX4_TEXT % PX4_ARMING_DENIED)  # CRITICAL, in two chunks as PX4 sends it
         # AND after AUTO_LOITER is selected arming is ACCEPTED
         assert _set_mode(client, 1, AUTO, 3) == ACCEPTED
         assert client.command(400, 1) == ACCEPTED
@@ -399,9 +431,9 @@ def test_a_gcs_nav_land_from_offboard_stays_in_land_after_the_disarm(tmp_path):
             assert client.command(21) == ACCEPTED
         texts: list[str] = []
         client.wait(
-            "STATUSTEXT", 15, lambda m: texts.append(m.text) or m.text == "Disarmed by landing"
+            "STATUSTEXT", 15, lambda m: texts.append(m.text) or m.text == PX4_TEXT % "Disarmed by landing"
         )
-        assert PX4_FAILSAFE not in texts
+        assert PX4_TEXT % PX4_FAILSAFE not in texts
         beats = client.collect(2.5, "HEARTBEAT")
         assert beats and all((hb.custom_mode, hb.base_mode & 128) == (LAND_MODE, 0) for hb in beats)
     client.close()
@@ -492,5 +524,5 @@ def test_lockstep_advances_one_tick_per_setpoint(tmp_path):
         # a tenth of wall time
         assert 0.05 * wall_ms < t1 - t0 < 0.2 * wall_ms
         # WHEN the GCS goes silent THEN time follows the clock again and the failsafe holds
-        client.wait("STATUSTEXT", 5, lambda m: m.text == PX4_FAILSAFE)
+        client.wait("STATUSTEXT", 5, lambda m: m.text == PX4_TEXT % PX4_FAILSAFE)
     client.close()

@@ -1,7 +1,15 @@
-"""MAVSDK (mavsdk 4.x, ``mavsdk.asyncio``) as a real third-party client of vehicle-emu.
+"""MAVSDK (mavsdk 4.x, ``mavsdk.asyncio``) as a real third-party client of vehicle-emu, on the
+px4 and the ardupilot personalities.
 
 MAVSDK listens on 127.0.0.1:PORT (``udpin://``); the emulator sends there, so all traffic stays
-on the loopback interface.
+on the loopback interface. MAVSDK 4.1 with ArduPilot (what these tests rely on): it finds the
+vehicle on its ephemeral port and answers there, reports ``Autopilot.ARDUPILOT``, arms, takes off
+(GUIDED, then NAV_TAKEOFF at a relative altitude), shows GUIDED as ``FlightMode.OFFBOARD`` (so
+``offboard.start()`` means GUIDED), sends its attitude-rate setpoints as SET_ATTITUDE_TARGET;
+telemetry needs its ``set_rate_*`` calls (ArduPilot streams nothing until asked), and none of
+them asks for SYS_STATUS, so ``health.is_armable`` (its pre-arm bit) never arrives. It has no flight
+mode for GUIDED_NOGPS, and ArduPilot's GUIDED does not lift a landed vehicle on thrust alone (a
+takeoff comes first), so the ardupilot flight takes off before its offboard part.
 """
 
 from __future__ import annotations
@@ -11,6 +19,7 @@ import time
 
 import pytest
 
+from vehicle_emulator.personality import PERSONALITIES
 from vehicle_emulator.testing import free_udp_port, hover_thrust, run_emulator
 
 mavsdk_asyncio = pytest.importorskip("mavsdk.asyncio")
@@ -35,11 +44,16 @@ async def _first(agen, timeout_s: float, cond=lambda x: True):
     return await asyncio.wait_for(go(), timeout_s)
 
 
-async def _connect(mavsdk: Mavsdk, port: int):
+async def _connect(mavsdk: Mavsdk, port: int, rates_hz: float | None = None):
     await mavsdk.add_any_connection(f"udpin://127.0.0.1:{port}")
     system = await mavsdk.first_autopilot(timeout_s=60.0)
     assert system is not None, "MAVSDK found no autopilot"
-    return system, TelemetryAsync(system), ActionAsync(system), OffboardAsync(system)
+    telemetry = TelemetryAsync(system)
+    if rates_hz is not None:  # ArduPilot: SET_MESSAGE_INTERVAL for what the test reads
+        await telemetry.set_rate_position(rates_hz)
+        await telemetry.set_rate_attitude_euler(rates_hz)
+        await telemetry.set_rate_velocity_ned(rates_hz)
+    return system, telemetry, ActionAsync(system), OffboardAsync(system)
 
 
 async def _start_offboard(telemetry: TelemetryAsync, offboard: OffboardAsync, thrust: float):
@@ -67,22 +81,37 @@ async def _hold_altitudes(telemetry: TelemetryAsync, n: int = 100) -> list[float
     return alts
 
 
-async def _fly(port: int) -> dict:
+async def _fly(port: int, ardupilot: bool = False) -> dict:
     config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
     out: dict = {}
     async with Mavsdk(config) as mavsdk:
-        system, telemetry, action, offboard = await _connect(mavsdk, port)
+        system, telemetry, action, offboard = await _connect(
+            mavsdk, port, 50.0 if ardupilot else None)
         out["autopilot"] = await system.autopilot_type()
         pos = await _first(telemetry.subscribe_position(), 10)
         att = await _first(telemetry.subscribe_attitude_euler(), 10)
         out["start_rel_alt_m"] = pos.relative_altitude_m
         out["start_roll_deg"] = att.roll_deg
+        # as MAVSDK's examples do: wait for the health checks before arming (PX4 refuses to
+        # arm for its first seconds after boot; health.is_armable is the pre-arm check bit).
+        # Not on ArduPilot: the bit is in SYS_STATUS, which MAVSDK never asks ArduPilot for
+        if not ardupilot:
+            health = await _first(telemetry.subscribe_health(), 15, lambda h: h.is_armable)
+            out["home_position_ok"] = health.is_home_position_ok
         await action.arm()
         await _first(telemetry.subscribe_armed(), 5, bool)
-        hover = hover_thrust(0.85, 6.0)
+        if ardupilot:  # GUIDED + NAV_TAKEOFF (MAVSDK's action.takeoff for ArduPilot)
+            await action.set_takeoff_altitude(2.0)
+            await action.takeoff()
+            up = await _first(telemetry.subscribe_position(), 20,
+                              lambda p: p.relative_altitude_m > 1.9)
+            out["took_off_m"] = up.relative_altitude_m
+            out["start_rel_alt_m"] = 0.0
+        hover = _hover(ardupilot)
         out["offboard_timing_s"] = await _start_offboard(telemetry, offboard, hover + 0.08)
         climbed = await _first(
-            telemetry.subscribe_position(), 15, lambda p: p.relative_altitude_m > 1.0
+            telemetry.subscribe_position(), 15,
+            lambda p: p.relative_altitude_m > 1.0 + out.get("took_off_m", 0.0),
         )
         out["climbed_to_m"] = climbed.relative_altitude_m
         # brake below hover thrust until the climb stops, then hold at hover thrust
@@ -95,16 +124,23 @@ async def _fly(port: int) -> dict:
     return out
 
 
-async def _take_over_in_the_air(port: int) -> dict:
+def _hover(ardupilot: bool) -> float:
+    """Hover thrust of the default vehicle 1: m g / (4 f_max), less ArduPilot's battery and
+    air-density compensation (docs/emulator.md, "Calibration")."""
+    scale = PERSONALITIES["ardupilot"].dynamics.thrust_scale if ardupilot else 1.0
+    return hover_thrust(0.85, 6.0) / scale
+
+
+async def _take_over_in_the_air(port: int, ardupilot: bool = False) -> dict:
     config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
     out: dict = {}
     async with Mavsdk(config) as mavsdk:
-        _, telemetry, _, offboard = await _connect(mavsdk, port)
+        _, telemetry, _, offboard = await _connect(mavsdk, port, 50.0 if ardupilot else None)
         out["armed"] = await _first(telemetry.subscribe_armed(), 10)
         out["mode_before"] = await _first(telemetry.subscribe_flight_mode(), 10)
         pos = await _first(telemetry.subscribe_position(), 10)
         out["start_rel_alt_m"] = pos.relative_altitude_m
-        hover = hover_thrust(0.85, 6.0)
+        hover = _hover(ardupilot)
         out["offboard_timing_s"] = await _start_offboard(telemetry, offboard, hover)
         out["hold_alt_m"] = await _hold_altitudes(telemetry)
         out["mode"] = await _first(telemetry.subscribe_flight_mode(), 5)
@@ -123,12 +159,13 @@ def test_mavsdk_discovers_arms_and_flies_offboard_with_attitude_rate(tmp_path):
     with run_emulator(["--id", "1"], remote_port=port, log_dir=str(tmp_path)):
         out = asyncio.run(_fly(port))
     assert out["autopilot"] == Autopilot.PX4
+    assert out["home_position_ok"]
     assert abs(out["start_rel_alt_m"]) < 0.05 and abs(out["start_roll_deg"]) < 1.0
     ack_s, mode_s = out["offboard_timing_s"]
     assert ack_s < ACK_WITHIN_S and mode_s < MODE_SEEN_WITHIN_S
     assert out["climbed_to_m"] > 1.0
     assert out["mode"] == FlightMode.OFFBOARD
-    # at hover thrust the altitude holds (the drag-free model has no other damping)
+    # at hover thrust the altitude holds (px4: SIH's linear drag damps the climb)
     assert min(out["hold_alt_m"]) > 1.0
     assert max(out["hold_alt_m"]) - min(out["hold_alt_m"]) < 0.15
 
@@ -143,5 +180,37 @@ def test_mavsdk_takes_over_a_hovering_vehicle_with_one_setpoint_then_start(tmp_p
     assert abs(out["start_rel_alt_m"] - 10.0) < 0.1
     ack_s, mode_s = out["offboard_timing_s"]
     assert ack_s < ACK_WITHIN_S and mode_s < MODE_SEEN_WITHIN_S
+    assert out["mode"] == FlightMode.OFFBOARD
+    assert max(abs(a - out["start_rel_alt_m"]) for a in out["hold_alt_m"]) < 0.15
+
+
+ARDUPILOT = ["--autopilot", "ardupilot", "--param", "EMU_BOOT_SCALE=0", "--param",
+             "GUID_OPTIONS=8"]  # booted at once; thrust is thrust (GUID_OPTIONS bit 3)
+
+
+def test_mavsdk_on_ardupilot_arms_takes_off_and_flies_attitude_rates_in_guided(tmp_path):
+    # GIVEN the ardupilot personality on its ephemeral port (no --bind), on the ground
+    port = free_udp_port()
+    with run_emulator(["--id", "1", *ARDUPILOT], remote_port=port, log_dir=str(tmp_path),
+                      bind=False):
+        out = asyncio.run(_fly(port, ardupilot=True))
+    # THEN MAVSDK sees ArduPilot, arms, takes off; one setpoint then start() flies GUIDED
+    assert out["autopilot"] == Autopilot.ARDUPILOT
+    assert abs(out["start_roll_deg"]) < 1.0 and out["took_off_m"] > 1.9
+    ack_s, mode_s = out["offboard_timing_s"]
+    assert ack_s < ACK_WITHIN_S and mode_s < MODE_SEEN_WITHIN_S
+    assert out["climbed_to_m"] > 1.0 + out["took_off_m"]
+    assert out["mode"] == FlightMode.OFFBOARD  # MAVSDK's name of ArduPilot's GUIDED
+    assert max(out["hold_alt_m"]) - min(out["hold_alt_m"]) < 0.15
+
+
+def test_mavsdk_on_ardupilot_takes_over_a_hovering_vehicle(tmp_path):
+    # GIVEN an ArduCopter in the air (past boot: armed in GUIDED, holding)
+    port = free_udp_port()
+    with run_emulator(["--id", "1", "--in-air", *ARDUPILOT], remote_port=port,
+                      log_dir=str(tmp_path), bind=False):
+        out = asyncio.run(_take_over_in_the_air(port, ardupilot=True))
+    assert out["armed"] and out["mode_before"] == FlightMode.OFFBOARD  # GUIDED
+    assert abs(out["start_rel_alt_m"] - 10.0) < 0.1
     assert out["mode"] == FlightMode.OFFBOARD
     assert max(abs(a - out["start_rel_alt_m"]) for a in out["hold_alt_m"]) < 0.15

@@ -40,6 +40,7 @@ def team_file(
     z_shift: float = 0.0,
     faults: list | None = None,
     massdrop: bool = False,
+    autopilot: str = "nominal",
 ) -> Path:
     """square4 (or its Scenario II variant) on free ports: vehicle i binds bind_base + i and the
     GCS listens on gcs_base + i (the team file's link keys, which the emulator reads too)."""
@@ -55,7 +56,7 @@ def team_file(
     data["faults"] = faults if faults is not None else data.get("faults", [])
     # The law and the link against the paper's nominal model (actuator setpoints honoured, no
     # sensor noise); the px4 and ardupilot personalities are flown in test_fly_personalities.py
-    data["emulator"] = {"autopilot": "nominal", "origin": "shared"}
+    data["emulator"] = {"autopilot": autopilot, "origin": "shared"}
     path = tmp / "team.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path
@@ -213,6 +214,27 @@ def test_scenario_one_actuators_mode_at_250_hz(tmp_path):
     check_scenario_one(report, code, out)
     assert report["tick"]["rate_hz"] == 250.0
     assert report["extra"]["gains"]["alpha_omega"] == 3.0
+
+
+def test_actuators_mode_is_refused_in_preflight_against_px4_1_16(tmp_path):
+    # GIVEN the px4 personality (PX4 v1.16.0 ignores SET_ACTUATOR_CONTROL_TARGET, silently)
+    base = free_udp_port_block(4)
+    team = team_file(tmp_path, base, duration_s=10.0, autopilot="px4")
+    with emulators(team, base, tmp_path):
+        gcs = Gcs(team, tmp_path / "run", "--mode", "actuators")
+        code, out = gcs.finish(120)
+    # THEN preflight reads AUTOPILOT_VERSION and refuses, one line per vehicle, naming the fix
+    assert code == 1, out
+    log = gcs.log_path.read_text()
+    for k in range(1, 5):
+        assert (f"vehicle {k} (sysid {k}): PX4 1.16.0 ignores SET_ACTUATOR_CONTROL_TARGET (only "
+                "<= 1.13 acts on it); fly it with --mode rates") in log + out
+    # AND nothing was commanded: no mode change was sent
+    conn = mavutil.mavlink_connection(str(tmp_path / "run" / "flight.tlog"))
+    sent = []
+    while (msg := conn.recv_match(type="COMMAND_LONG")) is not None:
+        sent.append(msg.command)
+    assert 176 not in sent and 400 not in sent
 
 
 def test_scenario_two_over_the_link_adaptive_holds_baseline_climbs(tmp_path):

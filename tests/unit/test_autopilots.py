@@ -108,7 +108,26 @@ def test_ardupilot_refuses_actuator_setpoints():
         == ["vehicle 1 (sysid 1): ArduPilot Copter does not act on actuators setpoints; fly it "
             "with --mode rates"]
     assert ARDUPILOT.preflight_problems("v", "rates", {"GUID_OPTIONS": 8}) == []
-    assert PX4.preflight_problems("v", "actuators", None) == []
+
+
+def _version(major: int, minor: int, patch: int) -> int:
+    return (major << 24) | (minor << 16) | (patch << 8) | 255
+
+
+def test_px4_actuators_only_where_its_autopilot_version_acts_on_them():
+    # PX4 1.14 dropped SET_ACTUATOR_CONTROL_TARGET: 1.16.0 ignores it without any refusal
+    assert PX4.needs_version("actuators") and not PX4.needs_version("rates")
+    assert PX4.preflight_problems("v", "actuators", None, _version(1, 13, 3)) == []
+    assert PX4.preflight_problems("vehicle 2 (sysid 2)", "actuators", None,
+                                  _version(1, 16, 0)) == [
+        "vehicle 2 (sysid 2): PX4 1.16.0 ignores SET_ACTUATOR_CONTROL_TARGET (only <= 1.13 acts "
+        "on it); fly it with --mode rates"]
+    assert PX4.preflight_problems("v", "actuators", None, _version(2, 0, 0)) != []
+    # no answer: not confirmed, refused
+    assert PX4.preflight_problems("vehicle 1 (sysid 1)", "actuators", None, None) == [
+        "vehicle 1 (sysid 1): no AUTOPILOT_VERSION: cannot confirm that PX4 acts on actuator "
+        "setpoints (only <= 1.13 does); fly it with --mode rates"]
+    assert PX4.preflight_problems("v", "rates", None, None) == []
 
 
 def test_preflight_accepts_ardupilot_and_refuses_unknown_autopilots():
@@ -152,6 +171,7 @@ class World:
                 s = dataclasses.replace(s, mode=in_air_mode)
             self.v[vid] = s
         self.params = {vid: {"GUID_OPTIONS": guid_options} for vid in autopilots}
+        self.versions = {vid: _version(1, 13, 3) for vid in autopilots}
         self.sent: list[Command] = []
         self.reject: set[tuple[int, Cmd]] = set()
         self.ignore: set[tuple[int, Cmd]] = set()  # acknowledged, without effect
@@ -169,6 +189,8 @@ class World:
             return s, True, ()
         if c.cmd is Cmd.READ_PARAMS:
             return s, True, tuple((n, self.params[c.vehicle_id][n]) for n in c.names)
+        if c.cmd is Cmd.IDENTIFY:
+            return s, True, (("flight_sw_version", float(self.versions[c.vehicle_id])),)
         if c.cmd is Cmd.ARM:
             return dataclasses.replace(s, armed=True, mode="GUIDED" if ardu else s.mode), True, ()
         if c.cmd is Cmd.TAKEOFF:
@@ -377,3 +399,28 @@ def test_mixed_team_invariants_under_random_failures(events, on_ground):
         w.tick()  # THEN World.tick's invariants hold
     assert m.done and m.outcome is not None
     assert w.acted_before_formation == []
+
+
+@pytest.mark.parametrize(("version", "refused"), [((1, 13, 3), False), ((1, 16, 0), True)])
+def test_an_actuators_flight_reads_autopilot_version_and_refuses_px4_from_1_14(version, refused):
+    # GIVEN two PX4 vehicles in the air, one on PX4 `version`, flown in actuators mode
+    m = machine(control_mode="actuators")
+    w = World(m, {1: 12, 2: 12})
+    w.versions[2] = _version(*version)
+    w.run(3.0)
+    # THEN preflight asked each for AUTOPILOT_VERSION once
+    assert w.cmds(1).count(Cmd.IDENTIFY) == 1 and w.cmds(2).count(Cmd.IDENTIFY) == 1
+    if refused:
+        # AND refused the flight before commanding anything, naming vehicle 2 and the fix
+        assert m.done and m.outcome.exit_code == EXIT_ABORTED
+        assert "PX4 1.16.0 ignores SET_ACTUATOR_CONTROL_TARGET" in m.outcome.reason
+        assert Cmd.OFFBOARD not in w.cmds()
+    else:
+        assert Cmd.OFFBOARD in w.cmds()
+
+
+def test_a_rates_flight_does_not_ask_for_the_version():
+    m = machine()
+    w = World(m, {1: 12, 2: 12})
+    w.run(3.0)
+    assert Cmd.IDENTIFY not in w.cmds() and Cmd.OFFBOARD in w.cmds()

@@ -183,6 +183,25 @@ def test_setpoint_loss_after_com_of_loss_t_runs_the_action(action, state):
         assert ap.demand.position_enu_m == AIR.position_enu_m  # holds where it was
     assert (Severity.CRITICAL, PX4_FAILSAFE) in ap.events  # PX4's text
     assert ap.intended_state is NavState.OFFBOARD  # a failsafe is not a user's choice
+    assert ap.failsafe_active and ap.system_status(last + 0.51) == 5
+
+
+@pytest.mark.parametrize("state", [NavState.POSCTL, NavState.ALTCTL])
+def test_without_manual_control_position_and_altitude_descend_at_full_stick(state):
+    # PX4 v1.16.0 with COM_RC_IN_MODE 4 (the px4 personality's default): the Position failsafe
+    # descended at 1.04 m/s, i.e. MPC_Z_VEL_MAX_DN with the throttle stick read as full down
+    params = ParamStore({"COM_RC_IN_MODE": 4, "COM_OBL_RC_ACT": 0 if state is NavState.POSCTL
+                         else 1})
+    ap = _offboard_in_the_air(params)
+    ap.tick(2.3, AIR)
+    assert ap.nav_state is state
+    assert isinstance(ap.demand, PositionTarget)
+    assert ap.demand.mask[2] == 0.0 and ap.demand.velocity_ff_enu_mps[2] == -1.0
+    # a commanded Position is flown the same way, and it ends in a landing
+    assert ap.set_mode(3.0, AIR, 3, 0) is MavResult.ACCEPTED
+    assert ap.demand.velocity_ff_enu_mps[2] == -1.0 and not ap.failsafe_active
+    _land_and_wait(ap, 10.0, 12.2)
+    assert not ap.armed
 
 
 def _offboard_in_the_air(params: ParamStore) -> Autopilot:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import ast
-from collections import Counter
+import dataclasses
 from dataclasses import replace
 from pathlib import Path
 
@@ -16,25 +16,13 @@ from vehicle_emulator.faults import LinkImpairment
 from vehicle_emulator.runner import Emulator
 from vehicle_emulator.team import FaultSpec, default_vehicle
 from vehicle_emulator.telemetry import DEFAULT_RATES_HZ
+from vehicle_emulator.testing import RecordingLink, run_until
 
 ROOT = Path(__file__).resolve().parents[2]
 GCS = mavlink.MAVLink(None, srcSystem=245, srcComponent=190)
 
 
-class FakeLink:
-    """Collects what the emulator sends; decodes it for assertions."""
-
-    name = "fake"
-
-    def __init__(self) -> None:
-        self.decoder = PeerDecoder()
-        self.msgs: list = []
-
-    def send(self, data: bytes, addr=None) -> None:
-        self.msgs.extend(self.decoder.feed(data, "emu"))
-
-    def types(self) -> Counter:
-        return Counter(m.get_type() for m in self.msgs)
+FakeLink = RecordingLink
 
 
 def _emu(n=1, in_air=True, **kw) -> tuple[Emulator, list[FakeLink]]:
@@ -47,11 +35,7 @@ def _emu(n=1, in_air=True, **kw) -> tuple[Emulator, list[FakeLink]]:
     return emu, links
 
 
-def _run(emu: Emulator, until_s: float, tick_s: float = 0.002) -> None:
-    t = emu.now_s
-    while t < until_s - 1e-9:
-        t += tick_s
-        emu.advance_to(t)
+_run = run_until
 
 
 def _send(emu: Emulator, i: int, msg, link) -> None:
@@ -151,6 +135,7 @@ def test_noise_defaults_per_personality_and_is_seeded_when_on(autopilot):
         emu = Emulator([spec], seed=seed, param_overrides=overrides or None)
         link = FakeLink()
         emu.nodes[0].links.append(link)
+        emu.telemetry.set_interval(0, 32, 20_000, 0.0)  # ArduPilot streams only when asked
         _run(emu, 0.5)
         default = emu.nodes[0].params.get_int("EMU_NOISE")
         return default, [(m.x, m.y, m.z) for m in link.msgs if m.get_type() == "LOCAL_POSITION_NED"]
@@ -160,7 +145,7 @@ def test_noise_defaults_per_personality_and_is_seeded_when_on(autopilot):
     assert default == (0 if autopilot == "nominal" else 1)
     # WHEN noise is off THEN the hold is exact; WHEN on THEN seeded, reproducible, small
     _, clean = first_positions(1, EMU_NOISE=0)
-    assert all(p == (0.0, 0.0, -10.0) for p in clean)
+    assert clean and all(p == (0.0, 0.0, -10.0) for p in clean)
     _, noisy = first_positions(1, EMU_NOISE=1)
     assert noisy == first_positions(1, EMU_NOISE=1)[1] and noisy != clean
     assert noisy != first_positions(2, EMU_NOISE=1)[1]
@@ -209,7 +194,7 @@ def test_do_set_mode_gets_accepted_at_once_then_the_commanders_result_on_the_nex
     texts = [m.text for m in link.msgs if m.get_type() == "STATUSTEXT"]
     if in_air:
         assert kinds[:3] == ["COMMAND_ACK", "COMMAND_ACK", "STATUSTEXT"]
-        assert "Switching to Offboard is currently not available" in texts
+        assert "Switching to Offboard is currently not available\t" in texts  # PX4: a TAB
     # AND nothing more
     _run(emu, emu.now_s + 1.0)
     assert len(_acks(link)) == 2
@@ -226,17 +211,18 @@ def test_emu_ack_twice_0_answers_do_set_mode_once_with_the_result():
 
 def test_only_do_set_mode_commands_are_acked_twice():
     emu, (link,) = _emu(in_air=False)
+    _run(emu, 3.1)  # past PX4's arming readiness after boot
     # COMMAND_INT 176 goes through the same PX4 receiver path: twice
     _send(
         emu, 0, mavlink.MAVLink_command_int_message(1, 1, 0, 176, 0, 0, 1, 3, 0, 0, 0, 0, 0), link
     )
-    _run(emu, 0.01)
+    _run(emu, emu.now_s + 0.01)
     assert _acks(link) == [(176, 0), (176, 0)]
     # SET_MODE (the message) is PX4's commander alone: one ACK; arming: one ACK
     link.msgs.clear()
     _send(emu, 0, mavlink.MAVLink_set_mode_message(1, 1, (4 << 16) | (3 << 24)), link)
     _send(emu, 0, mavlink.MAVLink_command_long_message(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0), link)
-    _run(emu, 0.1)
+    _run(emu, emu.now_s + 0.1)
     assert _acks(link) == [(176, 0), (400, 0)]
 
 
@@ -256,9 +242,24 @@ def test_heartbeat_interval_cannot_be_changed():
     assert link.types()["HEARTBEAT"] == pytest.approx(5, abs=1)
 
 
-def test_a_statustext_longer_than_50_bytes_goes_in_mavlink2_chunks():
-    # GIVEN PX4 v1.16.0's 51-character arming refusal (recorded: 2 chunks, one id)
+def test_px4_statustexts_end_in_a_tab_as_recorded():
+    # PX4 v1.16.0: "Arming denied: Resolve system health failures first" + TAB, in 2 chunks
     emu, (link,) = _emu(in_air=False)
+    emu.nodes[0].statustext(2, "Arming denied: Resolve system health failures first")
+    emu.nodes[0].statustext(6, "Armed by external command")
+    msgs = [m for m in link.msgs if m.get_type() == "STATUSTEXT"]
+    assert [(m.text, m.chunk_seq) for m in msgs] == [
+        ("Arming denied: Resolve system health failures firs", 0), ("t\t", 1),
+        ("Armed by external command\t", 0),
+    ]
+
+
+def test_a_statustext_longer_than_50_bytes_goes_in_mavlink2_chunks():
+    # GIVEN PX4 v1.16.0's 51-character arming refusal (recorded: 2 chunks, one id), from a
+    # personality that adds no ending
+    emu = Emulator([dataclasses.replace(default_vehicle(1), autopilot="nominal")])
+    link = RecordingLink()
+    emu.nodes[0].links.append(link)
     node = emu.nodes[0]
     text = "Arming denied: Resolve system health failures first"
     node.statustext(2, "short one")

@@ -1,0 +1,708 @@
+"""ArduCopter-like autopilot logic of one vehicle: boot, arming, modes, guided targets. Pure.
+
+The same interface as ``autopilot.Autopilot`` (``start``, ``arm``, ``set_mode``, ``takeoff``,
+``land``, ``tick``, ``demand``/``demand_version``, ``events``), for the ``ardupilot``
+personality: ArduCopter 4.7.0-dev SITL as recorded (../shared/data/sitl/README.md, ArduPilot
+sections 1-3). No clock, no I/O: ``now_s`` is the emulator's simulated time since start.
+
+* Modes: ``custom_mode`` is the mode number (``Mode``). Disarmed, every mode the emulator flies is
+  accepted (ArduPilot skips its checks then); armed, a mode that needs a position estimate is
+  refused until the EKF has one. The modes with pilot input (STABILIZE, ALT_HOLD, LOITER, POSHOLD)
+  see SITL's default RC: throttle stick low, other sticks centred.
+* Boot (``BootTimeline``, scaled by EMU_BOOT_SCALE): "Arm: System not initialised", then accel,
+  gyro and EKF reasons, ready in STABILIZE at 23.6 s; EKF origin at 20.03 s (HOME_POSITION and
+  GPS_GLOBAL_ORIGIN), position estimate at 41.63 s ("Arm: Need Position Estimate" before it in
+  the modes that need one). A vehicle that starts in the air is past boot (GUIDED, holding).
+* Arming: one COMMAND_ACK, FAILED with an "Arm: <reason>" STATUSTEXT per failed check; "<MODE>
+  mode not armable" (LAND, BRAKE, RTL, ...); 2989 forces (mandatory checks stay); disarm in the
+  air refused unless forced (21196). DISARM_DELAY after landing or arming without takeoff.
+* GUIDED: NAV_TAKEOFF to a relative altitude (spool-up, then a climb limited by WPNAV_SPEED_UP
+  and WPNAV_ACCEL_Z), then holds; position/velocity targets (``on_position_target``) flown by the
+  onboard position controller; a velocity target lasts GUID_TIMEOUT. LAND descends at
+  LAND_SPEED, disarms 0.5 s after the land detector (1.6 s after touchdown) and stays in LAND.
+* Guided attitude targets (``on_attitude_target``), in GUIDED and GUIDED_NOGPS only: used for
+  exactly GUID_TIMEOUT after arrival, then level attitude and altitude hold, mode unchanged, no
+  STATUSTEXT. GUID_OPTIONS bit 3 (8): thrust is normalised thrust (echoed in ATTITUDE_TARGET),
+  else a climb rate (0.5 holds, 1 climbs at WPNAV_SPEED_UP, 0 descends at WPNAV_SPEED_DN).
+  Altitude hold and climb rates are flown by a vertical-speed loop at the autopilot rate.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from enum import IntEnum
+
+import numpy as np
+
+from vehicle_emulator.autopilot import (
+    AttitudeSetpoint,
+    Demand,
+    Idle,
+    MavResult,
+    MotorsOff,
+    Observation,
+    PositionTarget,
+    RatesSetpoint,
+    Severity,
+)
+from vehicle_emulator.params import ParamStore
+
+__all__ = [
+    "AngleTarget",
+    "ArduCopter",
+    "BootTimeline",
+    "CopterObservation",
+    "Mode",
+    "mode_name",
+]
+
+GRAVITY_MPS2 = 9.80665
+FORCE_ARM_MAGIC = 2989
+FORCE_DISARM_MAGIC = 21196
+MSG_HOME_POSITION = 242
+MSG_GPS_GLOBAL_ORIGIN = 49
+
+
+class Mode(IntEnum):
+    """ArduCopter flight mode numbers (HEARTBEAT custom_mode, DO_SET_MODE param2)."""
+
+    STABILIZE = 0
+    ACRO = 1
+    ALT_HOLD = 2
+    AUTO = 3
+    GUIDED = 4
+    LOITER = 5
+    RTL = 6
+    CIRCLE = 7
+    LAND = 9
+    DRIFT = 11
+    SPORT = 13
+    FLIP = 14
+    AUTOTUNE = 15
+    POSHOLD = 16
+    BRAKE = 17
+    THROW = 18
+    AVOID_ADSB = 19
+    GUIDED_NOGPS = 20
+    SMART_RTL = 21
+    FLOWHOLD = 22
+    FOLLOW = 23
+    ZIGZAG = 24
+    SYSTEMID = 25
+    AUTOROTATE = 26
+    AUTO_RTL = 27
+    TURTLE = 28
+
+
+M = Mode
+FLOWN = frozenset({M.STABILIZE, M.ALT_HOLD, M.GUIDED, M.LOITER, M.LAND, M.POSHOLD, M.BRAKE,
+                   M.GUIDED_NOGPS})
+# Mode::allows_arming (ArduCopter 4.7)
+ARMABLE = frozenset({M.STABILIZE, M.ACRO, M.ALT_HOLD, M.GUIDED, M.LOITER, M.DRIFT, M.SPORT,
+                     M.POSHOLD, M.GUIDED_NOGPS, M.THROW, M.FLOWHOLD, M.ZIGZAG, M.TURTLE})
+# Mode::requires_GPS
+NEEDS_POSITION = frozenset({M.AUTO, M.GUIDED, M.LOITER, M.RTL, M.CIRCLE, M.DRIFT, M.POSHOLD,
+                            M.BRAKE, M.THROW, M.SMART_RTL, M.FOLLOW, M.ZIGZAG, M.AUTO_RTL})
+GUIDED_MODES = frozenset({M.GUIDED, M.GUIDED_NOGPS})  # Mode::in_guided_mode
+# HEARTBEAT base_mode GUIDED_ENABLED (8): the horizontal position controller runs (recorded:
+# STABILIZE 81, GUIDED / BRAKE / LAND 89 disarmed, 217 armed, GUIDED_NOGPS 89 disarmed, 209 armed)
+XY_CONTROL = frozenset({M.AUTO, M.GUIDED, M.LOITER, M.RTL, M.CIRCLE, M.LAND, M.POSHOLD, M.BRAKE,
+                        M.SMART_RTL, M.FOLLOW, M.ZIGZAG, M.AUTO_RTL})
+PILOT_MODES = frozenset({M.STABILIZE, M.ALT_HOLD, M.LOITER, M.POSHOLD})
+
+
+def mode_name(number: int) -> str:
+    """ArduCopter's name of a mode number ('GUIDED_NOGPS'), or 'MODE <n>'."""
+    try:
+        return Mode(number).name
+    except ValueError:
+        return f"MODE {number}"
+
+
+@dataclass(frozen=True, slots=True)
+class BootTimeline:
+    """What ArduCopter 4.7.0-dev SITL did after process start (recorded twice, s), times
+    ``scale``. ``arm_reasons`` are the "Arm: ..." failures of an arming attempt at a time."""
+
+    scale: float = 1.0
+
+    READY_S = 2.46  # "ArduPilot Ready": system_status BOOT -> STANDBY
+    EKF_INIT_S = 4.46
+    TILT_S = 5.81
+    ACCELS_OK_S = 13.6  # "Accels inconsistent" until 13.26-14.02 s
+    GYROS_OK_S = 23.6  # "Gyros inconsistent" until 23.26-24.02 s (armed at 24.02 / 24.26 s)
+    ORIGIN_S = 20.03  # EKF origin: GPS_GLOBAL_ORIGIN + HOME_POSITION
+    POSITION_S = 41.63  # "EKF3 IMU0 is using GPS": position estimate, LOCAL_POSITION_NED
+    PREARM_FIRST_S = 29.46  # "PreArm: <reason>" while disarmed and failing, every 30 s
+    PREARM_PERIOD_S = 30.0
+    TEXTS = (
+        (0.33, "Calibrating barometer"),
+        (1.93, "Barometer 1 calibration complete"),
+        (1.93, "Barometer 2 calibration complete"),
+        (2.46, "ArduPilot Ready"),
+        (2.46, "AHRS: DCM active"),
+        (4.46, "EKF3 IMU0 initialised"),
+        (4.46, "EKF3 IMU1 initialised"),
+        (4.46, "AHRS: EKF3 active"),
+        (5.81, "EKF3 IMU0 tilt alignment complete"),
+        (5.81, "EKF3 IMU1 tilt alignment complete"),
+        (5.91, "EKF3 IMU0 MAG0 initial yaw alignment complete"),
+        (5.91, "EKF3 IMU1 MAG0 initial yaw alignment complete"),
+        (9.81, "GPS 1: probing for u-blox at 230400 baud"),
+        (9.84, "GPS 1: detected u-blox"),
+        (20.03, "EKF3 IMU0 origin set"),
+        (20.23, "EKF3 IMU1 origin set"),
+        (41.63, "EKF3 IMU0 is using GPS"),
+        (41.64, "EKF3 IMU1 is using GPS"),
+    )
+
+    def at(self, t_recorded_s: float) -> float:
+        """Emulator time of a recorded boot time."""
+        return t_recorded_s * self.scale
+
+    def initialised(self, now_s: float) -> bool:
+        return now_s >= self.at(self.READY_S)
+
+    def origin_set(self, now_s: float) -> bool:
+        return now_s >= self.at(self.ORIGIN_S)
+
+    def position_ok(self, now_s: float) -> bool:
+        return now_s >= self.at(self.POSITION_S)
+
+    def sensor_reasons(self, now_s: float) -> list[str]:
+        """The boot-time "Arm: ..." reasons (without the "Arm: " prefix), in recorded order."""
+        if not self.initialised(now_s):
+            return ["System not initialised"]
+        if now_s < self.at(self.EKF_INIT_S):
+            return ["Accels inconsistent", "EKF attitude is bad",
+                    "AHRS: not using configured AHRS type"]
+        if now_s < self.at(self.TILT_S):
+            return ["Accels inconsistent", "EKF attitude is bad", "AHRS: EKF3 still initialising"]
+        if now_s < self.at(self.ACCELS_OK_S):
+            return ["Accels inconsistent"]
+        if now_s < self.at(self.GYROS_OK_S):
+            return ["Gyros inconsistent"]
+        return []
+
+
+PAST_BOOT = BootTimeline(scale=0.0)  # a vehicle that starts in the air
+
+
+@dataclass(frozen=True, slots=True)
+class CopterObservation(Observation):
+    """Observation plus the cosine of the tilt (body z against up), for angle boost."""
+
+    tilt_cos: float = 1.0
+
+
+@dataclass(frozen=True, slots=True)
+class AngleTarget:
+    """A guided attitude target (SET_ATTITUDE_TARGET): rates or attitude (the setpoint's thrust
+    field unused when ``use_thrust`` is False), and thrust or climb rate."""
+
+    setpoint: RatesSetpoint | AttitudeSetpoint
+    use_thrust: bool
+    climb_rate_mps: float = 0.0  # when not use_thrust (up positive)
+
+
+# Vertical loop (ArduPilot's PSC_POSZ_P 1, PSC_VELZ_P 5 style; integrator for mass changes)
+POS_Z_P = 1.0
+VEL_Z_P = 5.0
+VEL_Z_I = 2.0
+VEL_Z_I_LIMIT = 3.0  # m/s^2
+LEASH_Z_M = 1.0
+TAKEOFF_SPOOL_S = 2.5  # NAV_TAKEOFF -> liftoff (recorded 48.70 -> 51.20 s)
+LAND_DETECT_S = 1.6  # touchdown -> land complete (recorded 108.08 -> 109.67 s)
+LAND_DISARM_S = 0.5  # land complete -> "Disarming motors" in LAND (recorded 109.67 -> 110.16 s)
+STOPPED_MPS = 0.1  # a braking vehicle holds its position below this horizontal speed
+TAKEOFF_DONE_M = 0.1
+
+
+@dataclass(slots=True)
+class ArduCopter:
+    """One vehicle's ArduCopter-like state machine. Call ``tick`` regularly (>= 10 Hz)."""
+
+    vehicle_id: int
+    params: ParamStore
+    boot: BootTimeline = field(default_factory=BootTimeline)
+    armed: bool = False
+    mode: Mode = Mode.STABILIZE
+    demand: Demand = field(default_factory=MotorsOff)
+    demand_version: int = 0
+    events: list[tuple[Severity, str]] = field(default_factory=list)
+    requests: list[int] = field(default_factory=list)  # msgids to send now (HOME, ORIGIN)
+    first_offboard_s: float | None = None  # first GUIDED_NOGPS entry (the fault clock)
+    setpoint: AngleTarget | None = None
+    home_enu_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    land_complete: bool = True
+    auto_armed: bool = False
+    angle_control: bool = False  # guided angle submode (GUIDED_NOGPS, or GUIDED after one)
+    guided_timeouts: int = 0  # attitude targets that expired (GUID_TIMEOUT) while flown
+    _setpoint_s: float = -math.inf
+    _expiry_counted: bool = True
+    _velocity_target_s: float | None = None  # GUIDED velocity target: its arrival
+    _taking_off: str = ""  # "" | "spool" | "climb"
+    _takeoff_started_s: float = 0.0
+    _takeoff_from_m: float = 0.0
+    _takeoff_alt_m: float = 0.0
+    _ground_since_s: float | None = None
+    _landed_since_s: float | None = None
+    _z_ref_m: float | None = None
+    _vz_int: float = 0.0
+    _braking: bool = False
+    _texts_done: int = 0
+    _origin_sent: bool = False
+    _next_prearm_s: float = 0.0
+
+    # --- construction ---------------------------------------------------------------------------
+
+    @classmethod
+    def start(
+        cls, vehicle_id: int, params: ParamStore, now_s: float, obs: Observation,
+        ready_after_s: float = 0.0,
+    ) -> ArduCopter:
+        """At boot on the ground: disarmed in STABILIZE, the boot timeline ahead (EMU_BOOT_SCALE;
+        ``ready_after_s``, the personality's single readiness time, is PX4's, unused here).
+        In the air: past boot, armed in GUIDED, holding its position."""
+        ap = cls(vehicle_id, params, BootTimeline(params["EMU_BOOT_SCALE"]))
+        ap.home_enu_m = (obs.position_enu_m[0], obs.position_enu_m[1], 0.0)
+        ap._next_prearm_s = ap.boot.at(BootTimeline.PREARM_FIRST_S)
+        if not obs.on_ground:
+            ap.boot = PAST_BOOT
+            ap._texts_done = len(BootTimeline.TEXTS)
+            ap._origin_sent = True
+            ap.armed = ap.auto_armed = True
+            ap.land_complete = False
+            ap.mode = Mode.GUIDED
+            ap._set(ap._position_hold(obs))
+        return ap
+
+    # --- queries -------------------------------------------------------------------------------
+
+    @property
+    def nav_state(self) -> Mode:
+        """The current mode (the name the PX4 state machine uses)."""
+        return self.mode
+
+    @property
+    def custom_mode(self) -> int:
+        """HEARTBEAT custom_mode: the mode number."""
+        return int(self.mode)
+
+    @property
+    def mode_name(self) -> str:
+        return self.mode.name
+
+    def position_ok(self, now_s: float) -> bool:
+        """The EKF has a position estimate (LOCAL_POSITION_NED is sent, GUIDED is armable)."""
+        return self.boot.position_ok(now_s)
+
+    def prearm_ok(self, now_s: float) -> bool:
+        """SYS_STATUS pre-arm check bit: the pre-arm checks pass (recorded: set at 23.5 s, when
+        the gyros became consistent, in STABILIZE)."""
+        return not self.arm_failures(now_s, mode_check=False)
+
+    def system_status(self, now_s: float) -> int:
+        """HEARTBEAT system_status: BOOT (1) before "ArduPilot Ready", STANDBY (3) landed,
+        ACTIVE (4) flying."""
+        if not self.boot.initialised(now_s):
+            return 1
+        return 3 if self.land_complete else 4
+
+    def base_mode(self, now_s: float) -> int:
+        """HEARTBEAT base_mode: CUSTOM_MODE_ENABLED | STABILIZE | MANUAL_INPUT (81), GUIDED (8)
+        while the horizontal position controller runs, SAFETY_ARMED (128)."""
+        xy = self.mode in XY_CONTROL or not self.boot.initialised(now_s)
+        if self.mode is Mode.GUIDED_NOGPS and not self.armed:
+            xy = True  # recorded 89
+        if self.mode is Mode.GUIDED and self.angle_control and self.armed:
+            xy = False
+        return 81 | (8 if xy else 0) | (128 if self.armed else 0)
+
+    def landed_state(self) -> int:
+        """EXTENDED_SYS_STATE landed_state: ON_GROUND 1, IN_AIR 2, TAKEOFF 3, LANDING 4."""
+        if self.land_complete:
+            return 1
+        if self.mode is Mode.LAND:
+            return 4
+        return 3 if self._taking_off else 2
+
+    def setpoint_driven(self) -> bool:
+        """Armed and flying guided attitude targets (lockstep follows these vehicles)."""
+        return self.armed and self.angle_control and self.mode in GUIDED_MODES
+
+    # --- commands ------------------------------------------------------------------------------
+
+    def arm(self, now_s: float, obs: Observation, arm: bool, magic: int = 0) -> MavResult:
+        """COMPONENT_ARM_DISARM: FAILED with an "Arm: ..." text per failed check."""
+        if arm:
+            if self.armed:
+                return MavResult.ACCEPTED
+            failures = self.arm_failures(now_s, forced=magic == FORCE_ARM_MAGIC)
+            if failures:
+                for reason in failures:
+                    self._event(Severity.CRITICAL, f"Arm: {reason}")
+                return MavResult.FAILED
+            self.armed = True
+            self.auto_armed = not obs.on_ground
+            self._landed_since_s = now_s if self.land_complete else None
+            self.home_enu_m = (obs.position_enu_m[0], obs.position_enu_m[1], 0.0)
+            if self.boot.origin_set(now_s):
+                self.requests += [MSG_GPS_GLOBAL_ORIGIN, MSG_HOME_POSITION]
+            self._event(Severity.INFO, "Arming motors")
+            self._enter(self.mode, now_s, obs)
+            return MavResult.ACCEPTED
+        if not self.armed:
+            return MavResult.ACCEPTED
+        if not self.land_complete and magic != FORCE_DISARM_MAGIC:
+            return MavResult.FAILED  # ArduPilot: no text
+        self._disarm()
+        return MavResult.ACCEPTED
+
+    def arm_failures(self, now_s: float, forced: bool = False, mode_check: bool = True
+                     ) -> list[str]:
+        """Reasons an arming attempt would fail now (without "Arm: "); [] if it would arm.
+        ``mode_check=False``: the pre-arm checks only."""
+        out = [] if self.boot.initialised(now_s) else ["System not initialised"]
+        if not out and not forced and self.params.get_int("ARMING_CHECK") != 0:
+            out = self.boot.sensor_reasons(now_s)
+        if self.mode in NEEDS_POSITION and not self.position_ok(now_s):
+            out.append("Need Position Estimate")  # mandatory, even forced
+        if not out and not forced and mode_check and self.mode not in ARMABLE:
+            out.append(f"{self.mode.name} mode not armable")
+        return out
+
+    def set_mode(self, now_s: float, obs: Observation, number: int) -> MavResult:
+        """DO_SET_MODE / SET_MODE with an ArduCopter mode number. Disarmed: accepted for every
+        mode the emulator flies (no checks); armed: a mode that needs a position estimate is
+        refused without one. A mode the emulator does not fly is refused (FAILED)."""
+        try:
+            target = Mode(number)
+        except ValueError:
+            self._event(Severity.WARNING, f"No such mode {number}")
+            return MavResult.FAILED
+        if target not in FLOWN:
+            self._event(Severity.WARNING, f"Mode change to {target.name} failed: not emulated")
+            return MavResult.FAILED
+        if self.armed and target in NEEDS_POSITION and not self.position_ok(now_s):
+            self._event(Severity.WARNING, f"Mode change to {target.name} failed: requires position")
+            return MavResult.FAILED
+        if target is self.mode:
+            return MavResult.ACCEPTED
+        if target is Mode.GUIDED_NOGPS and self.first_offboard_s is None:
+            self.first_offboard_s = now_s
+        self.mode = target
+        self._enter(target, now_s, obs)
+        return MavResult.ACCEPTED
+
+    def takeoff(self, now_s: float, obs: Observation, altitude_rel_m: float) -> MavResult:
+        """NAV_TAKEOFF in GUIDED (param7 above home): armed, landed, above the ground; after
+        TAKEOFF_SPOOL_S it climbs, then holds the altitude in GUIDED."""
+        alt = altitude_rel_m
+        if (not self.armed or not self.land_complete or self.mode is not Mode.GUIDED
+                or not math.isfinite(alt) or alt <= obs.position_enu_m[2] - self.home_enu_m[2]):
+            return MavResult.FAILED
+        self.auto_armed = True
+        self.angle_control = False
+        self._taking_off = "spool"
+        self._takeoff_started_s = now_s
+        self._takeoff_from_m = obs.position_enu_m[2]
+        self._takeoff_alt_m = self.home_enu_m[2] + alt
+        self._set(Idle())
+        return MavResult.ACCEPTED
+
+    def land(self, now_s: float, obs: Observation) -> MavResult:
+        """MAV_CMD_NAV_LAND: the LAND mode."""
+        return self.set_mode(now_s, obs, Mode.LAND)
+
+    # --- guided targets ------------------------------------------------------------------------
+
+    def on_attitude_target(self, now_s: float, obs: Observation, target: AngleTarget | None
+                           ) -> bool:
+        """A SET_ATTITUDE_TARGET in a guided mode (None: invalid, which stops a GUIDED vehicle;
+        GUIDED_NOGPS keeps flying its last target). Ignored elsewhere. True if used."""
+        if self.mode not in GUIDED_MODES:
+            return False
+        if target is None:
+            if self.mode is Mode.GUIDED:
+                self._stop_guided(obs)
+            return False
+        self.setpoint = target
+        self._setpoint_s = now_s
+        self._expiry_counted = False
+        if not self.angle_control:
+            self.angle_control = True
+            self._z_ref_m = obs.position_enu_m[2]
+        self._velocity_target_s = None
+        self._taking_off = ""
+        self._fly_angle(now_s, obs)
+        return True
+
+    def on_position_target(self, now_s: float, obs: Observation, target: PositionTarget | None,
+                           velocity_only: bool = False) -> bool:
+        """A SET_POSITION_TARGET_* in GUIDED, already in team ENU (None: invalid, stops).
+        ``velocity_only`` targets time out after GUID_TIMEOUT. GUIDED_NOGPS and other modes
+        ignore them. True if used."""
+        if self.mode is not Mode.GUIDED:
+            return False
+        if target is None:
+            self._stop_guided(obs)
+            return False
+        self.angle_control = False
+        self._taking_off = ""
+        self._velocity_target_s = now_s if velocity_only else None
+        if self._grounded():
+            return True  # taken, but a landed vehicle waits for a takeoff (ArduPilot)
+        self._braking = False
+        self._set(target)
+        return True
+
+    # --- the tick ------------------------------------------------------------------------------
+
+    def tick(self, now_s: float, obs: Observation) -> None:
+        """Boot timeline, takeoff, land detector, auto-disarm, timeouts, the vertical loop."""
+        self._boot_progress(now_s)
+        self._land_detector(now_s, obs)
+        if not self.armed:
+            self._prearm_report(now_s)
+            return
+        if self._taking_off:
+            self._takeoff_progress(now_s, obs)
+        elif self.angle_control and self.mode in GUIDED_MODES:
+            self._fly_angle(now_s, obs)
+        elif self._velocity_target_s is not None and (
+            now_s - self._velocity_target_s > self.params["GUID_TIMEOUT"]
+        ):
+            self._stop_guided(obs)
+        elif self._braking and math.hypot(*obs.velocity_enu_mps[:2]) < STOPPED_MPS:
+            self._braking = False
+            self._set(self._position_hold(obs))
+        elif self.mode is Mode.ALT_HOLD and not self.land_complete:
+            self._set(self._level_climb(obs, -self._pilot_down_mps(), 0.02))
+        elif self.mode is Mode.LAND:
+            self._land_speed_update(obs)
+        if self.land_complete and not self._taking_off:
+            angle = self.angle_control and self.mode in GUIDED_MODES
+            if not angle and not isinstance(self.demand, Idle):
+                self._set(Idle())  # every mode idles a landed vehicle (the angle mode decides)
+            since = self._landed_since_s if self._landed_since_s is not None else now_s
+            landed_s = now_s - since
+            land_done = self.mode is Mode.LAND and landed_s >= LAND_DISARM_S
+            if land_done or 0 < self.params["DISARM_DELAY"] <= landed_s:
+                self._disarm()
+
+    # --- internals -----------------------------------------------------------------------------
+
+    def _event(self, severity: Severity, text: str) -> None:
+        self.events.append((severity, text))
+
+    def _set(self, demand: Demand) -> None:
+        self.demand = demand
+        self.demand_version += 1
+
+    def _disarm(self) -> None:
+        self.armed = self.auto_armed = False
+        self.angle_control = False
+        self._taking_off = ""
+        self._velocity_target_s = None
+        self._event(Severity.INFO, "Disarming motors")
+        self._set(MotorsOff())
+
+    def _grounded(self) -> bool:
+        """ArduPilot's is_disarmed_or_landed: the mode's controllers idle the motors."""
+        return not self.armed or not self.auto_armed or self.land_complete
+
+    def _boot_progress(self, now_s: float) -> None:
+        texts = BootTimeline.TEXTS
+        while self._texts_done < len(texts) and now_s >= self.boot.at(texts[self._texts_done][0]):
+            self._event(Severity.INFO, texts[self._texts_done][1])
+            self._texts_done += 1
+        if not self._origin_sent and self.boot.origin_set(now_s):
+            self._origin_sent = True
+            self.requests += [MSG_GPS_GLOBAL_ORIGIN, MSG_HOME_POSITION]
+
+    def _prearm_report(self, now_s: float) -> None:
+        """Every 30 s while disarmed (first at 29.46 s of the boot timeline): "PreArm: <first
+        reason>" if a pre-arm check fails (the mode check is an arming check, not one)."""
+        if now_s < self._next_prearm_s:
+            return
+        self._next_prearm_s = now_s + BootTimeline.PREARM_PERIOD_S
+        failures = self.arm_failures(now_s, mode_check=False)
+        if failures and self.boot.initialised(now_s):
+            self._event(Severity.CRITICAL, f"PreArm: {failures[0]}")
+
+    def _land_detector(self, now_s: float, obs: Observation) -> None:
+        if not obs.on_ground:
+            self._ground_since_s = None
+            if self.land_complete and self._taking_off != "spool":
+                self.land_complete = False
+                self._landed_since_s = None
+            return
+        if self._ground_since_s is None:
+            self._ground_since_s = now_s
+        if (not self.land_complete and self._taking_off != "climb"
+                and now_s - self._ground_since_s >= LAND_DETECT_S):
+            self.land_complete = True
+            self._landed_since_s = now_s
+            self._taking_off = ""
+            self.angle_control = self.mode is Mode.GUIDED_NOGPS
+
+    def _enter(self, mode: Mode, now_s: float, obs: Observation) -> None:
+        """A mode's start: its demand now (armed) or motors off."""
+        self._taking_off = ""
+        self._velocity_target_s = None
+        self._braking = False
+        self.angle_control = mode is Mode.GUIDED_NOGPS
+        if mode is Mode.GUIDED_NOGPS:
+            self.setpoint = None  # ArduPilot's angle_control_start: level, climb rate 0
+            self._setpoint_s = -math.inf
+            self._expiry_counted = True
+            self._z_ref_m = obs.position_enu_m[2]
+            self._vz_int = 0.0
+        if not self.armed:
+            self._set(MotorsOff())
+        elif self.land_complete:
+            self._set(Idle())
+        elif mode is Mode.GUIDED_NOGPS:
+            self._fly_angle(now_s, obs)
+        elif mode is Mode.STABILIZE:
+            self._set(Idle())  # throttle stick low: the motors idle in the air too
+        elif mode is Mode.ALT_HOLD:
+            self._z_ref_m = obs.position_enu_m[2]
+            self._set(self._level_climb(obs, -self._pilot_down_mps(), 0.0))
+        elif mode in (Mode.LOITER, Mode.POSHOLD):
+            self._set(PositionTarget(obs.position_enu_m, (0.0, 0.0, -self._pilot_down_mps()),
+                                     (1.0, 1.0, 0.0), obs.yaw_enu_rad))
+        elif mode is Mode.LAND:
+            self._set(PositionTarget(obs.position_enu_m, (0.0, 0.0, -self._land_speed_mps(obs)),
+                                     (1.0, 1.0, 0.0), obs.yaw_enu_rad))
+        else:  # GUIDED, BRAKE: stop, then hold
+            self._stop_guided(obs)
+
+    def _stop_guided(self, obs: Observation) -> None:
+        """Decelerate to zero velocity holding the altitude, then hold the position."""
+        self.angle_control = self.mode is Mode.GUIDED_NOGPS
+        self._velocity_target_s = None
+        if self._grounded():
+            return
+        self._braking = True
+        self._set(PositionTarget(obs.position_enu_m, (0.0, 0.0, 0.0), (0.0, 0.0, 1.0),
+                                 obs.yaw_enu_rad))
+
+    @staticmethod
+    def _position_hold(obs: Observation) -> PositionTarget:
+        return PositionTarget(obs.position_enu_m, yaw_enu_rad=obs.yaw_enu_rad)
+
+    def _pilot_down_mps(self) -> float:
+        down = self.params["PILOT_SPEED_DN"] or self.params["PILOT_SPEED_UP"]
+        return down * 0.01
+
+    def _land_speed_mps(self, obs: Observation) -> float:
+        above_home_m = obs.position_enu_m[2] - self.home_enu_m[2]
+        if above_home_m > self.params["LAND_ALT_LOW"] * 0.01:
+            return self.params["WPNAV_SPEED_DN"] * 0.01
+        return self.params["LAND_SPEED"] * 0.01
+
+    def _land_speed_update(self, obs: Observation) -> None:
+        d = self.demand
+        speed = self._land_speed_mps(obs)
+        if isinstance(d, PositionTarget) and d.velocity_ff_enu_mps[2] != -speed:
+            self._set(replace(d, velocity_ff_enu_mps=(0.0, 0.0, -speed)))
+
+    def _takeoff_progress(self, now_s: float, obs: Observation) -> None:
+        """Spool-up, then a trapezoidal climb (WPNAV_SPEED_UP, WPNAV_ACCEL_Z) to the altitude,
+        flown by the position controller; GUIDED then holds there."""
+        t = now_s - self._takeoff_started_s
+        if self._taking_off == "spool":
+            if t < TAKEOFF_SPOOL_S:
+                return
+            self._taking_off = "climb"
+            self.land_complete = False
+            self._landed_since_s = None
+            self._takeoff_started_s = now_s
+            t = 0.0
+        z, v = _trapezoid(self._takeoff_alt_m - self._takeoff_from_m, t,
+                          self.params["WPNAV_SPEED_UP"] * 0.01,
+                          self.params["WPNAV_ACCEL_Z"] * 0.01)
+        x, y = obs.position_enu_m[0], obs.position_enu_m[1]
+        if isinstance(self.demand, PositionTarget):
+            x, y = self.demand.position_enu_m[0], self.demand.position_enu_m[1]
+        self._set(PositionTarget((x, y, self._takeoff_from_m + z), (0.0, 0.0, v),
+                                 (1.0, 1.0, 1.0), getattr(self.demand, "yaw_enu_rad",
+                                                          obs.yaw_enu_rad)))
+        if v == 0.0 and abs(obs.position_enu_m[2] - self._takeoff_alt_m) < TAKEOFF_DONE_M:
+            self._taking_off = ""
+
+    def _fly_angle(self, now_s: float, obs: Observation) -> None:
+        """Guided angle control (ArduPilot's angle_control_run): the target while fresh, else
+        level + altitude hold; idle on the ground unless thrust or a climb is commanded."""
+        sp = self.setpoint if self._fresh(now_s) else None
+        if sp is None and not self._expiry_counted:
+            self._expiry_counted = True
+            self.guided_timeouts += 1
+        if self._angle_idles(sp):
+            if self.armed and not isinstance(self.demand, Idle):
+                self._set(Idle())
+            return
+        if sp is not None and sp.use_thrust:
+            if self.demand is not sp.setpoint:
+                self._set(sp.setpoint)
+            return
+        if sp is not None:
+            self._set(self._climb(obs, sp.setpoint, sp.climb_rate_mps))
+        else:
+            self._set(self._level_climb(obs, 0.0, 0.02))
+
+    def _angle_idles(self, sp: AngleTarget | None) -> bool:
+        """make_safe_ground_handling: disarmed, not auto-armed, or landed without thrust or a
+        climb commanded."""
+        lifting = sp is not None and (sp.use_thrust or sp.climb_rate_mps > 0.0)
+        return not self.armed or not self.auto_armed or (self.land_complete and not lifting)
+
+    def _fresh(self, now_s: float) -> bool:
+        return now_s - self._setpoint_s <= self.params["GUID_TIMEOUT"]
+
+    def _level_climb(self, obs: Observation, climb_mps: float, dt_s: float) -> AttitudeSetpoint:
+        """Level attitude with the current heading, thrust from the vertical loop."""
+        c, s = math.cos(obs.yaw_enu_rad), math.sin(obs.yaw_enu_rad)
+        level = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        return self._climb(obs, AttitudeSetpoint(level, 0.0, 0.0), climb_mps, dt_s)
+
+    def _climb(self, obs: Observation, sp: RatesSetpoint | AttitudeSetpoint, climb_mps: float,
+               dt_s: float = 0.02) -> RatesSetpoint | AttitudeSetpoint:
+        """``sp`` with the thrust of a climb rate (ArduPilot's set_pos_target_z_from_climb_rate:
+        the altitude target integrates the rate, within a leash)."""
+        z = obs.position_enu_m[2]
+        z_ref = z if self._z_ref_m is None else self._z_ref_m
+        z_ref = min(max(z_ref + climb_mps * dt_s, z - LEASH_Z_M), z + LEASH_Z_M)
+        self._z_ref_m = z_ref
+        err = climb_mps + POS_Z_P * (z_ref - z) - obs.velocity_enu_mps[2]
+        self._vz_int = min(max(self._vz_int + VEL_Z_I * err * dt_s, -VEL_Z_I_LIMIT),
+                           VEL_Z_I_LIMIT)
+        acc = VEL_Z_P * err + self._vz_int
+        tilt = max(getattr(obs, "tilt_cos", 1.0), 0.5)
+        thrust = self.params["MOT_THST_HOVER"] * (1.0 + acc / GRAVITY_MPS2) / tilt
+        thrust = min(max(thrust, 0.05), 1.0)
+        return replace(sp, thrust_norm=thrust)
+
+
+def _trapezoid(distance_m: float, t_s: float, v_max: float, a_max: float) -> tuple[float, float]:
+    """(distance covered, speed) at ``t_s`` of a rest-to-rest move with speed and acceleration
+    limits (the speed is 0 once it has arrived)."""
+    d = max(distance_m, 0.0)
+    v_peak = min(v_max, math.sqrt(a_max * d))
+    t_acc = v_peak / a_max
+    d_acc = 0.5 * a_max * t_acc * t_acc
+    t_cruise = (d - 2.0 * d_acc) / v_peak if v_peak > 0 else 0.0
+    t_end = 2.0 * t_acc + t_cruise
+    if t_s <= 0.0:
+        return 0.0, 0.0
+    if t_s < t_acc:
+        return 0.5 * a_max * t_s * t_s, a_max * t_s
+    if t_s < t_acc + t_cruise:
+        return d_acc + v_peak * (t_s - t_acc), v_peak
+    if t_s < t_end:
+        r = t_end - t_s
+        return d - 0.5 * a_max * r * r, a_max * r
+    return d, 0.0
