@@ -501,7 +501,10 @@ def test_attitude_branch_wins_over_rates(air_vehicle):
         client.collect(1.3)
         assert _set_mode(client, 1 | 128, OFFBOARD) == ACCEPTED
         att = client.collect(1.0, "ATTITUDE")
-        assert max(abs(a.roll) + abs(a.pitch) for a in att) < 0.02
+        # level within 0.1 rad: px4 comes from a hold on its wandering estimates, tilted as PX4
+        # SIH was in AUTO_LOITER (recorded 1.1 deg mean, 2.8 deg max), with a noisy rate loop;
+        # 2 rad/s of rates would turn it by 2 rad
+        assert max(abs(a.roll) + abs(a.pitch) for a in att) < 0.1
         targets = client.collect(0.5, "ATTITUDE_TARGET")
         assert targets and all(abs(t.thrust - thrust) < 1e-6 for t in targets)
 
