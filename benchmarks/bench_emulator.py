@@ -44,7 +44,7 @@ def _team_yaml(n: int, path: Path, remote_base: int) -> None:
                     "rotor_thrust_max_n": 6.0,
                 },
                 "plant": {"mass_kg": 0.85, "inertia_kgm2": [0.04856, 0.04856, 0.08801]},
-                "link": {"remote": f"127.0.0.1:{remote_base + i}"},
+                "link": {"local_port": remote_base + i},
             }
         )
     path.write_text(yaml.safe_dump({"name": f"bench{n}", "vehicles": vehicles}))

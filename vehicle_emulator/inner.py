@@ -175,3 +175,142 @@ def position_control(
     r = rotation[i]
     proj = tx * r[0, 2] + ty * r[1, 2] + tz * r[2, 2]
     return min(max(proj, 0.0), 1.0)
+
+
+# --- calibrated personalities (personality.Dynamics; docs/emulator.md "Calibration") -----------
+
+PX4_I_FACTOR_RADPS = math.radians(400.0)  # RateControl: I gain fades with the rate error
+
+
+@njit(cache=True)
+def px4_rate_control(
+    i: int,
+    rate_sp: np.ndarray,
+    rate_meas: np.ndarray,
+    dgyro: np.ndarray,
+    rate_int: np.ndarray,
+    yaw_lpf: np.ndarray,
+    gain_p: np.ndarray,
+    gain_i: np.ndarray,
+    gain_d: np.ndarray,
+    int_limit: np.ndarray,
+    yaw_alpha: np.ndarray,
+    accel_per_unit: np.ndarray,
+    inertia: np.ndarray,
+    landed: bool,
+    dt: float,
+    torque_out: np.ndarray,
+) -> None:
+    """PX4's RateControl::update on the filtered gyro ``rate_meas[i]`` (FLU; PX4 runs it in FRD,
+    which flips the signs of both sides alike): normalised torque ``P e + I - D dgyro``, the I term
+    fading with |e| (i_factor) and clamped, frozen while landed; yaw through the
+    MC_YAW_TQ_CUTOFF first-order low pass; each axis clipped to +-1, then scaled to N m by
+    ``accel_per_unit`` times the vehicle's inertia into ``torque_out[i]``."""
+    for k in range(3):
+        e = rate_sp[i, k] - rate_meas[i, k]
+        u = gain_p[i, k] * e + rate_int[i, k] - gain_d[i, k] * dgyro[i, k]
+        if not landed:
+            f = e / PX4_I_FACTOR_RADPS
+            f = max(0.0, 1.0 - f * f)
+            v = rate_int[i, k] + f * gain_i[i, k] * e * dt
+            rate_int[i, k] = min(max(v, -int_limit[i, k]), int_limit[i, k])
+        if k == 2:
+            yaw_lpf[i] += yaw_alpha[i] * (u - yaw_lpf[i])
+            u = yaw_lpf[i]
+        u = min(max(u, -1.0), 1.0)
+        torque_out[i, k] = inertia[i, k] * accel_per_unit[i, k] * u
+
+
+@njit(cache=True)
+def reference_rate_control(
+    i: int,
+    rate_sp: np.ndarray,
+    rate_meas: np.ndarray,
+    gyro_raw: np.ndarray,
+    omega: np.ndarray,
+    shaped: np.ndarray,
+    ref: np.ndarray,
+    angle_err: np.ndarray,
+    track_int: np.ndarray,
+    accel_max: np.ndarray,
+    ref_gain: np.ndarray,
+    ref_phi: np.ndarray,
+    ref_gamma: np.ndarray,
+    angle_p: np.ndarray,
+    track: np.ndarray,
+    delay_n: np.ndarray,
+    delay_buf: np.ndarray,
+    delay_idx: np.ndarray,
+    inertia: np.ndarray,
+    landed: bool,
+    dt: float,
+    torque_out: np.ndarray,
+) -> None:
+    """A fitted closed-loop model of an autopilot's rate response, per body axis (FLU): the
+    command slews at most ``accel_max`` (ArduPilot's ATC_ACCEL_*_MAX input shaping) to
+    ``shaped``; the angle error ``angle_err`` integrates shaped minus raw gyro rate (an attitude
+    estimate's error, not the filtered rate's); the reference
+    ``ref[i, k] = (rate, rate')`` is a 2nd-order system driven by ``ref_gain * shaped + angle_p *
+    angle_err`` delayed by ``delay_n[i, k]`` periods (ring ``delay_buf[i, k]``, write position
+    ``delay_idx[i]``), stepped exactly (``ref_phi`` (2x2 row-major), ``ref_gamma``); the body
+    follows it
+    through a stiff loop on the raw gyro with the reference acceleration fed forward, plus the
+    gyroscopic term: torque = J (rate' + kp e + ki int e) + w x J w into ``torque_out[i]``."""
+    kp, ki = track[i, 0], track[i, 1]
+    for k in range(3):
+        step = accel_max[i, k] * dt
+        s = shaped[i, k]
+        s += min(max(rate_sp[i, k] - s, -step), step)
+        shaped[i, k] = s
+        if landed:
+            angle_err[i, k] = 0.0
+            track_int[i, k] = 0.0
+        else:
+            a = angle_err[i, k] + (s - gyro_raw[i, k]) * dt
+            angle_err[i, k] = min(max(a, -0.5), 0.5)
+        u = ref_gain[i, k] * s + angle_p[i, k] * angle_err[i, k]
+        size = delay_buf.shape[2]
+        j = delay_idx[i]
+        delay_buf[i, k, j] = u
+        u = delay_buf[i, k, (j - delay_n[i, k]) % size]
+        x1, x2 = ref[i, k, 0], ref[i, k, 1]
+        p = ref_phi[i, k]
+        ref[i, k, 0] = p[0] * x1 + p[1] * x2 + ref_gamma[i, k, 0] * u
+        ref[i, k, 1] = p[2] * x1 + p[3] * x2 + ref_gamma[i, k, 1] * u
+        e = ref[i, k, 0] - gyro_raw[i, k]
+        if not landed:
+            track_int[i, k] = min(max(track_int[i, k] + ki * e * dt, -20.0), 20.0)
+        torque_out[i, k] = inertia[i, k] * (ref[i, k, 1] + kp * e + track_int[i, k])
+    delay_idx[i] = (delay_idx[i] + 1) % delay_buf.shape[2]
+    w0, w1, w2 = omega[i, 0], omega[i, 1], omega[i, 2]
+    jx, jy, jz = inertia[i, 0], inertia[i, 1], inertia[i, 2]
+    torque_out[i, 0] += w1 * jz * w2 - w2 * jy * w1
+    torque_out[i, 1] += w2 * jx * w0 - w0 * jz * w2
+    torque_out[i, 2] += w0 * jy * w1 - w1 * jx * w0
+
+
+def second_order_step(wn_radps: float, zeta: float, dt_s: float) -> tuple[tuple, tuple]:
+    """Exact zero-order-hold step of x'' = wn^2 (u - x) - 2 zeta wn x' over dt_s:
+    ((phi00, phi01, phi10, phi11), (gamma0, gamma1)) with (x, x')_next = Phi (x, x') + Gamma u.
+    Closed form of expm for the companion matrix (any zeta > 0)."""
+    if not (wn_radps > 0.0 and zeta > 0.0 and dt_s > 0.0):
+        raise ValueError(f"second-order reference needs wn, zeta, dt > 0, got {wn_radps}, "
+                         f"{zeta}, {dt_s}")
+    s = -zeta * wn_radps  # e^{A t} = e^{s t} (c(t) I + g(t) (A - s I)), q^2 = s^2 - wn^2
+    q2 = s * s - wn_radps * wn_radps
+    t = dt_s
+    if abs(q2) < 1e-12:
+        c, g = 1.0, t
+    elif q2 > 0.0:
+        q = math.sqrt(q2)
+        c, g = math.cosh(q * t), math.sinh(q * t) / q
+    else:
+        q = math.sqrt(-q2)
+        c, g = math.cos(q * t), math.sin(q * t) / q
+    e = math.exp(s * t)
+    # A - s I = [[-s, 1], [-wn^2, -2 zeta wn - s]]
+    phi = (e * (c - g * s), e * g, -e * g * wn_radps**2, e * (c + g * (-2.0 * zeta * wn_radps - s)))
+    # Gamma = A^-1 (Phi - I) B with B = (0, wn^2): A^-1 = [[-2 zeta / wn, -1 / wn^2], [1, 0]]
+    d0, d1 = phi[1] * wn_radps**2, (phi[3] - 1.0) * wn_radps**2
+    gamma = (-2.0 * zeta / wn_radps * d0 - d1 / wn_radps**2, d0)
+    return phi, gamma

@@ -79,7 +79,7 @@ PARAMS: tuple[ParamDef, ...] = (
         "MPC_THR_HOVER", _F, 0.5, 0.05, 0.95, "hover thrust of the onboard controllers [0..1]"
     ),
     ParamDef("MAV_SYS_ID", _I, 1, 1, 254, "system id (set at start)", read_only=True),
-    ParamDef("EMU_NOISE", _I, 0, 0, 1, "1: add seeded Gaussian noise to telemetry"),
+    ParamDef("EMU_NOISE", _I, 0, 0, 1, "1: seeded noise (sensor model; nominal: telemetry)"),
     ParamDef("EMU_SEED", _I, 0, 0, 2**31 - 1, "seed of noise and packet-loss draws"),
     ParamDef("EMU_FLT_T0", _I, 0, 0, 1, "fault clock zero: 0 first OFFBOARD entry, 1 boot"),
     ParamDef(

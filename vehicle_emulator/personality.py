@@ -19,7 +19,9 @@ v1.16.0 SITL (SIH) as recorded; ``ardupilot`` is ArduCopter 4.7.0-dev SITL as re
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
+from enum import IntEnum
 
 __all__ = [
     "AUTOPILOT_NAMES",
@@ -28,6 +30,7 @@ __all__ = [
     "PERSONALITIES",
     "Personality",
     "Protocol",
+    "RateLoop",
     "Sensors",
     "personality_of",
 ]
@@ -58,22 +61,174 @@ class Protocol:
         return (major << 24) | (minor << 16) | (patch << 8) | 255
 
 
+class RateLoop(IntEnum):
+    """Which onboard rate loop a vehicle flies (the plant kernel branches on it)."""
+
+    NOMINAL = 0  # the paper's stiff loop (inner.py rate_control): inertia-scaled PID, 1 kHz
+    PX4 = 1  # PX4's RateControl in normalised torque on the filtered gyro (inner.py)
+    REFERENCE = 2  # a fitted closed-loop reference model, tracked by a stiff loop (ArduPilot)
+
+
 @dataclass(frozen=True, slots=True)
 class Dynamics:
-    """Onboard inner loops (see inner.py): placeholder until the calibration lands."""
+    """Onboard inner loops and airframe effects of a personality (docs/emulator.md,
+    "Calibration"). Body axes FLU; per-axis tuples are (roll, pitch, yaw).
 
-    name: str = "nominal"
+    The defaults are the nominal model exactly. The plant kernel gets these as per-vehicle
+    arrays (plant.py); nothing here is looked at per physics step.
+    """
+
+    rate_loop: RateLoop = RateLoop.NOMINAL
+    control_period_s: float = 0.001  # sensors and inner loops run this often (whole steps)
+    # RateLoop.PX4: PX4's RateControl, gains in normalised torque per rad/s
+    rate_p: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rate_i: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rate_d: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rate_int_limit: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # angular acceleration per unit of normalised torque [rad/s^2] (multiplied by the
+    # vehicle's own inertia in the kernel, so every airframe gets this response)
+    accel_per_unit_radps2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    dterm_cutoff_hz: float = 0.0  # IMU_DGYRO_CUTOFF: 2nd-order low pass of d(gyro)/dt
+    yaw_torque_cutoff_hz: float = 0.0  # MC_YAW_TQ_CUTOFF: first-order low pass, yaw torque
+    output_delay_periods: int = 0  # the loop's output reaches the motors this much later
+    # RateLoop.REFERENCE: rate command -> acceleration limit -> gain -> 2nd order, plus an
+    # angle-error feedback (the integral of shaped command minus measured rate)
+    accel_max_radps2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    ref_gain: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    ref_wn_radps: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    ref_zeta: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    angle_p: tuple[float, float, float] = (0.0, 0.0, 0.0)  # [1/s]
+    ref_delay_periods: tuple[int, int, int] = (0, 0, 0)  # dead time before the 2nd order
+    track_p: float = 40.0  # the stiff loop that makes the body follow the reference [1/s]
+    track_i: float = 200.0  # [1/s^2]
+    # airframe and actuators
+    motor_time_constant_s: float | None = None  # None: the team file's value
+    linear_drag_per_s: float = 0.0  # drag force -m k v, world frame (SIH_KDV / SIH_MASS)
+    angular_damping_per_s: tuple[float, float, float] = (0.0, 0.0, 0.0)  # torque -J k w
+    # process noise (EMU_NOISE = 1): a white angular-acceleration disturbance, a new draw every
+    # control period, 1 sigma per axis [rad/s^2]
+    disturbance_std_radps2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    thrust_scale: float = 1.0  # collective thrust [N] = scale * normalised thrust * 4 f_max
 
 
 @dataclass(frozen=True, slots=True)
 class Sensors:
-    """Telemetry noise (1 sigma, white unless stated), applied when EMU_NOISE = 1."""
+    """What a vehicle measures and reports.
 
-    position_std_m: float = 0.01
-    velocity_std_mps: float = 0.02
-    attitude_std_rad: float = 0.002
-    gyro_std_radps: tuple[float, float, float] = (0.003, 0.003, 0.003)
-    accel_std_mps2: tuple[float, float, float] = (0.05, 0.05, 0.05)
+    ``model`` False (nominal): telemetry is the true state, plus, with EMU_NOISE = 1, white
+    noise of the ``telemetry_*`` sizes drawn per telemetry tick. ``model`` True: an IMU sample
+    every control period with white noise (1 sigma per sample, with EMU_NOISE = 1), the gyro low
+    pass the rate loop flies on (ATTITUDE rates report it), HIGHRES_IMU as the autopilot
+    reports it, and estimates that carry their own sample times.
+    """
+
+    model: bool = False
+    noise_default: bool = False  # EMU_NOISE at start
+    telemetry_position_std_m: float = 0.01
+    telemetry_velocity_std_mps: float = 0.02
+    telemetry_attitude_std_rad: float = 0.002
+    telemetry_gyro_std_radps: float = 0.003
+    telemetry_accel_std_mps2: float = 0.05
+    gyro_noise_std_radps: tuple[float, float, float] = (0.0, 0.0, 0.0)  # per sample, FLU axes
+    accel_noise_std_mps2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gyro_noise_off_std_radps: float = 0.0  # every axis, with the motors off
+    accel_noise_off_std_mps2: float = 0.0
+    gyro_cutoff_hz: float = 0.0  # 2nd-order low pass the rate loop flies on (0: none)
+    imu_filtered: bool = False  # HIGHRES_IMU: the filtered gyro and accel (else raw means)
+    imu_average_samples: int = 1  # raw samples averaged into HIGHRES_IMU (1 or 2)
+    accel_cutoff_hz: float = 0.0  # 2nd-order low pass of the accel when imu_filtered
+    position_delay_periods: int = 0  # LOCAL_POSITION_NED is this many periods older
+    # estimate errors (EMU_NOISE = 1): first-order Gauss-Markov processes, 1 sigma, ENU/FLU;
+    # the position error integrates the velocity error and decays with its own time constant
+    attitude_error_std_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)  # roll, pitch, yaw
+    attitude_error_tau_s: float = 1.0
+    velocity_error_std_mps: tuple[float, float] = (0.0, 0.0)  # horizontal, vertical
+    velocity_error_tau_s: float = 1.0
+    position_error_tau_s: float = 1.0
+
+
+# PX4 v1.16.0 SITL with SIH (airframe 10040 sihsim_quadx), parameters as read back
+# (../shared/data/sitl/px4/params.txt). SIH: square X, rotors at (+-L, +-L) with L =
+# SIH_L_ROLL = SIH_L_PITCH = 0.2 m, SIH_T_MAX 5 N and SIH_Q_MAX 0.1 N m per rotor at full command,
+# inertia SIH_IXX/IYY/IZZ 0.025/0.025/0.030 kg m^2. PX4's control allocation (pseudo-inverse of
+# CA_ROTOR*, then normalised: roll and pitch columns to +-1/sqrt(2) for four rotors, yaw to +-1)
+# turns a unit torque command into motor commands of +-0.7071 (roll, pitch) or +-1 (yaw), i.e.
+# 4 * L * T_MAX / sqrt(2) = 2.83 N m and 4 * Q_MAX = 0.4 N m.
+SIH_L_M, SIH_T_MAX_N, SIH_Q_MAX_NM = 0.2, 5.0, 0.1
+SIH_INERTIA_KGM2 = (0.025, 0.025, 0.030)
+PX4_ACCEL_PER_UNIT_RADPS2 = (
+    4.0 * SIH_L_M * SIH_T_MAX_N / math.sqrt(2.0) / SIH_INERTIA_KGM2[0],
+    4.0 * SIH_L_M * SIH_T_MAX_N / math.sqrt(2.0) / SIH_INERTIA_KGM2[1],
+    4.0 * SIH_Q_MAX_NM / SIH_INERTIA_KGM2[2],
+)
+PX4_DYNAMICS = Dynamics(
+    rate_loop=RateLoop.PX4,
+    control_period_s=0.004,  # SIH lockstep: min(IMU_GYRO_RATEMAX 800, IMU_INTEG_RATE 250) Hz
+    rate_p=(0.15, 0.15, 0.2),  # MC_ROLLRATE_P, MC_PITCHRATE_P, MC_YAWRATE_P (MC_*RATE_K 1)
+    rate_i=(0.2, 0.2, 0.1),
+    rate_d=(0.003, 0.003, 0.0),
+    rate_int_limit=(0.3, 0.3, 0.3),  # MC_RR_INT_LIM, MC_PR_INT_LIM, MC_YR_INT_LIM
+    accel_per_unit_radps2=PX4_ACCEL_PER_UNIT_RADPS2,
+    dterm_cutoff_hz=30.0,  # IMU_DGYRO_CUTOFF
+    yaw_torque_cutoff_hz=2.0,  # MC_YAW_TQ_CUTOFF
+    output_delay_periods=1,  # lockstep: SIH reads the motor outputs at its next step
+    motor_time_constant_s=0.05,  # SIH_T_TAU
+    linear_drag_per_s=1.0,  # SIH_KDV 1 N/(m/s) on SIH_MASS 1 kg
+    angular_damping_per_s=(1.0, 1.0, 0.025 / 0.030),  # SIH_KDW 0.025 N m/(rad/s) / inertia
+)
+PX4_SENSORS = Sensors(
+    model=True,
+    noise_default=True,
+    gyro_noise_std_radps=(0.14, 0.07, 0.03),  # SIH, armed (thrust > 0), per 4 ms sample
+    accel_noise_std_mps2=(0.5, 1.7, 1.4),
+    gyro_noise_off_std_radps=0.01,  # SIH, disarmed (no thrust)
+    accel_noise_off_std_mps2=0.1,
+    gyro_cutoff_hz=40.0,  # IMU_GYRO_CUTOFF
+    imu_filtered=False,
+    imu_average_samples=2,  # HIGHRES_IMU: recorded std = SIH's / 1.37 (two-sample means)
+    position_delay_periods=1,  # LOCAL_POSITION_NED timestamps 4 ms older than attitude's
+    # EKF2's estimate wander (fitted stand-in, benchmarks/fit_emulator.py --fit)
+    velocity_error_std_mps=(0.126, 0.147),
+    velocity_error_tau_s=1.5,  # recorded vz autocorrelation 0.72 at 0.5 s
+    position_error_tau_s=4.0,
+)
+
+# ArduCopter 4.7.0-dev SITL, frame "quad" (plus), 3 kg. Its attitude controller in GUIDED_NOGPS
+# body-rate mode is not modelled term by term (the SITL frame's torque scales are not
+# identifiable from these recordings): a reference model per axis, fitted to the recorded rate
+# doublets by benchmarks/fit_emulator.py, with ArduPilot's own acceleration limits
+# ATC_ACCEL_R_MAX/P_MAX 110000 and ATC_ACCEL_Y_MAX 27000 cdeg/s^2.
+ARDUPILOT_DYNAMICS = Dynamics(
+    rate_loop=RateLoop.REFERENCE,
+    control_period_s=0.002,  # ArduCopter's 400 Hz loop, rounded to whole physics steps
+    accel_max_radps2=(math.radians(1100.0), math.radians(1100.0), math.radians(270.0)),
+    # fitted by benchmarks/fit_emulator.py --fit (docs/emulator.md, "Calibration")
+    ref_gain=(0.98, 0.98, 0.857),
+    ref_wn_radps=(250.0, 250.0, 8.48),
+    ref_zeta=(1.4, 1.4, 0.790),
+    angle_p=(1.0, 1.0, 1.847),
+    ref_delay_periods=(0, 0, 3),
+    motor_time_constant_s=0.0025,  # thrust steps: vz follows after ~2.5 ms
+    disturbance_std_radps2=(0.303, 0.304, 0.0836),  # the hover's limit cycle, sized to its gyro std
+    # MOT_THST_HOVER 0.39 was learned with battery (1/0.974) and air-density (1/0.945)
+    # compensation; the measured hover thrust 0.3649 gives the effective scale 0.39 / 0.3649
+    thrust_scale=0.39 / 0.3649,
+)
+ARDUPILOT_SENSORS = Sensors(
+    model=True,
+    noise_default=True,
+    # SITL has no IMU noise (SIM_GYR*_RND = SIM_ACC*_RND = 0): the gyro's ~2 mrad/s 23 Hz limit
+    # cycle is true motion (ARDUPILOT_DYNAMICS.disturbance_std_radps2); this white accelerometer
+    # noise stands in for the recorded slow ~3 mm/s^2 wander
+    accel_noise_std_mps2=(0.0102, 0.0116, 0.0007),
+    gyro_cutoff_hz=20.0,  # INS_GYRO_FILTER
+    imu_filtered=True,
+    accel_cutoff_hz=20.0,  # INS_ACCEL_FILTER
+    # EKF3's estimate wander (fitted stand-in, benchmarks/fit_emulator.py --fit)
+    velocity_error_std_mps=(0.0045, 0.002),
+    velocity_error_tau_s=5.0,  # recorded vz autocorrelation 0.90 at 0.5 s
+    position_error_tau_s=3.0,
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,6 +256,8 @@ PERSONALITIES: dict[str, Personality] = {
         Protocol("px4", MAV_AUTOPILOT_PX4, (1, 16, 0), actuator_setpoints=False, ack_twice=True,
                  arming_ready_s=3.0, own_origin=True, param_defaults=(("COM_RC_IN_MODE", 4),),
                  statustext_end="\t"),
+        dynamics=PX4_DYNAMICS,
+        sensors=PX4_SENSORS,
     ),
     "ardupilot": Personality(
         "ardupilot",
@@ -108,6 +265,8 @@ PERSONALITIES: dict[str, Personality] = {
         # start; 23 s in STABILIZE); the ardupilot protocol work sets its own readiness timeline
         Protocol("ardupilot", MAV_AUTOPILOT_ARDUPILOTMEGA, (4, 7, 0), actuator_setpoints=False,
                  ack_twice=False, arming_ready_s=0.0, own_origin=True),
+        dynamics=ARDUPILOT_DYNAMICS,
+        sensors=ARDUPILOT_SENSORS,
     ),
 }
 AUTOPILOT_NAMES = tuple(PERSONALITIES)

@@ -4,11 +4,16 @@
 fleet by ``k`` fixed physics steps in one numba call (``_step_kernel``). Per step and vehicle:
 
 1. control mode -> (collective thrust [N], body torque [N m]) through the onboard cascade in
-   inner.py (position -> attitude -> rate) or directly (actuator mode, disarmed, idle);
+   inner.py (position -> attitude -> rate) or directly (actuator mode, disarmed, idle). The
+   nominal personality runs its stiff rate loop every step on the true state; the calibrated ones
+   (personality.Dynamics/Sensors, docs/emulator.md "Calibration") sample their IMU model
+   (sensors.py) every control period, fly PX4's rate loop or a fitted reference model on the
+   measured rates, and hold the output until the next period (optionally one period late);
 2. the mixer (51) ``rotors_from_wrench_into`` (rotor limits 0..f_max; MC_AIRMODE decides whether
    thrust or torque gives way at low thrust);
-3. optional first-order motor lag, then per-rotor efficiency (fault);
-4. ``wrench_from_rotors`` -> ``rk4_step`` (physics.py, eqs (6)-(9));
+3. optional first-order motor lag, then per-rotor efficiency (fault); angular damping;
+4. ``wrench_from_rotors`` -> ``rk4_step`` (physics.py, eqs (6)-(9)), then linear drag (an exact
+   decay of the velocity, split from the step);
 5. ground plane at z = 0: a vehicle below it is put back on it, level, at rest (landed); the
    vertical speed at touchdown is recorded.
 
@@ -25,6 +30,8 @@ import numpy as np
 from numba import njit
 
 from vehicle_emulator.inner import attitude_control, position_control, rate_control
+from vehicle_emulator.onboard import Onboard, onboard_step
+from vehicle_emulator.personality import Personality, personality_of
 from vehicle_emulator.physics import (
     GRAVITY_MPS2,
     rk4_step,
@@ -62,6 +69,7 @@ def torque_max_nm(arm_length_m: np.ndarray, anti_torque_m: np.ndarray, f_max_n: 
 @njit(cache=True)
 def _step_kernel(
     steps,
+    step0,
     dt,
     mode,
     thrust_cmd,
@@ -104,14 +112,34 @@ def _step_kernel(
     sf_body,
     charge_c,
     t_sp_n,
+    cal_par,
+    cal_st,
 ):
     n = pos.shape[0]
     rotor_eff = np.empty((n, 4))
-    for _ in range(steps):
+    loop = cal_par[0]
+    damping = cal_par[1]
+    drag_decay = cal_par[2]
+    drag_k = cal_par[3]
+    thrust_scale = cal_par[4]
+    calibrated = False
+    for i in range(n):
+        calibrated = calibrated or loop[i] != 0
+    for st in range(steps):
+        if calibrated:
+            onboard_step(
+                step0 + st, dt, mode, on_ground, thrust_cmd, rate_cmd, att_cmd, yaw_rate_ff,
+                torque_cmd, pos_sp, vel_ff, pos_mask, yaw_sp, hover, att_sp, rate_sp, thrust_sp,
+                torque_sp, rate_int, vel_int, pos, vel, rot, omega, inertia, tmax, sf_body,
+                cal_par, cal_st,
+            )
         for i in range(n):
             m = mode[i]
             landed = on_ground[i]
             t_max = 4.0 * fmax[i]
+            if loop[i] != 0:  # calibrated: onboard_step above, holding between its periods
+                t_sp_n[i] = thrust_sp[i] * t_max * thrust_scale[i]
+                continue
             if m == 0 or m == 1:
                 thrust_sp[i] = 0.0 if m == 0 else 0.05
                 for k in range(3):
@@ -166,10 +194,16 @@ def _step_kernel(
             thrust_n[i] = t_out[i]
             for k in range(3):
                 torque_n[i, k] = tq_out[i, k]
+            if loop[i] != 0:  # angular damping (SIH_KDW): -J k w
+                for k in range(3):
+                    torque_n[i, k] -= inertia[i, k] * damping[i, k] * omega[i, k]
             if mode[i] != 0:
                 charge_c[i] += (0.5 + 0.8 * t_out[i]) * dt
         rk4_step(pos, vel, rot, omega, thrust_n, torque_n, mass, inertia, dt)
         for i in range(n):
+            if drag_k[i] > 0.0:  # linear drag -m k v: exact decay over the step
+                for k in range(3):
+                    vel[i, k] *= drag_decay[i]
             r = rot[i]
             if pos[i, 2] <= 0.0:
                 if not on_ground[i]:
@@ -195,12 +229,30 @@ def _step_kernel(
                 sf_body[i, 0] = 0.0
                 sf_body[i, 1] = 0.0
                 sf_body[i, 2] = thrust_n[i] / mass[i]
+                if drag_k[i] > 0.0:  # the accelerometer feels the drag: R^T (-k v)
+                    kd = drag_k[i]
+                    for k in range(3):
+                        sf_body[i, k] -= kd * (
+                            r[0, k] * vel[i, 0] + r[1, k] * vel[i, 1] + r[2, k] * vel[i, 2]
+                        )
+
+
+def _motor_tau(spec: VehicleSpec, personality_tau_s: float | None) -> float:
+    """Motor time constant: the team file's, else the personality's, else none."""
+    if spec.motor_time_constant_s is not None:
+        return spec.motor_time_constant_s
+    return 0.0 if personality_tau_s is None else personality_tau_s
 
 
 class FleetPlant:
     """State, setpoint and parameter arrays of n vehicles, advanced together by ``step``."""
 
-    def __init__(self, specs: Sequence[VehicleSpec], dt_s: float = 1e-3) -> None:
+    def __init__(
+        self,
+        specs: Sequence[VehicleSpec],
+        dt_s: float = 1e-3,
+        personalities: Sequence[Personality] | None = None,
+    ) -> None:
         if dt_s <= 0.0 or not math.isfinite(dt_s):
             raise ValueError(f"physics step dt_s must be > 0, got {dt_s}")
         n = len(specs)
@@ -224,7 +276,15 @@ class FleetPlant:
         self.torque_max_nm = torque_max_nm(
             self.arm_length_m, self.anti_torque_m, self.rotor_thrust_max_n
         )
-        self.motor_time_constant_s = np.array([s.motor_time_constant_s for s in specs], dtype=f)
+        if personalities is None:  # else (tests, fitting) one per spec, overriding spec.autopilot
+            personalities = [personality_of(s.autopilot) for s in specs]
+        if len(personalities) != n:
+            raise ValueError(f"{n} vehicles but {len(personalities)} personalities")
+        self.motor_time_constant_s = np.array(
+            [_motor_tau(s, p.dynamics.motor_time_constant_s)
+             for s, p in zip(specs, personalities, strict=True)],
+            dtype=f,
+        )
         self.airmode = np.zeros(len(specs), dtype=f)  # MC_AIRMODE, PX4's default 0
         self.rotor_efficiency = np.ones((n, 4))
         self.rotor_cmd_n = np.zeros((n, 4))
@@ -249,8 +309,17 @@ class FleetPlant:
         self.velocity_ff_enu_mps = np.zeros((n, 3))
         self.position_mask = np.ones((n, 3))
         self.yaw_sp_enu_rad = np.array([s.yaw_enu_rad for s in specs], dtype=f)
-        hover = self.mass_kg * GRAVITY_MPS2 / (4.0 * self.rotor_thrust_max_n)
+        self.sysid = np.array([s.sysid for s in specs], dtype=np.int64)
+        self.onboard = Onboard(personalities, self)
+        hover = self.mass_kg * GRAVITY_MPS2 / (
+            4.0 * self.rotor_thrust_max_n * self.onboard.thrust_scale
+        )
         self.hover_thrust_norm = np.clip(hover, 0.05, 0.95)
+        # calibrated vehicles in the air start with their (lagged) motors at hover
+        airborne = self.onboard.sensor_model & ~self.on_ground
+        self.rotor_thrust_n[airborne] = (self.mass_kg * GRAVITY_MPS2 / 4.0)[airborne, None]
+        self.rotor_cmd_n[airborne] = self.rotor_thrust_n[airborne]
+        self.onboard.thrust_next_norm[airborne] = self.hover_thrust_norm[airborne]
         # controller internals / outputs (telemetry reads these)
         self.attitude_sp = self.rotation.copy()
         self.rate_sp_flu_radps = np.zeros((n, 3))
@@ -260,6 +329,24 @@ class FleetPlant:
         self.omega_prev = np.zeros((n, 3))
         self.velocity_integral = np.zeros((n, 3))
         self._thrust_sp_n = np.zeros(n)
+
+    def set_noise(self, i: int, on: bool) -> bool:
+        """EMU_NOISE for vehicle i: the onboard sensor model's noise (calibrated
+        personalities); returns whether telemetry should add its own white noise instead (the
+        nominal model)."""
+        return self.onboard.set_noise(i, on)
+
+    def seed_noise(self, i: int, seed: int) -> None:
+        """EMU_SEED for vehicle i: restart its onboard noise stream from (seed, sysid)."""
+        self.onboard.seed_noise(i, seed)
+
+    def sample_time_s(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per vehicle, the sample times [s] of the reported attitude/IMU and position
+        (calibrated personalities: their last IMU sample; nominal: now)."""
+        ob, now = self.onboard, self.time_s
+        att = np.where(ob.sensor_model, ob.attitude_sample_step * self.dt_s, now)
+        pos = np.where(ob.sensor_model, ob.position_sample_step * self.dt_s, now)
+        return att, pos
 
     @property
     def max_collective_thrust_n(self) -> np.ndarray:
@@ -286,6 +373,7 @@ class FleetPlant:
             return
         _step_kernel(
             int(steps),
+            self.steps_done,
             self.dt_s,
             self.mode,
             self.thrust_cmd_norm,
@@ -328,5 +416,7 @@ class FleetPlant:
             self.specific_force_flu_mps2,
             self.charge_used_c,
             self._thrust_sp_n,
+            self.onboard.params(),
+            self.onboard.states(),
         )
         self.steps_done += int(steps)

@@ -160,7 +160,8 @@ class Emulator:
                 params.set(name, value)
             params.set("EMU_SEED", seed)
             params.set(hover_param, float(self.plant.hover_thrust_norm[i]))
-            params.set("EMU_MOT_TAU", spec.motor_time_constant_s)
+            params.set("EMU_MOT_TAU", float(self.plant.motor_time_constant_s[i]))
+            params.set("EMU_NOISE", 1.0 if personality.sensors.noise_default else 0.0)
             params.set("EMU_MASS_KG", spec.mass_kg, force=True)
             params.set("EMU_THR_MAX_N", 4.0 * spec.rotor_thrust_max_n, force=True)
             for name, value in (param_overrides or {}).items():

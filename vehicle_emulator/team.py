@@ -70,7 +70,7 @@ class VehicleSpec:
     arm_length_m: float
     anti_torque_m: float
     rotor_thrust_max_n: float
-    motor_time_constant_s: float = 0.0
+    motor_time_constant_s: float | None = None  # None: the personality's (plant.py)
     position_enu_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     velocity_enu_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
     yaw_enu_rad: float = 0.0
@@ -175,6 +175,11 @@ def _int(value: Any, path: str, lo: int, hi: int) -> int:
     return int(value)
 
 
+def _optional_float(section: Any, path: str, key: str, **kw: Any) -> float | None:
+    value = _get(section, key, path)
+    return None if value is None else _float(value, f"{path}.{key}", **kw)
+
+
 def _vec3(value: Any, path: str, *, positive: bool = False) -> tuple[float, float, float]:
     if not isinstance(value, list | tuple) or len(value) != 3:
         raise TeamFileError(f"{path}: expected a list of 3 numbers, got {value!r}")
@@ -261,7 +266,9 @@ def _vehicle(raw: Any, index: int, team_emulator: dict[str, Any]) -> VehicleSpec
         rotor_thrust_max_n=opt(
             airframe, "airframe", "rotor_thrust_max_n", base.rotor_thrust_max_n, positive=True
         ),
-        motor_time_constant_s=opt(airframe, "airframe", "motor_time_constant_s", 0.0, minimum=0.0),
+        motor_time_constant_s=_optional_float(
+            airframe, f"{path}.airframe", "motor_time_constant_s", minimum=0.0
+        ),
         position_enu_m=(
             base.position_enu_m
             if pos_raw is None

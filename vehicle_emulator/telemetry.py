@@ -6,7 +6,9 @@ changeable with MAV_CMD_SET_MESSAGE_INTERVAL. LOCAL_POSITION_NED is sent only fo
 ``FleetStatus.position_valid`` is set (ArduPilot: once its EKF has a position). Each
 ``collect`` builds every due message type for all vehicles at once from the fleet arrays
 (NED/FRD via frames.py), frames them with ``BatchEncoder`` and returns one byte string per
-vehicle (PX4 also packs several messages into one UDP datagram).
+vehicle (PX4 also packs several messages into one UDP datagram). Nominal vehicles report the
+true state at ``now``; calibrated personalities (onboard.sensor_model) report their sensor
+model's measured rates, HIGHRES_IMU and estimates, stamped with their sample times.
 Pure: time is an argument; noise comes from an injected numpy Generator.
 """
 
@@ -103,6 +105,22 @@ class FleetStatus:
             battery_current_a=np.zeros(n),
             errors_comm=np.zeros(n, dtype=np.uint16),
         )
+
+
+@njit(cache=True)
+def _select_sources(model, rot, rot_est, omega, rate_meas, pos, pos_est, vel, vel_est, sf,
+                    accel_imu, out_rot, out_w, out_pos, out_vel, out_sf):
+    """Per vehicle, what telemetry reports: the true state (nominal) or the sensor model's
+    measurements and estimates (``model[i]``)."""
+    for i in range(model.shape[0]):
+        cal = model[i]
+        for a in range(3):
+            for b in range(3):
+                out_rot[i, a, b] = rot_est[i, a, b] if cal else rot[i, a, b]
+            out_w[i, a] = rate_meas[i, a] if cal else omega[i, a]
+            out_pos[i, a] = pos_est[i, a] if cal else pos[i, a]
+            out_vel[i, a] = vel_est[i, a] if cal else vel[i, a]
+            out_sf[i, a] = accel_imu[i, a] if cal else sf[i, a]
 
 
 @njit(cache=True)
@@ -273,12 +291,42 @@ class Telemetry:
             }
         else:
             nz = {key: np.zeros((0, 3)) for key in ("att", "gyro", "pos", "vel", "acc")}
+        ob = plant.onboard
+        model = ob.sensor_model
+        if model.any():
+            if "src_rot" not in d or d["src_rot"].shape[0] != n:
+                d["src_rot"], d["src_w"] = np.empty((n, 3, 3)), np.empty((n, 3))
+                d["src_pos"], d["src_vel"] = np.empty((n, 3)), np.empty((n, 3))
+                d["src_sf"], d["gimu_frd"] = np.empty((n, 3)), np.empty((n, 3))
+            _select_sources(
+                model,
+                plant.rotation,
+                ob.rotation_est,
+                plant.omega_flu_radps,
+                ob.rate_meas_flu_radps,
+                plant.position_enu_m,
+                ob.position_est_enu_m,
+                plant.velocity_enu_mps,
+                ob.velocity_est_enu_mps,
+                plant.specific_force_flu_mps2,
+                ob.accel_imu_flu_mps2,
+                d["src_rot"],
+                d["src_w"],
+                d["src_pos"],
+                d["src_vel"],
+                d["src_sf"],
+            )
+            src = (d["src_rot"], d["src_w"], d["src_pos"], d["src_vel"], d["src_sf"])
+        else:
+            src = (
+                plant.rotation,
+                plant.omega_flu_radps,
+                plant.position_enu_m,
+                plant.velocity_enu_mps,
+                plant.specific_force_flu_mps2,
+            )
         frames.fleet_to_ned_frd(
-            plant.rotation,
-            plant.omega_flu_radps,
-            plant.position_enu_m,
-            plant.velocity_enu_mps,
-            plant.specific_force_flu_mps2,
+            *src,
             plant.attitude_sp,
             plant.rate_sp_flu_radps,
             noisy,
@@ -299,6 +347,18 @@ class Telemetry:
             d["rate_sp_frd"],
             d["yaw_ned"],
         )
+        if model.any():  # HIGHRES_IMU gyro: the IMU's own (PX4: raw means), FLU -> FRD
+            g = d["gimu_frd"]
+            g[:] = d["w_frd"]
+            g[model] = ob.gyro_imu_flu_radps[model] * np.array([1.0, -1.0, -1.0])
+        else:
+            d["gimu_frd"] = d["w_frd"]
+        att_s, pos_s = plant.sample_time_s()
+        d["t_att_ms"] = (att_s * 1e3).astype(np.int64)
+        d["t_att_us"] = (att_s * 1e6).astype(np.int64)
+        d["t_pos_ms"] = (pos_s * 1e3).astype(np.int64)
+        d["t_pos_us"] = (pos_s * 1e6).astype(np.int64)
+        d["z_up"] = src[2][:, 2]
 
     # --- builders: fill payload rows for vehicles idx ----------------------------------------
 
@@ -314,28 +374,28 @@ class Telemetry:
     def _attitude(self, rows, idx, now_s, plant, status) -> None:
         d = self._d
         eul, w = d["eul"][idx], d["w_frd"][idx]
-        rows["time_boot_ms"] = int(now_s * 1e3)
+        rows["time_boot_ms"] = d["t_att_ms"][idx]
         rows["roll"], rows["pitch"], rows["yaw"] = eul[:, 0], eul[:, 1], eul[:, 2]
         rows["rollspeed"], rows["pitchspeed"], rows["yawspeed"] = w[:, 0], w[:, 1], w[:, 2]
 
     def _attitude_quaternion(self, rows, idx, now_s, plant, status) -> None:
         d = self._d
         q, w = d["q"][idx], d["w_frd"][idx]
-        rows["time_boot_ms"] = int(now_s * 1e3)
+        rows["time_boot_ms"] = d["t_att_ms"][idx]
         rows["q1"], rows["q2"], rows["q3"], rows["q4"] = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
         rows["rollspeed"], rows["pitchspeed"], rows["yawspeed"] = w[:, 0], w[:, 1], w[:, 2]
 
     def _local_position(self, rows, idx, now_s, plant, status) -> None:
         d = self._d
         p, v = d["pos_ned"][idx] - status.origin_ned_m[idx], d["vel_ned"][idx]
-        rows["time_boot_ms"] = int(now_s * 1e3)
+        rows["time_boot_ms"] = d["t_pos_ms"][idx]
         rows["x"], rows["y"], rows["z"] = p[:, 0], p[:, 1], p[:, 2]
         rows["vx"], rows["vy"], rows["vz"] = v[:, 0], v[:, 1], v[:, 2]
 
     def _odometry(self, rows, idx, now_s, plant, status) -> None:
         d = self._d
         p, v, w = d["pos_ned"][idx] - status.origin_ned_m[idx], d["vel_frd"][idx], d["w_frd"][idx]
-        rows["time_usec"] = int(now_s * 1e6)
+        rows["time_usec"] = d["t_pos_us"][idx]
         rows["frame_id"] = 1  # MAV_FRAME_LOCAL_NED
         rows["child_frame_id"] = 12  # MAV_FRAME_BODY_FRD: the twist is in the body frame
         rows["x"], rows["y"], rows["z"] = p[:, 0], p[:, 1], p[:, 2]
@@ -348,11 +408,11 @@ class Telemetry:
 
     def _highres_imu(self, rows, idx, now_s, plant, status) -> None:
         d = self._d
-        acc, w = d["acc_frd"][idx], d["w_frd"][idx]
-        rows["time_usec"] = int(now_s * 1e6)
+        acc, w = d["acc_frd"][idx], d["gimu_frd"][idx]
+        rows["time_usec"] = d["t_att_us"][idx]
         rows["xacc"], rows["yacc"], rows["zacc"] = acc[:, 0], acc[:, 1], acc[:, 2]
         rows["xgyro"], rows["ygyro"], rows["zgyro"] = w[:, 0], w[:, 1], w[:, 2]
-        z = plant.position_enu_m[idx, 2]
+        z = d["z_up"][idx]
         rows["abs_pressure"] = 1013.25 * (1.0 - 2.25577e-5 * (HOME_ALT_M + z)) ** 5.25588
         rows["pressure_alt"] = HOME_ALT_M + z
         rows["temperature"] = 25.0
@@ -363,7 +423,7 @@ class Telemetry:
         p = d["pos_ned"][idx]
         v = d["vel_ned"][idx]
         lat, lon, alt = geodetic_of_ned(p)
-        rows["time_boot_ms"] = int(now_s * 1e3)
+        rows["time_boot_ms"] = d["t_pos_ms"][idx]
         rows["lat"] = np.round(lat * 1e7)
         rows["lon"] = np.round(lon * 1e7)
         rows["alt"] = np.round(alt * 1e3)

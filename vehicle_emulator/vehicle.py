@@ -371,14 +371,15 @@ class VehicleNode:
             self.plant.motor_time_constant_s[i] = v
         elif name == "MC_AIRMODE":
             self.plant.airmode[i] = float(v)
-        elif name == "EMU_NOISE":
-            self.status.noise[i] = bool(v)
+        elif name == "EMU_NOISE":  # the sensor model's noise, or telemetry noise (nominal)
+            self.status.noise[i] = self.plant.set_noise(i, bool(v))
         elif name == "EMU_PKT_LOSS":
             self.impairment.loss_probability = v
         elif name == "EMU_LATENCY_MS":
             self.impairment.latency_s = v * 1e-3
         elif name == "EMU_SEED":
             self.impairment.rng = np.random.default_rng(int(v) + self.index)
+            self.plant.seed_noise(i, int(v))
         elif name in ("MPC_THR_HOVER", "MOT_THST_HOVER"):
             self.plant.hover_thrust_norm[i] = v
         elif name in ("EMU_MDROP_T", "EMU_MDROP_FRAC"):

@@ -88,6 +88,17 @@ def air_vehicle(tmp_path):
     client.close()
 
 
+@pytest.fixture
+def nominal_air_vehicle(tmp_path):
+    """The paper's nominal model (stiff, noise-free inner loops) in the air; the calibrated
+    px4 response is tested against the recordings in test_emulator_replay_udp.py."""
+    client, ctx = _start(["--id", "1", "--in-air", "--autopilot", "nominal"], tmp_path)
+    with ctx as emu:
+        client.wait("HEARTBEAT", 60)
+        yield client, emu
+    client.close()
+
+
 def _set_mode(client: MavClient, base_mode: int, main: int, sub: int = 0) -> int:
     """DO_SET_MODE as PX4 v1.16.0 answers it: ACCEPTED at once, then the result (returned)."""
     first, result = client.command_acks(176, base_mode, main, sub, count=2)
@@ -172,8 +183,8 @@ def test_offboard_without_a_recent_setpoint_is_temporarily_rejected(air_vehicle)
     assert _set_mode(client, 1 | 128, OFFBOARD) == ACCEPTED
 
 
-def test_rates_and_thrust_hold_hover_and_track_a_body_rate(air_vehicle):
-    client, _ = air_vehicle
+def test_rates_and_thrust_hold_hover_and_track_a_body_rate(nominal_air_vehicle):
+    client, _ = nominal_air_vehicle
     cmd = {"roll": 0.0}
     with _hover_stream(client, lambda: cmd["roll"]):
         client.collect(1.3)
@@ -490,7 +501,10 @@ def test_attitude_branch_wins_over_rates(air_vehicle):
         client.collect(1.3)
         assert _set_mode(client, 1 | 128, OFFBOARD) == ACCEPTED
         att = client.collect(1.0, "ATTITUDE")
-        assert max(abs(a.roll) + abs(a.pitch) for a in att) < 0.02
+        # level within 0.1 rad: px4 comes from a hold on its wandering estimates, tilted as PX4
+        # SIH was in AUTO_LOITER (recorded 1.1 deg mean, 2.8 deg max), with a noisy rate loop;
+        # 2 rad/s of rates would turn it by 2 rad
+        assert max(abs(a.roll) + abs(a.pitch) for a in att) < 0.1
         targets = client.collect(0.5, "ATTITUDE_TARGET")
         assert targets and all(abs(t.thrust - thrust) < 1e-6 for t in targets)
 

@@ -4,6 +4,7 @@ ground plane), plus the physics acceptance points checked through the whole plan
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,7 +15,11 @@ from vehicle_emulator.team import default_vehicle
 
 
 def _plant(n=1, on_ground=False, **kw):
-    return FleetPlant([default_vehicle(i + 1, on_ground=on_ground) for i in range(n)], **kw)
+    # the nominal personality's plant (the paper's model; test_emulator_onboard.py covers the
+    # calibrated ones)
+    specs = [replace(default_vehicle(i + 1, on_ground=on_ground), autopilot="nominal")
+             for i in range(n)]
+    return FleetPlant(specs, **kw)
 
 
 def test_hover_thrust_through_mixer_is_an_equilibrium():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ast
 import dataclasses
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -120,22 +121,34 @@ def test_parameter_side_effects_and_run_time_triggers():
     for name, value in [("EMU_MOT3_EFF", 0.5), ("EMU_NOISE", 1), ("EMU_MASS_DROP", 0.2)]:
         _send(emu, 0, mavlink.MAVLink_param_set_message(1, 1, name.encode(), value, 9), link)
     assert emu.plant.rotor_efficiency[0, 2] == 0.5
-    assert emu.status.noise[0]
+    # px4 (the default personality): EMU_NOISE drives its sensor model, not telemetry noise
+    assert emu.plant.onboard.noise_on[0] and not emu.status.noise[0]
     assert emu.plant.mass_kg[0] == pytest.approx(0.68)
     echoed = {m.param_id: m.param_value for m in link.msgs if m.get_type() == "PARAM_VALUE"}
     assert echoed["EMU_MOT3_EFF"] == 0.5
 
 
-def test_noise_is_off_by_default_and_seeded_when_on():
-    def first_positions(noise, seed):
-        emu, (link,) = _emu(seed=seed, param_overrides={"EMU_NOISE": noise})
+@pytest.mark.parametrize("autopilot", ["nominal", "px4", "ardupilot"])
+def test_noise_defaults_per_personality_and_is_seeded_when_on(autopilot):
+    def first_positions(seed, **overrides):
+        spec = replace(default_vehicle(1, on_ground=False), autopilot=autopilot)
+        emu = Emulator([spec], seed=seed, param_overrides=overrides or None)
+        link = FakeLink()
+        emu.nodes[0].links.append(link)
+        emu.telemetry.set_interval(0, 32, 20_000, 0.0)  # ArduPilot streams only when asked
         _run(emu, 0.5)
-        return [(m.x, m.y, m.z) for m in link.msgs if m.get_type() == "LOCAL_POSITION_NED"]
+        default = emu.nodes[0].params.get_int("EMU_NOISE")
+        return default, [(m.x, m.y, m.z) for m in link.msgs if m.get_type() == "LOCAL_POSITION_NED"]
 
-    clean = first_positions(0, 1)
-    assert all(p == (0.0, 0.0, -10.0) for p in clean)
-    noisy = first_positions(1, 1)
-    assert noisy == first_positions(1, 1) and noisy != clean
+    # GIVEN the personality's default THEN nominal is noise-free, px4 and ardupilot are noisy
+    default, _ = first_positions(1)
+    assert default == (0 if autopilot == "nominal" else 1)
+    # WHEN noise is off THEN the hold is exact; WHEN on THEN seeded, reproducible, small
+    _, clean = first_positions(1, EMU_NOISE=0)
+    assert clean and all(p == (0.0, 0.0, -10.0) for p in clean)
+    _, noisy = first_positions(1, EMU_NOISE=1)
+    assert noisy == first_positions(1, EMU_NOISE=1)[1] and noisy != clean
+    assert noisy != first_positions(2, EMU_NOISE=1)[1]
     assert max(abs(p[2] + 10.0) for p in noisy) < 0.1
 
 
@@ -264,7 +277,8 @@ def test_a_statustext_longer_than_50_bytes_goes_in_mavlink2_chunks():
 
 
 PURE = [
-    "autopilot", "inner", "plant", "setpoints", "frames", "faults", "params", "team", "personality"
+    "autopilot", "inner", "plant", "setpoints", "frames", "faults", "params", "team", "personality",
+    "onboard", "sensors", "metrics",
 ]
 IMPURE = {"asyncio", "socket", "time", "pymavlink", "mavsdk", "select", "threading", "gcs"}
 

@@ -1,0 +1,282 @@
+"""The calibrated personalities' onboard pieces against closed forms: filters, the seeded noise,
+the exact second-order step, PX4's rate control, the reference model (acceleration limit,
+delay), and what they do inside the plant (output delay, drag, damping, thrust scale, sample
+times, a nominal vehicle untouched by calibrated neighbours)."""
+
+from __future__ import annotations
+
+import cmath
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+
+from vehicle_emulator import sensors as sn
+from vehicle_emulator.inner import (
+    PX4_I_FACTOR_RADPS,
+    px4_rate_control,
+    reference_rate_control,
+    second_order_step,
+)
+from vehicle_emulator.personality import PERSONALITIES, Dynamics, RateLoop, Sensors
+from vehicle_emulator.physics import GRAVITY_MPS2
+from vehicle_emulator.plant import ControlMode, FleetPlant
+from vehicle_emulator.replay import sitl_airframe
+from vehicle_emulator.team import default_vehicle
+
+
+def _response(coef, f_hz, fs_hz):
+    """|H(e^{j w})| of a biquad (b0, b1, b2, a1, a2) at f_hz."""
+    z = cmath.exp(-2j * math.pi * f_hz / fs_hz)
+    b0, b1, b2, a1, a2 = coef
+    return abs((b0 + b1 * z + b2 * z * z) / (1 + a1 * z + a2 * z * z))
+
+
+@pytest.mark.parametrize("fc, fs", [(40.0, 250.0), (20.0, 500.0), (30.0, 250.0)])
+def test_biquad_is_a_butterworth_low_pass_with_unit_dc_gain(fc, fs):
+    coef = sn.biquad_coefficients(fc, fs)
+    # THEN DC gain 1, -3 dB at the cutoff (prewarped), and it attenuates above
+    assert _response(coef, 0.0, fs) == pytest.approx(1.0, abs=1e-12)
+    assert _response(coef, fc, fs) == pytest.approx(1 / math.sqrt(2), abs=1e-9)
+    assert _response(coef, 2 * fc, fs) < 0.3
+    # and stepping it with a constant converges to the constant; a primed state starts there
+    state = np.zeros(2)
+    y = [sn.biquad(np.array(coef), state, 1.0) for _ in range(200)]
+    assert y[-1] == pytest.approx(1.0, abs=1e-9)
+    primed = np.zeros(2)
+    sn.biquad_prime(np.array(coef), primed, 9.81)
+    assert sn.biquad(np.array(coef), primed, 9.81) == pytest.approx(9.81, abs=1e-12)
+
+
+def test_biquad_passes_through_without_a_cutoff_or_above_nyquist():
+    assert sn.biquad_coefficients(0.0, 250.0) == sn.PASS_THROUGH
+    assert sn.biquad_coefficients(200.0, 250.0) == sn.PASS_THROUGH
+    assert sn.one_pole_alpha(0.0, 0.004) == 1.0
+    assert sn.one_pole_alpha(2.0, 0.004) == pytest.approx(0.004 / (0.004 + 1 / (4 * math.pi)))
+
+
+def test_noise_streams_are_standard_normal_and_seeded_per_sysid():
+    def draws(seed, sysid, n=20000):
+        rng = np.array([sn.noise_seed(seed, sysid)], dtype=np.uint64)
+        return np.array([sn.gauss_pair(rng, 0) for _ in range(n // 2)]).ravel()
+
+    a = draws(0, 1)
+    assert abs(a.mean()) < 0.03 and abs(a.std() - 1.0) < 0.02
+    assert abs(np.corrcoef(a[:-1], a[1:])[0, 1]) < 0.03
+    np.testing.assert_array_equal(a, draws(0, 1))
+    assert not np.array_equal(a[:100], draws(0, 2)[:100])
+    assert not np.array_equal(a[:100], draws(1, 1)[:100])
+
+
+@pytest.mark.parametrize("wn, zeta, dt", [(8.48, 0.79, 0.002), (250.0, 1.4, 0.002),
+                                          (10.0, 1.0, 0.004)])
+def test_second_order_step_is_the_exact_zero_order_hold_discretisation(wn, zeta, dt):
+    phi, gamma = second_order_step(wn, zeta, dt)
+    a = np.array([[0.0, 1.0], [-wn * wn, -2 * zeta * wn]])
+    m = expm(np.block([[a, np.array([[0.0], [wn * wn]])], [np.zeros((1, 3))]]) * dt)
+    np.testing.assert_allclose(np.array(phi).reshape(2, 2), m[:2, :2], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(gamma, m[:2, 2], rtol=1e-9, atol=1e-12)
+    with pytest.raises(ValueError, match="wn, zeta, dt > 0"):
+        second_order_step(wn, 0.0, dt)
+
+
+def _px4_arrays(n=1):
+    d = PERSONALITIES["px4"].dynamics
+    return dict(
+        gain_p=np.tile(d.rate_p, (n, 1)), gain_i=np.tile(d.rate_i, (n, 1)),
+        gain_d=np.tile(d.rate_d, (n, 1)), int_limit=np.tile(d.rate_int_limit, (n, 1)),
+        accel_per_unit=np.tile(d.accel_per_unit_radps2, (n, 1)),
+    )
+
+
+def test_px4_rate_control_is_pids_normalised_torque_times_authority():
+    # GIVEN a rate error of (0.5, -0.2, 0.1) rad/s, no integral, no derivative, yaw filter open
+    g = _px4_arrays()
+    sp, meas = np.array([[0.5, -0.2, 0.1]]), np.zeros((1, 3))
+    integ, yaw, out = np.zeros((1, 3)), np.zeros(1), np.zeros((1, 3))
+    inertia = np.array([[0.025, 0.025, 0.030]])
+    px4_rate_control(0, sp, meas, np.zeros((1, 3)), integ, yaw, g["gain_p"], g["gain_i"],
+                     g["gain_d"], g["int_limit"], np.ones(1), g["accel_per_unit"], inertia,
+                     False, 0.004, out)
+    # THEN torque = J * accel_per_unit * P e (the integral only counts from the next call)
+    np.testing.assert_allclose(out[0], inertia[0] * g["accel_per_unit"][0] * g["gain_p"][0]
+                               * sp[0])
+    # and the integral grew by i_factor * I e dt
+    f = 1 - (sp[0] / PX4_I_FACTOR_RADPS) ** 2
+    np.testing.assert_allclose(integ[0], f * g["gain_i"][0] * sp[0] * 0.004)
+    # WHEN the error is huge THEN the output clips at 1 (normalised) and the integral at its limit
+    integ[:] = 0.29
+    px4_rate_control(0, np.array([[50.0, 50.0, 50.0]]), meas, np.zeros((1, 3)), integ, yaw,
+                     g["gain_p"], g["gain_i"], g["gain_d"], g["int_limit"], np.ones(1),
+                     g["accel_per_unit"], inertia, False, 1.0, out)
+    np.testing.assert_allclose(out[0], inertia[0] * g["accel_per_unit"][0])
+    assert np.all(integ[0] <= g["int_limit"][0] + 1e-12)
+    # and landed, the integral does not move
+    before = integ.copy()
+    px4_rate_control(0, sp, meas, np.zeros((1, 3)), integ, yaw, g["gain_p"], g["gain_i"],
+                     g["gain_d"], g["int_limit"], np.ones(1), g["accel_per_unit"], inertia,
+                     True, 0.004, out)
+    np.testing.assert_array_equal(integ, before)
+
+
+def test_px4_yaw_torque_goes_through_a_first_order_low_pass():
+    g = _px4_arrays()
+    g["gain_i"][:] = 0.0
+    alpha = sn.one_pole_alpha(2.0, 0.004)
+    yaw, out = np.zeros(1), np.zeros((1, 3))
+    inertia = np.array([[0.025, 0.025, 0.030]])
+    seen = []
+    for _ in range(50):
+        px4_rate_control(0, np.array([[0.0, 0.0, 1.0]]), np.zeros((1, 3)), np.zeros((1, 3)),
+                         np.zeros((1, 3)), yaw, g["gain_p"], g["gain_i"], g["gain_d"],
+                         g["int_limit"], np.array([alpha]), g["accel_per_unit"], inertia, False,
+                         0.004, out)
+        seen.append(out[0, 2])
+    full = inertia[0, 2] * g["accel_per_unit"][0, 2] * g["gain_p"][0, 2]
+    k = np.arange(1, 51)
+    np.testing.assert_allclose(seen, full * (1 - (1 - alpha) ** k), rtol=1e-12)
+
+
+def _reference_arrays(accel=(19.2, 19.2, 4.7), delay=(0, 0, 0), wn=300.0, zeta=1.0, dt=0.002):
+    phi, gamma = second_order_step(wn, zeta, dt)
+    return dict(
+        accel_max=np.array([accel]), ref_gain=np.ones((1, 3)),
+        ref_phi=np.tile(phi, (1, 3, 1)), ref_gamma=np.tile(gamma, (1, 3, 1)),
+        angle_p=np.zeros((1, 3)), track=np.array([[40.0, 200.0]]),
+        delay_n=np.array([delay]), delay_buf=np.zeros((1, 3, 32)), delay_idx=np.zeros(1, int),
+    )
+
+
+def _reference_run(arr, cmd, steps, dt=0.002):
+    st = dict(shaped=np.zeros((1, 3)), ref=np.zeros((1, 3, 2)), angle_err=np.zeros((1, 3)),
+              track_int=np.zeros((1, 3)))
+    out, shaped, ref = np.zeros((1, 3)), [], []
+    z = np.zeros((1, 3))
+    for _ in range(steps):
+        reference_rate_control(0, np.array([cmd]), z, z, z, st["shaped"], st["ref"],
+                               st["angle_err"], st["track_int"], arr["accel_max"],
+                               arr["ref_gain"], arr["ref_phi"], arr["ref_gamma"], arr["angle_p"],
+                               arr["track"], arr["delay_n"], arr["delay_buf"], arr["delay_idx"],
+                               np.array([[0.023, 0.023, 0.046]]), False, dt, out)
+        shaped.append(st["shaped"][0].copy())
+        ref.append(st["ref"][0, :, 0].copy())
+    return np.array(shaped), np.array(ref)
+
+
+def test_reference_model_slews_at_the_acceleration_limit():
+    # GIVEN ArduPilot's limits WHEN 0.5 / 0.5 / 1.0 rad/s are commanded
+    shaped, _ = _reference_run(_reference_arrays(), (0.5, 0.5, 1.0), 150)
+    # THEN the shaped command ramps at 19.2 and 4.7 rad/s^2 and stops at the command
+    steps = np.diff(np.vstack([np.zeros(3), shaped]), axis=0)
+    assert np.all(steps[:, 0] <= 19.2 * 0.002 + 1e-12) and np.all(steps[:, 2] <= 4.7 * 0.002 + 1e-12)
+    assert shaped[12, 0] == pytest.approx(13 * 19.2 * 0.002)
+    np.testing.assert_allclose(shaped[-1], (0.5, 0.5, 1.0))
+    assert np.argmax(shaped[:, 2] >= 1.0) == math.ceil(1.0 / (4.7 * 0.002)) - 1
+
+
+def test_reference_model_delay_line_shifts_the_response_by_whole_periods():
+    _, plain = _reference_run(_reference_arrays(), (0.5, 0.0, 0.0), 60)
+    _, late = _reference_run(_reference_arrays(delay=(5, 0, 0)), (0.5, 0.0, 0.0), 60)
+    np.testing.assert_allclose(late[5:, 0], plain[:-5, 0], atol=1e-12)
+    assert np.all(late[:5, 0] == 0.0)
+
+
+def _sih(n=1, autopilot="px4", **kw):
+    return [replace(s, **kw) for s in sitl_airframe(autopilot, n, 5.0)]
+
+
+def test_px4_motors_get_the_rate_loops_output_one_control_period_late():
+    # GIVEN the px4 personality hovering in rates mode, noise off
+    p = FleetPlant(_sih())
+    p.mode[:] = ControlMode.RATES
+    p.thrust_cmd_norm[:] = p.hover_thrust_norm
+    p.step(8)  # two control periods, on the 4 ms grid
+    # WHEN a roll rate is commanded THEN the torque reaching the mixer changes one period later
+    p.rate_cmd_flu_radps[0, 0] = 0.5
+    p.step(1)
+    assert np.all(p.torque_sp_nm[0] == 0.0) and p.onboard.torque_next_nm[0, 0] > 0.0
+    p.step(3)
+    assert np.all(p.torque_sp_nm[0] == 0.0)
+    p.step(1)
+    assert p.torque_sp_nm[0, 0] > 0.0
+
+
+def test_linear_drag_and_angular_damping_decay_as_exponentials():
+    # GIVEN the px4 personality (SIH_KDV / SIH_MASS 1/s, SIH_KDW / I 1/s roll) without motor lag
+    p = FleetPlant(_sih(motor_time_constant_s=0.0))
+    p.mode[:] = ControlMode.OFF
+    p.omega_flu_radps[0] = (1.0, 0.0, 0.0)
+    p.step(1000)
+    # THEN falling: v = -(g / k)(1 - e^{-k t}); rolling: w = w0 e^{-k t}
+    assert p.velocity_enu_mps[0, 2] == pytest.approx(-GRAVITY_MPS2 * (1 - math.exp(-1.0)),
+                                                     rel=1e-3)
+    assert p.omega_flu_radps[0, 0] == pytest.approx(math.exp(-1.0), rel=1e-3)
+    # and the accelerometer feels the drag: specific force = R^T (-k v), here k = 1/s
+    np.testing.assert_allclose(p.specific_force_flu_mps2[0],
+                               p.rotation[0].T @ -p.velocity_enu_mps[0], rtol=1e-9)
+
+
+def test_ardupilot_thrust_scale_is_its_battery_and_air_density_compensation():
+    p = FleetPlant(_sih(autopilot="ardupilot"))
+    scale = PERSONALITIES["ardupilot"].dynamics.thrust_scale
+    assert scale == pytest.approx(0.39 / 0.3649)
+    # THEN hover needs m g / (4 f_max scale) = 0.365 for the SITL airframe, as recorded
+    assert p.hover_thrust_norm[0] == pytest.approx(3.0 * GRAVITY_MPS2 / (4 * 18.86 * scale))
+    assert p.hover_thrust_norm[0] == pytest.approx(0.3649, abs=0.002)
+    p.mode[:] = ControlMode.RATES
+    p.thrust_cmd_norm[:] = 0.5
+    p.step(100)
+    assert p.thrust_n[0] == pytest.approx(0.5 * 4 * 18.86 * scale, rel=1e-3)
+
+
+def test_px4_estimates_carry_sample_times_on_the_4_ms_grid_position_one_sample_older():
+    p = FleetPlant(_sih())
+    p.mode[:] = ControlMode.RATES
+    p.thrust_cmd_norm[:] = p.hover_thrust_norm
+    p.step(1003)
+    att, pos = p.sample_time_s()
+    assert att[0] == pytest.approx(1.000) and pos[0] == pytest.approx(0.996)
+    # a nominal vehicle reports now
+    q = FleetPlant([replace(default_vehicle(1, on_ground=False), autopilot="nominal")])
+    q.step(1003)
+    assert q.sample_time_s()[0][0] == q.sample_time_s()[1][0] == q.time_s
+
+
+def test_px4_imu_noise_sizes_per_sample_and_two_sample_means():
+    # GIVEN SIH's gyro noise per 4 ms sample, HIGHRES_IMU as two-sample means, 40 Hz rate filter
+    p = FleetPlant(_sih())
+    p.onboard.noise_on[:] = True
+    p.mode[:] = ControlMode.IDLE  # motors on, no control: the noise alone
+    g, r = [], []
+    for _ in range(4000):
+        p.step(4)
+        g.append(p.onboard.gyro_imu_flu_radps[0].copy())
+        r.append(p.onboard.rate_meas_flu_radps[0].copy())
+    sigma = np.array(PERSONALITIES["px4"].sensors.gyro_noise_std_radps)
+    # THEN the means carry sigma / sqrt(2); the filtered rate less (the recorded 0.085 for 0.14)
+    np.testing.assert_allclose(np.std(g, axis=0), sigma / math.sqrt(2), rtol=0.06)
+    ratio = np.std(r, axis=0) / sigma
+    assert np.all((ratio > 0.5) & (ratio < 0.7))
+
+
+def test_a_nominal_vehicle_is_untouched_by_calibrated_neighbours():
+    nominal = replace(default_vehicle(1, on_ground=False), autopilot="nominal")
+    alone = FleetPlant([nominal])
+    mixed = FleetPlant([nominal, *(_sih(2)[1:]), *_sih(1, autopilot="ardupilot")])
+    mixed.onboard.noise_on[1:] = True
+    for p in (alone, mixed):
+        p.mode[:] = ControlMode.RATES
+        p.thrust_cmd_norm[:] = p.hover_thrust_norm
+        p.rate_cmd_flu_radps[:] = (0.3, -0.2, 0.5)
+        p.step(3000)
+    np.testing.assert_array_equal(alone.rotation[0], mixed.rotation[0])
+    np.testing.assert_array_equal(alone.position_enu_m[0], mixed.position_enu_m[0])
+
+
+def test_personality_consistency_is_checked():
+    broken = replace(PERSONALITIES["px4"], sensors=Sensors())
+    with pytest.raises(ValueError, match="calibrated rate loop needs the sensor model"):
+        FleetPlant(_sih(), personalities=[broken])
+    assert Dynamics().rate_loop is RateLoop.NOMINAL

@@ -1,0 +1,221 @@
+"""Onboard sensor model of the calibrated personalities: seeded IMU noise, filters, estimates.
+
+Per vehicle and control period (personality.Sensors): a raw gyro and accelerometer sample (true
+body rate and specific force, FLU, plus white Gaussian noise from a per-vehicle counter-based
+generator), the gyro low pass the rate loop flies on, the D-term derivative, HIGHRES_IMU as the
+autopilot reports it, and the latched estimates (attitude, position) with their sample times.
+
+The numba kernels work on vehicle ``i`` of batched arrays and are called from plant.py's fleet
+kernel; the coefficient helpers are plain Python (run once per vehicle). Pure: no clock, no I/O.
+Noise is reproducible: vehicle i's stream depends only on (seed, sysid), not on the fleet.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "PASS_THROUGH",
+    "biquad",
+    "biquad_coefficients",
+    "biquad_prime",
+    "gauss_pair",
+    "noise_seed",
+    "one_pole_alpha",
+]
+
+PASS_THROUGH = (1.0, 0.0, 0.0, 0.0, 0.0)  # b0, b1, b2, a1, a2 of "no filter"
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_MIX1 = np.uint64(0xBF58476D1CE4E5B9)
+_MIX2 = np.uint64(0x94D049BB133111EB)
+_TWO_PI = 2.0 * math.pi
+
+
+def biquad_coefficients(cutoff_hz: float, sample_hz: float) -> tuple[float, ...]:
+    """2nd-order Butterworth low pass (b0, b1, b2, a1, a2), bilinear with prewarping: PX4's
+    LowPassFilter2p. A cutoff <= 0 or at/above Nyquist gives PASS_THROUGH."""
+    if cutoff_hz <= 0.0 or cutoff_hz >= 0.5 * sample_hz:
+        return PASS_THROUGH
+    ohm = math.tan(math.pi * cutoff_hz / sample_hz)
+    q = 2.0 * math.cos(math.pi / 4.0)  # sqrt(2): Butterworth
+    c = 1.0 + q * ohm + ohm * ohm
+    b0 = ohm * ohm / c
+    return (b0, 2.0 * b0, b0, 2.0 * (ohm * ohm - 1.0) / c, (1.0 - q * ohm + ohm * ohm) / c)
+
+
+def one_pole_alpha(cutoff_hz: float, dt_s: float) -> float:
+    """PX4 AlphaFilter gain dt / (dt + 1 / (2 pi f)); 1.0 (no filter) for a cutoff <= 0."""
+    if cutoff_hz <= 0.0:
+        return 1.0
+    return dt_s / (dt_s + 1.0 / (_TWO_PI * cutoff_hz))
+
+
+def biquad_prime(coef: np.ndarray, state: np.ndarray, value: float) -> None:
+    """Set a biquad's state (2,) to its steady state for a constant input ``value``."""
+    b0, b1, b2, a1, a2 = coef
+    d = value / (1.0 + a1 + a2)
+    state[0] = d
+    state[1] = d
+
+
+def noise_seed(seed: int, sysid: int) -> np.uint64:
+    """Initial generator state of one vehicle: a splitmix64 hash of (seed, sysid)."""
+    z = (int(seed) * 0x100000001B3 + int(sysid) * 0x9E3779B97F4A7C15) & 0xFFFFFFFFFFFFFFFF
+    for _ in range(2):
+        z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9 & 0xFFFFFFFFFFFFFFFF
+        z = (z ^ (z >> 27)) * 0x94D049BB133111EB & 0xFFFFFFFFFFFFFFFF
+        z ^= z >> 31
+    return np.uint64(z)
+
+
+@njit(cache=True)
+def _uniform(rng: np.ndarray, i: int) -> float:
+    """Next uniform in (0, 1] of vehicle i's splitmix64 stream (advances rng[i])."""
+    rng[i] += _GOLDEN
+    z = rng[i]
+    z = (z ^ (z >> np.uint64(30))) * _MIX1
+    z = (z ^ (z >> np.uint64(27))) * _MIX2
+    z = z ^ (z >> np.uint64(31))
+    return (float(z >> np.uint64(11)) + 1.0) * (1.0 / 9007199254740992.0)
+
+
+@njit(cache=True)
+def gauss_pair(rng: np.ndarray, i: int) -> tuple[float, float]:
+    """Two independent standard normal draws for vehicle i (Box-Muller)."""
+    r = math.sqrt(-2.0 * math.log(_uniform(rng, i)))
+    a = _TWO_PI * _uniform(rng, i)
+    return r * math.cos(a), r * math.sin(a)
+
+
+@njit(cache=True)
+def biquad(coef: np.ndarray, state: np.ndarray, x: float) -> float:
+    """One step of a biquad (direct form II, as PX4's LowPassFilter2p); state (2,) updated."""
+    d0 = x - state[0] * coef[3] - state[1] * coef[4]
+    y = d0 * coef[0] + state[0] * coef[1] + state[1] * coef[2]
+    state[1] = state[0]
+    state[0] = d0
+    return y
+
+
+@njit(cache=True)
+def sample_sensors(
+    i,
+    dt_c,
+    noise_on,
+    motors_on,
+    omega,
+    sf,
+    gyro_std,
+    accel_std,
+    off_std,
+    gyro_coef,
+    dterm_coef,
+    accel_coef,
+    imu_mode,
+    rng,
+    gyro_state,
+    dterm_state,
+    accel_state,
+    gyro_raw,
+    accel_raw,
+    rate_meas,
+    dgyro,
+    gyro_imu,
+    accel_imu,
+):
+    """One IMU sample of vehicle i (FLU), time step ``dt_c``: the raw samples ``gyro_raw[i]`` and
+    ``accel_raw[i]`` (the previous ones on entry), the filtered rate ``rate_meas[i]`` (what the
+    rate loop and ATTITUDE see), the filtered derivative ``dgyro[i]`` of the raw gyro (PX4's D
+    term), and HIGHRES_IMU's ``gyro_imu[i]``/``accel_imu[i]``:
+    ``imu_mode`` 0 the raw sample, 1 the mean of the last two raw samples, 2 the filtered gyro
+    and accelerometer. Noise: white, ``gyro_std``/``accel_std`` per axis with the motors on,
+    ``off_std`` (gyro, accel) with them off, none when ``noise_on[i]`` is False."""
+    ng = (0.0, 0.0, 0.0)
+    na = (0.0, 0.0, 0.0)
+    std_sum = gyro_std[i, 0] + gyro_std[i, 1] + gyro_std[i, 2] + accel_std[i, 0]
+    std_sum += accel_std[i, 1] + accel_std[i, 2] + off_std[i, 0] + off_std[i, 1]
+    if noise_on[i] and std_sum > 0.0:
+        g0, g1 = gauss_pair(rng, i)
+        g2, a0 = gauss_pair(rng, i)
+        a1, a2 = gauss_pair(rng, i)
+        if motors_on:
+            ng = (g0 * gyro_std[i, 0], g1 * gyro_std[i, 1], g2 * gyro_std[i, 2])
+            na = (a0 * accel_std[i, 0], a1 * accel_std[i, 1], a2 * accel_std[i, 2])
+        else:
+            ng = (g0 * off_std[i, 0], g1 * off_std[i, 0], g2 * off_std[i, 0])
+            na = (a0 * off_std[i, 1], a1 * off_std[i, 1], a2 * off_std[i, 1])
+    mode = imu_mode[i]
+    for k in range(3):
+        g = omega[i, k] + ng[k]
+        a = sf[i, k] + na[k]
+        rate_meas[i, k] = biquad(gyro_coef[i], gyro_state[i, k], g)
+        dgyro[i, k] = biquad(dterm_coef[i], dterm_state[i, k], (g - gyro_raw[i, k]) / dt_c)
+        a_f = biquad(accel_coef[i], accel_state[i, k], a)
+        if mode == 0:
+            gyro_imu[i, k] = g
+            accel_imu[i, k] = a
+        elif mode == 1:
+            gyro_imu[i, k] = 0.5 * (g + gyro_raw[i, k])
+            accel_imu[i, k] = 0.5 * (a + accel_raw[i, k])
+        else:
+            gyro_imu[i, k] = rate_meas[i, k]
+            accel_imu[i, k] = a_f
+        gyro_raw[i, k] = g
+        accel_raw[i, k] = a
+
+
+@njit(cache=True)
+def estimate_errors(i, dt_c, noise_on, att_std, att_phi, vel_std, vel_phi, pos_phi, rng,
+                    att_err, vel_err, pos_err):
+    """Advance vehicle i's estimate errors by one control period: first-order Gauss-Markov
+    attitude errors (roll, pitch, yaw; body axes) and velocity errors (ENU; ``vel_std[i]`` =
+    (horizontal, vertical)), stationary 1 sigma ``*_std``, factors ``*_phi = exp(-dt/tau)``;
+    the position error integrates the velocity error and decays by ``pos_phi`` per period. Off
+    (held at zero) without noise."""
+    if not noise_on[i]:
+        for k in range(3):
+            att_err[i, k] = 0.0
+            vel_err[i, k] = 0.0
+            pos_err[i, k] = 0.0
+        return
+    pa, pv = att_phi[i], vel_phi[i]
+    if att_std[i, 0] != 0.0 or att_std[i, 1] != 0.0 or att_std[i, 2] != 0.0:
+        ka = math.sqrt(max(0.0, 1.0 - pa * pa))
+        n0, n1 = gauss_pair(rng, i)
+        n2, _ = gauss_pair(rng, i)
+        na = (n0, n1, n2)
+        for k in range(3):
+            att_err[i, k] = pa * att_err[i, k] + ka * att_std[i, k] * na[k]
+    if vel_std[i, 0] != 0.0 or vel_std[i, 1] != 0.0:
+        kv = math.sqrt(max(0.0, 1.0 - pv * pv))
+        n3, n4 = gauss_pair(rng, i)
+        n5, _ = gauss_pair(rng, i)
+        nv = (n3, n4, n5)
+        for k in range(3):
+            s = vel_std[i, 1] if k == 2 else vel_std[i, 0]
+            vel_err[i, k] = pv * vel_err[i, k] + kv * s * nv[k]
+            pos_err[i, k] = pos_phi[i] * pos_err[i, k] + vel_err[i, k] * dt_c
+
+
+@njit(cache=True)
+def rotate_body(r: np.ndarray, e0: float, e1: float, e2: float, out: np.ndarray) -> None:
+    """out = r exp(hat(e)) (Rodrigues): r (3, 3) turned by the small body-frame rotation e."""
+    th = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    if th < 1e-12:
+        for a in range(3):
+            for b in range(3):
+                out[a, b] = r[a, b]
+        return
+    x, y, z = e0 / th, e1 / th, e2 / th
+    s, c = math.sin(th), 1.0 - math.cos(th)
+    m = (
+        (1.0 - c * (y * y + z * z), -s * z + c * x * y, s * y + c * x * z),
+        (s * z + c * x * y, 1.0 - c * (x * x + z * z), -s * x + c * y * z),
+        (-s * y + c * x * z, s * x + c * y * z, 1.0 - c * (x * x + y * y)),
+    )
+    for a in range(3):
+        for b in range(3):
+            out[a, b] = r[a, 0] * m[0][b] + r[a, 1] * m[1][b] + r[a, 2] * m[2][b]
