@@ -51,11 +51,16 @@ TICK_S = 0.002  # the runner's default loop tick
 
 
 def data_dir() -> Path:
-    """The recordings: $SITL_DATA_DIR, else ../shared/data/sitl next to the repository."""
+    """The recordings: $SITL_DATA_DIR, else ../shared/data/sitl next to the repository, else
+    the copy of the replayed files in the repository (tests/data/sitl, for a clean checkout)."""
     env = os.environ.get("SITL_DATA_DIR")
     if env:
         return Path(env)
-    return Path(__file__).resolve().parents[2] / "shared" / "data" / "sitl"
+    repo = Path(__file__).resolve().parents[1]
+    shared = repo.parent / "shared" / "data" / "sitl"
+    return shared if (shared / "px4" / "flight_setpoints.csv").is_file() else (
+        repo / "tests" / "data" / "sitl"
+    )
 
 
 @dataclass(frozen=True, slots=True)
