@@ -1,7 +1,7 @@
 """MAVLink link layers: sans-IO codec, asyncio UDP endpoint, per-vehicle proxy, .tlog writer."""
 
 from gcs.link.codec import CodecStats, MavlinkCodec
-from gcs.link.commands import CommandRejectedError, CommandTimeoutError
+from gcs.link.commands import CommandNotConfirmedError, CommandRejectedError, CommandTimeoutError
 from gcs.link.config import VehicleLinkConfig, check_unique_sysids
 from gcs.link.enums import LinkState, MavResult
 from gcs.link.proxy import LinkStats, SetpointError, VehicleProxy
@@ -12,6 +12,7 @@ from gcs.link.udp import LinkClosedError, UdpEndpoint
 __all__ = [
     "Clock",
     "CodecStats",
+    "CommandNotConfirmedError",
     "CommandRejectedError",
     "CommandTimeoutError",
     "LinkClosedError",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import math
 from collections.abc import Callable, Sequence
@@ -14,7 +15,14 @@ from numpy.typing import ArrayLike
 
 from gcs import frames
 from gcs.link.codec import CodecStats, MavlinkCodec, MAVLinkMessage
-from gcs.link.commands import CommandChannel, CommandRejectedError, CommandStats, command_label
+from gcs.link.commands import (
+    AckLog,
+    CommandChannel,
+    CommandNotConfirmedError,
+    CommandRejectedError,
+    CommandStats,
+    command_label,
+)
 from gcs.link.config import VehicleLinkConfig
 from gcs.link.enums import (
     LinkState,
@@ -25,6 +33,7 @@ from gcs.link.enums import (
     MavState,
     MavType,
 )
+from gcs.link.statustext import StatusTextLog
 from gcs.link.telemetry import (
     Clock,
     MonotonicClock,
@@ -109,6 +118,7 @@ class VehicleProxy:
         self._seq = SequenceTracker()
         self._n: dict[str, int] = {f.name: 0 for f in fields(ProxyCounters)}
         self._commands = CommandChannel(self.name, config.gcs_sysid, self._send_command)
+        self.statustexts = StatusTextLog(self.name)  # every STATUSTEXT of the vehicle
         self._waiters: list[tuple[str, Callable[[MAVLinkMessage], bool], asyncio.Future[Received]]]
         self._waiters = []
         self._tasks: list[asyncio.Task[None]] = []
@@ -229,6 +239,8 @@ class VehicleProxy:
             self._cache.update(msg, now_s)
             if msg.get_type() == "COMMAND_ACK":
                 self._commands.on_ack(msg)
+            elif msg.get_type() == "STATUSTEXT":
+                self.statustexts.feed(msg, now_s)
             if self._waiters:
                 self._wake_waiters(msg, now_s)
 
@@ -259,6 +271,78 @@ class VehicleProxy:
         naming vehicle and command after the last (details: CommandChannel.command_long)."""
         return await self._commands.command_long(command, params, timeout_s=timeout_s,
                                                  retries=retries)
+
+    async def command_confirmed(self, command: int, params: Sequence[float], *, want: str,
+                                shows: Callable[[MAVLinkMessage], bool],
+                                reported: Callable[[MAVLinkMessage | None], str],
+                                timeout_s: float = 3.0, ack_timeout_s: float = 0.5,
+                                retries: int = 2) -> tuple[MavResult, ...]:
+        """Send COMMAND_LONG and return when the vehicle's HEARTBEAT shows its effect; returns
+        every MAV_RESULT read for it.
+
+        The ACK is registered before sending (resends as in ``command_long``). Every ACK that
+        arrives until the confirmation is read, and a refusal among them wins over an earlier
+        ACCEPTED (PX4 v1.16.0 sends ACCEPTED, then the real answer): CommandRejectedError. The
+        effect counts only in a HEARTBEAT received after the first final ACK for which
+        ``shows(heartbeat)`` is true; none within ``timeout_s`` of that ACK raises
+        CommandNotConfirmedError. Both messages name the vehicle, ``want`` (e.g. 'mode
+        OFFBOARD'), what the latest HEARTBEAT reports (``reported``), the ACKs seen, and the
+        vehicle's latest STATUSTEXT since the command was sent."""
+        loop = asyncio.get_running_loop()
+        sent_s = self._clock.now_s()
+        label = command_label(command)
+        async with self._commands.exchange(command) as log:
+            await self._commands.send_until_acked(log, params, timeout_s=ack_timeout_s,
+                                                  retries=retries)
+            deadline = loop.time() + timeout_s
+            while True:
+                result = log.result
+                if result is not None and result != MavResult.ACCEPTED:
+                    await self._settle_text(sent_s)
+                    raise CommandRejectedError(
+                        self._unconfirmed_text(f"{label} for {want} refused", log, reported,
+                                               sent_s), command, result, tuple(log.results),
+                        self._text_since(sent_s))
+                remaining = deadline - loop.time()
+                if remaining <= 0:
+                    raise CommandNotConfirmedError(
+                        self._unconfirmed_text(f"{want} not confirmed within {timeout_s:g} s",
+                                               log, reported, sent_s),
+                        command, tuple(log.results), self._text_since(sent_s))
+                log.changed.clear()
+                heartbeat = asyncio.ensure_future(
+                    self.wait_message("HEARTBEAT", remaining))
+                acked = asyncio.ensure_future(log.changed.wait())
+                try:
+                    await asyncio.wait({heartbeat, acked}, timeout=remaining,
+                                       return_when=asyncio.FIRST_COMPLETED)
+                finally:
+                    for fut in (heartbeat, acked):
+                        if not fut.done():
+                            fut.cancel()
+                    await asyncio.gather(heartbeat, acked, return_exceptions=True)
+                if (heartbeat.done() and not heartbeat.cancelled()
+                        and heartbeat.exception() is None and shows(heartbeat.result().msg)
+                        and log.result == MavResult.ACCEPTED):
+                    return tuple(log.results)
+
+    def _text_since(self, since_s: float) -> str:
+        text = self.statustexts.latest(since_s)
+        return text.text if text is not None else ""
+
+    async def _settle_text(self, since_s: float, timeout_s: float = 0.2) -> None:
+        """A refusal's STATUSTEXT may follow its ACK (PX4, ArduPilot): wait briefly for it."""
+        if self.statustexts.latest(since_s) is None:
+            with contextlib.suppress(TimeoutError):
+                await self.wait_message("STATUSTEXT", timeout_s)
+
+    def _unconfirmed_text(self, what: str, log: AckLog,
+                          reported: Callable[[MAVLinkMessage | None], str], since_s: float) -> str:
+        hb = self._cache.latest("HEARTBEAT")
+        text = self.statustexts.latest(since_s)
+        said = f"; the vehicle said {text.quoted()}" if text is not None else ""
+        return (f"{self.name}: {what}: HEARTBEAT reports {reported(hb.msg if hb else None)}; "
+                f"COMMAND_ACKs seen: {log.summary()}{said}")
 
     def _send_command(self, command: int, confirmation: int, params: Sequence[float]) -> None:
         self._send(self._codec.mav.command_long_encode(

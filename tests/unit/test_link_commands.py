@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from gcs.link.commands import CommandChannel, CommandTimeoutError, command_label
+from gcs.link.commands import AckLog, CommandChannel, CommandTimeoutError, command_label
 from gcs.link.enums import MavCmd, MavResult
 
 VEHICLE = mavlink.MAVLink(None, 1, 1)
@@ -117,3 +117,57 @@ def test_bad_arguments() -> None:
         run(vehicle.channel.command_long(ARM, [], timeout_s=0.0))
     assert command_label(176) == "MAV_CMD_DO_SET_MODE (176)"
     assert command_label(31000) == "MAV_CMD 31000"
+
+
+# --- every ACK is read (PX4 v1.16.0 answers DO_SET_MODE twice) ------------------------------------
+
+MODE = MavCmd.DO_SET_MODE
+
+
+def test_every_ack_of_an_exchange_is_read_and_a_later_refusal_wins() -> None:
+    # GIVEN PX4 v1.16.0's pair for a refused OFFBOARD: ACCEPTED, then TEMPORARILY_REJECTED
+    vehicle = Vehicle(lambda c, n: [MavResult.ACCEPTED, MavResult.TEMPORARILY_REJECTED])
+
+    async def scenario() -> tuple[MavResult, MavResult | None, str]:
+        async with vehicle.channel.exchange(MODE) as log:
+            first = await vehicle.channel.send_until_acked(log, [1.0, 6.0])
+            return first, log.result, log.summary()
+
+    # THEN the first ACK alone says ACCEPTED, but the log's answer is the refusal
+    first, result, summary = run(scenario())
+    assert first == MavResult.ACCEPTED and result == MavResult.TEMPORARILY_REJECTED
+    assert summary == "ACCEPTED, TEMPORARILY_REJECTED"
+    # AND neither ACK counted as unexpected
+    assert vehicle.channel.stats().acks_unexpected == 0
+
+
+def test_ack_twice_and_acks_for_commands_not_asked_never_raise() -> None:
+    # GIVEN a vehicle that acknowledges every command twice (ACCEPTED, ACCEPTED)
+    vehicle = Vehicle(lambda c, n: [MavResult.ACCEPTED, MavResult.ACCEPTED])
+
+    async def scenario() -> AckLog:
+        async with vehicle.channel.exchange(MODE) as log:
+            await vehicle.channel.send_until_acked(log)
+        return log
+
+    log = run(scenario())
+    assert log.result == MavResult.ACCEPTED and log.summary() == "ACCEPTED, ACCEPTED"
+    # WHEN ACKs arrive for a command nobody asked, and one with an unknown result
+    vehicle.channel.on_ack(ack(MavCmd.NAV_LAND, MavResult.ACCEPTED))
+    vehicle.channel.on_ack(ack(MODE, 200))
+    # THEN they are counted, not raised
+    assert vehicle.channel.stats().acks_unexpected == 2
+
+
+def test_ack_log_result_rules() -> None:
+    async def scenario() -> None:
+        log = AckLog(MODE, asyncio.get_running_loop().create_future())
+        assert log.result is None and log.summary() == "none"
+        log.results += [MavResult.IN_PROGRESS]
+        assert log.result is None
+        log.results += [MavResult.ACCEPTED]
+        assert log.result == MavResult.ACCEPTED
+        log.results += [MavResult.DENIED, MavResult.ACCEPTED]
+        assert log.result == MavResult.DENIED  # a refusal is not undone by a later ACCEPTED
+
+    run(scenario())
