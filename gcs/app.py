@@ -57,6 +57,7 @@ from gcs.fly.measure import (
 from gcs.fly.stats import AgeStats, TickStats, link_report
 from gcs.fly.telemetry import team_sample, vehicle_statuses
 from gcs.link import (
+    CommandNotConfirmedError,
     CommandRejectedError,
     CommandTimeoutError,
     LinkClosedError,
@@ -66,7 +67,7 @@ from gcs.link import (
     VehicleProxy,
     check_unique_sysids,
 )
-from gcs.link.enums import MSG_ID
+from gcs.link.enums import MSG_ID, MavCmd, MavModeFlag
 from gcs.mission.autopilots import AutopilotProfile, ModeSpec, version_text
 from gcs.mission.machine import (
     EXIT_ABORTED,
@@ -219,7 +220,13 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
         abort_action=fly.abort_action, link_loss_action=fly.link_loss_action,
         connect_timeout_s=options.connect_timeout_s or fly.connect_timeout_s,
         takeoff_timeout_s=fly.takeoff_timeout_s,
+        takeoff_tolerance_m=fly.takeoff_tolerance_m,
         land_timeout_s=fly.land_timeout_s,
+        arm_timeout_s=fly.arm_timeout_s, arm_retry_s=fly.arm_retry_s,
+        mode_timeout_s=fly.mode_timeout_s,
+        formation_check_s=fly.formation_check.after_s,
+        formation_max_error_m=fly.formation_check.max_error_m,
+        formation_max_fraction=fly.formation_check.max_fraction,
     )
     return FlightSetup(team, mode, law, rate, gains, plan, required,
                        round(rate / fly.log_rate_hz), stability)
@@ -307,6 +314,7 @@ class Flight:
         self._status_factory = status_factory
         self._setpoint_errors = 0
         self._notes_logged = 0
+        self._t0_s = time.monotonic()  # the proxies' clock; STATUSTEXT times in the report
 
     def _warm_up(self, team: TeamConfig, setup: FlightSetup, rhohat: np.ndarray,
                  nominal: np.ndarray | None) -> None:
@@ -417,7 +425,7 @@ class Flight:
     async def _execute(self, c: Command) -> None:
         p = self._proxy_by_id[c.vehicle_id]
         profile = self.machine.profile(c.vehicle_id)
-        ok, detail = True, ""
+        ok, detail, result, text = True, "", "", ""
         values: list[tuple[str, float]] = []
         try:
             if c.cmd is Cmd.CONFIGURE:
@@ -433,45 +441,94 @@ class Flight:
                 word = await p.autopilot_version()
                 values.append(("flight_sw_version", float(word)))
                 detail = f"{profile.name} {version_text(word)}"
+            elif c.cmd is Cmd.ARM_MODE:
+                await self._set_mode(p, profile, profile.arm_mode, confirm=self._mode_timeout_s)
             elif c.cmd is Cmd.ARM:
-                if profile.takeoff_mode is not None:  # ArduPilot: NAV_TAKEOFF needs GUIDED
-                    await self._set_mode(p, profile, profile.takeoff_mode)
-                await p.arm()
+                await self._arm(p, profile, self._mode_timeout_s)
             elif c.cmd is Cmd.DISARM:
                 await p.disarm()
             elif c.cmd is Cmd.TAKEOFF:
                 await p.takeoff(self._takeoff_amsl_m(p, c.altitude_m)
                                 if profile.takeoff_altitude_amsl else c.altitude_m)
             elif c.cmd is Cmd.OFFBOARD:
-                await self._set_mode(p, profile, profile.offboard)
+                await self._set_mode(p, profile, profile.offboard, confirm=self._mode_timeout_s)
             elif c.cmd is Cmd.HOLD:
-                await self._set_mode(p, profile, profile.hold)
+                await self._set_mode(p, profile, profile.hold, confirm=self._mode_timeout_s)
             elif c.cmd is Cmd.LAND:
-                await self._land(p, profile)
-        except (CommandRejectedError, CommandTimeoutError, LinkClosedError, TimeoutError) as exc:
-            ok, detail = False, str(exc)
+                await self._land(p, profile, confirm=self._mode_timeout_s)
+        except CommandRejectedError as exc:
+            ok, detail, result, text = False, str(exc), exc.result.name, exc.text
+        except CommandNotConfirmedError as exc:
+            ok, detail, result, text = False, str(exc), "NOT_CONFIRMED", exc.text
+        except (CommandTimeoutError, LinkClosedError, TimeoutError) as exc:
+            ok, detail, result = False, str(exc), "TIMEOUT"
         logger.log(logging.INFO if ok else logging.WARNING, "vehicle %d: %s %s%s", c.vehicle_id,
                    c.cmd.value, "ok" if ok else "failed", f": {detail}" if detail else "")
         self._dispatch(self.machine.on_result(
-            CommandResult(c.vehicle_id, c.cmd, ok, detail, tuple(values) if ok else ())))
+            CommandResult(c.vehicle_id, c.cmd, ok, detail, tuple(values) if ok else (),
+                          result, text)))
+
+    @property
+    def _mode_timeout_s(self) -> float:
+        return self.setup.plan.mode_timeout_s
 
     @staticmethod
-    async def _set_mode(p: VehicleProxy, profile: AutopilotProfile, mode: ModeSpec, *,
-                        timeout_s: float = 0.5, retries: int = 2) -> None:
-        """DO_SET_MODE as the vehicle's autopilot encodes `mode`; returns when accepted (raises
-        CommandRejectedError / CommandTimeoutError otherwise)."""
+    def _mode_params(p: VehicleProxy, profile: AutopilotProfile, mode: ModeSpec) -> list[float]:
+        """DO_SET_MODE params as the vehicle's autopilot encodes `mode` (PX4: +128 when armed,
+        as MAVSDK sends it)."""
         if profile.family == "ardupilot":
-            await p.set_mode_ardupilot(mode.number, timeout_s=timeout_s, retries=retries)
-        else:
-            await p.set_mode_px4(mode.number, mode.sub, timeout_s=timeout_s, retries=retries)
+            return [float(MavModeFlag.CUSTOM_MODE_ENABLED), mode.number]
+        armed = p.state().armed
+        base = MavModeFlag.CUSTOM_MODE_ENABLED | (MavModeFlag.SAFETY_ARMED if armed else 0)
+        return [float(base), mode.number, mode.sub]
+
+    @staticmethod
+    def _reported(profile: AutopilotProfile) -> Callable[[Any], str]:
+        """What a HEARTBEAT says, for messages: 'AUTO_LOITER, disarmed'."""
+        def text(hb: Any) -> str:
+            if hb is None:
+                return "nothing (no HEARTBEAT yet)"
+            armed = "armed" if int(hb.base_mode) & MavModeFlag.SAFETY_ARMED else "disarmed"
+            return f"{profile.mode_name(int(hb.custom_mode))}, {armed}"
+        return text
 
     @classmethod
-    async def _land(cls, p: VehicleProxy, profile: AutopilotProfile, *, timeout_s: float = 0.5,
+    async def _set_mode(cls, p: VehicleProxy, profile: AutopilotProfile, mode: ModeSpec, *,
+                        confirm: float | None = None, timeout_s: float = 0.5,
+                        retries: int = 2) -> None:
+        """DO_SET_MODE as the vehicle's autopilot encodes `mode`. With `confirm` (seconds):
+        returns when a HEARTBEAT after the ACK shows the mode, every ACK read (a later refusal
+        wins); raises CommandRejectedError / CommandNotConfirmedError / CommandTimeoutError
+        naming the vehicle, the mode asked, the mode reported and the ACKs. Without: returns
+        when the first ACK accepts it (the emergency stop's best effort)."""
+        params = cls._mode_params(p, profile, mode)
+        if confirm is None:
+            await p.command_long(MavCmd.DO_SET_MODE, params, timeout_s=timeout_s,
+                                 retries=retries)
+            return
+        want = mode.custom_mode(profile.family)
+        await p.command_confirmed(
+            MavCmd.DO_SET_MODE, params, want=f"mode {mode.name}",
+            shows=lambda hb: int(hb.custom_mode) == want, reported=cls._reported(profile),
+            timeout_s=confirm, ack_timeout_s=timeout_s, retries=retries)
+
+    @classmethod
+    async def _arm(cls, p: VehicleProxy, profile: AutopilotProfile, confirm: float) -> None:
+        """COMPONENT_ARM_DISARM 1 (never forced); returns when HEARTBEAT shows armed."""
+        await p.command_confirmed(
+            MavCmd.COMPONENT_ARM_DISARM, [1.0, 0.0], want="armed",
+            shows=lambda hb: bool(int(hb.base_mode) & MavModeFlag.SAFETY_ARMED),
+            reported=cls._reported(profile), timeout_s=confirm)
+
+    @classmethod
+    async def _land(cls, p: VehicleProxy, profile: AutopilotProfile, *,
+                    confirm: float | None = None, timeout_s: float = 0.5,
                     retries: int = 2) -> None:
-        """The profile's land: its LAND mode (ArduPilot) or MAV_CMD_NAV_LAND (PX4); returns when
-        accepted, not when landed."""
+        """The profile's land: its LAND mode (ArduPilot, confirmed with `confirm`) or
+        MAV_CMD_NAV_LAND (PX4); returns when accepted, not when landed."""
         if profile.land is not None:
-            await cls._set_mode(p, profile, profile.land, timeout_s=timeout_s, retries=retries)
+            await cls._set_mode(p, profile, profile.land, confirm=confirm, timeout_s=timeout_s,
+                                retries=retries)
         else:
             await p.land(timeout_s=timeout_s, retries=retries)
 
@@ -529,7 +586,7 @@ class Flight:
         if k % self.machine_every == 0:
             want_rates = m.phase in (Phase.CONNECT, Phase.PREFLIGHT)
             statuses = vehicle_statuses(self.proxies, self.ids, sample, want_rates)
-            self._dispatch(m.on_tick(deadline_s, statuses))
+            self._dispatch(m.on_tick(deadline_s, statuses, self.formation_error_m))
             self._log_notes()
         streaming = m.streaming
         if m.law_active and (streaming or m.phase is Phase.FORMATION):
@@ -619,6 +676,13 @@ class Flight:
 
     # --- records ---------------------------------------------------------------------------------
 
+    def _statustexts(self) -> dict[str, list[dict[str, Any]]]:
+        """Every vehicle's STATUSTEXT (severity, text, time after the flight start in s)."""
+        t0 = self._t0_s
+        return {str(self.ids[i]): [{"t_s": round(e.rx_time_s - t0, 3), "severity": e.severity_name,
+                                    "text": e.text} for e in p.statustexts.texts()]
+                for i, p in enumerate(self.proxies)}
+
     def _write_records(self, outcome: Outcome) -> FlyResult:
         out = self.options.out_dir
         if len(self.builder) == 0:
@@ -643,6 +707,7 @@ class Flight:
             "link": link, "tick": tick,
             "outcome": {"exit_code": outcome.exit_code, "reason": outcome.reason},
             "events": self.machine.notes[-50:],
+            "statustext": self._statustexts(),
         })
         report = build_report(log)
         write_report(out / REPORT_NAME, report)

@@ -39,6 +39,7 @@ from gcs.config.schema import (
     FaultConfig,
     FlyConfig,
     FlyModeConfig,
+    FormationCheckConfig,
     Gains,
     GeofenceConfig,
     GraphConfig,
@@ -557,6 +558,17 @@ def _fly_mode(node: _Node, default: FlyModeConfig) -> FlyModeConfig:
     )
 
 
+def _formation_check(node: _Node, d: FormationCheckConfig) -> FormationCheckConfig:
+    if node.absent:
+        return d
+    node.keys("", "after_s max_error_m max_fraction")
+    return FormationCheckConfig(
+        node.child("after_s").number(d.after_s, ge=0.0),
+        node.child("max_error_m").number(d.max_error_m, gt=0.0),
+        node.child("max_fraction").number(d.max_fraction, gt=0.0),
+    )
+
+
 def _fly(node: _Node) -> FlyConfig:
     """The optional `fly:` section (every key optional; see docs/configuration.md)."""
     d = FlyConfig()
@@ -566,7 +578,8 @@ def _fly(node: _Node) -> FlyConfig:
         "",
         "rates actuators start takeoff_altitude_m end_action abort_action link_loss_action "
         "stale_after_s link_lost_after_s max_tilt_rad geofence log_rate_hz connect_timeout_s "
-        "takeoff_timeout_s land_timeout_s",
+        "takeoff_timeout_s land_timeout_s takeoff_tolerance_m arm_timeout_s arm_retry_s "
+        "mode_timeout_s formation_check",
     )
     geofence = None
     g = node.child("geofence")
@@ -597,7 +610,17 @@ def _fly(node: _Node) -> FlyConfig:
         connect_timeout_s=node.child("connect_timeout_s").number(d.connect_timeout_s, gt=0.0),
         takeoff_timeout_s=node.child("takeoff_timeout_s").number(d.takeoff_timeout_s, gt=0.0),
         land_timeout_s=node.child("land_timeout_s").number(d.land_timeout_s, gt=0.0),
+        takeoff_tolerance_m=node.child("takeoff_tolerance_m").number(
+            d.takeoff_tolerance_m, gt=0.0),
+        arm_timeout_s=node.child("arm_timeout_s").number(d.arm_timeout_s, gt=0.0),
+        arm_retry_s=node.child("arm_retry_s").number(d.arm_retry_s, ge=0.1),
+        mode_timeout_s=node.child("mode_timeout_s").number(d.mode_timeout_s, gt=0.0),
+        formation_check=_formation_check(node.child("formation_check"), d.formation_check),
     )
+    if not fly.takeoff_tolerance_m < fly.takeoff_altitude_m:
+        node.child("takeoff_tolerance_m").fail(
+            f"expected < takeoff_altitude_m {fly.takeoff_altitude_m!r}, got "
+            f"{fly.takeoff_tolerance_m!r}")
     if not fly.link_lost_after_s > fly.stale_after_s:
         node.child("link_lost_after_s").fail(
             f"expected > stale_after_s {fly.stale_after_s!r}, got {fly.link_lost_after_s!r}"

@@ -335,6 +335,17 @@ class GeofenceConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class FormationCheckConfig:
+    """`fly.formation_check`: from formation time `after_s` on, the formation error must stay
+    at or below max(`max_error_m`, `max_fraction` x its value at t = 0), else the flight stops
+    with exit 1 (the vehicles do not follow the law; docs/gcs.md)."""
+
+    after_s: float = 10.0
+    max_error_m: float = 1.0
+    max_fraction: float = 0.5
+
+
+@dataclass(frozen=True, slots=True)
 class FlyConfig:
     """The `fly:` section: flight sequence, safety rules and link timing of `gcs fly`."""
 
@@ -352,7 +363,12 @@ class FlyConfig:
     log_rate_hz: float = 50.0  # time-series samples; must divide every mode's tick rate
     connect_timeout_s: float = 60.0  # emulators compiling, autopilots booting (PX4 SITL 10-25 s)
     takeoff_timeout_s: float = 60.0
+    takeoff_tolerance_m: float = 0.3  # takeoff done within this of takeoff_altitude_m
     land_timeout_s: float = 120.0
+    arm_timeout_s: float = 60.0  # arming waits this long for the vehicles to be ready
+    arm_retry_s: float = 1.0  # between two arming attempts of one vehicle
+    mode_timeout_s: float = 3.0  # a commanded mode (or arming) must show in HEARTBEAT within
+    formation_check: FormationCheckConfig = FormationCheckConfig()
 
     def mode(self, name: str) -> FlyModeConfig:
         """The settings of control mode `name` ('rates' or 'actuators')."""

@@ -24,6 +24,8 @@ from gcs.mission.autopilots import profile_for
 from gcs.mission.safety import VehicleStatus, tilt_rad
 
 _IDENTITY_Q = (1.0, 0.0, 0.0, 0.0)
+#: SYS_STATUS onboard_control_sensors_* bit of the pre-arm checks (MAV_SYS_STATUS_PREARM_CHECK)
+PREARM_CHECK_BIT = 0x10000000
 _LANDED = {LandedState.ON_GROUND: True, LandedState.IN_AIR: False, LandedState.TAKEOFF: False,
            LandedState.LANDING: False}
 
@@ -106,13 +108,22 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
             profile = profile_for(autopilot)
             mode = (profile.mode_name(int(m.custom_mode)) if profile is not None
                     else mode_name(autopilot, int(m.custom_mode)))
-        landed = None
+        landed, landed_state = None, 0
         ess = p.latest("EXTENDED_SYS_STATE")
         if ess is not None:
             try:
-                landed = _LANDED.get(LandedState(int(ess.msg.landed_state)))
+                landed_state = int(LandedState(int(ess.msg.landed_state)))
+                landed = _LANDED.get(LandedState(landed_state))
             except ValueError:
                 landed = None
+        prearm_ok = None
+        sys_status = p.latest("SYS_STATUS")
+        if sys_status is not None and int(sys_status.msg.onboard_control_sensors_present) \
+                & PREARM_CHECK_BIT:
+            prearm_ok = bool(int(sys_status.msg.onboard_control_sensors_health) & PREARM_CHECK_BIT)
+        text = p.statustexts.latest()
+        gpi = p.latest("GLOBAL_POSITION_INT")
+        height = float(gpi.msg.relative_alt) * 1e-3 if gpi is not None else math.nan
         rates = {k: v.rate_hz for k, v in p.stats().by_type.items()} if want_rates else {}
         out.append(VehicleStatus(
             vehicle_id=ids[i], sysid=p.config.sysid, link=p.link_state().value, armed=armed,
@@ -120,6 +131,8 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
             velocity_enu_mps=tuple(sample.velocity_mps[i].tolist()),
             tilt_rad=tilt_rad(sample.rotation[i]), data_age_s=float(sample.age_s[i]),
             autopilot=autopilot, vehicle_type=vtype, sysid_mismatch=p.sysid_mismatch,
-            rates_hz=rates, listen=listen_label(p),
+            rates_hz=rates, listen=listen_label(p), landed_state=landed_state,
+            prearm_ok=prearm_ok, status_text=text.quoted() if text is not None else "",
+            height_above_home_m=height,
         ))
     return out

@@ -6,7 +6,8 @@ One `AutopilotProfile` per supported autopilot, chosen per vehicle from its HEAR
 the profile instead of PX4 constants. Facts: ../shared/spec/mavlink.md (docs/gcs.md says why each
 mode was chosen).
 
-* PX4 (12): OFFBOARD; hold AUTO_LOITER; land with MAV_CMD_NAV_LAND; NAV_TAKEOFF with an AMSL
+* PX4 (12): arms in Hold (AUTO_LOITER, commanded first when it reports another mode); OFFBOARD;
+  hold AUTO_LOITER; land with MAV_CMD_NAV_LAND; NAV_TAKEOFF with an AMSL
   altitude, after which PX4 switches itself to AUTO_LOITER; the OFFBOARD switch needs a setpoint
   younger than COM_OF_LOSS_T (1 s); the PRIME phase streams for longer than that first, as good
   practice.
@@ -72,7 +73,8 @@ class AutopilotProfile:
     offboard: ModeSpec  # the GCS flies the vehicle (setpoints stream) in this mode
     hold: ModeSpec  # position hold: end/abort/link-loss action `hold`
     land: ModeSpec | None  # None: MAV_CMD_NAV_LAND
-    takeoff_mode: ModeSpec | None  # commanded before arming a vehicle that will take off
+    arm_mode: ModeSpec  # commanded (disarmed, on the ground) before arming, unless the vehicle
+    # already reports it: a mode the autopilot arms in and takes off from
     takeoff_done_modes: frozenset[str]  # what a vehicle reports once its NAV_TAKEOFF finished
     takeoff_altitude_amsl: bool  # NAV_TAKEOFF param7 AMSL (PX4) or above home (ArduPilot)
     setpoint_modes: frozenset[str]  # modes in which the autopilot acts on SET_ATTITUDE_TARGET
@@ -84,6 +86,22 @@ class AutopilotProfile:
     actuators_until: tuple[int, int] | None = None
     force_arm_magic: int = 21196  # COMPONENT_ARM_DISARM param2 (gcs fly never forces)
     force_disarm_magic: int = 21196
+    # MAV_RESULTs of an arming refusal that mean "not ready yet" (retried until fly.arm_timeout_s)
+    arm_retry_results: frozenset[str] = frozenset({"TEMPORARILY_REJECTED"})
+    # ... and those that mean it only with a pre-arm STATUSTEXT starting with one of these
+    arm_retry_texts: tuple[str, ...] = ()
+    # SYS_STATUS MAV_SYS_STATUS_PREARM_CHECK is a reliable "would arm now" (PX4: MAVSDK's
+    # health.is_armable); ArduPilot sets it before its GUIDED needs are met, so it is not waited on
+    prearm_bit_reliable: bool = False
+
+    def arm_retryable(self, result: str, text: str) -> bool:
+        """True when an arming attempt that ended with `result` (a MAV_RESULT name, or
+        NOT_CONFIRMED: accepted but HEARTBEAT never showed armed) and the vehicle's STATUSTEXT
+        `text` means the vehicle is not ready yet, so arming is tried again."""
+        if result in self.arm_retry_results or result == "NOT_CONFIRMED":
+            return True
+        return bool(self.arm_retry_texts) and result == "FAILED" \
+            and text.startswith(self.arm_retry_texts)
 
     def mode_name(self, custom_mode: int) -> str:
         """Name of a HEARTBEAT custom_mode, e.g. 'OFFBOARD', 'AUTO_LOITER', 'GUIDED_NOGPS'."""
@@ -126,13 +144,15 @@ PX4 = AutopilotProfile(
     offboard=ModeSpec("OFFBOARD", 6),
     hold=ModeSpec("AUTO_LOITER", 4, 3),
     land=None,
-    takeoff_mode=None,
+    arm_mode=ModeSpec("AUTO_LOITER", 4, 3),  # Hold; after a failsafe landing PX4 sits in
+    # OFFBOARD, disarmed, and refuses to arm there without a fresh setpoint
     takeoff_done_modes=frozenset({"AUTO_LOITER"}),
     takeoff_altitude_amsl=True,
     setpoint_modes=frozenset({"OFFBOARD"}),
     hold_before_prime=False,
     control_modes=frozenset({"rates", "actuators"}),  # actuators: PX4 <= 1.13 only
     actuators_until=(1, 13),  # PX4 1.14 moved actuator control to its ROS 2 bridge
+    prearm_bit_reliable=True,
 )
 
 #: GUID_OPTIONS bit 3: SET_ATTITUDE_TARGET `thrust` is normalised thrust, not a climb rate.
@@ -145,7 +165,7 @@ ARDUPILOT = AutopilotProfile(
     offboard=ModeSpec("GUIDED_NOGPS", 20),
     hold=ModeSpec("BRAKE", 17),
     land=ModeSpec("LAND", 9),
-    takeoff_mode=ModeSpec("GUIDED", 4),
+    arm_mode=ModeSpec("GUIDED", 4),  # NAV_TAKEOFF needs GUIDED; LAND and BRAKE are not armable
     takeoff_done_modes=frozenset({"GUIDED"}),
     takeoff_altitude_amsl=False,
     setpoint_modes=frozenset({"GUIDED", "GUIDED_NOGPS"}),
@@ -154,6 +174,11 @@ ARDUPILOT = AutopilotProfile(
     required_params=(GUID_OPTIONS_THRUST,),
     force_arm_magic=2989,
     force_disarm_magic=21196,
+    # ArduPilot answers every failed pre-arm check with FAILED and a text "Arm: <reason>"
+    # (its boot: "Arm: Gyros inconsistent", ..., GUIDED until the EKF uses GPS: "Arm: Need
+    # Position Estimate"); "PreArm: ..." comes every 30 s while one fails
+    arm_retry_results=frozenset({"TEMPORARILY_REJECTED"}),
+    arm_retry_texts=("Arm: ", "PreArm: "),
 )
 
 def version_text(flight_sw_version: int) -> str:

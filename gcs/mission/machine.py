@@ -23,6 +23,18 @@ while `law_active`. Rules (docs/gcs.md):
   (READ_PARAMS) and checked with the other preflight rules; so is the firmware version
   (IDENTIFY, AUTOPILOT_VERSION) when the control mode depends on it (PX4 >= 1.14 ignores
   actuator setpoints: `actuators` is refused there).
+* Commands count when the vehicle shows them (the composition root confirms every mode change
+  and arming in HEARTBEAT, reading every COMMAND_ACK). Before arming, a vehicle is put in its
+  profile's `arm_mode` (PX4 Hold: after a failsafe landing PX4 sits in OFFBOARD, disarmed, and
+  refuses to arm there); arming waits for the pre-arm checks where the autopilot reports them
+  reliably (PX4's SYS_STATUS bit) and is retried every `arm_retry_s` while the answer means "not
+  ready yet" (profile.arm_retryable), up to `arm_timeout_s`; each vehicle takes off as soon as it
+  is armed. Takeoff is complete when the vehicle reports IN_AIR, its post-takeoff mode and a
+  height above its takeoff point (GLOBAL_POSITION_INT relative_alt, else the rise of its local
+  z since arming) within `takeoff_tolerance_m` of the altitude asked.
+* A formation never ends "complete" unless every vehicle reported the offboard mode, and for
+  t >= `formation_check_s` the formation error stays at or below max(`formation_max_error_m`,
+  `formation_max_fraction` x its value at t = 0) (docs/gcs.md, "Did the vehicles follow?").
 * Any problem (failed check, rejected command, geofence, tilt, lost link, operator abort) moves to
   STOPPING: the lost vehicles are left to their failsafe, the others get `abort_action` (or
   `link_loss_action` when the cause is a lost link), and the outcome is non-zero with the reason.
@@ -36,6 +48,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 
+from gcs.link.enums import LandedState
 from gcs.mission.autopilots import PX4, AutopilotProfile, profile_for
 from gcs.mission.safety import (
     Problem,
@@ -72,7 +85,8 @@ class Cmd(Enum):
     CONFIGURE = "configure"  # telemetry rates (SET_MESSAGE_INTERVAL)
     READ_PARAMS = "read_params"  # the profile's required parameters (`names`), values in result
     IDENTIFY = "identify"  # AUTOPILOT_VERSION; result values (("flight_sw_version", word),)
-    ARM = "arm"  # (ArduPilot: GUIDED first, the profile's takeoff_mode)
+    ARM_MODE = "arm_mode"  # the profile's arm_mode (PX4 Hold, ArduPilot GUIDED), confirmed
+    ARM = "arm"  # confirmed when HEARTBEAT shows armed
     TAKEOFF = "takeoff"  # altitude_m above home
     OFFBOARD = "offboard"  # the profile's offboard mode (PX4 OFFBOARD, ArduPilot GUIDED_NOGPS)
     HOLD = "hold"  # the profile's hold mode (PX4 AUTO_LOITER, ArduPilot BRAKE)
@@ -95,6 +109,8 @@ class CommandResult:
     ok: bool
     detail: str = ""
     values: tuple[tuple[str, float], ...] = ()  # READ_PARAMS: (parameter id, value)
+    result: str = ""  # MAV_RESULT name of a refusal, NOT_CONFIRMED, TIMEOUT; '' when ok
+    text: str = ""  # the vehicle's STATUSTEXT that came with the refusal, if any
 
 
 @dataclass(frozen=True, slots=True)
@@ -122,7 +138,13 @@ class MissionPlan:
     connect_timeout_s: float = 60.0  # emulators compiling, autopilots booting (PX4 SITL 10-25 s)
     settle_s: float = 1.0  # after CONFIGURE, before the rates are judged
     takeoff_timeout_s: float = 60.0
-    takeoff_tolerance_m: float = 0.3
+    takeoff_tolerance_m: float = 0.3  # height above the takeoff point vs takeoff_altitude_m
+    arm_timeout_s: float = 60.0  # ARM phase: every ground vehicle armed and taking off
+    arm_retry_s: float = 1.0  # between two arming attempts of one vehicle
+    mode_timeout_s: float = 3.0  # a mode change shows in HEARTBEAT (PX4: 1 Hz) within this
+    formation_check_s: float = 10.0  # from this formation time on, the error rule applies
+    formation_max_error_m: float = 1.0
+    formation_max_fraction: float = 0.5
     prime_s: float = 1.5  # setpoints stream before the offboard switch: good practice, not a
     # PX4 requirement (PX4 only needs one setpoint younger than COM_OF_LOSS_T); it also proves
     # the stream reaches every vehicle before any of them acts on it
@@ -147,6 +169,20 @@ class _Stop:
 
 
 @dataclass(slots=True)
+class _Arm:
+    """Progress of one ground vehicle through ARM (mode, readiness, attempts) and takeoff."""
+
+    mode_sent: bool = False
+    attempts: int = 0
+    last_attempt_s: float = -math.inf
+    last_result: str = ""
+    armed: bool = False
+    takeoff_sent: bool = False
+    z0_m: float = math.nan  # ENU z (its own frame) where it took off
+    waiting_noted: bool = False
+
+
+@dataclass(slots=True)
 class _Vehicle:
     status: VehicleStatus | None = None
     pending: Cmd | None = None
@@ -162,6 +198,7 @@ class _Vehicle:
     version: int | None = None  # AUTOPILOT_VERSION.flight_sw_version (IDENTIFY result)
     version_asked: bool = False
     heard: bool = False  # a message has arrived since the flight started (CONNECT)
+    arm: _Arm | None = None  # vehicles that take off
 
 
 @dataclass(slots=True)
@@ -182,6 +219,9 @@ class MissionMachine:
     _stopping_since_s: float = 0.0
     _interrupts: int = 0
     _held: tuple[int, ...] = ()  # vehicles sent to hold in the HOLD phase
+    _arming: tuple[int, ...] = ()  # vehicles that arm and take off
+    _formation_error_m: float = math.nan  # latest, from the composition root
+    _error_t0: float | None = None  # formation error at the formation start
 
     def __post_init__(self) -> None:
         self._v = {vid: _Vehicle() for vid in self.vehicle_ids}
@@ -251,6 +291,13 @@ class MissionMachine:
             v.params = dict(result.values)
         if result.cmd is Cmd.IDENTIFY and result.ok:
             v.version = int(dict(result.values)["flight_sw_version"])
+        if result.cmd is Cmd.ARM and self.phase is Phase.ARM and v.arm is not None:
+            if result.ok:
+                v.arm.armed = True
+                return self._drive()
+            v.arm.last_result = result.result or "FAILED"
+            if self.profile(result.vehicle_id).arm_retryable(v.arm.last_result, result.text):
+                return self._drive()  # not ready yet: tried again after arm_retry_s
         if result.cmd is Cmd.OFFBOARD:
             v.offboard_acked = result.ok
             if not result.ok and self.phase is Phase.FORMATION:
@@ -277,15 +324,19 @@ class MissionMachine:
             )
         return self._drive()
 
-    def on_tick(self, now_s: float, team: Sequence[VehicleStatus]) -> list[Command]:
-        """Advance with the latest status of every vehicle; returns the commands to send now."""
+    def on_tick(self, now_s: float, team: Sequence[VehicleStatus],
+                formation_error_m: float = math.nan) -> list[Command]:
+        """Advance with the latest status of every vehicle and, during the formation, the
+        latest formation error [m] (max over pairs of |p_i - p_j - (d_i - d_j)|, NaN unknown);
+        returns the commands to send now."""
         self._now_s = now_s
+        self._formation_error_m = formation_error_m
         if self._phase_since_s is None:
             self._phase_since_s = now_s
         for s in team:
             v = self._v[s.vehicle_id]
             v.status = s
-            if v.offboard_acked and self._in_offboard(s.vehicle_id):
+            if v.offboard_sent and self._in_offboard(s.vehicle_id):
                 v.seen_offboard = True
         if self._abort:
             reasons = [r for r, _ in self._abort]
@@ -306,7 +357,7 @@ class MissionMachine:
         handler = {
             Phase.CONNECT: self._connect,
             Phase.PREFLIGHT: self._preflight,
-            Phase.ARM: self._arm,
+            Phase.ARM: self._arm_and_take_off,
             Phase.TAKEOFF: self._takeoff,
             Phase.HOLD: self._hold,
             Phase.PRIME: self._prime,
@@ -410,8 +461,11 @@ class MissionMachine:
             return self._drive()
         self._note("preflight checks passed")
         if ground:
+            self._arming = tuple(ground)
+            for vid in ground:
+                self._v[vid].arm = _Arm()
             self._enter(Phase.ARM)
-            return [self._send(vid, Cmd.ARM) for vid in ground]
+            return self._drive()
         return self._to_prime()
 
     def _read_params(self, team: Sequence[VehicleStatus]) -> list[Command]:
@@ -466,33 +520,103 @@ class MissionMachine:
             return self._drive()
         return []
 
-    def _arm(self) -> list[Command]:
-        if not self._idle():
-            return []
-        ground = [vid for vid, v in self._v.items() if v.status is not None and not v.status.in_air]
-        for vid in ground:
-            self._v[vid].took_off = True
-        self._enter(Phase.TAKEOFF)
-        return [self._send(vid, Cmd.TAKEOFF, self.plan.takeoff_altitude_m) for vid in ground]
+    def _arm_and_take_off(self) -> list[Command]:
+        """Each ground vehicle on its own: its arm mode (unless it reports it), its pre-arm
+        checks (where reliable), arming (retried while "not ready yet"), then NAV_TAKEOFF at
+        once (PX4 and ArduPilot disarm an armed vehicle that does not take off within 10 s)."""
+        out: list[Command] = []
+        now = self._now_s
+        for vid in self._arming:
+            v, profile = self._v[vid], self.profile(vid)
+            a, s = v.arm, v.status
+            if a is None or s is None or v.pending is not None or a.takeoff_sent:
+                continue
+            if a.armed:
+                a.z0_m = s.position_enu_m[2]
+                a.takeoff_sent = v.took_off = True
+                out.append(self._send(vid, Cmd.TAKEOFF, self.plan.takeoff_altitude_m))
+            elif s.mode != profile.arm_mode.name and not a.mode_sent:
+                a.mode_sent = True
+                out.append(self._send(vid, Cmd.ARM_MODE))
+            elif profile.prearm_bit_reliable and s.prearm_ok is False:
+                if not a.waiting_noted:
+                    a.waiting_noted = True
+                    self._note(f"{s.name}: waiting for its pre-arm checks (SYS_STATUS)")
+            elif now - a.last_attempt_s >= self.plan.arm_retry_s:
+                a.attempts += 1
+                a.last_attempt_s = now
+                out.append(self._send(vid, Cmd.ARM))
+        if all(self._v[vid].arm.takeoff_sent for vid in self._arming) and self._idle():
+            self._enter(Phase.TAKEOFF)
+            return out
+        if self._elapsed() > self.plan.arm_timeout_s:
+            lines = [self._not_armed_line(vid) for vid in self._arming
+                     if not self._v[vid].arm.armed]
+            if lines:
+                self._begin_stop([Problem(None, "\n  ".join(
+                    [f"not every vehicle armed within {self.plan.arm_timeout_s:g} s "
+                     "(fly.arm_timeout_s):", *lines]))], EXIT_ABORTED)
+                return self._drive()
+        return out
+
+    def _not_armed_line(self, vid: int) -> str:
+        v = self._v[vid]
+        a, s = v.arm, v.status
+        name = s.name if s is not None else f"vehicle {vid}"
+        attempts = a.attempts if a is not None else 0
+        last = f", last answer {a.last_result}" if a is not None and a.last_result else ""
+        ready = (", pre-arm checks failing (SYS_STATUS)"
+                 if s is not None and s.prearm_ok is False else "")
+        text = s.status_text if s is not None and s.status_text else "none"
+        mode = s.mode if s is not None and s.mode else "?"
+        return (f"{name}: not armed after {attempts} attempts{last}{ready}, mode {mode}; "
+                f"latest STATUSTEXT: {text}")
 
     def _takeoff(self) -> list[Command]:
         if not self._idle():
             return []
-        target = self.plan.takeoff_altitude_m - self.plan.takeoff_tolerance_m
-        waiting = [
-            vid for vid, v in self._v.items()
-            if v.took_off and not (v.status is not None and v.status.in_air
-                                   and v.status.mode in self.profile(vid).takeoff_done_modes
-                                   and v.status.position_enu_m[2] >= target)
-        ]
+        alt, tol = self.plan.takeoff_altitude_m, self.plan.takeoff_tolerance_m
+        waiting = [vid for vid in self._arming if not self._took_off(vid, alt - tol)]
         if not waiting:
             return self._to_prime()
         if self._elapsed() > self.plan.takeoff_timeout_s:
-            self._begin_stop([Problem(None, f"vehicles {waiting} did not reach "
-                                            f"{self.plan.takeoff_altitude_m:g} m within "
-                                            f"{self.plan.takeoff_timeout_s:g} s")], EXIT_ABORTED)
+            lines = [self._takeoff_line(vid) for vid in waiting]
+            self._begin_stop([Problem(None, "\n  ".join(
+                [f"vehicles {waiting} did not complete the takeoff to {alt:g} m (tolerance "
+                 f"{tol:g} m) within {self.plan.takeoff_timeout_s:g} s:", *lines]))],
+                EXIT_ABORTED)
             return self._drive()
         return []
+
+    def _height_m(self, vid: int) -> float:
+        """Height above the takeoff point, as the vehicle reports it: GLOBAL_POSITION_INT
+        relative_alt (above home, which the autopilot sets where it arms; the same reference as
+        the NAV_TAKEOFF altitude), else the rise of its local z since it was armed. Never its
+        local z alone: that is relative to its EKF origin, which need not be where it took off."""
+        v = self._v[vid]
+        if v.status is None or v.arm is None:
+            return math.nan
+        if math.isfinite(v.status.height_above_home_m):
+            return v.status.height_above_home_m
+        return v.status.position_enu_m[2] - v.arm.z0_m
+
+    def _took_off(self, vid: int, min_height_m: float) -> bool:
+        s = self._v[vid].status
+        return (s is not None and s.landed_state == LandedState.IN_AIR
+                and s.mode in self.profile(vid).takeoff_done_modes
+                and self._height_m(vid) >= min_height_m)
+
+    def _takeoff_line(self, vid: int) -> str:
+        s = self._v[vid].status
+        if s is None:
+            return f"vehicle {vid}: no status"
+        try:
+            landed = LandedState(s.landed_state).name
+        except ValueError:
+            landed = str(s.landed_state)
+        done = " or ".join(sorted(self.profile(vid).takeoff_done_modes))
+        return (f"{s.name}: {self._height_m(vid):.2f} m above its takeoff point (home), "
+                f"landed state {landed} (need IN_AIR), mode {s.mode or '?'} (need {done})")
 
     def _prime(self) -> list[Command]:
         problems = flight_problems(self._statuses(), self.plan.rules)
@@ -506,7 +630,9 @@ class MissionMachine:
         return [self._send(vid, Cmd.OFFBOARD) for vid in self.vehicle_ids]
 
     def _formation(self) -> list[Command]:
+        t = self._now_s - (self.formation_t0_s or self._now_s)
         problems = flight_problems(self._statuses(), self.plan.rules)
+        problems += self._not_following(t)
         for vid, v in self._v.items():
             s = v.status
             if v.seen_offboard and s is not None and not self._in_offboard(vid) \
@@ -517,11 +643,44 @@ class MissionMachine:
         if problems:
             self._begin_stop(problems, EXIT_ABORTED)
             return self._drive()
-        t = self._now_s - (self.formation_t0_s or self._now_s)
         if t >= self.plan.duration_s:
+            never = [Problem(vid, f"{v.status.name}: never reported "
+                                  f"{self.profile(vid).offboard.name} during the formation "
+                                  f"(reports {v.status.mode or '?'})", "mode")
+                     for vid, v in self._v.items() if not v.seen_offboard and v.status is not None]
+            if never:
+                self._begin_stop(never, EXIT_ABORTED)
+                return self._drive()
             self._begin_stop([], EXIT_OK, end=True)
             return self._drive()
         return []
+
+    def _not_following(self, t: float) -> list[Problem]:
+        """The vehicles do not fly the law: one never reported the offboard mode within
+        `mode_timeout_s` + 2 s (the command's own confirmation normally fails first), or the
+        formation error did not fall as the law predicts (module docstring)."""
+        out = []
+        if t > self.plan.mode_timeout_s + 2.0:
+            for vid, v in self._v.items():
+                s = v.status
+                if not v.seen_offboard and s is not None and s.link == "alive":
+                    name = self.profile(vid).offboard.name
+                    out.append(Problem(vid, f"{s.name}: never reported {name} in {t:.1f} s of "
+                                            f"formation (reports {s.mode or '?'}): it does not "
+                                            "fly the setpoints", "mode"))
+        e = self._formation_error_m
+        if math.isfinite(e) and self._error_t0 is None:
+            self._error_t0 = e
+        e0 = self._error_t0
+        if t >= self.plan.formation_check_s and e0 is not None and math.isfinite(e):
+            bound = max(self.plan.formation_max_error_m, self.plan.formation_max_fraction * e0)
+            if e > bound:
+                out.append(Problem(None, (
+                    f"the vehicles do not follow the formation: error {e:.2f} m at t = "
+                    f"{t:.1f} s > {bound:.2f} m = max({self.plan.formation_max_error_m:g} m, "
+                    f"{self.plan.formation_max_fraction:g} x {e0:.2f} m at t = 0) "
+                    "(fly.formation_check)"), "follow"))
+        return out
 
     # --- stopping --------------------------------------------------------------------------------
 

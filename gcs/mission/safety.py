@@ -42,7 +42,12 @@ class VehicleStatus:
     link: 'waiting' | 'alive' | 'lost'; mode: e.g. 'OFFBOARD', 'AUTO_LOITER', 'GUIDED_NOGPS';
     landed: True on the ground, False in the air, None unknown; data_age_s: age of the older of
     its position and attitude samples; rates_hz: measured receive rate per message type;
-    listen: where the ground station listens for it (e.g. 'udp 127.0.0.1:14540'), for messages.
+    listen: where the ground station listens for it (e.g. 'udp 127.0.0.1:14540'), for messages;
+    landed_state: MAV_LANDED_STATE (0 unknown, 1 ON_GROUND, 2 IN_AIR, 3 TAKEOFF, 4 LANDING);
+    prearm_ok: SYS_STATUS MAV_SYS_STATUS_PREARM_CHECK health, None when not reported;
+    status_text: the vehicle's latest STATUSTEXT (severity and text quoted, '' if none);
+    height_above_home_m: GLOBAL_POSITION_INT.relative_alt, the autopilot's own height above its
+    home (PX4 and ArduPilot put home where they arm: the takeoff point); NaN when not sent.
     """
 
     vehicle_id: int
@@ -60,6 +65,10 @@ class VehicleStatus:
     sysid_mismatch: int | None = None
     rates_hz: Mapping[str, float] = field(default_factory=dict)
     listen: str = ""
+    landed_state: int = 0
+    prearm_ok: bool | None = None
+    status_text: str = ""
+    height_above_home_m: float = math.nan
 
     @property
     def name(self) -> str:

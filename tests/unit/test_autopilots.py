@@ -54,8 +54,11 @@ def test_ardupilot_profile_holds_the_spec_facts():
     assert (a.offboard.name, a.offboard.number) == ("GUIDED_NOGPS", 20)
     assert (a.hold.name, a.hold.number) == ("BRAKE", 17)
     assert a.land is not None and (a.land.name, a.land.number) == ("LAND", 9)
-    assert a.takeoff_mode is not None and (a.takeoff_mode.name, a.takeoff_mode.number) == (
-        "GUIDED", 4)
+    assert (a.arm_mode.name, a.arm_mode.number) == ("GUIDED", 4)
+    assert not a.prearm_bit_reliable
+    assert a.arm_retryable("FAILED", "Arm: Need Position Estimate")
+    assert a.arm_retryable("FAILED", "PreArm: Gyros inconsistent")
+    assert not a.arm_retryable("FAILED", "Throttle too high") and not a.arm_retryable("DENIED", "")
     assert not a.takeoff_altitude_amsl and a.takeoff_done_modes == {"GUIDED"}
     assert a.setpoint_modes == {"GUIDED", "GUIDED_NOGPS"} and a.hold_before_prime
     assert (a.force_arm_magic, a.force_disarm_magic) == (2989, 21196)
@@ -67,7 +70,11 @@ def test_px4_profile_is_what_gcs_fly_did_before():
     p = PX4
     assert p.offboard.custom_mode("px4") == 393216 == px4_custom_mode(6)
     assert p.hold.custom_mode("px4") == px4_custom_mode(4, 3) and p.hold.name == "AUTO_LOITER"
-    assert p.land is None and p.takeoff_mode is None and p.takeoff_altitude_amsl
+    assert p.land is None and p.takeoff_altitude_amsl
+    assert p.arm_mode == p.hold and p.prearm_bit_reliable
+    assert p.arm_retryable("TEMPORARILY_REJECTED", "") and p.arm_retryable("NOT_CONFIRMED", "")
+    assert not p.arm_retryable("DENIED", "Arming denied: not landed")
+    assert not p.arm_retryable("FAILED", "Arm: x") and not p.arm_retryable("TIMEOUT", "")
     assert not p.hold_before_prime and not p.required_params
     assert p.control_modes == {"rates", "actuators"}
     assert (p.force_arm_magic, p.force_disarm_magic) == (21196, 21196)
@@ -84,7 +91,7 @@ def test_mode_names_agree_with_the_link_layer_and_the_mode_specs(profile: Autopi
     for cm in modes:
         assert profile.mode_name(cm) == mode_name(profile.autopilot, cm), cm
     # AND every mode the profile commands reads back under its own name
-    specs = [profile.offboard, profile.hold, profile.land, profile.takeoff_mode]
+    specs = [profile.offboard, profile.hold, profile.land, profile.arm_mode]
     for spec in (s for s in specs if s is not None):
         assert profile.mode_name(spec.custom_mode(profile.family)) == spec.name
     assert ARDUPILOT.mode_name(17) == "BRAKE"
@@ -145,7 +152,7 @@ def status(vid: int, autopilot: int, **kw) -> VehicleStatus:
     base = dict(vehicle_id=vid, sysid=vid, link="alive", armed=True,
                 mode="BRAKE" if autopilot == 3 else "AUTO_LOITER", landed=False,
                 position_enu_m=(vid * 3.0, 0.0, 10.0), velocity_enu_mps=(0, 0, 0), tilt_rad=0.01,
-                data_age_s=0.01, autopilot=autopilot, vehicle_type=2,
+                data_age_s=0.01, autopilot=autopilot, vehicle_type=2, landed_state=2,
                 rates_hz={"ATTITUDE_QUATERNION": 99.0, "LOCAL_POSITION_NED": 98.0})
     base.update(kw)
     return VehicleStatus(**base)
@@ -164,6 +171,7 @@ class World:
         self.v = {}
         for vid, ap in autopilots.items():
             s = status(vid, ap, armed=not on_ground, landed=on_ground,
+                       landed_state=1 if on_ground else 2,
                        position_enu_m=(vid * 3.0, 0.0, 0.0 if on_ground else 10.0))
             if on_ground:
                 s = dataclasses.replace(s, mode="STABILIZE" if ap == 3 else "AUTO_READY")
@@ -191,12 +199,15 @@ class World:
             return s, True, tuple((n, self.params[c.vehicle_id][n]) for n in c.names)
         if c.cmd is Cmd.IDENTIFY:
             return s, True, (("flight_sw_version", float(self.versions[c.vehicle_id])),)
+        if c.cmd is Cmd.ARM_MODE:
+            return dataclasses.replace(s, mode="GUIDED" if ardu else "AUTO_LOITER"), True, ()
         if c.cmd is Cmd.ARM:
-            return dataclasses.replace(s, armed=True, mode="GUIDED" if ardu else s.mode), True, ()
+            return dataclasses.replace(s, armed=True), True, ()
         if c.cmd is Cmd.TAKEOFF:
             if ardu and not (s.armed and s.mode == "GUIDED"):
                 return s, False, ()
             return dataclasses.replace(s, landed=False, mode="GUIDED" if ardu else "AUTO_LOITER",
+                                       landed_state=2,
                                        position_enu_m=(s.position_enu_m[0], 0.0, c.altitude_m)
                                        ), True, ()
         if c.cmd is Cmd.OFFBOARD:
@@ -205,7 +216,7 @@ class World:
             return dataclasses.replace(s, mode="BRAKE" if ardu else "AUTO_LOITER"), True, ()
         if c.cmd is Cmd.LAND:
             return dataclasses.replace(s, mode="LAND" if ardu else "AUTO_LAND", landed=True,
-                                       armed=False,
+                                       armed=False, landed_state=1,
                                        position_enu_m=(s.position_enu_m[0], 0.0, 0.0)), True, ()
         if c.cmd is Cmd.DISARM:
             return dataclasses.replace(s, armed=False), True, ()
@@ -256,8 +267,8 @@ def test_ardupilot_team_on_the_ground_takes_off_in_guided_brakes_flies_guided_no
     # the setpoints start, GUIDED_NOGPS, LAND
     assert m.outcome.exit_code == EXIT_OK, m.outcome
     for vid in (1, 2):
-        assert w.cmds(vid) == [Cmd.CONFIGURE, Cmd.READ_PARAMS, Cmd.ARM, Cmd.TAKEOFF, Cmd.HOLD,
-                               Cmd.OFFBOARD, Cmd.LAND]
+        assert w.cmds(vid) == [Cmd.CONFIGURE, Cmd.READ_PARAMS, Cmd.ARM_MODE, Cmd.ARM,
+                               Cmd.TAKEOFF, Cmd.HOLD, Cmd.OFFBOARD, Cmd.LAND]
         assert w.v[vid].mode == "LAND" and w.v[vid].landed and not w.v[vid].armed
     (read,) = [c for c in w.sent if c.cmd is Cmd.READ_PARAMS and c.vehicle_id == 1]
     assert read.names == ("GUID_OPTIONS",)

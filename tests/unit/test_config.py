@@ -509,6 +509,15 @@ ERRORS = [
      r"fly\.geofence\.max_enu_m: required key is missing"),
     ("fly.log_rate_hz", 30, r"fly\.log_rate_hz: must divide fly\.rates\.tick_rate_hz 100 \(a "
      r"whole number of ticks per sample\), got 30$"),
+    ("fly.arm_timeout_s", 0, r"fly\.arm_timeout_s: expected > 0, got 0"),
+    ("fly.arm_retry_s", 0.01, r"fly\.arm_retry_s: expected >= 0\.1, got 0\.01"),
+    ("fly.mode_timeout_s", -1, r"fly\.mode_timeout_s: expected > 0, got -1"),
+    ("fly.takeoff_tolerance_m", 3.0, r"fly\.takeoff_tolerance_m: expected < takeoff_altitude_m "
+     r"2\.5, got 3\.0"),
+    ("fly.formation_check", {"max_fraction": 0}, r"fly\.formation_check\.max_fraction: expected "
+     r"> 0, got 0"),
+    ("fly.formation_check", {"after": 3}, r"fly\.formation_check\.after: unknown key; did you "
+     r"mean 'after_s'"),
 ]
 
 
@@ -521,6 +530,10 @@ def test_fly_section_is_optional_and_defaults_are_documented():
     assert fly.rates.max_rate_radps == 1.0 and fly.actuators.alpha_omega is None
     assert (fly.end_action, fly.abort_action, fly.link_loss_action) == ("land", "land", "hold")
     assert fly.geofence is None and fly.stale_after_s == 0.1 and fly.link_lost_after_s == 0.5
+    assert (fly.arm_timeout_s, fly.arm_retry_s, fly.mode_timeout_s) == (60.0, 1.0, 3.0)
+    assert fly.takeoff_tolerance_m == 0.3
+    fc = fly.formation_check
+    assert (fc.after_s, fc.max_error_m, fc.max_fraction) == (10.0, 1.0, 0.5)
     # AND the shipped file flies the criterion's torque gains
     shipped = load_team(SQUARE4).fly
     assert (shipped.actuators.alpha_eps, shipped.actuators.alpha_omega) == (24.0, 3.0)

@@ -35,7 +35,7 @@ RULES = SafetyRules(max_tilt_rad=1.0, link_lost_after_s=0.5, geofence_min_enu_m=
 def status(vid: int, **kw) -> VehicleStatus:
     base = dict(vehicle_id=vid, sysid=vid, link="alive", armed=True, mode="AUTO_LOITER",
                 landed=False, position_enu_m=(vid * 3.0, 0.0, 10.0), velocity_enu_mps=(0, 0, 0),
-                tilt_rad=0.01, data_age_s=0.01, autopilot=12, vehicle_type=2,
+                tilt_rad=0.01, data_age_s=0.01, autopilot=12, vehicle_type=2, landed_state=2,
                 rates_hz={"ATTITUDE_QUATERNION": 99.0, "LOCAL_POSITION_NED": 98.0})
     base.update(kw)
     return VehicleStatus(**base)
@@ -48,6 +48,7 @@ class World:
         self.m = machine
         self.t = 0.0
         self.v = {vid: status(vid, armed=not on_ground, landed=on_ground,
+                              landed_state=1 if on_ground else 2,
                               position_enu_m=(vid * 3.0, 0.0, 0.0 if on_ground else 10.0))
                   for vid in machine.vehicle_ids}
         self.sent: list[tuple[int, Cmd]] = []
@@ -66,11 +67,14 @@ class World:
                     s = dataclasses.replace(s, mode="AUTO_LOITER")
                 elif c.cmd is Cmd.LAND:
                     s = dataclasses.replace(s, mode="AUTO_LAND", landed=True, armed=False,
+                                            landed_state=1,
                                             position_enu_m=(s.position_enu_m[0], 0.0, 0.0))
                 elif c.cmd is Cmd.ARM:
                     s = dataclasses.replace(s, armed=True)
+                elif c.cmd is Cmd.ARM_MODE:
+                    s = dataclasses.replace(s, mode="AUTO_LOITER")
                 elif c.cmd is Cmd.TAKEOFF:
-                    s = dataclasses.replace(s, landed=False, mode="AUTO_LOITER",
+                    s = dataclasses.replace(s, landed=False, mode="AUTO_LOITER", landed_state=2,
                                             position_enu_m=(s.position_enu_m[0], 0.0, c.altitude_m))
                 elif c.cmd is Cmd.DISARM:
                     s = dataclasses.replace(s, armed=False)
@@ -276,6 +280,197 @@ def test_never_offboard_without_setpoints_under_random_failures(events):
 
 
 # --- safety ------------------------------------------------------------------------------------
+
+
+# --- arming, takeoff and "did the vehicles follow" (issue 9) ------------------------------------
+
+
+class Answering(World):
+    """World whose ARM answers come from a script: (ok, MAV_RESULT name, STATUSTEXT) per
+    attempt; OFFBOARD is acknowledged but, for vehicles in `never_offboard`, never shown; the
+    formation error is what `error_m(t)` says."""
+
+    def __init__(self, machine: MissionMachine, arm_answers, **kw) -> None:
+        super().__init__(machine, **kw)
+        self.arm_answers = list(arm_answers)
+        self.arm_times: list[float] = []
+        self.never_offboard: set[int] = set()
+        self.error_m = lambda t: math.nan
+
+    def apply(self, cmds) -> None:
+        for c in cmds:
+            if c.cmd is Cmd.ARM:
+                self.sent.append((c.vehicle_id, c.cmd))
+                self.arm_times.append(self.t)
+                ok, result, text = (self.arm_answers.pop(0) if self.arm_answers
+                                    else (True, "", ""))
+                if ok:
+                    self.v[c.vehicle_id] = dataclasses.replace(self.v[c.vehicle_id], armed=True)
+                elif text:
+                    self.v[c.vehicle_id] = dataclasses.replace(self.v[c.vehicle_id],
+                                                               status_text=text)
+                self.apply(self.m.on_result(CommandResult(
+                    c.vehicle_id, c.cmd, ok, "" if ok else f"{result}: {text}", (),
+                    "" if ok else result, text)))
+            elif c.cmd is Cmd.OFFBOARD and c.vehicle_id in self.never_offboard:
+                self.sent.append((c.vehicle_id, c.cmd))
+                self.apply(self.m.on_result(CommandResult(c.vehicle_id, c.cmd, True)))
+            else:
+                super().apply([c])
+
+    def tick(self, dt: float = 0.05) -> None:
+        self.t += dt
+        t = self.m.formation_time_s(self.t)
+        self.apply(self.m.on_tick(self.t, list(self.v.values()),
+                                  self.error_m(t) if t is not None else math.nan))
+
+
+def one_vehicle(rules: SafetyRules = RULES, **plan) -> MissionMachine:
+    return MissionMachine(MissionPlan(duration_s=plan.pop("duration_s", 5.0), rules=rules,
+                                      **plan), (1,))
+
+
+def test_px4_left_in_offboard_disarmed_is_put_in_hold_before_arming():
+    # GIVEN a PX4 vehicle on the ground in OFFBOARD, disarmed (PX4 v1.16.0 after a failsafe
+    # landing: arming is refused there)
+    m = one_vehicle()
+    w = Answering(m, [], on_ground=True)
+    w.v[1] = dataclasses.replace(w.v[1], mode="OFFBOARD")
+    w.run(30.0)
+    # THEN Hold is commanded first, then arming, then the takeoff
+    cmds = [c for _, c in w.sent]
+    assert cmds[:4] == [Cmd.CONFIGURE, Cmd.ARM_MODE, Cmd.ARM, Cmd.TAKEOFF], cmds
+    assert m.outcome.exit_code == EXIT_OK, m.outcome
+
+
+def test_arming_waits_for_the_px4_prearm_bit_then_arms_once():
+    m = one_vehicle()
+    w = Answering(m, [], on_ground=True)
+    w.v[1] = dataclasses.replace(w.v[1], prearm_ok=False)
+    w.run(4.0)
+    assert Cmd.ARM not in [c for _, c in w.sent]
+    assert "vehicle 1 (sysid 1): waiting for its pre-arm checks (SYS_STATUS)" in m.notes
+    w.v[1] = dataclasses.replace(w.v[1], prearm_ok=True)
+    w.run(1.0)
+    assert [c for _, c in w.sent].count(Cmd.ARM) == 1
+
+
+def test_temporarily_rejected_arming_is_retried_at_the_retry_rate_until_armed():
+    # GIVEN PX4 refusing twice (its first 3 s after boot), then arming
+    refusal = (False, "TEMPORARILY_REJECTED", 'CRITICAL "Arming denied: Resolve system health '
+               'failures first"')
+    m = one_vehicle(arm_retry_s=1.0)
+    w = Answering(m, [refusal, refusal], on_ground=True)
+    w.run(30.0)
+    # THEN three attempts, one per arm_retry_s, and the flight goes on
+    assert len(w.arm_times) == 3
+    gaps = [b - a for a, b in zip(w.arm_times, w.arm_times[1:], strict=False)]
+    assert all(1.0 - 1e-9 <= g < 1.0 + 0.05 + 1e-9 for g in gaps), gaps  # on 50 ms ticks
+    assert m.outcome.exit_code == EXIT_OK, m.outcome
+
+
+def test_arming_gives_up_after_arm_timeout_quoting_the_latest_statustext():
+    text = 'CRITICAL "Arming denied: Resolve system health failures first"'
+    m = one_vehicle(arm_timeout_s=3.0, arm_retry_s=1.0)
+    w = Answering(m, [(False, "TEMPORARILY_REJECTED", text)] * 100, on_ground=True)
+    w.run(10.0)
+    assert m.outcome.exit_code == EXIT_ABORTED
+    assert m.outcome.reason.startswith(
+        "not every vehicle armed within 3 s (fly.arm_timeout_s):\n  vehicle 1 (sysid 1): not "
+        "armed after 3 attempts, last answer TEMPORARILY_REJECTED, mode AUTO_LOITER; latest "
+        f"STATUSTEXT: {text}"), m.outcome.reason
+    assert Cmd.TAKEOFF not in [c for _, c in w.sent]
+
+
+def test_a_final_arming_refusal_is_not_retried():
+    m = one_vehicle()
+    w = Answering(m, [(False, "DENIED", 'CRITICAL "Arming denied: not landed"')], on_ground=True)
+    w.run(10.0)
+    assert m.outcome.exit_code == EXIT_ABORTED and len(w.arm_times) == 1
+    assert m.outcome.reason == 'vehicle 1: arm failed: DENIED: CRITICAL "Arming denied: not landed"'
+
+
+def test_takeoff_is_judged_by_the_height_above_home_not_the_ekf_origin_z():
+    # GIVEN a vehicle whose EKF origin is 2 m above the ground it takes off from: at 2.5 m above
+    # home its local z reads 0.5 m (the check of issue 9 compared that with 2.5 m)
+    # (no geofence: a box in the team frame means nothing in this vehicle's own frame)
+    m = one_vehicle(dataclasses.replace(RULES, geofence_min_enu_m=None, geofence_max_enu_m=None),
+                    takeoff_altitude_m=2.5)
+    w = Answering(m, [], on_ground=True)
+    w.v[1] = dataclasses.replace(w.v[1], position_enu_m=(3.0, 0.0, -2.0))
+    real_apply = World.apply
+
+    def apply(cmds) -> None:
+        for c in cmds:
+            real_apply(w, [c])
+            if c.cmd is Cmd.TAKEOFF:
+                w.v[1] = dataclasses.replace(w.v[1], position_enu_m=(3.0, 0.0, 0.5),
+                                             height_above_home_m=2.45)
+    w.apply = apply
+    w.run(30.0)
+    assert m.outcome.exit_code == EXIT_OK, m.outcome
+    assert "phase prime" in m.notes
+
+
+def test_takeoff_not_in_air_times_out_naming_height_landed_state_and_mode():
+    m = one_vehicle(takeoff_timeout_s=2.0, takeoff_tolerance_m=0.2)
+    w = Answering(m, [], on_ground=True)
+    real_apply = World.apply
+
+    def apply(cmds) -> None:
+        for c in cmds:
+            real_apply(w, [c])
+            if c.cmd is Cmd.TAKEOFF:  # still climbing: landed state TAKEOFF, 1.2 m
+                w.v[1] = dataclasses.replace(w.v[1], landed_state=3, mode="AUTO_TAKEOFF",
+                                             height_above_home_m=1.2)
+    w.apply = apply
+    w.run(10.0)
+    assert m.outcome.exit_code == EXIT_ABORTED
+    assert m.outcome.reason.startswith(
+        "vehicles [1] did not complete the takeoff to 2.5 m (tolerance 0.2 m) within 2 s:\n  "
+        "vehicle 1 (sysid 1): 1.20 m above its takeoff point (home), landed state TAKEOFF (need "
+        "IN_AIR), mode AUTO_TAKEOFF (need AUTO_LOITER)"), m.outcome.reason
+
+
+def test_a_formation_whose_error_does_not_fall_is_not_complete():
+    # GIVEN vehicles that acknowledge everything but whose formation error stays at ~5.6 m
+    # (issue 9: actuators mode on PX4 1.16, "formation complete" with 5.4-6.1 m throughout)
+    m = one_vehicle(duration_s=60.0, formation_check_s=10.0, formation_max_error_m=1.0,
+                    formation_max_fraction=0.5)
+    w = Answering(m, [])
+    w.error_m = lambda t: 6.0 - 0.04 * t
+    w.run(80.0)
+    # THEN the flight stops at t = 10 s with exit 1, naming the rule and the figures
+    assert m.outcome.exit_code == EXIT_ABORTED
+    assert m.outcome.reason.startswith(
+        "the vehicles do not follow the formation: error 5.60 m at t = 10.0 s > 3.00 m = "
+        "max(1 m, 0.5 x 6.00 m at t = 0) (fly.formation_check)"), m.outcome.reason
+
+
+def test_a_formation_that_converges_as_the_law_predicts_completes():
+    m = one_vehicle(duration_s=30.0)
+    w = Answering(m, [])
+    w.error_m = lambda t: 6.0 * math.exp(-t / 2.0) + 0.1
+    w.run(60.0)
+    assert m.outcome.exit_code == EXIT_OK and m.outcome.reason == "formation complete"
+
+
+@pytest.mark.parametrize("duration_s", [2.0, 30.0])
+def test_a_vehicle_that_never_shows_the_offboard_mode_fails_the_flight(duration_s):
+    # GIVEN a vehicle that acknowledges OFFBOARD but keeps reporting AUTO_LOITER
+    m = one_vehicle(duration_s=duration_s, mode_timeout_s=3.0)
+    w = Answering(m, [])
+    w.never_offboard.add(1)
+    w.run(60.0)
+    # THEN short flights fail at their end, longer ones after mode_timeout_s + 2 s; never exit 0
+    assert m.outcome.exit_code == EXIT_ABORTED
+    if duration_s < 5.0:
+        assert m.outcome.reason == ("vehicle 1 (sysid 1): never reported OFFBOARD during the "
+                                    "formation (reports AUTO_LOITER)")
+    else:
+        assert m.outcome.reason == ("vehicle 1 (sysid 1): never reported OFFBOARD in 5.0 s of "
+                                    "formation (reports AUTO_LOITER): it does not fly the "
+                                    "setpoints")
 
 
 def test_preflight_names_every_problem():
