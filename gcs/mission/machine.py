@@ -220,6 +220,7 @@ class MissionMachine:
     _interrupts: int = 0
     _held: tuple[int, ...] = ()  # vehicles sent to hold in the HOLD phase
     _arming: tuple[int, ...] = ()  # vehicles that arm and take off
+    _waiting_ready: bool = False  # PREFLIGHT waits for vehicles on the ground not ready yet
     _formation_error_m: float = math.nan  # latest, from the composition root
     _error_t0: float | None = None  # formation error at the formation start
 
@@ -456,6 +457,8 @@ class MissionMachine:
         for s in team:
             if s.in_air and not s.armed:
                 problems.append(Problem(s.vehicle_id, f"{s.name}: in the air but not armed"))
+        if problems and self._not_ready_yet(problems):
+            return []
         if problems:
             self._begin_stop(problems, EXIT_ABORTED)
             return self._drive()
@@ -467,6 +470,31 @@ class MissionMachine:
             self._enter(Phase.ARM)
             return self._drive()
         return self._to_prime()
+
+    def _not_ready_yet(self, problems: list[Problem]) -> bool:
+        """Wait (True) while every problem is a vehicle on the ground not ready yet (a stream or
+        its position estimate missing: ArduPilot sends LOCAL_POSITION_NED only once its EKF uses
+        GPS, ~41.6 s after boot), up to arm_timeout_s; then append, per vehicle, a problem
+        quoting its latest STATUSTEXT."""
+        ids = {p.vehicle_id for p in problems}
+        ground = all(p.kind == "ready" and p.vehicle_id is not None
+                     and self._v[p.vehicle_id].status is not None
+                     and self._v[p.vehicle_id].status.landed is True for p in problems)
+        if not ground:
+            return False
+        if self._elapsed() < self.plan.arm_timeout_s:
+            if not self._waiting_ready:
+                self._waiting_ready = True
+                self._note("waiting for the vehicles to be ready: "
+                           + "; ".join(p.text for p in problems))
+            return True
+        for vid in sorted(i for i in ids if i is not None):
+            s = self._v[vid].status
+            text = s.status_text if s is not None and s.status_text else "none"
+            problems.append(Problem(vid, f"{s.name if s else vid}: not ready within "
+                                         f"{self.plan.arm_timeout_s:g} s (fly.arm_timeout_s); "
+                                         f"latest STATUSTEXT: {text}"))
+        return False
 
     def _read_params(self, team: Sequence[VehicleStatus]) -> list[Command]:
         """Fix each live vehicle's profile from its HEARTBEAT; ask once for the parameters the

@@ -29,7 +29,9 @@ class Problem:
 
     vehicle_id: int | None
     text: str
-    kind: str = "check"  # check | link | geofence | tilt | mode
+    kind: str = "check"  # check | ready | link | geofence | tilt | mode | follow
+    # ready: not yet (a stream or the position estimate still missing, e.g. ArduPilot before its
+    # EKF uses GPS); preflight waits for it on the ground, up to fly.arm_timeout_s
 
     def __str__(self) -> str:
         return self.text
@@ -183,9 +185,10 @@ def preflight_problems(team: Sequence[VehicleStatus], rules: SafetyRules) -> lis
             got = s.rates_hz.get(kind, 0.0)
             if not got >= RATE_TOLERANCE * need:
                 out.append(Problem(s.vehicle_id, f"{n}: {kind} at {got:.1f} Hz, need >= "
-                                                 f"{RATE_TOLERANCE * need:g} Hz (asked {need:g})"))
+                                                 f"{RATE_TOLERANCE * need:g} Hz (asked {need:g})",
+                                   "ready"))
         if not all(math.isfinite(x) for x in (*s.position_enu_m, *s.velocity_enu_mps)):
-            out.append(Problem(s.vehicle_id, f"{n}: no valid position/velocity"))
+            out.append(Problem(s.vehicle_id, f"{n}: no valid position/velocity", "ready"))
             continue
         q = tilt_problem(s, rules)
         if q is not None:

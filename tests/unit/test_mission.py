@@ -473,6 +473,46 @@ def test_a_vehicle_that_never_shows_the_offboard_mode_fails_the_flight(duration_
                                     "setpoints")
 
 
+def test_preflight_waits_for_a_ground_vehicle_whose_position_is_not_there_yet():
+    # GIVEN a vehicle on the ground without a position estimate yet (ArduPilot before its EKF
+    # uses GPS sends no LOCAL_POSITION_NED)
+    m = one_vehicle()
+    w = Answering(m, [], on_ground=True)
+    w.v[1] = dataclasses.replace(w.v[1], position_enu_m=(math.nan,) * 3, rates_hz={})
+    w.run(5.0)
+    # THEN nothing is commanded yet, and the note says what it waits for
+    assert [c for _, c in w.sent] == [Cmd.CONFIGURE] and m.phase is Phase.PREFLIGHT
+    assert ("waiting for the vehicles to be ready: vehicle 1 (sysid 1): ATTITUDE_QUATERNION at "
+            "0.0 Hz, need >= 50 Hz (asked 100)") in " ".join(m.notes)
+    # WHEN the estimate arrives THEN the flight goes on
+    w.v[1] = dataclasses.replace(w.v[1], position_enu_m=(3.0, 0.0, 0.0),
+                                 rates_hz={"ATTITUDE_QUATERNION": 99.0, "LOCAL_POSITION_NED": 98.0})
+    w.run(30.0)
+    assert m.outcome.exit_code == EXIT_OK, m.outcome
+
+
+def test_preflight_gives_up_on_a_vehicle_not_ready_after_arm_timeout():
+    m = one_vehicle(arm_timeout_s=2.0)
+    w = Answering(m, [], on_ground=True)
+    w.v[1] = dataclasses.replace(w.v[1], position_enu_m=(math.nan,) * 3,
+                                 status_text='CRITICAL "Arm: Need Position Estimate"')
+    w.run(10.0)
+    assert m.outcome.exit_code == EXIT_ABORTED
+    assert m.outcome.reason == (
+        "vehicle 1 (sysid 1): no valid position/velocity; vehicle 1 (sysid 1): not ready within "
+        '2 s (fly.arm_timeout_s); latest STATUSTEXT: CRITICAL "Arm: Need Position Estimate"')
+    assert Cmd.ARM not in [c for _, c in w.sent]
+
+
+def test_preflight_does_not_wait_for_a_vehicle_in_the_air():
+    m = one_vehicle()
+    w = Answering(m, [])
+    w.v[1] = dataclasses.replace(w.v[1], position_enu_m=(math.nan,) * 3)
+    w.run(3.0)
+    assert m.outcome.exit_code == EXIT_ABORTED
+    assert m.outcome.reason == "vehicle 1 (sysid 1): no valid position/velocity"
+
+
 def test_preflight_names_every_problem():
     team = [status(1, autopilot=7), status(2, vehicle_type=13), status(3, sysid_mismatch=7),
             status(4, link="waiting"), status(5, tilt_rad=1.2),

@@ -1,0 +1,293 @@
+"""`gcs fly` judged by what the vehicles report (issue 9, point 1 and the takeoff of point 4):
+the real `gcs` CLI against real `vehicle-emu` processes of the px4 and ardupilot personalities
+over 127.0.0.1 UDP, each failure of the issue reproduced on the personality, its message pinned.
+
+Set-up as in test_fly_emulator.py (the px4 fleet on the team file's ports, `origin: shared`) and
+test_fly_ardupilot.py (one process per copter with a forced bind and the team's
+message-intervals file, the crutches that test file documents; here the copters boot on a
+quarter of the recorded timeline, EMU_BOOT_SCALE=0.25, so GUIDED arming is refused for ~10 s).
+Flights are short (formation 3-12 s): what is tested is the sequence, not the figures.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import yaml
+from pymavlink import mavutil
+from test_fly_emulator import Gcs, emulators
+
+from vehicle_emulator.testing import MavClient, free_udp_port, free_udp_port_block, run_emulator
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
+
+ROOT = Path(__file__).resolve().parents[2]
+OFFBOARD, HOLD = 6 << 16, (4 << 16) | (3 << 24)
+COMMAND_LINE = re.compile(r"command (\d+) \(([^)]*)\) -> (\w+)")
+
+
+def px4_team(tmp: Path, *, duration_s: float, ground: bool = True, name: str = "team",
+             origins: dict[int, list[float]] | None = None, fly: dict | None = None,
+             faults: list | None = None, params: dict[int, dict] | None = None) -> Path:
+    """configs/square4.yaml on free ports, rates mode, the px4 personality, vehicles on the
+    ground under their team-file positions (``ground``) or in the air there."""
+    gcs_base, bind_base = free_udp_port_block(4), free_udp_port_block(4)
+    data = yaml.safe_load((ROOT / "configs" / "square4.yaml").read_text())
+    data["name"] = name
+    data["mission"]["duration_s"] = duration_s
+    data["controller"]["mode"] = "rates"
+    data["fly"]["geofence"]["min_enu_m"][2] = 0.5
+    data["fly"].update(fly or {})
+    data["faults"] = faults or []
+    data["emulator"] = {"autopilot": "px4", "origin": "shared"}
+    for k, v in enumerate(data["vehicles"]):
+        v["link"] = {"local_port": gcs_base + k, "remote_port": bind_base + k}
+        if ground:
+            v["initial"]["position_enu_m"][2] = 0.0
+        if origins and v["id"] in origins:
+            v["emulator"] = {"origin_enu_m": origins[v["id"]]}
+    path = tmp / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def fly_once(team: Path, out: Path, *args: str, timeout_s: float = 200) -> tuple[int, str, str]:
+    gcs = Gcs(team, out, "--mode", "rates", *args)
+    code, stdout = gcs.finish(timeout_s)
+    return code, stdout, gcs.log_path.read_text()
+
+
+def commands_sent(tlog: Path, sysid: int) -> list[tuple[int, float, float]]:
+    """(command, param2, param3) of every COMMAND_LONG the GCS sent to `sysid`, in order."""
+    conn = mavutil.mavlink_connection(str(tlog))
+    out = []
+    while (msg := conn.recv_match(type="COMMAND_LONG")) is not None:
+        row = (msg.command, msg.param2, msg.param3)
+        if msg.target_system == sysid and msg.command in (176, 400, 22, 21) and (
+                not out or out[-1] != row):
+            out.append(row)
+    return out
+
+
+def test_px4_from_the_ground_flown_twice_without_restarting_the_vehicles(tmp_path: Path) -> None:
+    # GIVEN Scenario I's team on the ground, px4 personality (PX4 v1.16.0: arming refused for
+    # ~3 s after boot, two ACKs per DO_SET_MODE, HEARTBEAT at 1 Hz); gcs fly starts with them
+    team = px4_team(tmp_path, duration_s=12.0)
+    with emulators(team, 0, tmp_path):
+        code1, out1, log1 = fly_once(team, tmp_path / "first")
+        # THEN the first flight waits for the pre-arm checks, flies, lands, disarms: exit 0
+        assert code1 == 0, log1[-3000:]
+        assert "gcs fly: done: formation complete (exit 0)" in out1
+        assert "vehicle 1 (sysid 1): waiting for its pre-arm checks (SYS_STATUS)" in log1
+        # AND every mode change and the arming were confirmed (no ACK left unread)
+        for k in range(1, 5):
+            assert f"vehicle {k}: arm ok" in log1 and f"vehicle {k}: offboard ok" in log1
+        # WHEN flown again against the same vehicles (landed in Land, disarmed)
+        code2, out2, log2 = fly_once(team, tmp_path / "second")
+        # THEN the second flight puts each in Hold, arms, flies and lands: exit 0 again
+        assert code2 == 0, log2[-3000:]
+        assert "gcs fly: done: formation complete (exit 0)" in out2
+        for k in range(1, 5):
+            sent = commands_sent(tmp_path / "second" / "flight.tlog", k)
+            assert sent[:3] == [(176, 4.0, 3.0), (400, 0.0, 0.0), (22, 0.0, 0.0)], sent
+    # AND the flight reports carry what the vehicles said
+    report = Gcs(team, tmp_path / "second").report()
+    texts = [e["text"] for e in report["extra"]["statustext"]["1"]]
+    assert "Armed by external command" in texts and "Mode: Offboard" in texts
+
+
+def test_px4_left_in_offboard_by_a_failsafe_landing_is_armed_in_hold(tmp_path: Path) -> None:
+    # GIVEN a flight whose ground station dies in the formation: PX4's offboard-loss failsafe
+    # (Position, no RC: descend) lands every vehicle, "Disarmed by landing", and PX4 v1.16.0
+    # returns to OFFBOARD, disarmed, where it refuses to arm (issue 9's second flight)
+    team = px4_team(tmp_path, duration_s=60.0)
+    with emulators(team, 0, tmp_path):
+        gcs = Gcs(team, tmp_path / "killed", "--mode", "rates")
+        gcs.wait_for("mission: phase formation", 120)
+        gcs.wait_for("vehicle 4: offboard ok", 10)
+        gcs.proc.kill()
+        gcs.proc.wait(10)
+        ports = [v["link"]["local_port"] for v in yaml.safe_load(team.read_text())["vehicles"]]
+        for k, port in enumerate(ports, start=1):
+            client = MavClient(port, target_system=k)
+            try:
+                client.wait("HEARTBEAT", 60.0, lambda m: m.custom_mode == OFFBOARD
+                            and not m.base_mode & 128 and m.system_status == 0)
+            finally:
+                client.close()
+        # WHEN gcs fly is run again
+        code, out, log = fly_once(team, tmp_path / "again")
+        # THEN each vehicle is put in Hold (confirmed) before arming, and the flight completes
+        assert code == 0, log[-3000:]
+        for k in range(1, 5):
+            assert f"vehicle {k}: arm_mode ok" in log
+            sent = commands_sent(tmp_path / "again" / "flight.tlog", k)
+            assert sent[:2] == [(176, 4.0, 3.0), (400, 0.0, 0.0)], sent
+        # AND no arming attempt was refused: it was not tried in OFFBOARD
+        assert "Arming denied" not in log
+
+
+def test_px4_takeoff_is_judged_by_height_above_home_not_the_ekf_origin_z(tmp_path: Path) -> None:
+    # GIVEN vehicles 2 and 3 whose EKF origin is 2 m above the ground they take off from: at
+    # 2.5 m above home their LOCAL_POSITION_NED reads 0.5 m up (issue 9: "vehicles [2, 3] did not
+    # reach 2.5 m within 60 s", the check compared that z with the home-relative altitude)
+    origins = {2: [3.0, -4.0, 2.0], 3: [-5.0, -4.0, 2.0]}
+    team = px4_team(tmp_path, duration_s=3.0, origins=origins,
+                    fly={"takeoff_timeout_s": 20.0,
+                         "geofence": {"min_enu_m": [-60.0, -60.0, -5.0],
+                                      "max_enu_m": [60.0, 60.0, 60.0]}})
+    with emulators(team, 0, tmp_path):
+        code, out, log = fly_once(team, tmp_path / "run")
+    # THEN every takeoff is complete from the vehicles' own height above home: exit 0
+    assert code == 0, log[-3000:]
+    assert "mission: phase prime" in log and "did not complete the takeoff" not in log
+
+
+def test_px4_refusing_offboard_after_an_accepted_ack_ends_with_exit_1(tmp_path: Path) -> None:
+    # GIVEN vehicle 3 with COM_OF_LOSS_T = 0: PX4 v1.16.0 then answers OFFBOARD with ACCEPTED
+    # (its MAVLink receiver) and TEMPORARILY_REJECTED (its commander), as it did to actuator
+    # setpoints; the first ACK alone made issue 9's flight "complete"
+    team = px4_team(tmp_path, duration_s=20.0, ground=False)
+    port = yaml.safe_load(team.read_text())["vehicles"][2]["link"]["local_port"]
+    with emulators(team, 0, tmp_path):
+        client = MavClient(port, target_system=3)
+        try:
+            client.wait("HEARTBEAT", 60.0)
+            assert client.set_param("COM_OF_LOSS_T", 0.0).param_value == 0.0
+        finally:
+            client.close()
+        code, out, log = fly_once(team, tmp_path / "run")
+    # THEN the refusal wins, the flight stops with exit 1 and the line names what was seen
+    assert code == 1, log[-3000:]
+    assert ("vehicle 3 (sysid 3): MAV_CMD_DO_SET_MODE (176) for mode OFFBOARD refused: "
+            "HEARTBEAT reports AUTO_LOITER, armed; COMMAND_ACKs seen: ACCEPTED, "
+            "TEMPORARILY_REJECTED; the vehicle said CRITICAL \"Switching to Offboard is "
+            "currently not available\"") in out + log
+    assert "formation complete" not in out
+
+
+def test_px4_vehicle_that_cannot_follow_stops_the_flight_by_the_formation_rule(
+        tmp_path: Path) -> None:
+    # GIVEN UAV 2 (1.2 kg) with its rotors at 30 % from the formation start: 9.6 N of thrust
+    # for 11.8 N of weight, it sinks to the ground while its mode, link and attitude look fine
+    weak = [{"kind": "motor_efficiency", "vehicle": 2, "at_s": 0.0, "motor": m,
+             "efficiency": 0.3} for m in (1, 2, 3, 4)]
+    team = px4_team(tmp_path, duration_s=40.0, ground=False, faults=weak,
+                    fly={"geofence": {"min_enu_m": [-60.0, -60.0, -5.0],
+                                      "max_enu_m": [60.0, 60.0, 60.0]},
+                         "formation_check": {"after_s": 10.0}})
+    with emulators(team, 0, tmp_path):
+        code, out, log = fly_once(team, tmp_path / "run")
+    # THEN the flight stops at t = 10 s by the rule of docs/gcs.md, exit 1
+    assert code == 1, log[-3000:]
+    match = re.search(r"the vehicles do not follow the formation: error ([\d.]+) m at t = "
+                      r"10\.0 s > ([\d.]+) m = max\(1 m, 0\.5 x ([\d.]+) m at t = 0\) "
+                      r"\(fly\.formation_check\)", out + log)
+    assert match is not None, log[-3000:]
+    assert float(match[1]) > float(match[2]) >= 1.0
+
+
+# --- ArduPilot ------------------------------------------------------------------------------------
+
+INTERVALS_FILE = "0 200\n245 200\n"  # as test_fly_ardupilot.py (the team's SITL flights)
+
+
+@contextlib.contextmanager
+def copters(tmp: Path, n: int = 2, boot_scale: float = 0.25) -> Iterator[list]:
+    """`vehicle-emu --autopilot ardupilot` per vehicle, GUID_OPTIONS 8, booting on
+    `boot_scale` of the recorded timeline (0.25: GUIDED armable after ~10.4 s), bound ports."""
+    intervals = tmp / "message-intervals-chan0.txt"
+    intervals.write_text(INTERVALS_FILE)
+    with contextlib.ExitStack() as stack:
+        yield [stack.enter_context(run_emulator(
+            ["--id", str(k + 1), "--autopilot", "ardupilot", "--param", f"EMU_BOOT_SCALE={boot_scale}",
+             "--param", "GUID_OPTIONS=8", "--message-intervals", str(intervals)],
+            remote_port=free_udp_port(), log_dir=str(tmp))) for k in range(n)]
+
+
+def ardupilot_team(tmp: Path, emus: list, fly: dict | None = None) -> Path:
+    """square4's first vehicles (one edge if two), rates mode, 2 s, linked to the copters."""
+    data = yaml.safe_load((ROOT / "configs" / "square4.yaml").read_text())
+    data["name"] = "ardupilot2"
+    data["vehicles"] = data["vehicles"][:len(emus)]
+    data["graph"]["edges"] = [[1, 2]] if len(emus) == 2 else []
+    data["mission"]["duration_s"] = 2.0
+    data["fly"].update(fly or {})
+    for v, emu in zip(data["vehicles"], emus, strict=True):
+        v["link"] = {"local_port": emu.remote_port, "remote_host": "127.0.0.1",
+                     "remote_port": emu.bind_port}
+    path = tmp / "team.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def ardupilot_fly(team: Path, out: Path) -> tuple[int, str, str]:
+    proc = subprocess.run(
+        [sys.executable, "-m", "gcs.cli", "fly", "--team", str(team), "--out", str(out),
+         "--no-figures", "--status", "off", "--log-level", "INFO", "--mode", "rates"],
+        stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=150,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"}, check=False)
+    return proc.returncode, proc.stdout, proc.stderr
+
+
+def received(emu, since: int = 0) -> list[tuple[str, float, str]]:
+    """(command, param1 or mode, result) of what the copter was sent, from its log."""
+    out = []
+    for cmd, params, result in COMMAND_LINE.findall(emu.log_text()[since:]):
+        p = [float(x) for x in params.split(", ")]
+        if cmd == "176":
+            out.append(("mode", p[1], result))
+        elif cmd == "400":
+            out.append(("arm" if p[0] == 1.0 else "disarm", p[1], result))
+        elif cmd == "22":
+            out.append(("takeoff", p[6], result))
+    return out
+
+
+def test_ardupilot_waits_for_its_ekf_and_flies_twice_without_restarting(tmp_path: Path) -> None:
+    # GIVEN two copters straight after boot: no LOCAL_POSITION_NED and "Arm: ..." pre-arm
+    # failures until the EKF uses GPS, ~10.4 s here (41.6 s after a real boot)
+    with copters(tmp_path) as emus:
+        team = ardupilot_team(tmp_path, emus)
+        code1, out1, err1 = ardupilot_fly(team, tmp_path / "first")
+        # THEN gcs fly waits for them (not a refusal), arms once each, and the flight completes
+        assert code1 == 0, err1[-3000:]
+        assert "gcs fly: done: formation complete (exit 0)" in out1
+        assert ("mission: waiting for the vehicles to be ready: vehicle 1 (sysid 1): "
+                "LOCAL_POSITION_NED at 0.0 Hz") in err1
+        assert "EKF3 IMU0 is using GPS" in err1  # the vehicles' STATUSTEXT, logged
+        for emu in emus:
+            assert [r for c, _, r in received(emu) if c == "arm"] == ["ACCEPTED"]
+        mark = [len(e.log_text()) for e in emus]
+        # WHEN flown again: the copters sit in LAND, disarmed (LAND is not armable)
+        code2, out2, err2 = ardupilot_fly(team, tmp_path / "second")
+        # THEN GUIDED first, one arming, the same flight: exit 0
+        assert code2 == 0, err2[-3000:]
+        for emu, since in zip(emus, mark, strict=True):
+            seq = [(c, v) for c, v, _ in received(emu, since)]
+            assert seq == [("mode", 4.0), ("arm", 0.0), ("takeoff", 2.5), ("mode", 17.0),
+                           ("mode", 20.0), ("mode", 9.0)], seq
+
+
+def test_ardupilot_that_is_not_ready_in_time_fails_quoting_its_statustext(tmp_path: Path) -> None:
+    # GIVEN a copter at the real boot timeline (a position estimate only after 41.6 s) and a 5 s
+    # fly.arm_timeout_s
+    with copters(tmp_path, n=1, boot_scale=1.0) as emus:
+        team = ardupilot_team(tmp_path, emus, fly={"arm_timeout_s": 5.0})
+        code, out, err = ardupilot_fly(team, tmp_path / "run")
+        sent = received(emus[0])
+    # THEN exit 1 after 5 s, naming what is missing and quoting the vehicle's latest STATUSTEXT
+    assert code == 1, err[-3000:]
+    assert re.search(r"gcs fly: ABORTED: vehicle 1 \(sysid 1\): LOCAL_POSITION_NED at 0\.0 Hz, "
+                     r"need >= 50 Hz \(asked 100\); vehicle 1 \(sysid 1\): no valid "
+                     r"position/velocity; vehicle 1 \(sysid 1\): not ready within 5 s "
+                     r"\(fly\.arm_timeout_s\); latest STATUSTEXT: \w+ \"[^\"]+\"", err), err[-2000:]
+    # AND it was never commanded (no mode change, no arming)
+    assert sent == [], sent
