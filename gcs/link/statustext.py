@@ -15,7 +15,8 @@ import logging
 import math
 from collections import deque
 from dataclasses import dataclass
-from enum import IntEnum
+
+from pymavlink.dialects.v20 import common as mavlink
 
 logger = logging.getLogger(__name__)
 
@@ -27,17 +28,10 @@ CHUNK_TIMEOUT_S = 2.0
 KEEP = 500
 
 
-class MavSeverity(IntEnum):
-    """MAV_SEVERITY."""
-
-    EMERGENCY = 0
-    ALERT = 1
-    CRITICAL = 2
-    ERROR = 3
-    WARNING = 4
-    NOTICE = 5
-    INFO = 6
-    DEBUG = 7
+#: MAV_SEVERITY names from the MAVLink dialect: 'CRITICAL' for 2.
+SEVERITY_NAMES = {k: v.name.removeprefix("MAV_SEVERITY_")
+                  for k, v in mavlink.enums["MAV_SEVERITY"].items() if k < 8}
+WARNING_SEVERITY, INFO_SEVERITY = 4, 6
 
 
 @dataclass(frozen=True, slots=True)
@@ -50,10 +44,7 @@ class StatusText:
 
     @property
     def severity_name(self) -> str:
-        try:
-            return MavSeverity(self.severity).name
-        except ValueError:
-            return f"SEVERITY({self.severity})"
+        return SEVERITY_NAMES.get(self.severity, f"SEVERITY({self.severity})")
 
     def quoted(self) -> str:
         """`CRITICAL "Arming denied: Resolve system health failures first"`."""
@@ -74,9 +65,9 @@ def _clean(text: str) -> str:
 
 
 def _log_level(severity: int) -> int:
-    if severity <= MavSeverity.WARNING:
+    if severity <= WARNING_SEVERITY:
         return logging.WARNING
-    return logging.INFO if severity <= MavSeverity.INFO else logging.DEBUG
+    return logging.INFO if severity <= INFO_SEVERITY else logging.DEBUG
 
 
 @dataclass(slots=True)
@@ -99,9 +90,9 @@ class StatusTextLog:
     def feed(self, msg: object, rx_time_s: float) -> StatusText | None:
         """A STATUSTEXT as received; returns the text it completed, if any (never raises)."""
         try:
-            severity = int(getattr(msg, "severity", MavSeverity.INFO))
+            severity = int(getattr(msg, "severity", INFO_SEVERITY))
         except (TypeError, ValueError):
-            severity = MavSeverity.INFO
+            severity = INFO_SEVERITY
         text, nbytes = _text_of(getattr(msg, "text", ""))
         try:
             text_id = int(getattr(msg, "id", 0) or 0)

@@ -5,7 +5,7 @@ and against a scripted peer for a vehicle that acknowledges a mode it never show
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Coroutine
+from collections.abc import Awaitable, Callable, Coroutine
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +43,21 @@ async def set_mode(proxy: VehicleProxy, custom_mode: int, params: list[float], n
         timeout_s=timeout_s)
 
 
+def on_emulator(tmp: Path, *args: str, scenario: Callable[[VehicleProxy], Awaitable[None]]
+                ) -> None:
+    """Run `scenario(proxy)` with a proxy linked to `vehicle-emu --id 1 ARGS` once it is heard."""
+    with run_emulator(["--id", "1", *args], log_dir=str(tmp)) as emu:
+        cfg = VehicleLinkConfig(vehicle_id=1, sysid=1, local_port=emu.remote_port,
+                                remote_port=emu.bind_port)
+
+        async def linked() -> None:
+            async with VehicleProxy(cfg) as proxy:
+                await heard(proxy)
+                await scenario(proxy)
+
+        run(linked())
+
+
 async def heard(proxy: VehicleProxy) -> None:
     async with asyncio.timeout(30.0):
         while proxy.latest("HEARTBEAT") is None:
@@ -51,59 +66,46 @@ async def heard(proxy: VehicleProxy) -> None:
 
 def test_px4_refusal_after_accepted_wins_and_a_shown_mode_is_confirmed(tmp_path: Path) -> None:
     # GIVEN the px4 personality holding in the air (armed), no offboard setpoint ever sent
-    with run_emulator(["--id", "1", "--in-air", "--autopilot", "px4"],
-                      log_dir=str(tmp_path)) as emu:
-        cfg = VehicleLinkConfig(vehicle_id=1, sysid=1, local_port=emu.remote_port,
-                                remote_port=emu.bind_port)
+    async def scenario(proxy: VehicleProxy) -> None:
+        # WHEN OFFBOARD is asked: PX4 v1.16.0 answers ACCEPTED, then TEMPORARILY_REJECTED
+        with pytest.raises(CommandRejectedError) as err:
+            await set_mode(proxy, OFFBOARD, [129.0, 6.0, 0.0], "OFFBOARD")
+        # THEN the refusal wins, and the message names vehicle, mode, report, ACKs, text
+        assert err.value.result == MavResult.TEMPORARILY_REJECTED
+        assert err.value.acks == (MavResult.ACCEPTED, MavResult.TEMPORARILY_REJECTED)
+        assert str(err.value) == (
+            "vehicle 1 (sysid 1): MAV_CMD_DO_SET_MODE (176) for mode OFFBOARD refused: "
+            "HEARTBEAT reports AUTO_LOITER, armed; COMMAND_ACKs seen: ACCEPTED, "
+            "TEMPORARILY_REJECTED; the vehicle said CRITICAL \"Switching to Offboard is "
+            "currently not available\"")
+        # AND with a setpoint first, OFFBOARD is confirmed by a HEARTBEAT showing it
+        proxy.send_rates_thrust([0.0, 0.0, 0.0], 0.5)
+        acks = await set_mode(proxy, OFFBOARD, [129.0, 6.0, 0.0], "OFFBOARD")
+        assert acks == (MavResult.ACCEPTED, MavResult.ACCEPTED)
+        assert proxy.state().mode == "OFFBOARD"
+        # back to Hold (confirmed), so the vehicle is not left without setpoints
+        await set_mode(proxy, HOLD, [129.0, 4.0, 3.0], "AUTO_LOITER")
+        assert proxy.state().mode == "AUTO_LOITER"
+        assert proxy.stats().commands.acks_unexpected == 0
 
-        async def scenario() -> None:
-            async with VehicleProxy(cfg) as proxy:
-                await heard(proxy)
-                # WHEN OFFBOARD is asked: PX4 v1.16.0 answers ACCEPTED, then TEMPORARILY_REJECTED
-                with pytest.raises(CommandRejectedError) as err:
-                    await set_mode(proxy, OFFBOARD, [129.0, 6.0, 0.0], "OFFBOARD")
-                # THEN the refusal wins, and the message names vehicle, mode, report, ACKs, text
-                assert err.value.result == MavResult.TEMPORARILY_REJECTED
-                assert err.value.acks == (MavResult.ACCEPTED, MavResult.TEMPORARILY_REJECTED)
-                assert str(err.value) == (
-                    "vehicle 1 (sysid 1): MAV_CMD_DO_SET_MODE (176) for mode OFFBOARD refused: "
-                    "HEARTBEAT reports AUTO_LOITER, armed; COMMAND_ACKs seen: ACCEPTED, "
-                    "TEMPORARILY_REJECTED; the vehicle said CRITICAL \"Switching to Offboard is "
-                    "currently not available\"")
-                # AND with a setpoint first, OFFBOARD is confirmed by a HEARTBEAT showing it
-                proxy.send_rates_thrust([0.0, 0.0, 0.0], 0.5)
-                acks = await set_mode(proxy, OFFBOARD, [129.0, 6.0, 0.0], "OFFBOARD")
-                assert acks == (MavResult.ACCEPTED, MavResult.ACCEPTED)
-                assert proxy.state().mode == "OFFBOARD"
-                # back to Hold (confirmed), so the vehicle is not left without setpoints
-                await set_mode(proxy, HOLD, [129.0, 4.0, 3.0], "AUTO_LOITER")
-                assert proxy.state().mode == "AUTO_LOITER"
-                assert proxy.stats().commands.acks_unexpected == 0
-
-        run(scenario())
+    on_emulator(tmp_path, "--in-air", "--autopilot", "px4", scenario=scenario)
 
 
 def test_ardupilot_single_ack_mode_change_is_confirmed_by_heartbeat(tmp_path: Path) -> None:
     # GIVEN the ardupilot personality on the ground, booted at once, on a bound port
-    with run_emulator(["--id", "1", "--autopilot", "ardupilot", "--param", "EMU_BOOT_SCALE=0"],
-                      log_dir=str(tmp_path)) as emu:
-        cfg = VehicleLinkConfig(vehicle_id=1, sysid=1, local_port=emu.remote_port,
-                                remote_port=emu.bind_port)
+    async def scenario(proxy: VehicleProxy) -> None:
+        acks = await set_mode(proxy, GUIDED_NOGPS, [1.0, 20.0], "GUIDED_NOGPS")
+        assert acks == (MavResult.ACCEPTED,)
+        assert proxy.state().mode == "GUIDED_NOGPS"
+        # a mode the vehicle refuses (FAILED) names its STATUSTEXT
+        with pytest.raises(CommandRejectedError, match=(
+                r"for mode RTL refused: HEARTBEAT reports GUIDED_NOGPS, disarmed; "
+                r"COMMAND_ACKs seen: FAILED; the vehicle said WARNING \"Mode change to "
+                r"RTL failed: not emulated\"$")):
+            await set_mode(proxy, 6, [1.0, 6.0], "RTL")
 
-        async def scenario() -> None:
-            async with VehicleProxy(cfg) as proxy:
-                await heard(proxy)
-                acks = await set_mode(proxy, GUIDED_NOGPS, [1.0, 20.0], "GUIDED_NOGPS")
-                assert acks == (MavResult.ACCEPTED,)
-                assert proxy.state().mode == "GUIDED_NOGPS"
-                # a mode the vehicle refuses (FAILED) names its STATUSTEXT
-                with pytest.raises(CommandRejectedError, match=(
-                        r"for mode RTL refused: HEARTBEAT reports GUIDED_NOGPS, disarmed; "
-                        r"COMMAND_ACKs seen: FAILED; the vehicle said WARNING \"Mode change to "
-                        r"RTL failed: not emulated\"$")):
-                    await set_mode(proxy, 6, [1.0, 6.0], "RTL")
-
-        run(scenario())
+    on_emulator(tmp_path, "--autopilot", "ardupilot", "--param", "EMU_BOOT_SCALE=0",
+                scenario=scenario)
 
 
 class SilentModePeer(asyncio.DatagramProtocol):
