@@ -493,11 +493,15 @@ ERRORS = [
         r"faults\[0\]\.x: unknown key; allowed keys: kind, vehicle, at_s, fraction",
     ),
     ("faults", {"kind": "mass_drop"}, r"faults: expected a list of faults, got a mapping"),
-    ("fly", [1], r"^<dict>: fly: expected a mapping with keys rates, actuators, start, "),
+    ("fly", [1], r"^<dict>: fly: expected a mapping with keys rates, actuators, attitude, heading, start, "),
     ("fly.rates.tick_hz", 100, r"fly\.rates\.tick_hz: unknown key; did you mean 'tick_rate_hz'"),
     ("fly.rates.tick_rate_hz", 0, r"fly\.rates\.tick_rate_hz: expected a value in \(0, 1000\], "
      r"got 0\.0$"),
     ("fly.actuators.alpha_omega", -3, r"fly\.actuators\.alpha_omega: expected > 0, got -3\.0"),
+    ("fly.heading", "north", r"fly\.heading: expected 'hold', 'paper' or a compass heading in degrees, got 'north'"),
+    ("fly.heading", 400, r"fly\.heading: expected a value in \[-360, 360\], got 400"),
+    ("fly.rates.max_yaw_rate_radps", 0, r"fly\.rates\.max_yaw_rate_radps: expected > 0, got 0"),
+    ("fly.attitude.tick_rate_hz", 2000, r"fly\.attitude\.tick_rate_hz: expected a value in "),
     ("fly.end_action", "crash",
      r"fly\.end_action: expected one of 'land', 'hold', got string 'crash'"),
     ("fly.start", "maybe", r"fly\.start: expected one of 'auto', 'in_air', 'takeoff'"),
@@ -867,3 +871,29 @@ def test_a_name_that_reads_as_a_number_round_trips_through_yaml():
     text = team_to_yaml(team)
     assert "name: '0E0'" in text
     assert team_from_yaml(text, "gen") == team
+
+
+@pytest.mark.parametrize("heading", ["hold", "paper", 90.0, -45.0])
+def test_fly_heading_and_the_attitude_mode_load_and_round_trip(heading):
+    data = edit(edit(base(), "fly.heading", heading), "fly.attitude.tick_rate_hz", 50)
+    team = team_from_dict(data)
+    assert team.fly.heading == heading and team.fly.mode("attitude").tick_rate_hz == 50.0
+    assert team_from_yaml(team_to_yaml(team), "<rt>").fly == team.fly
+    # the defaults: hold the heading, yaw rate limited on its own to 0.5 rad/s
+    default = team_from_dict(base()).fly
+    assert default.heading == "hold" and default.rates.max_yaw_rate_radps == 0.5
+
+
+def test_mhat_from_hover_needs_a_mass_and_round_trips():
+    data = edit(base(), "vehicles.0.estimates.mhat", "from_hover")
+    team = team_from_dict(data)
+    v = team.vehicles[0]
+    # the stand-in (what gcs sim flies) is the plant's hover: phi(0) m / alpha_m
+    assert v.estimates.from_hover and v.estimates.mhat == pytest.approx(
+        2.0 * v.plant.mass_kg / team.controller.gains.alpha_m)
+    assert team_from_yaml(team_to_yaml(team), "<rt>").vehicles == team.vehicles
+    # without a plant it needs mass_bound_kg; a word other than from_hover is refused
+    del data["vehicles"][0]["plant"]
+    raises_at(data, r"vehicles\[0\]\.estimates\.mhat: from_hover needs estimates\.mass_bound_kg")
+    raises_at(edit(base(), "vehicles.0.estimates.mhat", "hover"),
+              r"vehicles\[0\]\.estimates\.mhat: expected a number > 0 or 'from_hover', got 'hover'")
