@@ -376,3 +376,14 @@ def test_a_failed_preflight_never_commands_disarmed_vehicles_on_the_ground():
     assert {c for _, c in w.sent} == {Cmd.CONFIGURE}
     assert w.t < 1.5  # the settle time, then done: no wait for a landing
     assert "not landed" not in m.outcome.reason and "link lost" not in m.outcome.reason
+
+
+def test_a_requested_stream_that_never_arrives_is_named_with_the_vehicle():
+    # GIVEN EXTENDED_SYS_STATE asked for at 5 Hz (the landed state), and a vehicle that answered
+    # ACCEPTED but never sends it
+    rules = dataclasses.replace(RULES, required_rates_hz={**RATES, "EXTENDED_SYS_STATE": 5.0})
+    s = status(2, landed=None)
+    # THEN preflight names the message, the vehicle and the rates, and the landed state
+    texts = [p.text for p in preflight_problems([s], rules)]
+    assert "vehicle 2 (sysid 2): EXTENDED_SYS_STATE at 0.0 Hz, need >= 2.5 Hz (asked 5)" in texts
+    assert "vehicle 2 (sysid 2): landed state unknown (no EXTENDED_SYS_STATE)" in texts
