@@ -648,6 +648,8 @@ class Flight:
                     "thrust_clamped": s.proxy.thrust_clamped,
                     "torque_clamped": s.proxy.torque_clamped,
                     "link_lost_events": s.proxy.link_lost_events,
+                    "stranger_address": s.proxy.stranger_address,
+                    "unknown_sysid_frames": s.port.unknown_sysid_frames,
                     "command_retries": getattr(s.commands, "retries", None),
                     "lost": self.ids[i] in self.machine.lost}
                    for i, s in enumerate(stats)],

@@ -135,7 +135,7 @@ class VehicleProxy:
         self._tasks: list[asyncio.Task[None]] = []
         self._t0_s = self._clock.now_s()
         self._link_state = LinkState.WAITING
-        self.sysid_mismatch: int | None = None  # sysid of a foreign vehicle HEARTBEAT, if any
+        self._mismatch: int | None = None  # sysid of a foreign vehicle HEARTBEAT, if any
 
     # --- lifetime --------------------------------------------------------------------------------
 
@@ -189,6 +189,16 @@ class VehicleProxy:
     @property
     def remote_learned(self) -> bool:
         return self._remote_learned
+
+    @property
+    def sysid_mismatch(self) -> int | None:
+        """Another vehicle's sysid heard where this one was expected: on its own port, a
+        HEARTBEAT of another vehicle (preflight refuses); on a shared port, while nothing of this
+        vehicle has arrived, a sysid no vehicle of the port has (for the connect diagnostics)."""
+        if self._mismatch is not None or not self._port.shared or self._n["messages_accepted"]:
+            return self._mismatch
+        unknown = self._port.unknown_sysids()
+        return min(unknown) if unknown else None
 
     @property
     def shared_port(self) -> bool:
@@ -296,12 +306,12 @@ class VehicleProxy:
                 self.config.sysid, addr[0], addr[1], self._remote[0], self._remote[1])
 
     def _report_mismatch(self, src_sys: int, src_comp: int, addr: Address) -> None:
-        if self.sysid_mismatch != src_sys:
+        if self._mismatch != src_sys:
             logger.error(
                 "%s: HEARTBEAT from sysid %d (compid %d) at %s:%d, expected sysid %d; check the "
                 "team file. Messages from sysid %d are ignored.", self.name, src_sys, src_comp,
                 addr[0], addr[1], self.config.sysid, src_sys)
-        self.sysid_mismatch = src_sys
+        self._mismatch = src_sys
 
     def _wake_waiters(self, msg: MAVLinkMessage, now_s: float) -> None:
         kind = msg.get_type()

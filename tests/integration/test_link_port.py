@@ -9,7 +9,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import Callable, Coroutine, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -20,51 +20,28 @@ from gcs.link import MavlinkPort, VehicleLinkConfig, VehicleProxy
 from gcs.link.commands import CommandRejectedError
 from gcs.link.enums import LinkState, MavResult
 from gcs.link.udp import Address
-from vehicle_emulator.testing import EmulatorProcess, free_udp_port, run_emulator
+from vehicle_emulator.testing import (
+    EmulatorProcess,
+    UdpPeer,
+    free_udp_port,
+    run_bounded,
+    run_emulator,
+    wait_until,
+)
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 
 ESS_ID, TIMESYNC_ID = 245, 111
 
 
-def run(coro: Coroutine[Any, Any, Any], timeout_s: float = 60.0) -> Any:
-    async def bounded() -> Any:
-        async with asyncio.timeout(timeout_s):
-            return await coro
-    return asyncio.run(bounded())
-
-
-async def wait_until(condition: Callable[[], bool], timeout_s: float = 2.0) -> None:
-    """Poll a condition on the loop (no fixed sleeps); TimeoutError after timeout_s."""
-    async with asyncio.timeout(timeout_s):
-        while not condition():
-            await asyncio.sleep(0.001)
-
-
-class Peer(asyncio.DatagramProtocol):
+class Peer(UdpPeer):
     """A vehicle (or a stranger) written with plain pymavlink on its own ephemeral port: sends
     to the GCS port it is given, records what it receives, acknowledges every COMMAND_LONG."""
 
     def __init__(self, sysid: int) -> None:
         self.mav = mavlink.MAVLink(None, sysid, 1)
         self.received: list[mavlink.MAVLink_message] = []
-        self.transport: asyncio.DatagramTransport | None = None
         self.gcs: Address | None = None
-
-    async def __aenter__(self) -> Peer:
-        self.transport, _ = await asyncio.get_running_loop().create_datagram_endpoint(
-            lambda: self, local_addr=("127.0.0.1", 0))
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        assert self.transport is not None
-        self.transport.close()
-
-    @property
-    def address(self) -> Address:
-        assert self.transport is not None
-        host, port = self.transport.get_extra_info("sockname")[:2]
-        return (host, port)
 
     def datagram_received(self, data: bytes, addr: Address) -> None:  # type: ignore[override]
         for msg in self.mav.parse_buffer(data) or []:
@@ -126,7 +103,7 @@ def test_one_port_serves_three_vehicles_each_at_its_own_learned_address(
             assert proxies[0].stats().proxy.send_no_remote >= 1  # its first GCS HEARTBEAT
 
     with caplog.at_level(logging.INFO):
-        run(scenario())
+        run_bounded(scenario(), timeout_s=60.0)
     assert "vehicle 2 (sysid 2): address learned from its first message" in caplog.text
 
 
@@ -148,12 +125,13 @@ def test_unknown_sysid_on_a_shared_port_is_counted_logged_once_and_ignored(
             assert port.unknown_sysids() == {9: 3}
             assert proxies[1].latest("HEARTBEAT") is None
             assert proxies[1].link_state() == LinkState.WAITING
-            # AND on a shared port a stranger is no reason to refuse a vehicle
-            assert proxies[0].sysid_mismatch is None and proxies[1].sysid_mismatch is None
+            # AND on a shared port a stranger is no reason to refuse a vehicle that is heard;
+            # one not heard names it (connect diagnostics: "only sysid 9 was heard there")
+            assert proxies[0].sysid_mismatch is None and proxies[1].sysid_mismatch == 9
             assert stranger.commands() == []
 
     with caplog.at_level(logging.WARNING):
-        run(scenario())
+        run_bounded(scenario(), timeout_s=60.0)
     lines = [r.getMessage() for r in caplog.records if "sysid 9" in r.getMessage()]
     assert len(lines) == 1, lines
     assert "messages from sysid 9 (compid 1)" in lines[0]
@@ -182,7 +160,7 @@ def test_a_stranger_address_on_a_learned_link_is_counted_and_ignored(
             assert len(vehicle.commands()) == 1 and impostor.commands() == []
 
     with caplog.at_level(logging.WARNING):
-        run(scenario())
+        run_bounded(scenario(), timeout_s=60.0)
     warnings = [r.getMessage() for r in caplog.records if "stranger_address" in r.getMessage()]
     assert len(warnings) == 1  # once per address
     assert warnings[0].startswith("vehicle 1 (sysid 1): messages with its sysid 1 from 127.0.0.1:")
@@ -216,7 +194,7 @@ def test_corrupt_batched_and_unframed_datagrams_on_a_shared_port() -> None:
             assert port.codec_stats().garbage_bytes == len(banner)
             assert [p.stats().proxy.messages_accepted for p in proxies] == [2, 1]
 
-    run(scenario())
+    run_bounded(scenario(), timeout_s=60.0)
 
 
 # --- real emulators: both personalities on one GCS port -------------------------------------------
@@ -265,7 +243,7 @@ def test_both_personalities_on_one_port_are_learned_and_their_streams_requested(
             return [p.remote for p in proxies]
 
     with emulators_on(gcs_port, tmp_path, personalities) as emus:
-        remotes = run(scenario(), timeout_s=100.0)
+        remotes = run_bounded(scenario(), timeout_s=100.0)
         logs = [e.log_text() for e in emus]
     # THEN the px4 vehicle was answered at its bound port, the ardupilot ones at their ephemeral
     # ports (each process got its own, which its log names)
@@ -306,7 +284,7 @@ def test_a_heartbeat_only_vehicle_stays_up_and_a_silent_one_is_lost_within_link_
             return states, detected - last_rx, beats
 
     with emulators_on(gcs_port, tmp_path, ["ardupilot"]) as (emu,):
-        states, silent_s, beats = run(scenario(emu), timeout_s=90.0)
+        states, silent_s, beats = run_bounded(scenario(emu), timeout_s=90.0)
     # THEN the link never flapped while only HEARTBEATs came (4-6 of them)
     assert 4 <= beats <= 6, beats
     assert set(states) == {LinkState.ALIVE}
