@@ -238,56 +238,70 @@ RISE_KEYS = ("t10_ms", "t63_ms", "t90_ms")
 
 
 def fit_noise(autopilot: str, n: int, iterations: int = 3, verbose: bool = True) -> dict:
-    """Scale the personality's estimate-error sizes (horizontal, vertical velocity; the position
-    error's time constant for the vertical position std) and, for
-    ArduPilot, its angular-acceleration disturbance (the limit cycle; gyro stds) and stand-in
-    accelerometer noise, until the median over n replayed hovers meets the recorded std
-    (multiplicative updates). Returns the new sizes."""
+    """Scale the personality's fitted noise sizes until the median over n replayed hovers meets
+    the recorded std (multiplicative updates): the velocity errors per axis (north, east, up:
+    LOCAL_POSITION_NED's vx, vy, vz), the position error's time constant (the vertical position
+    std), the attitude errors on the axes that have one (detrended roll, pitch, yaw) and, for
+    ArduPilot, its disturbance (roll and pitch: the limit cycle's gyro std; yaw: ATTITUDE's yaw
+    rate), its HIGHRES_IMU z-gyro bias and stand-in accelerometer noise. The time constants,
+    the complementary filter's and the limit cycle's frequency are set from the recordings'
+    spectra (docs/emulator.md), not here. Returns the new sizes."""
     rec = rp.load_recording(autopilot)
     recorded = rp.recorded_figures(rec)
-    sen = PERSONALITIES[autopilot].sensors
+    per = PERSONALITIES[autopilot]
+    sen = per.sensors
     vel = np.array(sen.velocity_error_std_mps, dtype=float)
     tau_p = sen.position_error_tau_s
-    gyro = np.array(PERSONALITIES[autopilot].dynamics.disturbance_std_radps2, dtype=float)
+    att = np.array(sen.attitude_error_std_rad, dtype=float)
+    dist = np.array(per.dynamics.disturbance_std_radps2, dtype=float)
+    bias = np.array(sen.gyro_bias_std_radps, dtype=float)
     accel = np.array(sen.accel_noise_std_mps2, dtype=float)
     scale_imu = autopilot == "ardupilot"  # PX4's IMU noise is SIH's own, not fitted
+    lpn = "LOCAL_POSITION_NED."
     for it in range(iterations):
-        sizes = (vel.copy(), gyro.copy(), accel.copy(), tau_p)
+        sizes = (vel.copy(), tau_p, att.copy(), dist.copy(), bias.copy(), accel.copy())
 
         def hook(emu, sizes=sizes):
-            vel, gyro, accel, tau_p = sizes
-            emu.plant.onboard.velocity_error_std[:] = vel
-            emu.plant.onboard.position_error_phi[:] = np.exp(
-                -emu.plant.onboard.control_div * emu.plant.dt_s / tau_p)
+            vel, tau_p, att, dist, bias, accel = sizes
+            ob = emu.plant.onboard
+            ob.velocity_error_std[:] = vel
+            ob.position_error_phi[:] = np.exp(-ob.control_div * emu.plant.dt_s / tau_p)
+            ob.attitude_error_std[:] = att
             if scale_imu:
-                emu.plant.onboard.disturbance_std[:] = gyro
-                emu.plant.onboard.accel_noise_std[:] = accel
+                ob.disturbance_std[:] = dist
+                ob.gyro_bias_std[:] = bias
+                ob.accel_noise_std[:] = accel
 
         traces = rp.replay(rec, n=n, until_s=rec.hover_window_s[1] + 0.05, emulator_hook=hook)
         med = _median_hover(traces, rec)
-        h_rec = np.hypot(recorded["LOCAL_POSITION_NED.vx"], recorded["LOCAL_POSITION_NED.vy"])
-        h_emu = np.hypot(med["LOCAL_POSITION_NED.vx"], med["LOCAL_POSITION_NED.vy"])
         if verbose:
-            print(f"  {autopilot} noise iteration {it}: velocity error {vel.round(4).tolist()}, "
-                  f"position tau {tau_p:.2f} s -> horizontal {h_emu:.4f} (recorded {h_rec:.4f}), "
-                  f"vertical {med['LOCAL_POSITION_NED.vz']:.4f} "
-                  f"({recorded['LOCAL_POSITION_NED.vz']:.4f}), z "
-                  f"{med['LOCAL_POSITION_NED.z']:.4f} ({recorded['LOCAL_POSITION_NED.z']:.4f})",
-                  flush=True)
-        vel = vel * np.array([_ratio(h_rec, h_emu, vel[0]),
-                              _ratio(recorded["LOCAL_POSITION_NED.vz"],
-                                     med["LOCAL_POSITION_NED.vz"], vel[1])])
+            got = ", ".join(f"{k} {med[k]:.4g} ({recorded[k]:.4g})" for k in (
+                f"{lpn}vx", f"{lpn}vy", f"{lpn}vz", f"{lpn}z", "attitude.roll",
+                "attitude.pitch", "attitude.yaw"))
+            print(f"  {autopilot} noise iteration {it}: {got}", flush=True)
+        for j, f in enumerate(("vx", "vy", "vz")):
+            vel[j] *= _ratio(recorded[lpn + f], med[lpn + f], vel[j])
         # the reported z falls as the position error slows (the altitude law cancels slow errors)
-        tau_p /= _ratio(recorded["LOCAL_POSITION_NED.z"], med["LOCAL_POSITION_NED.z"], tau_p)
+        tau_p /= _ratio(recorded[f"{lpn}z"], med[f"{lpn}z"], tau_p)
+        for j, axis in enumerate(("roll", "pitch", "yaw")):
+            att[j] *= _ratio(recorded[f"attitude.{axis}"], med[f"attitude.{axis}"], att[j])
         if scale_imu:
-            for j, f in enumerate(("xgyro", "ygyro", "zgyro")):
-                gyro[j] *= recorded[f"HIGHRES_IMU.{f}"] / med[f"HIGHRES_IMU.{f}"]
+            for j, f in enumerate(("HIGHRES_IMU.xgyro", "HIGHRES_IMU.ygyro",
+                                   "ATTITUDE_QUATERNION.yawspeed")):
+                dist[j] *= recorded[f] / med[f]
+            # the z gyro's part above the bias-free yaw rate is the bias
+            z_rec, z_emu = recorded["HIGHRES_IMU.zgyro"], med["HIGHRES_IMU.zgyro"]
+            yaw = recorded["ATTITUDE_QUATERNION.yawspeed"]
+            if bias[2] > 0.0 and z_emu > yaw:
+                bias[2] *= np.sqrt(max(z_rec**2 - yaw**2, 0.0) / (z_emu**2 - yaw**2))
             for j, f in enumerate(("xacc", "yacc", "zacc")):
                 accel[j] *= recorded[f"HIGHRES_IMU.{f}"] / med[f"HIGHRES_IMU.{f}"]
     out = {"velocity_error_std_mps": tuple(round(float(v), 4) for v in vel),
-           "position_error_tau_s": round(float(tau_p), 3)}
+           "position_error_tau_s": round(float(tau_p), 3),
+           "attitude_error_std_rad": tuple(float(f"{v:.3g}") for v in att)}
     if scale_imu:
-        out["disturbance_std_radps2 (Dynamics)"] = tuple(round(float(v), 4) for v in gyro)
+        out["disturbance_std_radps2 (Dynamics)"] = tuple(round(float(v), 4) for v in dist)
+        out["gyro_bias_std_radps"] = tuple(float(f"{v:.3g}") for v in bias)
         out["accel_noise_std_mps2"] = tuple(round(float(v), 5) for v in accel)
     return out
 

@@ -109,8 +109,20 @@ class Onboard:
                              f"{self.ref_delay.tolist()}")
         self.attitude_error_std = np.array([se.attitude_error_std_rad for se in sen], dtype=f)
         self.attitude_error_phi = np.exp(
-            -1.0 / (rates * np.array([se.attitude_error_tau_s for se in sen]))
+            -1.0 / (rates[:, None] * np.array([se.attitude_error_tau_s for se in sen], dtype=f))
         )
+        # complementary-filter estimate error: factor per period, -1 where the axis is off
+        tau_g = np.array([se.gyro_integration_tau_s for se in sen], dtype=f).reshape(n, 3)
+        self.gyro_integration_phi = np.where(
+            tau_g > 0.0, np.exp(-1.0 / (rates[:, None] * np.maximum(tau_g, 1e-9))), -1.0)
+        self.gyro_bias_std = np.array([se.gyro_bias_std_radps for se in sen], dtype=f)
+        self.gyro_bias_phi = np.exp(
+            -1.0 / (rates * np.array([se.gyro_bias_tau_s for se in sen], dtype=f)))
+        self.disturbance_ar = np.array(
+            [[sn.resonator_coefficients(hz, d.disturbance_zeta, 1.0 / r)
+              for hz in d.disturbance_resonance_hz] for d, r in zip(dyn, rates, strict=True)],
+            dtype=f,
+        ).reshape(n, 3, 3)
         self.velocity_error_std = np.array([se.velocity_error_std_mps for se in sen], dtype=f)
         self.velocity_error_phi = np.exp(
             -1.0 / (rates * np.array([se.velocity_error_tau_s for se in sen]))
@@ -149,6 +161,9 @@ class Onboard:
         self._delay_buffer = np.zeros((n, 3, REF_DELAY_MAX))
         self._delay_index = np.zeros(n, dtype=np.int64)
         self.attitude_error = np.zeros((n, 3))
+        self.integration_error = np.zeros((n, 3))
+        self.gyro_bias = np.zeros((n, 3))
+        self.disturbance_state = np.zeros((n, 3, 3))
         self.velocity_error = np.zeros((n, 3))
         self.position_error = np.zeros((n, 3))
         self.attitude_sample_step = np.zeros(n, dtype=np.int64)
@@ -217,6 +232,10 @@ class Onboard:
             self.velocity_error_phi,
             self.position_error_phi,
             self.disturbance_std,
+            self.gyro_integration_phi,
+            self.gyro_bias_std,
+            self.gyro_bias_phi,
+            self.disturbance_ar,
         )
 
     def _state_tuple(self) -> tuple:
@@ -252,6 +271,9 @@ class Onboard:
             self.attitude_error,
             self.velocity_error,
             self.position_error,
+            self.integration_error,
+            self.gyro_bias,
+            self.disturbance_state,
         )
 
 
@@ -297,13 +319,14 @@ def onboard_step(
         gyro_coef, dterm_coef, accel_coef, imu_mode, pos_delay, out_delay, gain_p, gain_i,
         gain_d, int_limit, yaw_alpha, accel_per_unit, accel_max, ref_gain, ref_phi, ref_gamma,
         angle_p, track, ref_delay, att_err_std, att_phi, vel_err_std, vel_phi, pos_phi,
-        disturbance,
+        disturbance, integ_phi, bias_std, bias_phi, dist_ar,
     ) = cal_par
     (
         rng, gyro_state, dterm_state, accel_state, gyro_raw, accel_raw, rate_meas, dgyro,
         gyro_imu, accel_imu, yaw_lpf, shaped, ref, angle_err, track_int, torque_next,
         thrust_next, torque_new, rot_est, pos_est, vel_est, pos_prev, vel_prev, att_step,
-        pos_step, pos_prev_step, delay_buf, delay_idx, att_err, vel_err, pos_err,
+        pos_step, pos_prev_step, delay_buf, delay_idx, att_err, vel_err, pos_err, integ_err,
+        gyro_bias, dist_state,
     ) = cal_st
     for i in range(loop.shape[0]):
         if loop[i] == 0 or step % ctrl_div[i] != 0:
@@ -322,12 +345,17 @@ def onboard_step(
             i, dt_c, noise_on, att_err_std, att_phi, vel_err_std, vel_phi, pos_phi, rng, att_err,
             vel_err, pos_err,
         )
-        if att_err[i, 0] == 0.0 and att_err[i, 1] == 0.0 and att_err[i, 2] == 0.0:
+        sn.gyro_integration_errors(i, dt_c, noise_on, integ_phi, gyro_raw, omega, integ_err)
+        sn.gyro_bias_step(i, noise_on, bias_std, bias_phi, rng, gyro_bias, gyro_imu)
+        e0 = att_err[i, 0] + integ_err[i, 0]
+        e1 = att_err[i, 1] + integ_err[i, 1]
+        e2 = att_err[i, 2] + integ_err[i, 2]
+        if e0 == 0.0 and e1 == 0.0 and e2 == 0.0:
             for a in range(3):
                 for b in range(3):
                     rot_est[i, a, b] = rot[i, a, b]
         else:
-            sn.rotate_body(rot[i], att_err[i, 0], att_err[i, 1], att_err[i, 2], rot_est[i])
+            sn.rotate_body(rot[i], e0, e1, e2, rot_est[i])
         att_step[i] = step
         if pos_delay[i] > 0:
             pos_step[i] = pos_prev_step[i]
@@ -363,14 +391,14 @@ def onboard_step(
             continue
         if m == 5:  # the autopilot's own position loop flies on its estimates, as PX4's does
             thr = position_control(
-                i, pos_est, vel_est, rot, pos_sp, vel_ff, pos_mask, yaw_sp, vel_int, hover, landed,
-                dt_c, att_sp,
+                i, pos_est, vel_est, rot_est, pos_sp, vel_ff, pos_mask, yaw_sp, vel_int, hover,
+                landed, dt_c, att_sp,
             )
-            attitude_control(i, rot, att_sp, yaw_rate_ff, rate_sp)
+            attitude_control(i, rot_est, att_sp, yaw_rate_ff, rate_sp)
         elif m == 3:
             thr = thrust_cmd[i]
             att_sp[i] = att_cmd[i]
-            attitude_control(i, rot, att_sp, yaw_rate_ff, rate_sp)
+            attitude_control(i, rot_est, att_sp, yaw_rate_ff, rate_sp)
         else:  # m == 2
             thr = thrust_cmd[i]
             for k in range(3):
@@ -392,7 +420,8 @@ def onboard_step(
             d2, _ = sn.gauss_pair(rng, i)
             dist = (d0, d1, d2)
             for k in range(3):
-                torque_new[i, k] += inertia[i, k] * disturbance[i, k] * dist[k]
+                d = sn.resonator_step(dist_ar[i, k], dist_state[i, k], dist[k])
+                torque_new[i, k] += inertia[i, k] * disturbance[i, k] * d
         if out_delay[i] > 0:  # what the motors get now was computed one period ago
             thrust_sp[i] = thrust_next[i]
             thrust_next[i] = thr

@@ -105,9 +105,12 @@ class Dynamics:
     motor_time_constant_s: float | None = None  # None: the team file's value
     linear_drag_per_s: float = 0.0  # drag force -m k v, world frame (SIH_KDV / SIH_MASS)
     angular_damping_per_s: tuple[float, float, float] = (0.0, 0.0, 0.0)  # torque -J k w
-    # process noise (EMU_NOISE = 1): a white angular-acceleration disturbance, a new draw every
-    # control period, 1 sigma per axis [rad/s^2]
+    # process noise (EMU_NOISE = 1): an angular-acceleration disturbance, 1 sigma per axis
+    # [rad/s^2], a new value every control period: white, or, on an axis with a resonance
+    # frequency, white noise through a 2nd-order resonator (a limit cycle's narrow band)
     disturbance_std_radps2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    disturbance_resonance_hz: tuple[float, float, float] = (0.0, 0.0, 0.0)  # 0: white
+    disturbance_zeta: float = 0.05  # the resonator's damping ratio
     thrust_scale: float = 1.0  # collective thrust [N] = scale * normalised thrust * 4 f_max
 
 
@@ -141,8 +144,17 @@ class Sensors:
     # estimate errors (EMU_NOISE = 1): first-order Gauss-Markov processes, 1 sigma, ENU/FLU;
     # the position error integrates the velocity error and decays with its own time constant
     attitude_error_std_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)  # roll, pitch, yaw
-    attitude_error_tau_s: float = 1.0
-    velocity_error_std_mps: tuple[float, float] = (0.0, 0.0)  # horizontal, vertical
+    attitude_error_tau_s: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    # attitude estimate as a complementary filter, per body axis (0: off): it integrates the
+    # raw gyro samples (noise included) and is pulled to the true attitude with this time
+    # constant (tilt from the accelerometer and velocity fusion, heading from the magnetometer),
+    # so its error is the gyro noise integrated and forgotten over tau
+    gyro_integration_tau_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # HIGHRES_IMU gyro bias the estimator removes (ATTITUDE rates and the rate loop do not see
+    # it): a Gauss-Markov process per axis, 1 sigma [rad/s]
+    gyro_bias_std_radps: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gyro_bias_tau_s: float = 10.0
+    velocity_error_std_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)  # north, east, up
     velocity_error_tau_s: float = 1.0
     position_error_tau_s: float = 1.0
 
@@ -188,9 +200,15 @@ PX4_SENSORS = Sensors(
     imu_average_samples=2,  # HIGHRES_IMU: recorded std = SIH's / 1.37 (two-sample means)
     position_delay_periods=1,  # LOCAL_POSITION_NED timestamps 4 ms older than attitude's
     # EKF2's estimate wander (fitted stand-in, benchmarks/fit_emulator.py --fit)
-    velocity_error_std_mps=(0.126, 0.147),
+    velocity_error_std_mps=(0.126, 0.126, 0.147),
     velocity_error_tau_s=1.5,  # recorded vz autocorrelation 0.72 at 0.5 s
-    position_error_tau_s=4.0,
+    position_error_tau_s=6.0,
+    # the attitude EKF2 reports: tilt integrates the noisy gyro and is pulled back to the truth
+    # over 6 s (the recorded roll is a quarter of the true wander's size), plus slow errors on
+    # pitch and heading (recorded autocorrelation 0.92 at 1 s, 0.33 at 3 s) (fitted)
+    gyro_integration_tau_s=(6.0, 6.0, 0.0),
+    attitude_error_std_rad=(0.0, 0.016, 0.042),
+    attitude_error_tau_s=(4.0, 4.0, 4.0),
 )
 
 # ArduCopter 4.7.0-dev SITL, frame "quad" (plus), 3 kg. Its attitude controller in GUIDED_NOGPS
@@ -209,7 +227,12 @@ ARDUPILOT_DYNAMICS = Dynamics(
     angle_p=(1.0, 1.0, 1.847),
     ref_delay_periods=(0, 0, 3),
     motor_time_constant_s=0.0025,  # thrust steps: vz follows after ~2.5 ms
-    disturbance_std_radps2=(0.303, 0.304, 0.0836),  # the hover's limit cycle, sized to its gyro std
+    # the hover's ~23.4 Hz roll/pitch limit cycle (94 % of the recorded rate power lies within
+    # 20-30 Hz; sized to its gyro std) and a slow white yaw disturbance (sized to ATTITUDE's
+    # yaw rate)
+    disturbance_std_radps2=(0.32, 0.325, 0.045),
+    disturbance_resonance_hz=(23.4, 23.4, 0.0),
+    disturbance_zeta=0.05,
     # MOT_THST_HOVER 0.39 was learned with battery (1/0.974) and air-density (1/0.945)
     # compensation; the measured hover thrust 0.3649 gives the effective scale 0.39 / 0.3649
     thrust_scale=0.39 / 0.3649,
@@ -225,9 +248,17 @@ ARDUPILOT_SENSORS = Sensors(
     imu_filtered=True,
     accel_cutoff_hz=20.0,  # INS_ACCEL_FILTER
     # EKF3's estimate wander (fitted stand-in, benchmarks/fit_emulator.py --fit)
-    velocity_error_std_mps=(0.0045, 0.002),
+    velocity_error_std_mps=(0.0032, 0.0052, 0.002),
     velocity_error_tau_s=5.0,  # recorded vz autocorrelation 0.90 at 0.5 s
     position_error_tau_s=3.0,
+    # attitude estimate errors: fast on roll and pitch (recorded autocorrelation 0.54 at 0.1 s),
+    # slow on heading (0.9 at 1 s) (fitted)
+    attitude_error_std_rad=(3.0e-5, 3.2e-5, 4.5e-5),
+    attitude_error_tau_s=(0.15, 0.15, 3.0),
+    # SITL's gyro drift (SIM_DRIFT_*): HIGHRES_IMU's z gyro wanders at < 1 Hz with 1.8 times the
+    # std of ATTITUDE's bias-corrected yaw rate (fitted)
+    gyro_bias_std_radps=(0.00014, 0.00014, 0.0004),
+    gyro_bias_tau_s=2.0,
 )
 
 

@@ -171,31 +171,33 @@ def sample_sensors(
 def estimate_errors(i, dt_c, noise_on, att_std, att_phi, vel_std, vel_phi, pos_phi, rng,
                     att_err, vel_err, pos_err):
     """Advance vehicle i's estimate errors by one control period: first-order Gauss-Markov
-    attitude errors (roll, pitch, yaw; body axes) and velocity errors (ENU; ``vel_std[i]`` =
-    (horizontal, vertical)), stationary 1 sigma ``*_std``, factors ``*_phi = exp(-dt/tau)``;
-    the position error integrates the velocity error and decays by ``pos_phi`` per period. Off
-    (held at zero) without noise."""
+    attitude errors (roll, pitch, yaw; body axes; factors ``att_phi[i, k]`` per axis) and
+    velocity errors (ENU arrays; ``vel_std[i]`` = (north, east, vertical), LOCAL_POSITION_NED's
+    x, y, z), stationary 1 sigma ``*_std``, factors ``*_phi = exp(-dt/tau)``; the position error
+    integrates the velocity error and decays by ``pos_phi`` per period. Off (held at zero)
+    without noise."""
     if not noise_on[i]:
         for k in range(3):
             att_err[i, k] = 0.0
             vel_err[i, k] = 0.0
             pos_err[i, k] = 0.0
         return
-    pa, pv = att_phi[i], vel_phi[i]
+    pv = vel_phi[i]
     if att_std[i, 0] != 0.0 or att_std[i, 1] != 0.0 or att_std[i, 2] != 0.0:
-        ka = math.sqrt(max(0.0, 1.0 - pa * pa))
         n0, n1 = gauss_pair(rng, i)
         n2, _ = gauss_pair(rng, i)
         na = (n0, n1, n2)
         for k in range(3):
+            pa = att_phi[i, k]
+            ka = math.sqrt(max(0.0, 1.0 - pa * pa))
             att_err[i, k] = pa * att_err[i, k] + ka * att_std[i, k] * na[k]
-    if vel_std[i, 0] != 0.0 or vel_std[i, 1] != 0.0:
+    if vel_std[i, 0] != 0.0 or vel_std[i, 1] != 0.0 or vel_std[i, 2] != 0.0:
         kv = math.sqrt(max(0.0, 1.0 - pv * pv))
         n3, n4 = gauss_pair(rng, i)
         n5, _ = gauss_pair(rng, i)
         nv = (n3, n4, n5)
         for k in range(3):
-            s = vel_std[i, 1] if k == 2 else vel_std[i, 0]
+            s = vel_std[i, 1] if k == 0 else (vel_std[i, 0] if k == 1 else vel_std[i, 2])
             vel_err[i, k] = pv * vel_err[i, k] + kv * s * nv[k]
             pos_err[i, k] = pos_phi[i] * pos_err[i, k] + vel_err[i, k] * dt_c
 
@@ -219,3 +221,76 @@ def rotate_body(r: np.ndarray, e0: float, e1: float, e2: float, out: np.ndarray)
     for a in range(3):
         for b in range(3):
             out[a, b] = r[a, 0] * m[0][b] + r[a, 1] * m[1][b] + r[a, 2] * m[2][b]
+
+
+@njit(cache=True)
+def gyro_integration_errors(i, dt_c, noise_on, phi, gyro_raw, omega, err):
+    """Advance vehicle i's complementary-filter attitude error by one control period, per body
+    axis with ``phi[i, k] = exp(-dt/tau) >= 0`` (negative: axis off, held at zero): the raw
+    gyro sample's noise (``gyro_raw - omega``) integrated, decaying as the filter's correction
+    pulls the estimate back to the true attitude."""
+    for k in range(3):
+        if not noise_on[i] or phi[i, k] < 0.0:
+            err[i, k] = 0.0
+        else:
+            err[i, k] = phi[i, k] * err[i, k] + (gyro_raw[i, k] - omega[i, k]) * dt_c
+
+
+@njit(cache=True)
+def gyro_bias_step(i, noise_on, std, phi, rng, bias, gyro_imu):
+    """Advance vehicle i's gyro bias (first-order Gauss-Markov, stationary 1 sigma ``std[i]``,
+    factor ``phi[i]`` per period) and add it to the HIGHRES_IMU gyro ``gyro_imu[i]``. Off (zero,
+    no draws) without noise or with a zero size."""
+    if not noise_on[i] or (std[i, 0] == 0.0 and std[i, 1] == 0.0 and std[i, 2] == 0.0):
+        for k in range(3):
+            bias[i, k] = 0.0
+        return
+    p = phi[i]
+    kb = math.sqrt(max(0.0, 1.0 - p * p))
+    n0, n1 = gauss_pair(rng, i)
+    n2, _ = gauss_pair(rng, i)
+    nb = (n0, n1, n2)
+    for k in range(3):
+        bias[i, k] = p * bias[i, k] + kb * std[i, k] * nb[k]
+        gyro_imu[i, k] += bias[i, k]
+
+
+def resonator_coefficients(frequency_hz: float, zeta: float, dt_s: float) -> tuple[float, float,
+                                                                                    float]:
+    """(a1, a2, gain) of the band-pass resonator y_k = a1 y_{k-1} + a2 y_{k-2} + gain (w_k -
+    w_{k-1}) driven by unit white noise w: poles at ``frequency_hz`` with damping ``zeta``, a
+    zero at DC (a limit cycle carries no steady part), the gain making y's stationary std 1.
+    ``frequency_hz`` 0: (0, 0, 1) and y = w (white; resonator_step then skips the zero)."""
+    if frequency_hz <= 0.0:
+        return (0.0, 0.0, 1.0)
+    if not 0.0 < zeta < 1.0:
+        raise ValueError(f"disturbance_zeta: expected 0 < zeta < 1, got {zeta}")
+    w = 2.0 * math.pi * frequency_hz
+    if w * dt_s >= math.pi:
+        raise ValueError(f"disturbance_resonance_hz: {frequency_hz} Hz is above the control "
+                         f"loop's Nyquist frequency {0.5 / dt_s:.0f} Hz")
+    r = math.exp(-zeta * w * dt_s)
+    a1 = 2.0 * r * math.cos(w * dt_s * math.sqrt(1.0 - zeta * zeta))
+    a2 = -r * r
+    # stationary variance: the energy of the impulse response (decays as r^k)
+    steps = int(min(10_000_000, max(1000, 40.0 / max(1e-12, 1.0 - r))))
+    h = np.zeros(steps)
+    y1 = y2 = 0.0
+    for k in range(steps):
+        y = a1 * y1 + a2 * y2 + (1.0 if k == 0 else (-1.0 if k == 1 else 0.0))
+        h[k] = y
+        y1, y2 = y, y1
+    return (a1, a2, 1.0 / math.sqrt(float(np.sum(h * h))))
+
+
+@njit(cache=True)
+def resonator_step(ar, state, w):
+    """One step of resonator_coefficients' filter: coefficients ``ar`` (a1, a2, gain), state
+    (y_{k-1}, y_{k-2}, w_{k-1}) updated in place; returns y_k. White (a1 = a2 = 0): y_k = w_k."""
+    if ar[0] == 0.0 and ar[1] == 0.0:
+        return ar[2] * w
+    y = ar[0] * state[0] + ar[1] * state[1] + ar[2] * (w - state[2])
+    state[1] = state[0]
+    state[0] = y
+    state[2] = w
+    return y

@@ -280,3 +280,66 @@ def test_personality_consistency_is_checked():
     with pytest.raises(ValueError, match="calibrated rate loop needs the sensor model"):
         FleetPlant(_sih(), personalities=[broken])
     assert Dynamics().rate_loop is RateLoop.NOMINAL
+
+
+@pytest.mark.parametrize("f_hz, zeta, dt", [(23.4, 0.05, 0.002), (5.0, 0.2, 0.004)])
+def test_disturbance_resonator_has_unit_std_a_peak_at_its_frequency_and_no_dc(f_hz, zeta, dt):
+    a1, a2, gain = sn.resonator_coefficients(f_hz, zeta, dt)
+    rng = np.random.default_rng(3)
+    state = np.zeros(3)
+    y = np.array([sn.resonator_step(np.array([a1, a2, gain]), state, w)
+                  for w in rng.standard_normal(200_000)])
+    # THEN the stationary std is 1, the spectrum peaks at the frequency, and its mean is 0
+    assert np.std(y) == pytest.approx(1.0, rel=0.03)
+    spectrum = np.abs(np.fft.rfft(y)) ** 2
+    freqs = np.fft.rfftfreq(y.size, dt)
+    smooth = np.convolve(spectrum, np.ones(201) / 201, mode="same")
+    assert freqs[np.argmax(smooth)] == pytest.approx(f_hz, rel=0.05)
+    # the zero at DC: the band below a tenth of the frequency holds almost no power
+    assert smooth[freqs < 0.1 * f_hz].mean() < 1e-3 * smooth.max()
+    # white when no frequency is given
+    assert sn.resonator_coefficients(0.0, zeta, dt) == (0.0, 0.0, 1.0)
+    with pytest.raises(ValueError, match="Nyquist"):
+        sn.resonator_coefficients(0.6 / dt, zeta, dt)
+
+
+def test_complementary_attitude_error_is_the_gyro_noise_integrated_and_forgotten():
+    # GIVEN one vehicle whose gyro noise is a known white sequence, tau 2 s at 250 Hz
+    dt, tau, sigma = 0.004, 2.0, 0.1
+    phi = np.array([[math.exp(-dt / tau), -1.0, math.exp(-dt / tau)]])
+    rng = np.random.default_rng(5)
+    err = np.zeros((1, 3))
+    omega = np.array([[0.3, -0.2, 0.1]])
+    out = []
+    for _ in range(100_000):
+        raw = omega + sigma * rng.standard_normal((1, 3))
+        sn.gyro_integration_errors(0, dt, np.array([True]), phi, raw, omega, err)
+        out.append(err[0].copy())
+    out = np.array(out)
+    # THEN the error is the AR(1) of the noise times dt: std sigma dt / sqrt(1 - phi^2); an
+    # axis that is off stays 0, and no noise means no error
+    expected = sigma * dt / math.sqrt(1.0 - phi[0, 0] ** 2)
+    assert np.std(out[:, 0]) == pytest.approx(expected, rel=0.1)
+    assert np.std(out[:, 2]) == pytest.approx(expected, rel=0.1)
+    assert np.all(out[:, 1] == 0.0)
+    sn.gyro_integration_errors(0, dt, np.array([False]), phi, raw, omega, err)
+    assert np.all(err == 0.0)
+
+
+def test_gyro_bias_wanders_in_highres_imu_only():
+    # GIVEN an ardupilot vehicle hovering noise-on in rates mode
+    p = FleetPlant(sitl_airframe("ardupilot"))
+    p.onboard.noise_on[:] = True
+    p.mode[:] = ControlMode.RATES
+    p.thrust_cmd_norm[:] = p.hover_thrust_norm
+    diff = []
+    for _ in range(3000):
+        p.step(2)
+        diff.append(p.onboard.gyro_imu_flu_radps[0] - p.onboard.rate_meas_flu_radps[0])
+    diff = np.array(diff)
+    # THEN HIGHRES_IMU differs from the (bias-free) rate the loop flies on by the bias, whose
+    # std is the configured one's order, on z largest (SITL's z drift)
+    bias = np.array(PERSONALITIES["ardupilot"].sensors.gyro_bias_std_radps)
+    assert np.all(np.std(diff, axis=0) > 0.2 * bias)
+    assert np.all(np.std(diff, axis=0) < 2.0 * bias)
+    assert np.argmax(np.std(diff, axis=0)) == 2
