@@ -68,12 +68,14 @@ from gcs.link import (
     CommandRejectedError,
     CommandTimeoutError,
     LinkClosedError,
+    MavlinkPort,
     SetpointError,
     TlogWriter,
     VehicleLinkConfig,
     VehicleProxy,
     check_unique_sysids,
 )
+from gcs.link.config import shared_ports
 from gcs.link.enums import MSG_ID
 from gcs.mission.autopilots import AutopilotProfile, ModeSpec, version_text
 from gcs.mission.machine import (
@@ -98,6 +100,9 @@ TLOG_NAME = "flight.tlog"
 #: Streams that are not needed and cost CPU on both sides: switched off (0) or slowed down.
 OPTIONAL_RATES_HZ = {"ATTITUDE": 0.0, "ODOMETRY": 0.0, "GLOBAL_POSITION_INT": 5.0, "HEARTBEAT": 5.0}
 MAX_POSITION_RATE_HZ = 100.0
+#: EXTENDED_SYS_STATE (landed state: preflight, takeoff, stopping); ArduPilot sends it only when
+#: asked with SET_MESSAGE_INTERVAL (it is in none of its stream groups).
+LANDED_STATE_RATE_HZ = 5.0
 #: The tick wakes this much before its deadline and blocks precisely for the rest (see _tick_loop).
 WAKE_EARLY_S = 1.5e-3
 #: The mission machine (checks, phase changes) runs at about this rate, on tick boundaries.
@@ -215,7 +220,8 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
     # Attitude at the tick rate (the torque loop needs it fresh); position and IMU at most at
     # MAX_POSITION_RATE_HZ (the position loop is slow, and every message costs CPU on both ends).
     slow = min(rate, MAX_POSITION_RATE_HZ)
-    required = {"ATTITUDE_QUATERNION": rate, "LOCAL_POSITION_NED": slow}
+    required = {"ATTITUDE_QUATERNION": rate, "LOCAL_POSITION_NED": slow,
+                "EXTENDED_SYS_STATE": LANDED_STATE_RATE_HZ}
     if team.controller.derivative.method == "model":
         required["HIGHRES_IMU"] = slow
     from_hover = law == "adaptive" and any(v.estimates.from_hover for v in team.vehicles)
@@ -296,11 +302,14 @@ class Flight:
         self.prime_thrust_norm = normalised_thrust(kappa0 * GRAVITY_MPS2, self.max_thrust_n)
         self.links = [
             VehicleLinkConfig(vehicle_id=v.id, sysid=v.sysid, local_port=v.link.local_port,
-                              remote_port=v.link.remote_port, remote_host=v.link.remote_host,
-                              link_timeout_s=team.fly.link_lost_after_s)
+                              remote_port=v.link.remote_port,
+                              remote_host=v.link.remote_host or "127.0.0.1",
+                              learn_remote=v.link.learn_remote,
+                              link_timeout_s=team.fly.link_timeout_s)
             for v in vehicles
         ]
         check_unique_sysids(self.links)
+        self.shared_ports = shared_ports(self.links)  # (host, port) -> the vehicles on it
         self.proxies: list[VehicleProxy] = []
         self._proxy_by_id: dict[int, VehicleProxy] = {}
         self.builder = FlightLogBuilder(
@@ -355,8 +364,13 @@ class Flight:
             sync_stack.callback(self._remove_signal_handlers, loop)
             self._install_signal_handlers(loop)
             async with contextlib.AsyncExitStack() as stack:
+                ports = {where: await stack.enter_async_context(
+                    MavlinkPort(where[1], local_host=where[0], tlog=tlog))
+                    for where in self.shared_ports}
                 for cfg in self.links:
-                    proxy = await stack.enter_async_context(VehicleProxy(cfg, tlog=tlog))
+                    port = ports.get((cfg.local_host, cfg.local_port))
+                    proxy = await stack.enter_async_context(VehicleProxy(cfg, tlog=tlog,
+                                                                         port=port))
                     self.proxies.append(proxy)
                     self._proxy_by_id[cfg.vehicle_id] = proxy
                 logger.info("%s", self.setup.stability)
@@ -709,6 +723,8 @@ class Flight:
                     "thrust_clamped": s.proxy.thrust_clamped,
                     "torque_clamped": s.proxy.torque_clamped,
                     "link_lost_events": s.proxy.link_lost_events,
+                    "stranger_address": s.proxy.stranger_address,
+                    "unknown_sysid_frames": s.port.unknown_sysid_frames,
                     "command_retries": getattr(s.commands, "retries", None),
                     "lost": self.ids[i] in self.machine.lost}
                    for i, s in enumerate(stats)],

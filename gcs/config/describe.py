@@ -80,8 +80,7 @@ def describe(team: TeamConfig) -> str:
             f"{_v3(v.initial.position_enu_m)}, mhat(0) {_mhat0(v)}, Jhat(0) "
             f"{_v3(v.estimates.inertia_kgm2)}",
             f"      max thrust {v.airframe.max_thrust_n:g} N, arm {v.airframe.arm_length_m:g}"
-            f" m; link udp :{v.link.local_port} -> {v.link.remote_host}:{v.link.remote_port};"
-            f" {plant}{nominal}",
+            f" m; link {_link(team, v)}; {plant}{nominal}",
         ]
     fly = team.fly
 
@@ -102,7 +101,8 @@ def describe(team: TeamConfig) -> str:
         f"{fly.rates.max_rate_radps:g} rad/s); {mode_line('actuators', fly.actuators)}",
         f"     start {fly.start}, end {fly.end_action}, abort {fly.abort_action}, link loss "
         f"{fly.link_loss_action}; stale after {fly.stale_after_s:g} s, lost after "
-        f"{fly.link_lost_after_s:g} s; max tilt {fly.max_tilt_rad:g} rad; {fence}",
+        f"{fly.link_lost_after_s:g} s in flight, link timeout {fly.link_timeout_s:g} s; max tilt "
+        f"{fly.max_tilt_rad:g} rad; {fence}",
     ]
     out.append("faults:" + ("" if team.faults else " none"))
     for f in team.faults:
@@ -179,3 +179,18 @@ def describe(team: TeamConfig) -> str:
 
 def _mhat0(v: VehicleConfig) -> str:
     return "from the hover thrust" if v.estimates.from_hover else f"{v.estimates.mhat:g}"
+
+
+def _link(team: TeamConfig, v: VehicleConfig) -> str:
+    """'udp :14550 (shared with 2, 3, by sysid) -> the address its first message comes from'."""
+    lk = v.link
+    others = [u.id for u in team.vehicles if u.id != v.id and lk.local_port
+              and u.link.local_port == lk.local_port]
+    text = f"udp :{lk.local_port}"
+    if others:
+        text += f" (shared with {', '.join(str(i) for i in others)}, by sysid)"
+    fixed = f"{lk.remote_host}:{lk.remote_port}"
+    if not lk.learn_remote:
+        return f"{text} -> {fixed}"
+    first = f" (until then {fixed})" if lk.remote_port is not None else ""
+    return f"{text} -> the address its first message comes from{first}"

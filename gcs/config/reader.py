@@ -279,6 +279,15 @@ class _Node:
             self.fail(f"expected {_interval(None, ge, None, le)}, got {x}")
         return x
 
+    def boolean(self, default: Any = _MISSING) -> Any:
+        if self.absent and default is not _MISSING:
+            return default
+        if self.value is _MISSING:
+            self.fail("required key is missing")
+        if not isinstance(self.value, bool):
+            self.fail(f"expected true or false, got {_kind(self.value)}")
+        return self.value
+
     def string(self, default: Any = _MISSING, choices: Sequence[str] = ()) -> Any:
         if self.absent and default is not _MISSING:
             return default
@@ -391,7 +400,13 @@ def _vehicle(node: _Node, gains: Gains) -> VehicleConfig:
     )
     link, default_link = node.child("link"), LinkConfig.px4_sitl(sysid)
     if not link.absent:
-        link.keys("", "local_port remote_host remote_port")
+        link.keys("", "local_port remote_host remote_port learn_remote")
+    learn = link.child("learn_remote").boolean(False)
+    if learn and link.child("remote_port").absent and not link.child("remote_host").absent:
+        link.child("remote_host").fail(
+            "has no effect without remote_port: with learn_remote: true the vehicle's address is "
+            "learned from its first message (give remote_port too to send there until then)"
+        )
     plant = node.child("plant")
     if not plant.absent:
         plant.keys("mass_kg inertia_kgm2")
@@ -420,8 +435,13 @@ def _vehicle(node: _Node, gains: Gains) -> VehicleConfig:
         ),
         link=LinkConfig(
             link.child("local_port").integer(default_link.local_port, ge=0, le=65535),
-            link.child("remote_host").string(default_link.remote_host),
-            link.child("remote_port").integer(default_link.remote_port, ge=1, le=65535),
+            link.child("remote_host").string(
+                None if learn and link.child("remote_port").absent else default_link.remote_host
+            ),
+            link.child("remote_port").integer(
+                None if learn else default_link.remote_port, ge=1, le=65535
+            ),
+            learn,
         ),
         plant=None
         if plant.absent
@@ -594,8 +614,8 @@ def _fly(node: _Node) -> FlyConfig:
     node.keys(
         "",
         "rates actuators attitude heading start takeoff_altitude_m end_action abort_action "
-        "link_loss_action stale_after_s link_lost_after_s max_tilt_rad geofence log_rate_hz "
-        "connect_timeout_s takeoff_timeout_s land_timeout_s",
+        "link_loss_action stale_after_s link_lost_after_s link_timeout_s max_tilt_rad geofence "
+        "log_rate_hz connect_timeout_s takeoff_timeout_s land_timeout_s",
     )
     geofence = None
     g = node.child("geofence")
@@ -622,6 +642,7 @@ def _fly(node: _Node) -> FlyConfig:
         link_loss_action=node.child("link_loss_action").string(d.link_loss_action, FLY_ACTIONS),
         stale_after_s=node.child("stale_after_s").number(d.stale_after_s, gt=0.0),
         link_lost_after_s=node.child("link_lost_after_s").number(d.link_lost_after_s, gt=0.0),
+        link_timeout_s=node.child("link_timeout_s").number(d.link_timeout_s, gt=0.0),
         max_tilt_rad=node.child("max_tilt_rad").number(d.max_tilt_rad, gt=0.0, le=math.pi),
         geofence=geofence,
         log_rate_hz=node.child("log_rate_hz").number(d.log_rate_hz, gt=0.0),
@@ -689,13 +710,23 @@ def _team(root: _Node) -> TeamConfig:
     vehicles = tuple(_vehicle(node, gains) for node in nodes)
     _unique(nodes, "id", [v.id for v in vehicles], "vehicle id")
     _unique(nodes, "sysid", [v.sysid for v in vehicles], "sysid")
-    _unique(nodes, "link.local_port", [v.link.local_port or None for v in vehicles], "local port")
-    _unique(
-        nodes,
-        "link.remote_port",
-        [(v.link.remote_host, v.link.remote_port) for v in vehicles],
-        "remote endpoint",
-    )
+    # Vehicles with the same local_port share that GCS port, told apart by their (unique) sysids;
+    # a fixed remote endpoint is still one vehicle's (the emulator binds it).
+    remotes = [
+        (v.link.remote_host, v.link.remote_port) if v.link.remote_port is not None else None
+        for v in vehicles
+    ]
+    seen_remote: dict[Any, int] = {}
+    for k, remote in enumerate(remotes):
+        if remote is None:
+            continue
+        if remote in seen_remote:
+            nodes[k].child("link.remote_port").fail(
+                f"duplicate remote endpoint {remote} (also vehicles[{seen_remote[remote]}]); "
+                "vehicles behind one router or relay share its address: set learn_remote: true "
+                "and leave remote_port out"
+            )
+        seen_remote[remote] = k
     _unique(nodes, "offset_enu_m", [v.offset_enu_m for v in vehicles], "offset (collision)")
     _unique(
         nodes,

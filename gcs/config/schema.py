@@ -212,11 +212,17 @@ class Estimates:
 
 @dataclass(frozen=True, slots=True)
 class LinkConfig:
-    """GCS side of a vehicle's MAVLink UDP link (local_port 0: any free port)."""
+    """GCS side of a vehicle's MAVLink UDP link (local_port 0: any free port).
+
+    ``learn_remote``: the vehicle's address is the source of its first valid message (its
+    ``remote_port``, if given, is only where the GCS sends until then; None: nowhere). Vehicles
+    with the same nonzero ``local_port`` share that GCS port, told apart by sysid.
+    """
 
     local_port: int
-    remote_host: str
-    remote_port: int
+    remote_host: str | None  # None only with learn_remote and no remote_port
+    remote_port: int | None  # None only with learn_remote
+    learn_remote: bool = False
 
     @classmethod
     def px4_sitl(cls, sysid: int) -> LinkConfig:
@@ -358,7 +364,10 @@ class FlyConfig:
     abort_action: str = "land"  # Ctrl-C, abort key, geofence, failed check
     link_loss_action: str = "hold"  # the other vehicles when one link is lost
     stale_after_s: float = 0.1  # telemetry older than this is stale (see docs/gcs.md)
-    link_lost_after_s: float = 0.5  # a vehicle silent this long is lost
+    link_lost_after_s: float = 0.5  # in flight: position/attitude older than this -> lost
+    # any valid message from the vehicle keeps its link ALIVE; none for this long -> LOST (a
+    # vehicle that sends only its 1 Hz HEARTBEAT, as ArduPilot does until asked, stays ALIVE)
+    link_timeout_s: float = 3.0
     max_tilt_rad: float = 1.0  # abort above this tilt (formation phase)
     geofence: GeofenceConfig | None = None
     log_rate_hz: float = 50.0  # time-series samples; must divide every mode's tick rate

@@ -224,6 +224,7 @@ def test_defaults_optional_keys_and_explicit_link():
     assert team.sim.plant_rate_hz == team.sim.controller_rate_hz == 1000.0
     assert team.controller.derivative.method == "model"
     assert team.vehicles[1].link == LinkConfig(0, "10.0.0.2", 14581)
+    assert team.vehicles[0].link == LinkConfig(14540, "127.0.0.1", 14580, learn_remote=False)
     assert team.vehicles[2].plant is None and not team.has_plants()
     assert team.vehicles[0].initial.attitude_rpy_rad == (0.0, 0.0, 0.0)
     with pytest.raises(ConfigError, match=r"vehicles\[2\]\.plant: missing: the true mass"):
@@ -236,6 +237,27 @@ def test_defaults_optional_keys_and_explicit_link():
     )
     a = team_from_dict(data).adjacency()
     assert a[0, 1] == a[1, 0] == 0.5 and a[1, 2] == 2.0 and a[2, 3] == a[3, 0] == 1.0
+
+
+def test_shared_ports_and_learned_addresses():
+    # GIVEN four vehicles sending to one GCS port (a router, or SITL told to), whose addresses
+    # are learned, one of them with a first address to send to until it is heard
+    data = base()
+    for k in range(4):
+        edit(data, f"vehicles.{k}.link", {"local_port": 14550, "learn_remote": True})
+    edit(data, "vehicles.3.link.remote_port", 14583)
+    team = team_from_dict(data)
+    # THEN they share the port; the learned links have no address until heard
+    assert [v.link.local_port for v in team.vehicles] == [14550] * 4
+    assert team.vehicles[0].link == LinkConfig(14550, None, None, learn_remote=True)
+    assert team.vehicles[3].link == LinkConfig(14550, "127.0.0.1", 14583, learn_remote=True)
+    # AND gcs check says so
+    text = describe(team)
+    assert "link udp :14550 (shared with 2, 3, 4, by sysid) -> the address its first message " \
+           "comes from;" in text
+    assert "-> the address its first message comes from (until then 127.0.0.1:14583)" in text
+    # AND it round-trips
+    assert team_from_dict(team_to_dict(team)) == team
 
 
 def test_with_law_switches_and_checks_the_baseline():
@@ -340,14 +362,27 @@ ERRORS = [
     ("vehicles.3.sysid", 256, r"vehicles\[3\]\.sysid: expected a value in \[1, 255\], got 256"),
     ("vehicles.0.sysid", 0, r"vehicles\[0\]\.sysid: expected a value in \[1, 255\], got 0"),
     (
+        "vehicles.3.sysid",
+        3,
+        r"vehicles\[3\]\.sysid: duplicate sysid 3 \(also vehicles\[2\]\)",
+    ),
+    (
         "vehicles.2.link",
-        {"local_port": 14540},
-        r"vehicles\[2\]\.link\.local_port: duplicate local port 14540 \(also vehicles\[0\]\)",
+        {"learn_remote": "yes"},
+        r"vehicles\[2\]\.link\.learn_remote: expected true or false, got string 'yes'",
+    ),
+    (
+        "vehicles.2.link",
+        {"learn_remote": True, "remote_host": "10.0.0.2"},
+        r"vehicles\[2\]\.link\.remote_host: has no effect without remote_port: with "
+        r"learn_remote: true",
     ),
     (
         "vehicles.2.link",
         {"remote_port": 14580},
-        r"vehicles\[2\]\.link\.remote_port: duplicate remote endpoint \('127\.0\.0\.1', 14580\)",
+        r"vehicles\[2\]\.link\.remote_port: duplicate remote endpoint \('127\.0\.0\.1', 14580\) "
+        r"\(also vehicles\[0\]\); vehicles behind one router or relay share its address: set "
+        r"learn_remote: true and leave remote_port out$",
     ),
     (
         "vehicles.2.link",
@@ -505,6 +540,7 @@ ERRORS = [
     ("fly.end_action", "crash",
      r"fly\.end_action: expected one of 'land', 'hold', got string 'crash'"),
     ("fly.start", "maybe", r"fly\.start: expected one of 'auto', 'in_air', 'takeoff'"),
+    ("fly.link_timeout_s", 0, r"fly\.link_timeout_s: expected > 0, got 0\.0$"),
     ("fly.link_lost_after_s", 0.05, r"fly\.link_lost_after_s: expected > stale_after_s 0\.1, "
      r"got 0\.05$"),
     ("fly.geofence", {"min_enu_m": [0, 0, 5], "max_enu_m": [1, 1, 5]},
@@ -525,6 +561,7 @@ def test_fly_section_is_optional_and_defaults_are_documented():
     assert fly.rates.max_rate_radps == 1.0 and fly.actuators.alpha_omega is None
     assert (fly.end_action, fly.abort_action, fly.link_loss_action) == ("land", "land", "hold")
     assert fly.geofence is None and fly.stale_after_s == 0.1 and fly.link_lost_after_s == 0.5
+    assert fly.link_timeout_s == 3.0  # tolerates a 1 Hz HEARTBEAT-only vehicle
     # AND the shipped file flies the criterion's torque gains
     shipped = load_team(SQUARE4).fly
     assert (shipped.actuators.alpha_eps, shipped.actuators.alpha_omega) == (24.0, 3.0)

@@ -37,8 +37,9 @@ def test_rates_setup_uses_the_file_and_checks_the_criterion():
     team = load_team(CONFIGS / "square4.yaml")
     setup = prepare(team, FlyOptions(out_dir=OUT, mode="rates"))
     assert setup.tick_rate_hz == 100.0 and setup.log_every == 2
+    # every stream the law and preflight need, EXTENDED_SYS_STATE (landed state) included
     assert setup.requested_rates_hz == {"ATTITUDE_QUATERNION": 100.0, "LOCAL_POSITION_NED": 100.0,
-                                        "HIGHRES_IMU": 100.0}
+                                        "EXTENDED_SYS_STATE": 5.0, "HIGHRES_IMU": 100.0}
     assert "rates mode at 100 Hz, k_eps 8" in setup.stability
 
 
