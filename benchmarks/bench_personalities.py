@@ -187,7 +187,7 @@ def main() -> None:
     results: dict[str, dict[str, dict]] = {}
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
-        for autopilot in args.autopilot or ["px4"]:
+        for autopilot in args.autopilot or sorted(TEAMS, reverse=True):  # px4, ardupilot
             recorded = json.loads((FLIGHTS / TEAMS[autopilot]).with_name("report.json")
                                   .read_text())
             runs = {f"recorded {SITL_NAMES[autopilot]}": figures(recorded)}

@@ -75,7 +75,8 @@ def main() -> int:
                 scale2,
             )
         )
-        *_, tau, rrate, _, _, _, _ = attitude_stage(rot, w, u, du_m, ddu_m, rho, gains, True)
+        *_, tau, rrate, _, _, _, _ = attitude_stage(rot, w, u, du_m, ddu_m, rho, gains, True,
+                                                   np.zeros(u.shape[0]))
         thrust_hold = t_n
         mhat = mhat + dt * mrate
         rho = rho + dt * rrate

@@ -25,6 +25,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import copy
+import dataclasses
 import logging
 import math
 import os
@@ -44,10 +45,17 @@ from gcs.control.gains import GRAVITY_MPS2, LawGains
 from gcs.control.law import SingularCommandError, TeamCommand, TeamLaw
 from gcs.flightlog import FlightLog, FlightLogBuilder, save_timeseries
 from gcs.fly.measure import (
+    HOVER_MIN_SAMPLES,
+    HOVER_RATE_HZ,
+    HOVER_WINDOW_S,
+    HoverEstimate,
+    HoverThrust,
     TeamSample,
+    command_heading_rad,
     desaturate_torque,
     effective_adjacency,
     fresh_mask,
+    level_rotations,
     limit_rate_command,
     normalised_thrust,
     normalised_torque,
@@ -61,12 +69,14 @@ from gcs.link import (
     CommandRejectedError,
     CommandTimeoutError,
     LinkClosedError,
+    MavlinkPort,
     SetpointError,
     TlogWriter,
     VehicleLinkConfig,
     VehicleProxy,
     check_unique_sysids,
 )
+from gcs.link.config import shared_ports
 from gcs.link.enums import MSG_ID, MavCmd, MavModeFlag
 from gcs.mission.autopilots import AutopilotProfile, ModeSpec, version_text
 from gcs.mission.machine import (
@@ -91,6 +101,9 @@ TLOG_NAME = "flight.tlog"
 #: Streams that are not needed and cost CPU on both sides: switched off (0) or slowed down.
 OPTIONAL_RATES_HZ = {"ATTITUDE": 0.0, "ODOMETRY": 0.0, "GLOBAL_POSITION_INT": 5.0, "HEARTBEAT": 5.0}
 MAX_POSITION_RATE_HZ = 100.0
+#: EXTENDED_SYS_STATE (landed state: preflight, takeoff, stopping); ArduPilot sends it only when
+#: asked with SET_MESSAGE_INTERVAL (it is in none of its stream groups).
+LANDED_STATE_RATE_HZ = 5.0
 #: The tick wakes this much before its deadline and blocks precisely for the rest (see _tick_loop).
 WAKE_EARLY_S = 1.5e-3
 #: The mission machine (checks, phase changes) runs at about this rate, on tick boundaries.
@@ -190,6 +203,10 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
                 f"{worst.spectral_radius:.3f} (decay {worst.decay_per_s:.3g} /s, need >= "
                 f"{MIN_DECAY_PER_S:g} /s with 1-2 ticks of delay); set fly.actuators.alpha_eps/"
                 f"alpha_omega or tick_rate_hz (docs/gcs.md)")
+    elif mode == "attitude":
+        # no attitude loop on the ground station: the autopilot closes it on board
+        stability = (f"attitude mode at {rate:g} Hz: the autopilot closes the attitude loop on "
+                     "board; the ground station runs the position loop (23)-(24) and R^c (14)")
     else:
         rho, decay = rate_margin(gains.k_eps, rate)
         stability = (f"rates mode at {rate:g} Hz, k_eps {gains.k_eps:g}: rho {rho:.4f}, "
@@ -204,9 +221,13 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
     # Attitude at the tick rate (the torque loop needs it fresh); position and IMU at most at
     # MAX_POSITION_RATE_HZ (the position loop is slow, and every message costs CPU on both ends).
     slow = min(rate, MAX_POSITION_RATE_HZ)
-    required = {"ATTITUDE_QUATERNION": rate, "LOCAL_POSITION_NED": slow}
+    required = {"ATTITUDE_QUATERNION": rate, "LOCAL_POSITION_NED": slow,
+                "EXTENDED_SYS_STATE": LANDED_STATE_RATE_HZ}
     if team.controller.derivative.method == "model":
         required["HIGHRES_IMU"] = slow
+    from_hover = law == "adaptive" and any(v.estimates.from_hover for v in team.vehicles)
+    if from_hover:  # the autopilot's own hover thrust, read while it holds (docs/gcs.md)
+        required["ATTITUDE_TARGET"] = HOVER_RATE_HZ
     rules = SafetyRules(
         max_tilt_rad=fly.max_tilt_rad, link_lost_after_s=fly.link_lost_after_s,
         geofence_min_enu_m=gf.min_enu_m if gf else None,
@@ -227,6 +248,7 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
         formation_check_s=fly.formation_check.after_s,
         formation_max_error_m=fly.formation_check.max_error_m,
         formation_max_fraction=fly.formation_check.max_fraction,
+        **({"prime_s": HOVER_WINDOW_S + 0.5} if from_hover else {}),
     )
     return FlightSetup(team, mode, law, rate, gains, plan, required,
                        round(rate / fly.log_rate_hz), stability)
@@ -276,6 +298,9 @@ class Flight:
         self.rotor_max_n = np.array([v.airframe.rotor_thrust_max_n for v in vehicles])
         self.torque_max = torque_max_nm(self.arm_m, self.anti_torque_m, self.rotor_max_n)
         self.max_rate_radps = team.fly.rates.max_rate_radps
+        self.hover = HoverThrust(self.n)
+        self.hover_estimates: dict[int, HoverEstimate] = {}
+        self.max_yaw_rate_radps = team.fly.rates.max_yaw_rate_radps
         self.limited_ticks = np.zeros(self.n, dtype=np.int64)  # rate or torque limit applied
         # Before the formation starts (PRIME), vehicles get level, zero-rate setpoints at the
         # law's own initial mass estimate times g (what the law itself would ask at rest).
@@ -284,11 +309,14 @@ class Flight:
         self.prime_thrust_norm = normalised_thrust(kappa0 * GRAVITY_MPS2, self.max_thrust_n)
         self.links = [
             VehicleLinkConfig(vehicle_id=v.id, sysid=v.sysid, local_port=v.link.local_port,
-                              remote_port=v.link.remote_port, remote_host=v.link.remote_host,
-                              link_timeout_s=team.fly.link_lost_after_s)
+                              remote_port=v.link.remote_port,
+                              remote_host=v.link.remote_host or "127.0.0.1",
+                              learn_remote=v.link.learn_remote,
+                              link_timeout_s=team.fly.link_timeout_s)
             for v in vehicles
         ]
         check_unique_sysids(self.links)
+        self.shared_ports = shared_ports(self.links)  # (host, port) -> the vehicles on it
         self.proxies: list[VehicleProxy] = []
         self._proxy_by_id: dict[int, VehicleProxy] = {}
         self.builder = FlightLogBuilder(
@@ -344,8 +372,13 @@ class Flight:
             sync_stack.callback(self._remove_signal_handlers, loop)
             self._install_signal_handlers(loop)
             async with contextlib.AsyncExitStack() as stack:
+                ports = {where: await stack.enter_async_context(
+                    MavlinkPort(where[1], local_host=where[0], tlog=tlog))
+                    for where in self.shared_ports}
                 for cfg in self.links:
-                    proxy = await stack.enter_async_context(VehicleProxy(cfg, tlog=tlog))
+                    port = ports.get((cfg.local_host, cfg.local_port))
+                    proxy = await stack.enter_async_context(VehicleProxy(cfg, tlog=tlog,
+                                                                         port=port))
                     self.proxies.append(proxy)
                     self._proxy_by_id[cfg.vehicle_id] = proxy
                 logger.info("%s", self.setup.stability)
@@ -589,14 +622,61 @@ class Flight:
             self._dispatch(m.on_tick(deadline_s, statuses, self.formation_error_m))
             self._log_notes()
         streaming = m.streaming
+        if m.phase is Phase.PRIME:
+            self._record_hover_thrust()
         if m.law_active and (streaming or m.phase is Phase.FORMATION):
-            command = self._run_law(k, sample)
+            command = self._run_law(k, sample, now_s)
             if command is not None:
                 self._send(command, streaming)
         elif m.phase is Phase.PRIME:
+            # level and still: zero rates or torque; in attitude mode, level at the heading
+            level = (level_rotations(sample.rotation) if self.setup.mode == "attitude"
+                     else np.zeros((self.n, 3)))
             for i, p in enumerate(self.proxies):
                 if self.ids[i] in streaming:
-                    self._send_one(i, p, np.zeros(3), self.prime_thrust_norm[i])
+                    self._send_one(i, p, level[i], self.prime_thrust_norm[i])
+
+    def _record_hover_thrust(self) -> None:
+        """PRIME: the vehicles hold on their own; keep the thrust they report (from_hover)."""
+        for i, (v, p) in enumerate(zip(self.team.vehicles, self.proxies, strict=True)):
+            if v.estimates.from_hover and (at := p.latest("ATTITUDE_TARGET")) is not None:
+                self.hover.add(i, at.rx_time_s, float(at.msg.thrust))
+
+    def _initial_mass_from_hover(self, sample: TeamSample, now_s: float) -> bool:
+        """At the formation start: mhat_i(0) from the hover of each `mhat: from_hover` vehicle,
+        checked against Proposition 2; False (and the flight stops) when one cannot be taken
+        or fails the check."""
+        if self.setup.law != "adaptive":
+            return True
+        g = self.setup.gains
+        for i, v in enumerate(self.team.vehicles):
+            if not v.estimates.from_hover:
+                continue
+            name = f"vehicle {v.id} (sysid {v.sysid})"
+            sat = g.sigma_a * np.tanh(sample.velocity_mps[i] / g.sigma_a)
+            phi0 = 2.0 + float(sat.sum()) / (3.0 * g.sigma_a)
+            est = self.hover.estimate(i, now_s, v.airframe.max_thrust_n, g.alpha_m, phi0,
+                                      v.mass_bound_kg)
+            if est is None:
+                self.machine.request_abort(
+                    f"{name}: no hover thrust to take mhat(0) from (fewer than "
+                    f"{HOVER_MIN_SAMPLES} ATTITUDE_TARGET in the {HOVER_WINDOW_S:g} s before the "
+                    "formation start)", operator=False)
+                return False
+            self.hover_estimates[v.id] = est
+            bound = ("no mass_bound_kg" if est.least_mhat0 is None else
+                     f"Proposition 2: mhat(0) >= (phi(0) - 1) mbar / alpha_m = "
+                     f"{est.least_mhat0:.4g} {'holds' if est.proposition2_holds else 'FAILS'}")
+            logger.info("%s: hover thrust %.4f (%d samples) -> %.4g kg, mhat(0) %.4g; %s", name,
+                        est.thrust_norm, est.samples, est.mass_kg, est.mhat0, bound)
+            if not est.proposition2_holds:
+                self.machine.request_abort(
+                    f"{name}: mhat(0) {est.mhat0:.4g} from the hover ({est.mass_kg:.4g} kg) is "
+                    f"below Proposition 2's {est.least_mhat0:.4g} (mass_bound_kg "
+                    f"{v.mass_bound_kg:g})", operator=False)
+                return False
+            self.law.mhat[i] = est.mhat0
+        return True
 
     def _log_notes(self) -> None:
         notes = self.machine.notes
@@ -606,9 +686,13 @@ class Flight:
                        "mission: %s", text)
         self._notes_logged = len(notes)
 
-    def _run_law(self, k: int, sample: TeamSample) -> TeamCommand | None:
+    def _run_law(self, k: int, sample: TeamSample, now_s: float) -> TeamCommand | None:
         if self._k0 is None:
             self._k0 = k
+            fly = self.team.fly
+            self.law.heading_rad = command_heading_rad(fly.heading, sample.rotation)
+            if not self._initial_mass_from_hover(sample, now_s):
+                return self.last_command
         t = (k - self._k0) * self.period_s
         dt = (k - (self._last_law_k if self._last_law_k is not None else k - 1)) * self.period_s
         self._last_law_k = k
@@ -656,8 +740,11 @@ class Flight:
             torque, limited = desaturate_torque(c.thrust_n, c.torque_nm, self.arm_m,
                                                 self.anti_torque_m, self.rotor_max_n)
             vec = normalised_torque(torque, self.torque_max)
+        elif self.setup.mode == "attitude":  # R^c itself; the autopilot limits its own tilt
+            vec, limited = c.command_rotation, np.zeros(self.n, dtype=bool)
         else:
-            vec, limited = limit_rate_command(c.rate_cmd_radps, self.max_rate_radps)
+            vec, limited = limit_rate_command(c.rate_cmd_radps, self.max_rate_radps,
+                                              self.max_yaw_rate_radps)
         if self.machine.phase is Phase.FORMATION:
             self.limited_ticks += limited
         for i, p in enumerate(self.proxies):
@@ -668,6 +755,8 @@ class Flight:
         try:
             if self.setup.mode == "actuators":
                 p.send_actuator_controls(vec, thrust_norm)
+            elif self.setup.mode == "attitude":
+                p.send_attitude_thrust(vec, thrust_norm)
             else:
                 p.send_rates_thrust(vec, thrust_norm)
         except SetpointError as exc:
@@ -698,6 +787,8 @@ class Flight:
                     "thrust_clamped": s.proxy.thrust_clamped,
                     "torque_clamped": s.proxy.torque_clamped,
                     "link_lost_events": s.proxy.link_lost_events,
+                    "stranger_address": s.proxy.stranger_address,
+                    "unknown_sysid_frames": s.port.unknown_sysid_frames,
                     "command_retries": getattr(s.commands, "retries", None),
                     "lost": self.ids[i] in self.machine.lost}
                    for i, s in enumerate(stats)],
@@ -706,6 +797,8 @@ class Flight:
         log = self.builder.build(extra={
             "link": link, "tick": tick,
             "outcome": {"exit_code": outcome.exit_code, "reason": outcome.reason},
+            "hover_estimates": {str(vid): dataclasses.asdict(e)
+                                for vid, e in self.hover_estimates.items()},
             "events": self.machine.notes[-50:],
             "statustext": self._statustexts(),
         })

@@ -7,6 +7,7 @@ Every wait raises ``TimeoutError`` naming what it waited for.
 
 from __future__ import annotations
 
+import asyncio
 import collections
 import contextlib
 import os
@@ -18,7 +19,7 @@ import sys
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Coroutine, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -31,12 +32,15 @@ __all__ = [
     "run_until",
     "clients_on_port_block",
     "SetpointStreamer",
+    "UdpPeer",
     "custom_main_mode",
     "custom_sub_mode",
     "free_udp_port",
     "hover_thrust",
     "rates_setpoint",
+    "run_bounded",
     "run_emulator",
+    "wait_until",
 ]
 
 GCS_SYSID = 245
@@ -70,6 +74,47 @@ def run_until(emu: Any, until_s: float, tick_s: float = 0.002) -> None:
     while t < until_s - 1e-9:
         t += tick_s
         emu.advance_to(t)
+
+
+def run_bounded(coro: Coroutine[Any, Any, Any], timeout_s: float = 10.0) -> Any:
+    """``asyncio.run(coro)``, raising TimeoutError after ``timeout_s`` (a test never hangs)."""
+
+    async def bounded() -> Any:
+        async with asyncio.timeout(timeout_s):
+            return await coro
+
+    return asyncio.run(bounded())
+
+
+async def wait_until(condition: Callable[[], bool], timeout_s: float = 2.0) -> None:
+    """Poll ``condition`` on the event loop every millisecond (no fixed sleeps); returns when it
+    holds, raises TimeoutError after ``timeout_s``."""
+    async with asyncio.timeout(timeout_s):
+        while not condition():
+            await asyncio.sleep(0.001)
+
+
+class UdpPeer(asyncio.DatagramProtocol):
+    """An asyncio UDP socket on an ephemeral 127.0.0.1 port for hand-written test peers
+    (subclasses implement ``datagram_received``). Lifetime: ``async with Peer() as peer:``."""
+
+    transport: asyncio.DatagramTransport | None = None
+
+    async def __aenter__(self) -> Any:
+        self.transport, _ = await asyncio.get_running_loop().create_datagram_endpoint(
+            lambda: self, local_addr=("127.0.0.1", 0))
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        assert self.transport is not None
+        self.transport.close()
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """(host, port) bound."""
+        assert self.transport is not None
+        host, port = self.transport.get_extra_info("sockname")[:2]
+        return (str(host), int(port))
 
 
 def free_udp_port() -> int:

@@ -14,6 +14,7 @@ from gcs.config.schema import (
     FaultConfig,
     FlyModeConfig,
     TeamConfig,
+    VehicleConfig,
     initial_phi,
     proposition2_min_mhat,
 )
@@ -76,11 +77,10 @@ def describe(team: TeamConfig) -> str:
         nominal = f", nominal {v.nominal_mass_kg:g} kg" if v.nominal_mass_kg else ""
         out += [
             f"  vehicle {v.id} (sysid {v.sysid}): offset {_v3(v.offset_enu_m)}, start "
-            f"{_v3(v.initial.position_enu_m)}, mhat(0) {v.estimates.mhat:g}, Jhat(0) "
+            f"{_v3(v.initial.position_enu_m)}, mhat(0) {_mhat0(v)}, Jhat(0) "
             f"{_v3(v.estimates.inertia_kgm2)}",
             f"      max thrust {v.airframe.max_thrust_n:g} N, arm {v.airframe.arm_length_m:g}"
-            f" m; link udp :{v.link.local_port} -> {v.link.remote_host}:{v.link.remote_port};"
-            f" {plant}{nominal}",
+            f" m; link {_link(team, v)}; {plant}{nominal}",
         ]
     fly = team.fly
 
@@ -101,7 +101,8 @@ def describe(team: TeamConfig) -> str:
         f"{fly.rates.max_rate_radps:g} rad/s); {mode_line('actuators', fly.actuators)}",
         f"     start {fly.start}, end {fly.end_action}, abort {fly.abort_action}, link loss "
         f"{fly.link_loss_action}; stale after {fly.stale_after_s:g} s, lost after "
-        f"{fly.link_lost_after_s:g} s; max tilt {fly.max_tilt_rad:g} rad; {fence}",
+        f"{fly.link_lost_after_s:g} s in flight, link timeout {fly.link_timeout_s:g} s; max tilt "
+        f"{fly.max_tilt_rad:g} rad; {fence}",
     ]
     out.append("faults:" + ("" if team.faults else " none"))
     for f in team.faults:
@@ -127,6 +128,9 @@ def describe(team: TeamConfig) -> str:
         out.append(
             f"    vehicle {v.id}: skipped (no mass_bound_kg, no plant)"
             if least is None
+            else f"    vehicle {v.id}: from the hover thrust in flight (gcs fly checks it), "
+            f"least {least:.4g}"
+            if v.estimates.from_hover
             else f"    vehicle {v.id}: {v.estimates.mhat:g} >= ({initial_phi(v, g):.4g} - 1)"
             f" * {v.mass_bound_kg:g} / {g.alpha_m:g} = {least:.4g}: "
             f"{_ok(v.estimates.mhat >= least)}, margin {v.estimates.mhat - least:.4g}"
@@ -171,3 +175,22 @@ def describe(team: TeamConfig) -> str:
                 factor = 1 - g.alpha_omega * sim.controller_dt_s / min(v.plant.inertia_kgm2)
                 out.append(f"    vehicle {v.id}: {factor:.3g}: {_ok(abs(factor) < 1)}")
     return "\n".join(out)
+
+
+def _mhat0(v: VehicleConfig) -> str:
+    return "from the hover thrust" if v.estimates.from_hover else f"{v.estimates.mhat:g}"
+
+
+def _link(team: TeamConfig, v: VehicleConfig) -> str:
+    """'udp :14550 (shared with 2, 3, by sysid) -> the address its first message comes from'."""
+    lk = v.link
+    others = [u.id for u in team.vehicles if u.id != v.id and lk.local_port
+              and u.link.local_port == lk.local_port]
+    text = f"udp :{lk.local_port}"
+    if others:
+        text += f" (shared with {', '.join(str(i) for i in others)}, by sysid)"
+    fixed = f"{lk.remote_host}:{lk.remote_port}"
+    if not lk.learn_remote:
+        return f"{text} -> {fixed}"
+    first = f" (until then {fixed})" if lk.remote_port is not None else ""
+    return f"{text} -> the address its first message comes from{first}"

@@ -20,6 +20,7 @@ from gcs.config.schema import (
     DERIVATIVE_METHODS,
     FAULT_KINDS,
     FLY_ACTIONS,
+    FLY_HEADINGS,
     FLY_STARTS,
     GAIN_NAMES,
     GRAVITY_MPS2,
@@ -279,6 +280,15 @@ class _Node:
             self.fail(f"expected {_interval(None, ge, None, le)}, got {x}")
         return x
 
+    def boolean(self, default: Any = _MISSING) -> Any:
+        if self.absent and default is not _MISSING:
+            return default
+        if self.value is _MISSING:
+            self.fail("required key is missing")
+        if not isinstance(self.value, bool):
+            self.fail(f"expected true or false, got {_kind(self.value)}")
+        return self.value
+
     def string(self, default: Any = _MISSING, choices: Sequence[str] = ()) -> Any:
         if self.absent and default is not _MISSING:
             return default
@@ -356,6 +366,24 @@ def _emulator_section(node: _Node, allowed: str) -> None:
         node.child("origin_enu_m").vec3()
 
 
+def _estimates(est: _Node, plant: _Node, gains: Gains) -> Estimates:
+    """vehicles[].estimates; `mhat: from_hover` needs a mass for its stand-in and Proposition 2's
+    mbar: the plant's mass_kg or mass_bound_kg."""
+    inertia = est.child("inertia_kgm2").vec3(gt=0.0)
+    bound = est.child("mass_bound_kg").number(None, gt=0.0)
+    node = est.child("mhat")
+    if node.value != "from_hover":
+        if isinstance(node.value, str):
+            node.fail(f"expected a number > 0 or 'from_hover', got {node.value!r}")
+        return Estimates(node.number(gt=0.0), inertia, bound)
+    mass = plant.child("mass_kg").number(gt=0.0) if not plant.absent else bound
+    if mass is None:
+        node.fail("from_hover needs estimates.mass_bound_kg (Proposition 2's mbar, checked "
+                  "against the hover estimate) or a plant")
+    # the stand-in: what the hover would give with v(0) = 0 (phi(0) = 2)
+    return Estimates(2.0 * mass / gains.alpha_m, inertia, bound, from_hover=True)
+
+
 def _vehicle(node: _Node, gains: Gains) -> VehicleConfig:
     node.keys(
         "id sysid offset_enu_m initial estimates airframe",
@@ -373,7 +401,13 @@ def _vehicle(node: _Node, gains: Gains) -> VehicleConfig:
     )
     link, default_link = node.child("link"), LinkConfig.px4_sitl(sysid)
     if not link.absent:
-        link.keys("", "local_port remote_host remote_port")
+        link.keys("", "local_port remote_host remote_port learn_remote")
+    learn = link.child("learn_remote").boolean(False)
+    if learn and link.child("remote_port").absent and not link.child("remote_host").absent:
+        link.child("remote_host").fail(
+            "has no effect without remote_port: with learn_remote: true the vehicle's address is "
+            "learned from its first message (give remote_port too to send there until then)"
+        )
     plant = node.child("plant")
     if not plant.absent:
         plant.keys("mass_kg inertia_kgm2")
@@ -392,11 +426,7 @@ def _vehicle(node: _Node, gains: Gains) -> VehicleConfig:
                 )
             )
         ),
-        estimates=Estimates(
-            est.child("mhat").number(gt=0.0),
-            est.child("inertia_kgm2").vec3(gt=0.0),
-            est.child("mass_bound_kg").number(None, gt=0.0),
-        ),
+        estimates=_estimates(est, plant, gains),
         airframe=Airframe(
             *(
                 air.child(k).number(gt=0.0)
@@ -406,8 +436,13 @@ def _vehicle(node: _Node, gains: Gains) -> VehicleConfig:
         ),
         link=LinkConfig(
             link.child("local_port").integer(default_link.local_port, ge=0, le=65535),
-            link.child("remote_host").string(default_link.remote_host),
-            link.child("remote_port").integer(default_link.remote_port, ge=1, le=65535),
+            link.child("remote_host").string(
+                None if learn and link.child("remote_port").absent else default_link.remote_host
+            ),
+            link.child("remote_port").integer(
+                None if learn else default_link.remote_port, ge=1, le=65535
+            ),
+            learn,
         ),
         plant=None
         if plant.absent
@@ -433,7 +468,8 @@ def _vehicle(node: _Node, gains: Gains) -> VehicleConfig:
                 f"need rotor_thrust_max_n >= {need / 4:.4g} ({who})"
             )
     least = proposition2_min_mhat(vehicle, gains)
-    if least is not None and vehicle.estimates.mhat < least * (1.0 - 1e-12):
+    if (least is not None and not vehicle.estimates.from_hover
+            and vehicle.estimates.mhat < least * (1.0 - 1e-12)):
         source = "mass_bound_kg" if vehicle.estimates.mass_bound_kg is not None else "plant mass"
         est.child("mhat").fail(
             f"Proposition 2 needs mhat(0) >= (phi(0) - 1) mbar / alpha_m = "
@@ -549,12 +585,13 @@ _FAULT_KINDS: dict[str, tuple[type, str, str, Callable[[_Node], tuple[Any, ...]]
 def _fly_mode(node: _Node, default: FlyModeConfig) -> FlyModeConfig:
     if node.absent:
         return default
-    node.keys("", "tick_rate_hz alpha_eps alpha_omega max_rate_radps")
+    node.keys("", "tick_rate_hz alpha_eps alpha_omega max_rate_radps max_yaw_rate_radps")
     return FlyModeConfig(
         node.child("tick_rate_hz").number(default.tick_rate_hz, gt=0.0, le=1000.0),
         node.child("alpha_eps").number(None, gt=0.0),
         node.child("alpha_omega").number(None, gt=0.0),
         node.child("max_rate_radps").number(default.max_rate_radps, gt=0.0),
+        node.child("max_yaw_rate_radps").number(default.max_yaw_rate_radps, gt=0.0),
     )
 
 
@@ -569,6 +606,18 @@ def _formation_check(node: _Node, d: FormationCheckConfig) -> FormationCheckConf
     )
 
 
+def _heading(node: _Node) -> str | float:
+    """fly.heading: 'hold', 'paper', or a compass heading in degrees."""
+    if node.absent:
+        return "hold"
+    if isinstance(node.value, str):
+        if node.value not in FLY_HEADINGS:
+            node.fail(f"expected 'hold', 'paper' or a compass heading in degrees, got "
+                      f"{node.value!r}")
+        return node.value
+    return node.number(ge=-360.0, le=360.0)
+
+
 def _fly(node: _Node) -> FlyConfig:
     """The optional `fly:` section (every key optional; see docs/configuration.md)."""
     d = FlyConfig()
@@ -576,10 +625,10 @@ def _fly(node: _Node) -> FlyConfig:
         return d
     node.keys(
         "",
-        "rates actuators start takeoff_altitude_m end_action abort_action link_loss_action "
-        "stale_after_s link_lost_after_s max_tilt_rad geofence log_rate_hz connect_timeout_s "
-        "takeoff_timeout_s land_timeout_s takeoff_tolerance_m arm_timeout_s arm_retry_s "
-        "mode_timeout_s formation_check",
+        "rates actuators attitude heading start takeoff_altitude_m end_action abort_action "
+        "link_loss_action stale_after_s link_lost_after_s link_timeout_s max_tilt_rad geofence "
+        "log_rate_hz connect_timeout_s takeoff_timeout_s land_timeout_s takeoff_tolerance_m "
+        "arm_timeout_s arm_retry_s mode_timeout_s formation_check",
     )
     geofence = None
     g = node.child("geofence")
@@ -595,6 +644,8 @@ def _fly(node: _Node) -> FlyConfig:
     fly = FlyConfig(
         rates=_fly_mode(node.child("rates"), d.rates),
         actuators=_fly_mode(node.child("actuators"), d.actuators),
+        attitude=_fly_mode(node.child("attitude"), d.attitude),
+        heading=_heading(node.child("heading")),
         start=node.child("start").string(d.start, FLY_STARTS),
         takeoff_altitude_m=node.child("takeoff_altitude_m").number(
             d.takeoff_altitude_m, ge=0.5, le=1000.0
@@ -604,6 +655,7 @@ def _fly(node: _Node) -> FlyConfig:
         link_loss_action=node.child("link_loss_action").string(d.link_loss_action, FLY_ACTIONS),
         stale_after_s=node.child("stale_after_s").number(d.stale_after_s, gt=0.0),
         link_lost_after_s=node.child("link_lost_after_s").number(d.link_lost_after_s, gt=0.0),
+        link_timeout_s=node.child("link_timeout_s").number(d.link_timeout_s, gt=0.0),
         max_tilt_rad=node.child("max_tilt_rad").number(d.max_tilt_rad, gt=0.0, le=math.pi),
         geofence=geofence,
         log_rate_hz=node.child("log_rate_hz").number(d.log_rate_hz, gt=0.0),
@@ -625,7 +677,7 @@ def _fly(node: _Node) -> FlyConfig:
         node.child("link_lost_after_s").fail(
             f"expected > stale_after_s {fly.stale_after_s!r}, got {fly.link_lost_after_s!r}"
         )
-    for name in ("rates", "actuators"):
+    for name in MODES:
         rate = fly.mode(name).tick_rate_hz
         ratio = rate / fly.log_rate_hz
         if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-9 * ratio:
@@ -681,13 +733,23 @@ def _team(root: _Node) -> TeamConfig:
     vehicles = tuple(_vehicle(node, gains) for node in nodes)
     _unique(nodes, "id", [v.id for v in vehicles], "vehicle id")
     _unique(nodes, "sysid", [v.sysid for v in vehicles], "sysid")
-    _unique(nodes, "link.local_port", [v.link.local_port or None for v in vehicles], "local port")
-    _unique(
-        nodes,
-        "link.remote_port",
-        [(v.link.remote_host, v.link.remote_port) for v in vehicles],
-        "remote endpoint",
-    )
+    # Vehicles with the same local_port share that GCS port, told apart by their (unique) sysids;
+    # a fixed remote endpoint is still one vehicle's (the emulator binds it).
+    remotes = [
+        (v.link.remote_host, v.link.remote_port) if v.link.remote_port is not None else None
+        for v in vehicles
+    ]
+    seen_remote: dict[Any, int] = {}
+    for k, remote in enumerate(remotes):
+        if remote is None:
+            continue
+        if remote in seen_remote:
+            nodes[k].child("link.remote_port").fail(
+                f"duplicate remote endpoint {remote} (also vehicles[{seen_remote[remote]}]); "
+                "vehicles behind one router or relay share its address: set learn_remote: true "
+                "and leave remote_port out"
+            )
+        seen_remote[remote] = k
     _unique(nodes, "offset_enu_m", [v.offset_enu_m for v in vehicles], "offset (collision)")
     _unique(
         nodes,
@@ -754,6 +816,10 @@ def team_to_dict(team: TeamConfig) -> dict[str, Any]:
     def plain(x: Any) -> Any:
         if isinstance(x, LawGains):
             return {name: getattr(x, name) for name in GAIN_NAMES}
+        if isinstance(x, Estimates):
+            out = {"mhat": "from_hover" if x.from_hover else x.mhat,
+                   "inertia_kgm2": plain(x.inertia_kgm2)}
+            return out | ({} if x.mass_bound_kg is None else {"mass_bound_kg": x.mass_bound_kg})
         if dataclasses.is_dataclass(x):
             return {
                 f.name: plain(getattr(x, f.name))

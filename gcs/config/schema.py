@@ -19,11 +19,13 @@ from gcs.control.gains import LawGains
 GRAVITY_MPS2 = 9.81
 THRUST_MARGIN = 1.2  # max collective thrust must be >= THRUST_MARGIN * m g when a plant is given
 LAWS = ("adaptive", "baseline")
-MODES = ("rates", "actuators")
+MODES = ("rates", "actuators", "attitude")  # attitude: gcs fly only (the autopilot's loop)
+SIM_MODES = ("rates", "actuators")
 DERIVATIVE_METHODS = ("model", "levant")
 FAULT_KINDS = ("mass_drop", "link_loss", "packet_loss", "motor_efficiency")
 FLY_ACTIONS = ("land", "hold")  # what `gcs fly` tells vehicles to do when it stops flying them
 FLY_STARTS = ("auto", "in_air", "takeoff")
+FLY_HEADINGS = ("hold", "paper")  # or a compass heading in degrees
 
 Vec3 = tuple[float, float, float]
 ZERO3: Vec3 = (0.0, 0.0, 0.0)
@@ -76,7 +78,8 @@ class DerivativeConfig:
 @dataclass(frozen=True, slots=True)
 class ControllerConfig:
     law: str  # "adaptive" | "baseline"
-    mode: str  # "rates" (thrust + body rates) | "actuators" (thrust + torque, eq. 26)
+    mode: str  # "rates" (thrust + body rates) | "actuators" (thrust + torque, eq. 26) |
+    # "attitude" (thrust + the command attitude (14); gcs fly only)
     gains: Gains
     derivative: DerivativeConfig
 
@@ -201,15 +204,25 @@ class Estimates:
     mhat: float
     inertia_kgm2: Vec3  # rhohat(0) = Jhat(0) diagonal
     mass_bound_kg: float | None = None  # mbar_i of Proposition 2
+    # `mhat: from_hover`: gcs fly takes mhat_i(0) from the thrust the vehicle reports while it
+    # holds (ATTITUDE_TARGET); mhat above is then the stand-in phi(0) m / alpha_m (m: the plant
+    # mass, else mass_bound_kg) that gcs sim flies and that the flight replaces
+    from_hover: bool = False
 
 
 @dataclass(frozen=True, slots=True)
 class LinkConfig:
-    """GCS side of a vehicle's MAVLink UDP link (local_port 0: any free port)."""
+    """GCS side of a vehicle's MAVLink UDP link (local_port 0: any free port).
+
+    ``learn_remote``: the vehicle's address is the source of its first valid message (its
+    ``remote_port``, if given, is only where the GCS sends until then; None: nowhere). Vehicles
+    with the same nonzero ``local_port`` share that GCS port, told apart by sysid.
+    """
 
     local_port: int
-    remote_host: str
-    remote_port: int
+    remote_host: str | None  # None only with learn_remote and no remote_port
+    remote_port: int | None  # None only with learn_remote
+    learn_remote: bool = False
 
     @classmethod
     def px4_sitl(cls, sysid: int) -> LinkConfig:
@@ -323,7 +336,8 @@ class FlyModeConfig:
     tick_rate_hz: float
     alpha_eps: float | None = None  # None: controller.gains.alpha_eps (actuators mode)
     alpha_omega: float | None = None  # None: controller.gains.alpha_omega (actuators mode)
-    max_rate_radps: float = 1.0  # rates mode: norm limit of the body-rate command
+    max_rate_radps: float = 1.0  # rates mode: norm limit of the roll/pitch body-rate command
+    max_yaw_rate_radps: float = 0.5  # rates mode: limit of the yaw-rate command, on its own
 
 
 @dataclass(frozen=True, slots=True)
@@ -351,13 +365,20 @@ class FlyConfig:
 
     rates: FlyModeConfig = FlyModeConfig(100.0)
     actuators: FlyModeConfig = FlyModeConfig(250.0)
+    attitude: FlyModeConfig = FlyModeConfig(100.0)
+    # the heading R^c is turned to about its thrust axis: "hold" (each vehicle's at the
+    # formation start), "paper" (eq. (14) as it is), or a compass heading [deg, 0 north, 90 east]
+    heading: str | float = "hold"
     start: str = "auto"  # auto: take off the vehicles that report being on the ground
     takeoff_altitude_m: float = 2.5  # above home
     end_action: str = "land"  # after the formation phase
     abort_action: str = "land"  # Ctrl-C, abort key, geofence, failed check
     link_loss_action: str = "hold"  # the other vehicles when one link is lost
     stale_after_s: float = 0.1  # telemetry older than this is stale (see docs/gcs.md)
-    link_lost_after_s: float = 0.5  # a vehicle silent this long is lost
+    link_lost_after_s: float = 0.5  # in flight: position/attitude older than this -> lost
+    # any valid message from the vehicle keeps its link ALIVE; none for this long -> LOST (a
+    # vehicle that sends only its 1 Hz HEARTBEAT, as ArduPilot does until asked, stays ALIVE)
+    link_timeout_s: float = 3.0
     max_tilt_rad: float = 1.0  # abort above this tilt (formation phase)
     geofence: GeofenceConfig | None = None
     log_rate_hz: float = 50.0  # time-series samples; must divide every mode's tick rate
@@ -371,8 +392,8 @@ class FlyConfig:
     formation_check: FormationCheckConfig = FormationCheckConfig()
 
     def mode(self, name: str) -> FlyModeConfig:
-        """The settings of control mode `name` ('rates' or 'actuators')."""
-        return self.rates if name == "rates" else self.actuators
+        """The settings of control mode `name` ('rates', 'actuators' or 'attitude')."""
+        return {"rates": self.rates, "actuators": self.actuators, "attitude": self.attitude}[name]
 
 
 @dataclass(frozen=True, slots=True)

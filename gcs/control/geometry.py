@@ -137,3 +137,35 @@ def rotation_from_rpy(roll_rad: float, pitch_rad: float, yaw_rad: float) -> np.n
     r[2, 1] = cp * sr
     r[2, 2] = cp * cr
     return r
+
+
+@njit(cache=True)
+def turn_about_thrust_axis(
+    rc: np.ndarray, wc: np.ndarray, dwc: np.ndarray, heading_rad: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The command attitude turned about its own thrust axis: R^c Rz(psi_i) per vehicle, with
+    its body rate Rz(psi)^T omega^c and rate derivative Rz(psi)^T omega^c' (psi constant).
+
+    R^c Rz(psi) e3 = R^c e3, so the thrust direction, and with it the position loop, is
+    unchanged; only the heading the attitude loop aims for moves (by psi, up to a second-order
+    term in the tilt: the minimal rotation (14) has heading -b_x b_y / (1 + b_z)). psi = 0
+    returns the inputs themselves (the paper's law)."""
+    n = rc.shape[0]
+    if not np.any(heading_rad != 0.0):
+        return rc, wc, dwc
+    rc2 = np.empty((n, 3, 3))
+    wc2 = np.empty((n, 3))
+    dwc2 = np.empty((n, 3))
+    for i in range(n):
+        c, s = np.cos(heading_rad[i]), np.sin(heading_rad[i])
+        for r in range(3):
+            rc2[i, r, 0] = c * rc[i, r, 0] + s * rc[i, r, 1]
+            rc2[i, r, 1] = -s * rc[i, r, 0] + c * rc[i, r, 1]
+            rc2[i, r, 2] = rc[i, r, 2]
+        wc2[i, 0] = c * wc[i, 0] + s * wc[i, 1]
+        wc2[i, 1] = -s * wc[i, 0] + c * wc[i, 1]
+        wc2[i, 2] = wc[i, 2]
+        dwc2[i, 0] = c * dwc[i, 0] + s * dwc[i, 1]
+        dwc2[i, 1] = -s * dwc[i, 0] + c * dwc[i, 1]
+        dwc2[i, 2] = dwc[i, 2]
+    return rc2, wc2, dwc2

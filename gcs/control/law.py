@@ -16,7 +16,12 @@ from numba import njit
 from gcs.control.attitude import adaptive_torque, attitude_errors, rate_command, regressor
 from gcs.control.derivatives import force_derivatives, levant_advance
 from gcs.control.gains import LawGains
-from gcs.control.geometry import command_angular_velocity, command_attitude, is_nonsingular
+from gcs.control.geometry import (
+    command_angular_velocity,
+    command_attitude,
+    is_nonsingular,
+    turn_about_thrust_axis,
+)
 from gcs.control.position import force_law, mass_estimator_rate, thrust
 
 DERIVATIVE_MODEL = 0  #: closed-form u', u'' with v' measured and the law's own mass estimate
@@ -61,13 +66,16 @@ def position_stage(
 
 
 @njit(cache=True)
-def attitude_stage(rotation, omega_radps, force_n, dforce, ddforce, rhohat, gains, adaptive):
-    """Command attitude (14), its rates (spec 2.5), torque (26), rhohat' (27), rate command.
+def attitude_stage(rotation, omega_radps, force_n, dforce, ddforce, rhohat, gains, adaptive,
+                   heading_rad):
+    """Command attitude (14) turned by heading_rad (n,) about its thrust axis (zeros: the
+    paper's), its rates (spec 2.5), torque (26), rhohat' (27), rate command.
 
     Returns (rc, wc, dwc, tau, rho_rate, omega_cmd, eps, tr_err, we).
     """
     rc = command_attitude(force_n)
     wc, dwc = command_angular_velocity(force_n, dforce, ddforce, rc)
+    rc, wc, dwc = turn_about_thrust_axis(rc, wc, dwc, heading_rad)
     re, eps, tr_err, wc_body, we = attitude_errors(rotation, rc, omega_radps, wc)
     gam = regressor(re, omega_radps, wc, dwc, we, wc_body)
     tau, rho_rate = adaptive_torque(eps, tr_err, we, gam, rhohat, gains, adaptive)
@@ -99,6 +107,7 @@ class TeamCommand:
     torque_nm: np.ndarray
     rate_cmd_radps: np.ndarray
     force_n: np.ndarray
+    command_rotation: np.ndarray  # R^c (n, 3, 3), turned by the law's heading
     mass_estimate_kg: np.ndarray
     inertia_estimate_kgm2: np.ndarray
     attitude_error: np.ndarray
@@ -151,6 +160,8 @@ class TeamLaw:
         self.levant_substep_s = levant_substep_s
         self._levant: np.ndarray | None = None
         self._u_prev: np.ndarray | None = None
+        #: per vehicle, the turn of R^c about its thrust axis [rad] (zeros: the paper's (14))
+        self.heading_rad = np.zeros(n)
 
     def step(
         self, meas: TeamMeasurement, reference_mps: np.ndarray, dt_s: float, adapt: bool = True
@@ -218,13 +229,15 @@ class TeamLaw:
                 self.adaptive,
             )
         rc, wc, dwc, tau, rho_rate, omega_cmd, eps, tr_err, we = attitude_stage(
-            meas.rotation, meas.omega_radps, u, du, ddu, self.rhohat, g, self.adaptive
+            meas.rotation, meas.omega_radps, u, du, ddu, self.rhohat, g, self.adaptive,
+            self.heading_rad,
         )
         command = TeamCommand(
             thrust_n=t_n,
             torque_nm=tau,
             rate_cmd_radps=omega_cmd,
             force_n=u,
+            command_rotation=rc,
             mass_estimate_kg=kappa,
             inertia_estimate_kgm2=self.rhohat.copy(),
             attitude_error=tr_err,

@@ -28,8 +28,9 @@ EXIT_INTERRUPTED = 130
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fly", help="fly the team in formation over MAVLink and write records")
     p.add_argument("--team", required=True, type=Path, help="team config (YAML)")
-    p.add_argument("--mode", choices=("rates", "actuators"), default=None,
-                   help="attitude level sent to the vehicles (default: the file's)")
+    p.add_argument("--mode", choices=("rates", "actuators", "attitude"), default=None,
+                   help="setpoints sent to the vehicles: thrust + body rates, thrust + torque, "
+                        "or thrust + attitude (default: the file's)")
     p.add_argument("--controller", choices=("adaptive", "baseline"), default=None,
                    help="law (default: the file's)")
     p.add_argument("--tick-rate-hz", type=float, default=None,

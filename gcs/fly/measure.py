@@ -18,10 +18,12 @@ The staleness rule (docs/gcs.md), applied every tick to the data each vehicle wo
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from gcs.control.gains import GRAVITY_MPS2
 from gcs.control.law import TeamMeasurement
 
 
@@ -83,18 +85,23 @@ def normalised_torque(torque_nm: np.ndarray, torque_max: np.ndarray) -> np.ndarr
     return np.asarray(torque_nm, dtype=float) / torque_max
 
 
-def limit_rate_command(rate_cmd_radps: np.ndarray,
-                       max_rate_radps: float) -> tuple[np.ndarray, np.ndarray]:
-    """Scale each body-rate command (n, 3) down to norm <= max_rate_radps (direction kept).
+def limit_rate_command(rate_cmd_radps: np.ndarray, max_rate_radps: float,
+                       max_yaw_rate_radps: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
+    """Limit each body-rate command (n, 3) [rad/s, FLU]: the roll/pitch part scaled down to
+    norm <= max_rate_radps (its direction kept), the yaw rate clipped to +-max_yaw_rate_radps
+    on its own, so a yaw command never shrinks the roll/pitch command that tilts the thrust.
 
-    Returns (limited, clipped) with clipped (n,) True where a row was scaled. Rationale
+    Returns (limited, clipped) with clipped (n,) True where a row was changed. Rationale
     (docs/gcs.md): a rate step the airframe cannot follow saturates the autopilot's mixer, which
     with airmode on trades collective thrust for torque and breaks the thrust the mass
-    estimator assumes.
+    estimator assumes; yaw authority is the weakest (PX4 SIH: 0.82 of a 1 rad/s step in 0.6 s).
     """
-    norm = np.sqrt((rate_cmd_radps * rate_cmd_radps).sum(axis=1))
-    scale = np.minimum(1.0, max_rate_radps / np.maximum(norm, 1e-300))
-    return rate_cmd_radps * scale[:, None], scale < 1.0
+    cmd = np.asarray(rate_cmd_radps, dtype=float)
+    xy = np.sqrt(cmd[:, 0] ** 2 + cmd[:, 1] ** 2)
+    scale = np.minimum(1.0, max_rate_radps / np.maximum(xy, 1e-300))
+    yaw = np.clip(cmd[:, 2], -max_yaw_rate_radps, max_yaw_rate_radps)
+    out = np.column_stack([cmd[:, 0] * scale, cmd[:, 1] * scale, yaw])
+    return out, (scale < 1.0) | (yaw != cmd[:, 2])
 
 
 def desaturate_torque(thrust_n: np.ndarray, torque_nm: np.ndarray, arm_length_m: np.ndarray,
@@ -124,3 +131,96 @@ def desaturate_torque(thrust_n: np.ndarray, torque_nm: np.ndarray, arm_length_m:
     out = np.stack((-2.0 * arm_length_m * q, 2.0 * arm_length_m * p, 4.0 * anti_torque_m * y_lim),
                    axis=1)
     return out, (s_rp < 1.0) | (y_lim != y)
+
+
+def yaw_rad(rotation: np.ndarray) -> np.ndarray:
+    """Heading of body FLU -> world ENU rotations (n, 3, 3): the angle of the body x axis's
+    horizontal projection from east, counter-clockwise [rad]; 0 for NaN rows."""
+    r = np.asarray(rotation, dtype=float)
+    out = np.arctan2(r[:, 1, 0], r[:, 0, 0])
+    return np.where(np.isfinite(out), out, 0.0)
+
+
+def level_rotations(rotation: np.ndarray) -> np.ndarray:
+    """Level attitudes (n, 3, 3) at the headings of `rotation` (yaw about world z)."""
+    yaw = yaw_rad(rotation)
+    c, s = np.cos(yaw), np.sin(yaw)
+    out = np.zeros((yaw.shape[0], 3, 3))
+    out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1] = c, -s, s, c
+    out[:, 2, 2] = 1.0
+    return out
+
+
+def command_heading_rad(heading: str | float, rotation: np.ndarray) -> np.ndarray:
+    """The turn of R^c about its thrust axis per vehicle (TeamLaw.heading_rad) for the team
+    file's `fly.heading`: "hold" each vehicle's heading now (the formation start), "paper" none
+    (eq. (14): heading ~0, east), a number: that compass heading [deg, 0 north, 90 east; ENU yaw
+    = 90 deg - heading] for every vehicle. (14)'s own heading is second order in the tilt, so the
+    command's heading is the turn to within it (docs/gcs.md)."""
+    n = np.asarray(rotation).shape[0]
+    if heading == "hold":
+        return yaw_rad(rotation)
+    if heading == "paper":
+        return np.zeros(n)
+    if isinstance(heading, int | float) and math.isfinite(heading):
+        return np.full(n, math.radians(90.0 - float(heading)))
+    raise ValueError(f"fly.heading {heading!r}: expected hold, paper or a number of degrees")
+
+
+#: `estimates.mhat: from_hover`: the mean over the last HOVER_WINDOW_S of ATTITUDE_TARGET thrust
+#: the vehicle reports while it holds, before the formation start (PRIME lasts at least this).
+HOVER_WINDOW_S = 2.0
+HOVER_MIN_SAMPLES = 10
+HOVER_RATE_HZ = 10.0  # ATTITUDE_TARGET asked this often (PX4 streams it at 10 Hz by default)
+
+
+@dataclass(frozen=True, slots=True)
+class HoverEstimate:
+    """One vehicle's initial mass estimate from its hover (docs/gcs.md, "Initial mass")."""
+
+    thrust_norm: float  # mean reported thrust, 0..1
+    samples: int
+    mass_kg: float  # thrust_norm * max_thrust_n / g: the thrust-equivalent mass
+    mhat0: float  # phi(0) mass / alpha_m
+    least_mhat0: float | None  # Proposition 2's bound (phi(0) - 1) mbar / alpha_m; None: no mbar
+
+    @property
+    def proposition2_holds(self) -> bool:
+        return self.least_mhat0 is None or self.mhat0 >= self.least_mhat0
+
+
+class HoverThrust:
+    """ATTITUDE_TARGET thrust samples (receive time, thrust) per vehicle, newest last."""
+
+    def __init__(self, n: int) -> None:
+        self._t: list[list[float]] = [[] for _ in range(n)]
+        self._u: list[list[float]] = [[] for _ in range(n)]
+
+    def add(self, i: int, rx_time_s: float, thrust_norm: float) -> bool:
+        """Record one sample (a repeat of the newest, or a non-finite or out-of-range thrust, is
+        not recorded); returns whether it was."""
+        t = self._t[i]
+        if (t and rx_time_s <= t[-1]) or not (math.isfinite(thrust_norm)
+                                              and 0.0 < thrust_norm <= 1.0):
+            return False
+        t.append(rx_time_s)
+        self._u[i].append(thrust_norm)
+        if len(t) > 4096:  # bounded: keep the newest half
+            del t[:2048], self._u[i][:2048]
+        return True
+
+    def estimate(self, i: int, now_s: float, max_thrust_n: float, alpha_m: float, phi0: float,
+                 mass_bound_kg: float | None,
+                 window_s: float = HOVER_WINDOW_S) -> HoverEstimate | None:
+        """The estimate from the samples of the last `window_s` before `now_s`; None with fewer
+        than HOVER_MIN_SAMPLES of them."""
+        t = np.asarray(self._t[i])
+        u = np.asarray(self._u[i])
+        keep = (t > now_s - window_s) & (t <= now_s)
+        if int(keep.sum()) < HOVER_MIN_SAMPLES:
+            return None
+        thrust = float(u[keep].mean())
+        mass = thrust * max_thrust_n / GRAVITY_MPS2
+        least = None if mass_bound_kg is None else (phi0 - 1.0) * mass_bound_kg / alpha_m
+        return HoverEstimate(thrust, int(keep.sum()), mass, phi0 * mass / alpha_m, least)
+

@@ -1,9 +1,10 @@
-"""MAVLink link layers: sans-IO codec, asyncio UDP endpoint, per-vehicle proxy, .tlog writer."""
+"""MAVLink link layers: sans-IO codec, UDP endpoint, shared port, per-vehicle proxy, tlog writer."""
 
 from gcs.link.codec import CodecStats, MavlinkCodec
 from gcs.link.commands import CommandNotConfirmedError, CommandRejectedError, CommandTimeoutError
 from gcs.link.config import VehicleLinkConfig, check_unique_sysids
 from gcs.link.enums import LinkState, MavResult
+from gcs.link.port import MavlinkPort, PortStats
 from gcs.link.proxy import LinkStats, SetpointError, VehicleProxy
 from gcs.link.telemetry import Clock, MonotonicClock, VehicleState
 from gcs.link.tlog import TlogWriter
@@ -20,7 +21,9 @@ __all__ = [
     "LinkStats",
     "MavResult",
     "MavlinkCodec",
+    "MavlinkPort",
     "MonotonicClock",
+    "PortStats",
     "SetpointError",
     "TlogWriter",
     "UdpEndpoint",

@@ -276,6 +276,12 @@ class MavlinkCodec:
             self._counts["other_errors"] += 1
 
 
+def message_name(msg_id: int) -> str:
+    """'EXTENDED_SYS_STATE (245)' for a common-dialect id, 'message 12345' otherwise."""
+    msg_type = mavlink.mavlink_map.get(msg_id)
+    return f"{msg_type.msgname} ({msg_id})" if msg_type is not None else f"message {msg_id}"
+
+
 def _next_marker(buf: bytearray, start: int) -> int:
     """Index of the next MAVLink start marker at or after start, or len(buf)."""
     candidates = [i for i in (buf.find(STX_V2, start), buf.find(STX_V1, start)) if i >= 0]

@@ -33,7 +33,10 @@ class VehicleLinkConfig:
     gcs_sysid: int = GCS_SYSID
     gcs_compid: int = GCS_COMPID
     heartbeat_period_s: float = 1.0  # GCS HEARTBEAT period
-    link_timeout_s: float = 0.5  # no message at all for this long -> LOST
+    # no valid message from the vehicle (any type) for this long -> LOST; 3 s keeps a vehicle that
+    # sends only its 1 Hz HEARTBEAT (ArduPilot before its streams are asked for) ALIVE through
+    # two lost beats (MAVSDK uses 3 s too)
+    link_timeout_s: float = 3.0
     # no HEARTBEAT for this long -> LOST: five 1 Hz periods (PX4 and ArduPilot keep HEARTBEAT at
     # 1 Hz; with 10 % loss, 3 s dropped a live link with p = 0.1^3 per beat, 5 s needs 0.1^5)
     heartbeat_timeout_s: float = 5.0
@@ -86,19 +89,26 @@ class VehicleLinkConfig:
 
 
 def check_unique_sysids(configs: Iterable[VehicleLinkConfig]) -> None:
-    """Raise ValueError naming every duplicated sysid or local port (ground stations merge them)."""
+    """Raise ValueError naming every duplicated sysid (ground stations would merge them).
+
+    Vehicles may share a local port (a `gcs.link.port.MavlinkPort` tells them apart by sysid),
+    so the sysids must be unique across the team, not just per port."""
     by_sysid: dict[int, list[int]] = {}
-    by_port: dict[tuple[str, int], list[int]] = {}
     for c in configs:
         by_sysid.setdefault(c.sysid, []).append(c.vehicle_id)
-        if c.local_port != 0:
-            by_port.setdefault((c.local_host, c.local_port), []).append(c.vehicle_id)
     problems = [f"sysid {s} used by vehicles {v}" for s, v in by_sysid.items() if len(v) > 1]
-    problems += [
-        f"local port {a[1]} used by vehicles {v}" for a, v in by_port.items() if len(v) > 1
-    ]
     if problems:
         raise ValueError("team links: " + "; ".join(problems))
+
+
+def shared_ports(configs: Iterable[VehicleLinkConfig]) -> dict[tuple[str, int], list[int]]:
+    """(local_host, local_port) -> vehicle ids, for the nonzero ports more than one vehicle uses
+    (port 0 is a new free port for each)."""
+    by_port: dict[tuple[str, int], list[int]] = {}
+    for c in configs:
+        if c.local_port != 0:
+            by_port.setdefault((c.local_host, c.local_port), []).append(c.vehicle_id)
+    return {a: ids for a, ids in by_port.items() if len(ids) > 1}
 
 
 def _check(ok: bool, message: str) -> None:

@@ -14,13 +14,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from gcs import frames
-from gcs.link.codec import CodecStats, MavlinkCodec, MAVLinkMessage
+from gcs.link.codec import CodecStats, MavlinkCodec, MAVLinkMessage, message_name
 from gcs.link.commands import (
     AckLog,
     CommandChannel,
     CommandNotConfirmedError,
     CommandRejectedError,
     CommandStats,
+    CommandTimeoutError,
     command_label,
 )
 from gcs.link.config import VehicleLinkConfig
@@ -33,6 +34,7 @@ from gcs.link.enums import (
     MavState,
     MavType,
 )
+from gcs.link.port import MavlinkPort, PortStats
 from gcs.link.statustext import StatusTextLog
 from gcs.link.telemetry import (
     Clock,
@@ -46,7 +48,7 @@ from gcs.link.telemetry import (
     build_state,
 )
 from gcs.link.tlog import TlogWriter
-from gcs.link.udp import Address, LinkClosedError, UdpEndpoint, UdpStats
+from gcs.link.udp import Address, LinkClosedError, UdpStats
 
 logger = logging.getLogger(__name__)
 
@@ -54,6 +56,8 @@ TYPE_MASK_RATES_THRUST = 128  # ATTITUDE_IGNORE: body rates + thrust
 TYPE_MASK_ATTITUDE_THRUST = 7  # roll/pitch/yaw rates ignored: attitude + thrust
 AUTOPILOT_VERSION_ID = 148  # REQUEST_MESSAGE param1
 FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 forcing arm/disarm (PX4; ArduPilot disarm)
+#: Stranger addresses logged per vehicle (all are counted); a flood does not flood the log.
+MAX_STRANGERS_LOGGED = 8
 #: q of rate setpoints: ignored (type_mask 128), but ArduPilot drops a non-unit one, so unit.
 _IDENTITY_Q = (1.0, 0.0, 0.0, 0.0)
 
@@ -73,6 +77,8 @@ class ProxyCounters:
     messages_accepted: int = 0
     foreign_sysid: int = 0  # valid messages from another sysid (ignored)
     other_component: int = 0  # valid messages from our sysid, another compid (ignored)
+    stranger_address: int = 0  # our sysid/compid from an address other than the learned one
+    send_no_remote: int = 0  # packets not sent: the vehicle's address is not known yet
     setpoints_sent: int = 0
     setpoints_rejected: int = 0  # NaN/inf/shape errors (raised)
     thrust_clamped: int = 0  # thrust outside 0..1, clamped
@@ -90,19 +96,26 @@ class LinkStats:
     commands: CommandStats
     sequence: SequenceStats
     by_type: dict[str, TypeStats]
+    port: PortStats  # the GCS port's routing (shared by every vehicle on that port)
 
 
 class VehicleProxy:
-    """One vehicle seen through its MAVLink link: owns the codec, the UDP endpoint and two tasks
-    (GCS HEARTBEAT, link monitor). Lifetime: ``async with VehicleProxy(cfg) as vehicle:``.
+    """One vehicle seen through its MAVLink link: owns the codec, the vehicle's address and two
+    tasks (GCS HEARTBEAT, link monitor). Lifetime: ``async with VehicleProxy(cfg) as vehicle:``.
 
-    Only messages from ``config.sysid``/``config.compid`` update the cache; others are counted and
-    ignored, and a vehicle HEARTBEAT with another sysid is reported as a sysid mismatch. Receive
-    times come from the injected ``clock``; ack timeouts use the event loop's clock.
+    The GCS port is the proxy's own (``port=None``: bound on enter, closed on exit) or a
+    `MavlinkPort` shared with other vehicles (opened and closed by its owner), which routes this
+    vehicle's sysid to it. Only messages from ``config.sysid``/``config.compid`` update the cache
+    and count as liveness; others are counted and ignored, and on its own port a vehicle
+    HEARTBEAT with another sysid is reported as a sysid mismatch. With ``learn_remote`` the
+    vehicle's address is the source of its first valid message (MAVProxy's ``udpin``); after that,
+    messages with its ids from any other address are counted (``stranger_address``), logged and
+    ignored. A fixed remote accepts the vehicle's messages from any address. Receive times come
+    from the injected ``clock``; ack timeouts use the event loop's clock.
     """
 
     def __init__(self, config: VehicleLinkConfig, *, clock: Clock | None = None,
-                 tlog: TlogWriter | None = None) -> None:
+                 tlog: TlogWriter | None = None, port: MavlinkPort | None = None) -> None:
         self.config = config
         self.name = config.name
         self._clock: Clock = clock if clock is not None else MonotonicClock()
@@ -111,9 +124,12 @@ class VehicleProxy:
         if config.signing_key is not None:
             self._codec.setup_signing(config.signing_key, link_id=config.signing_link_id,
                                       allow_unsigned=config.allow_unsigned)
-        self._endpoint = UdpEndpoint(
-            config.local_port, config.remote, local_host=config.local_host,
-            learn_remote=config.learn_remote, on_datagram=self._on_datagram, name=self.name)
+        self._owns_port = port is None
+        self._port = port if port is not None else MavlinkPort(
+            config.local_port, local_host=config.local_host, tlog=tlog, name=self.name)
+        self._remote: Address | None = config.remote
+        self._remote_learned = False
+        self._strangers: set[Address] = set()
         self._cache = TelemetryCache()
         self._seq = SequenceTracker()
         self._n: dict[str, int] = {f.name: 0 for f in fields(ProxyCounters)}
@@ -124,13 +140,15 @@ class VehicleProxy:
         self._tasks: list[asyncio.Task[None]] = []
         self._t0_s = self._clock.now_s()
         self._link_state = LinkState.WAITING
-        self.sysid_mismatch: int | None = None  # sysid of a foreign vehicle HEARTBEAT, if any
+        self._mismatch: int | None = None  # sysid of a foreign vehicle HEARTBEAT, if any
 
     # --- lifetime --------------------------------------------------------------------------------
 
     async def __aenter__(self) -> VehicleProxy:
         """Bind the socket and start the owned tasks; returns when bound (first HEARTBEAT sent)."""
-        await self._endpoint.open()
+        if self._owns_port:
+            await self._port.open()
+        self._port.attach(self.config.sysid, self)
         self._t0_s = self._clock.now_s()
         self._send_heartbeat()
         self._tasks = [
@@ -152,7 +170,9 @@ class VehicleProxy:
             if not fut.done():
                 fut.set_exception(LinkClosedError(f"{self.name}: link closed while waiting"))
         self._waiters.clear()
-        self._endpoint.close()
+        self._port.detach(self.config.sysid)
+        if self._owns_port:
+            self._port.close()
 
     def _on_task_done(self, task: asyncio.Task[None]) -> None:
         if not task.cancelled() and task.exception() is not None:
@@ -163,11 +183,32 @@ class VehicleProxy:
 
     @property
     def local_address(self) -> Address:
-        return self._endpoint.local_address
+        return self._port.local_address
 
     @property
     def remote(self) -> Address | None:
-        return self._endpoint.remote
+        """Where commands and setpoints go: the configured address, or the learned one (None
+        until the vehicle's first valid message on a link without a configured one)."""
+        return self._remote
+
+    @property
+    def remote_learned(self) -> bool:
+        return self._remote_learned
+
+    @property
+    def sysid_mismatch(self) -> int | None:
+        """Another vehicle's sysid heard where this one was expected: on its own port, a
+        HEARTBEAT of another vehicle (preflight refuses); on a shared port, while nothing of this
+        vehicle has arrived, a sysid no vehicle of the port has (for the connect diagnostics)."""
+        if self._mismatch is not None or not self._port.shared or self._n["messages_accepted"]:
+            return self._mismatch
+        unknown = self._port.unknown_sysids()
+        return min(unknown) if unknown else None
+
+    @property
+    def shared_port(self) -> bool:
+        """The GCS port serves other vehicles too."""
+        return self._port.shared
 
     def latest(self, kind: str) -> Received | None:
         """Latest accepted message of type ``kind`` (e.g. 'ATTITUDE') with its receive time."""
@@ -191,8 +232,9 @@ class VehicleProxy:
         return LinkState.ALIVE
 
     def stats(self) -> LinkStats:
-        return LinkStats(ProxyCounters(**self._n), self._codec.stats(), self._endpoint.stats(),
-                         self._commands.stats(), self._seq.stats(), self._cache.type_stats())
+        return LinkStats(ProxyCounters(**self._n), self._codec.stats(), self._port.udp_stats(),
+                         self._commands.stats(), self._seq.stats(), self._cache.type_stats(),
+                         self._port.stats())
 
     async def wait_message(self, kind: str, timeout_s: float,
                            predicate: Callable[[MAVLinkMessage], bool] | None = None) -> Received:
@@ -232,8 +274,12 @@ class VehicleProxy:
             if src_comp != cfg.compid:
                 self._n["other_component"] += 1
                 continue
-            if self._endpoint.remote is None:
-                self._endpoint.set_remote(addr)
+            if self._remote_learned:
+                if addr != self._remote:
+                    self._stranger(addr)
+                    continue
+            elif cfg.learn_remote:
+                self._learn(addr)
             self._n["messages_accepted"] += 1
             self._seq.update(msg.get_seq())
             self._cache.update(msg, now_s)
@@ -244,13 +290,35 @@ class VehicleProxy:
             if self._waiters:
                 self._wake_waiters(msg, now_s)
 
+    def _on_foreign(self, msg: MAVLinkMessage, addr: Address) -> None:
+        """Called by a port serving only this vehicle: a valid message from another sysid."""
+        self._n["foreign_sysid"] += 1
+        if msg.get_type() == "HEARTBEAT" and msg.type != MavType.GCS:
+            self._report_mismatch(msg.get_srcSystem(), msg.get_srcComponent(), addr)
+
+    def _learn(self, addr: Address) -> None:
+        same = " (the configured one)" if addr == self._remote else ""
+        logger.info("%s: address learned from its first message: %s:%d%s", self.name, *addr, same)
+        self._remote = addr
+        self._remote_learned = True
+
+    def _stranger(self, addr: Address) -> None:
+        self._n["stranger_address"] += 1
+        if addr not in self._strangers and len(self._strangers) < MAX_STRANGERS_LOGGED:
+            self._strangers.add(addr)
+            assert self._remote is not None
+            logger.warning(
+                "%s: messages with its sysid %d from %s:%d, but its address is %s:%d (learned "
+                "from its first message); ignored and counted (stranger_address)", self.name,
+                self.config.sysid, addr[0], addr[1], self._remote[0], self._remote[1])
+
     def _report_mismatch(self, src_sys: int, src_comp: int, addr: Address) -> None:
-        if self.sysid_mismatch != src_sys:
+        if self._mismatch != src_sys:
             logger.error(
                 "%s: HEARTBEAT from sysid %d (compid %d) at %s:%d, expected sysid %d; check the "
                 "team file. Messages from sysid %d are ignored.", self.name, src_sys, src_comp,
                 addr[0], addr[1], self.config.sysid, src_sys)
-        self.sysid_mismatch = src_sys
+        self._mismatch = src_sys
 
     def _wake_waiters(self, msg: MAVLinkMessage, now_s: float) -> None:
         kind = msg.get_type()
@@ -458,12 +526,23 @@ class VehicleProxy:
     async def set_message_interval(self, msg_id: int, rate_hz: float, *, check: bool = True,
                                    timeout_s: float = 0.5, retries: int = 2) -> MavResult:
         """SET_MESSAGE_INTERVAL (511): rate_hz > 0 sets 1e6/rate_hz us, 0 disables the stream;
-        returns when acknowledged."""
+        returns when acknowledged. A refusal (``check``) or no ACK raises an error naming the
+        vehicle, the message and the rate: `vehicle 2 (sysid 2): stream EXTENDED_SYS_STATE (245)
+        at 5 Hz: SET_MESSAGE_INTERVAL answered DENIED`."""
         if not math.isfinite(rate_hz) or rate_hz < 0:
             raise ValueError(f"{self.name}: message {msg_id} rate_hz: expected >= 0, got {rate_hz}")
         interval_us = -1.0 if rate_hz == 0 else 1e6 / rate_hz
-        return await self._checked(MavCmd.SET_MESSAGE_INTERVAL, [msg_id, interval_us], check,
-                                   timeout_s, retries)
+        what = f"{self.name}: stream {message_name(msg_id)} at {rate_hz:g} Hz"
+        try:
+            result = await self.command_long(MavCmd.SET_MESSAGE_INTERVAL, [msg_id, interval_us],
+                                             timeout_s=timeout_s, retries=retries)
+        except CommandTimeoutError:
+            raise CommandTimeoutError(f"{what}: SET_MESSAGE_INTERVAL got no COMMAND_ACK in "
+                                      f"{retries + 1} attempts of {timeout_s:g} s") from None
+        if check and result != MavResult.ACCEPTED:
+            raise CommandRejectedError(f"{what}: SET_MESSAGE_INTERVAL answered {result.name}",
+                                       MavCmd.SET_MESSAGE_INTERVAL, result)
+        return result
 
     # --- setpoints (each returns immediately; NaN/inf raise SetpointError, range is clamped) -----
 
@@ -531,7 +610,9 @@ class VehicleProxy:
         data = self._codec.encode(msg)
         if self._tlog is not None:
             self._tlog.write(data)
-        return self._endpoint.send(data)
+        if self._remote is None:
+            self._n["send_no_remote"] += 1
+        return self._port.send_to(data, self._remote)
 
     async def _heartbeat_loop(self) -> None:
         loop = asyncio.get_running_loop()

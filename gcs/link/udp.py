@@ -1,4 +1,4 @@
-"""asyncio UDP endpoint: one local socket, one remote peer, counters, bounded buffers."""
+"""asyncio UDP endpoint: one local socket, its peer addresses, counters, bounded buffers."""
 
 from __future__ import annotations
 
@@ -167,16 +167,22 @@ class UdpEndpoint:
         backlog over ``max_write_buffer_bytes``); every drop is counted. Raises
         :class:`LinkClosedError` if the endpoint is not open.
         """
+        return self.send_to(data, self._remote)
+
+    def send_to(self, data: bytes, addr: Address | None) -> bool:
+        """Queue one datagram to ``addr`` (None: not known yet, dropped and counted as
+        ``send_no_remote``); otherwise as :meth:`send`, which sends to the endpoint's remote.
+        A port shared by several peers sends with this, each peer at its own address."""
         transport = self._transport
         if transport is None:
             raise LinkClosedError(f"{self.name}: send on a closed endpoint")
-        if self._remote is None:
+        if addr is None:
             self._counts["send_no_remote"] += 1
             return False
         if transport.get_write_buffer_size() > self._max_write_buffer_bytes:
             self._counts["send_dropped_backpressure"] += 1
             return False
-        transport.sendto(data, self._remote)
+        transport.sendto(data, addr)
         self._counts["packets_out"] += 1
         self._counts["bytes_out"] += len(data)
         return True

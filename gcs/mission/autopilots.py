@@ -150,7 +150,7 @@ PX4 = AutopilotProfile(
     takeoff_altitude_amsl=True,
     setpoint_modes=frozenset({"OFFBOARD"}),
     hold_before_prime=False,
-    control_modes=frozenset({"rates", "actuators"}),  # actuators: PX4 <= 1.13 only
+    control_modes=frozenset({"rates", "actuators", "attitude"}),  # actuators: PX4 <= 1.13
     actuators_until=(1, 13),  # PX4 1.14 moved actuator control to its ROS 2 bridge
     prearm_bit_reliable=True,
 )
@@ -170,7 +170,7 @@ ARDUPILOT = AutopilotProfile(
     takeoff_altitude_amsl=False,
     setpoint_modes=frozenset({"GUIDED", "GUIDED_NOGPS"}),
     hold_before_prime=True,
-    control_modes=frozenset({"rates"}),  # SET_ATTITUDE_TARGET only
+    control_modes=frozenset({"rates", "attitude"}),  # SET_ATTITUDE_TARGET only
     required_params=(GUID_OPTIONS_THRUST,),
     force_arm_magic=2989,
     force_disarm_magic=21196,

@@ -744,14 +744,14 @@ class MissionMachine:
             st, s = v.stop, v.status
             if st is None or st.done:
                 continue
+            if s is not None and s.link == "alive" and not s.armed and not s.in_air:
+                st.done = True  # disarmed, not flying (landed state known or not): never commanded
+                continue
             if s is None or s.link == "lost" or (s.data_age_s > self.plan.rules.link_lost_after_s):
                 v.lost = True
                 st.done, st.failure = True, "link lost while stopping"
                 continue
             on_ground = s.landed is True
-            if on_ground and not s.armed:
-                st.done = True  # landed and disarmed (or never took off)
-                continue
             if v.pending is not None:
                 continue
             if on_ground:  # landed but still armed

@@ -194,7 +194,7 @@ def run_sampled(
                     adaptive,
                 )
             rc, wc, dwc, tau, rho_rate, omega_cmd, eps, tr_err, we = attitude_stage(
-                rot, w, u, du, ddu, rhohat, gains, adaptive
+                rot, w, u, du, ddu, rhohat, gains, adaptive, np.zeros(u.shape[0])
             )
             we_norm = _norms(we)
             thrust_hold[:] = t_n
@@ -291,7 +291,7 @@ def _oracle_rates(
         adaptive,
     )
     rc, wc, dwc, tau, rho_rate, omega_cmd, eps, tr_err, we = attitude_stage(
-        rot, w, u, du, ddu, rhohat, gains, adaptive
+        rot, w, u, du, ddu, rhohat, gains, adaptive, np.zeros(u.shape[0])
     )
     dp, dv, drot, dw = plant_derivatives(p, v, rot, w, t_n, tau, mass, inertia)
     return dp, dv, drot, dw, mhat_rate, rho_rate, u, kappa, t_n, tr_err, we

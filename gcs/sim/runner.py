@@ -79,6 +79,11 @@ def simulate(
     derivative = options.derivative or team.controller.derivative.method
     if law not in ("adaptive", "baseline"):
         raise ConfigError(f"controller law {law!r}: expected adaptive or baseline")
+    if mode == "attitude":
+        raise ConfigError(
+            "controller mode 'attitude': the vehicle's autopilot closes the attitude loop, which "
+            "gcs sim does not model; simulate with --mode rates or actuators, or fly the attitude "
+            "mode against vehicle-emu (gcs fly --emulators)")
     if mode not in _MODES:
         raise ConfigError(f"controller mode {mode!r}: expected one of {sorted(_MODES)}")
     if derivative not in DERIVATIVE_METHODS:

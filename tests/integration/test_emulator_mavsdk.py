@@ -154,9 +154,17 @@ ACK_WITHIN_S = 0.3
 MODE_SEEN_WITHIN_S = 1.0 + 0.3
 
 
+# The open-loop hold below checks the thrust normalisation: the brake ends when the REPORTED
+# vertical speed crosses zero, and px4's estimate carries SIH's 0.15 m/s vertical velocity
+# error (docs/emulator.md, "Calibration"), so with noise the true climb left at the switch to
+# hover thrust is anywhere within about +-0.15 m/s: the assertion is about the thrust, not the
+# estimator, so this flight is noise-free.
+NOISE_FREE = ["--param", "EMU_NOISE=0"]
+
+
 def test_mavsdk_discovers_arms_and_flies_offboard_with_attitude_rate(tmp_path):
     port = free_udp_port()
-    with run_emulator(["--id", "1"], remote_port=port, log_dir=str(tmp_path)):
+    with run_emulator(["--id", "1", *NOISE_FREE], remote_port=port, log_dir=str(tmp_path)):
         out = asyncio.run(_fly(port))
     assert out["autopilot"] == Autopilot.PX4
     assert out["home_position_ok"]

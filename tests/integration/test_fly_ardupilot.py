@@ -7,16 +7,13 @@ are the emulator's log lines, what it did with the setpoints is its ``--stats-js
 they met, rejected by ArduPilot's rules, GUID_TIMEOUT expiries). Tests wait on the CLI's exit,
 with timeouts; nothing sleeps to synchronise.
 
-Where today's `gcs fly` cannot fly the faithful personality, the vehicles are configured around
-it, and the first gap is pinned by a test of gcs fly's safe reaction to it:
-* ArduPilot SITL sends from an ephemeral port (udpclient) and hears only the address it sends
-  to; `gcs fly` answers the team file's `remote_port`. The flights force a bind (`--bind`), as a
-  relay (the team's SITL flights used one) or ArduPilot's `udp:` serial option would.
-* ArduCopter refuses to arm in GUIDED until its EKF uses GPS (~41 s after boot) and `gcs fly`
-  does not wait for that: the vehicles boot at once (EMU_BOOT_SCALE=0).
-* `gcs fly` needs EXTENDED_SYS_STATE but does not request it; ArduPilot sends it only when asked
-  or preloaded: the copters get the team's message-intervals file (HEARTBEAT and
-  EXTENDED_SYS_STATE at 5 Hz), as its SITL flights did.
+The copters run as SITL does: each sends from an ephemeral port (udpclient) and hears only the
+address it sends to, so the team file's links learn their addresses (`learn_remote: true`, no
+`remote_port`); they stream only a 1 Hz HEARTBEAT until `gcs fly` asks for every stream it needs
+(EXTENDED_SYS_STATE included) with SET_MESSAGE_INTERVAL; no message-intervals file, no forced
+bind. One gap is still configured around: ArduCopter refuses to arm in GUIDED until its EKF uses
+GPS (~41 s after boot) and `gcs fly` does not wait for that: the vehicles boot at once
+(EMU_BOOT_SCALE=0).
 
 The PARAM_REQUEST_READ retry test keeps a small scripted peer: it needs a vehicle that leaves the
 first request unanswered, which no autopilot does on purpose.
@@ -31,6 +28,7 @@ import os
 import re
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +36,7 @@ from typing import Any
 
 import pytest
 import yaml
+from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 from gcs.link import VehicleLinkConfig, VehicleProxy
@@ -50,50 +49,45 @@ ROOT = Path(__file__).resolve().parents[2]
 GUIDED, LAND, BRAKE, GUIDED_NOGPS, STABILIZE = 4, 9, 17, 20, 0
 FIX = "set GUID_OPTIONS bit 3 (8): otherwise ArduPilot reads thrust as a climb rate"
 COMMAND_LINE = re.compile(r"command (\d+) \(([^)]*)\) -> (\w+)")
-# the team's SITL flights: HEARTBEAT and EXTENDED_SYS_STATE at 5 Hz from boot; `gcs fly` reads the
-# landed state without asking for EXTENDED_SYS_STATE, which ArduPilot does not send unasked
-INTERVALS_FILE = "0 200\n245 200\n"
 
 
 @contextlib.contextmanager
-def copters(tmp: Path, *guid_options: int, bind: bool = True,
-            gcs_ports: list[int] | None = None) -> Iterator[list[EmulatorProcess]]:
-    """One `vehicle-emu --id N --autopilot ardupilot` per GUID_OPTIONS value, booted at once,
-    with the team's message-intervals file, on a forced bind port (``bind``) or ArduPilot's
-    ephemeral one, sending to ``gcs_ports`` (default: free ports); stats JSON at exit."""
-    intervals = tmp / "message-intervals-chan0.txt"
-    intervals.write_text(INTERVALS_FILE)
+def copters(tmp: Path, gcs_ports: list[int], *guid_options: int
+            ) -> Iterator[list[EmulatorProcess]]:
+    """One `vehicle-emu --id N --autopilot ardupilot` per GUID_OPTIONS value, booted at once, on
+    ArduPilot's ephemeral port, sending to ``gcs_ports[N-1]``; stats JSON at exit."""
     with contextlib.ExitStack() as stack:
-        emus = [stack.enter_context(run_emulator(
-            ["--id", str(k + 1), "--autopilot", "ardupilot", "--param", "EMU_BOOT_SCALE=0",
-             "--param", f"GUID_OPTIONS={g}", "--message-intervals", str(intervals),
-             "--stats-json", str(tmp / f"emu{k + 1}.json")],
-            remote_port=gcs_ports[k] if gcs_ports else free_udp_port(), log_dir=str(tmp),
-            bind=bind))
-            for k, g in enumerate(guid_options)]
+        emus = []
+        for k, g in enumerate(guid_options):
+            log_dir = tmp / f"emu{k + 1}"
+            log_dir.mkdir()
+            emus.append(stack.enter_context(run_emulator(
+                ["--id", str(k + 1), "--autopilot", "ardupilot", "--param", "EMU_BOOT_SCALE=0",
+                 "--param", f"GUID_OPTIONS={g}", "--stats-json", str(tmp / f"emu{k + 1}.json")],
+                remote_port=gcs_ports[k], log_dir=str(log_dir), bind=False)))
         yield emus
 
 
-def team_file(tmp: Path, ports: list[int], gcs_ports: list[int] | None = None) -> Path:
-    """square4's vehicles 1 and 2 on one edge, rates mode, linked to the copters' ports (the
-    GCS listening on ``gcs_ports``, default any free port)."""
+def team_file(tmp: Path, gcs_ports: list[int], remote_ports: list[int] | None = None) -> Path:
+    """square4's vehicles 1 and 2 on one edge, rates mode, the GCS listening on ``gcs_ports``;
+    the vehicles' addresses learned from their first message, or (``remote_ports``) fixed."""
     data = yaml.safe_load((ROOT / "configs" / "square4.yaml").read_text())
     data["name"] = "ardupilot2"
     data["vehicles"] = data["vehicles"][:2]
     data["graph"]["edges"] = [[1, 2]]
     data["controller"]["mode"] = "rates"
-    for k, (v, port) in enumerate(zip(data["vehicles"], ports, strict=True)):
-        v["link"] = {"local_port": gcs_ports[k] if gcs_ports else 0, "remote_host": "127.0.0.1",
-                     "remote_port": port}
+    for k, v in enumerate(data["vehicles"]):
+        v["link"] = ({"local_port": gcs_ports[k], "learn_remote": True} if remote_ports is None
+                     else {"local_port": gcs_ports[k], "remote_port": remote_ports[k]})
     path = tmp / "team.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path
 
 
-def fly(tmp: Path, ports: list[int], *args: str, gcs_ports: list[int] | None = None
+def fly(tmp: Path, gcs_ports: list[int], *args: str, remote_ports: list[int] | None = None
         ) -> tuple[int, str, str]:
     """`gcs fly` on the copters to its exit: (exit status, stdout, stderr)."""
-    team = team_file(tmp, ports, gcs_ports)
+    team = team_file(tmp, gcs_ports, remote_ports)
     proc = subprocess.run(
         [sys.executable, "-m", "gcs.cli", "fly", "--team", str(team),
          "--out", str(tmp / "run"), "--no-figures", "--status", "off", "--log-level", "INFO",
@@ -122,10 +116,26 @@ def stats(tmp: Path, vehicle: int) -> dict[str, Any]:
     return summary
 
 
+def gcs_ports(n: int = 2) -> list[int]:
+    return [free_udp_port() for _ in range(n)]
+
+
+def sent_commands(tmp: Path) -> list[tuple[int, int, float]]:
+    """(target sysid, command, param2) of every COMMAND_LONG gcs fly sent, from its tlog."""
+    conn = mavutil.mavlink_connection(str(tmp / "run" / "flight.tlog"))
+    out = []
+    while (msg := conn.recv_match(type="COMMAND_LONG")) is not None:
+        out.append((msg.target_system, msg.command, msg.param2))
+    return out
+
+
 def test_guid_options_without_bit_3_refuses_to_fly_and_never_arms(tmp_path: Path) -> None:
     # GIVEN two ArduPilot Copters on the ground, vehicle 2 with GUID_OPTIONS at its default 0
-    with copters(tmp_path, 8, 0) as emus:
-        code, _, err = fly(tmp_path, [e.bind_port for e in emus])
+    ports = gcs_ports()
+    with copters(tmp_path, ports, 8, 0) as emus:
+        started = time.monotonic()
+        code, _, err = fly(tmp_path, ports)
+        elapsed_s = time.monotonic() - started
     # THEN gcs fly refuses with one line naming vehicle 2 and the fix, and exits non-zero
     assert code == 1, err[-3000:]
     line = f"vehicle 2 (sysid 2): GUID_OPTIONS = 0 (bit mask 8 clear); {FIX}"
@@ -133,17 +143,22 @@ def test_guid_options_without_bit_3_refuses_to_fly_and_never_arms(tmp_path: Path
     # AND it read both values from the vehicles (ArduPilot casts integers to float)
     assert "vehicle 1: read_params ok: GUID_OPTIONS = 8" in err
     assert "vehicle 2: read_params ok: GUID_OPTIONS = 0" in err
-    # AND neither was armed, changed mode or got a setpoint
+    # AND neither was armed, changed mode (no LAND: they were disarmed on the ground) or got a
+    # setpoint, and gcs fly did not wait for a landing (before: LAND, then up to 120 s)
     for k, emu in enumerate(emus, start=1):
         assert sequence(emu) == [], sequence(emu)
         s = stats(tmp_path, k)
         assert (s["mode"], s["armed"], s["setpoints_by_mode"]) == ("STABILIZE", False, {})
+    assert {c for _, c, _ in sent_commands(tmp_path)} == {511}  # streams (then PARAM_REQUEST_READs)
+    assert elapsed_s < 20.0, elapsed_s  # (measured 4 s on 2 cores)
 
 
 def test_ardupilot_takes_off_flies_guided_nogps_and_lands(tmp_path: Path) -> None:
-    # GIVEN two ArduPilot Copters on the ground with GUID_OPTIONS bit 3 set (72 = 64 + 8)
-    with copters(tmp_path, 8, 72) as emus:
-        code, out, err = fly(tmp_path, [e.bind_port for e in emus], "--duration-s", "2")
+    # GIVEN two ArduPilot Copters on the ground with GUID_OPTIONS bit 3 set (72 = 64 + 8), as
+    # SITL runs them: ephemeral ports, nothing but a 1 Hz HEARTBEAT streamed until asked
+    ports = gcs_ports()
+    with copters(tmp_path, ports, 8, 72) as emus:
+        code, out, err = fly(tmp_path, ports, "--duration-s", "2")
     # THEN the flight completes and lands
     assert code == 0, err[-3000:]
     assert "gcs fly: done: formation complete (exit 0)" in out
@@ -153,7 +168,15 @@ def test_ardupilot_takes_off_flies_guided_nogps_and_lands(tmp_path: Path) -> Non
         assert sequence(emu) == [("mode", 4.0), ("arm", 0.0), ("takeoff", 2.5), ("mode", 17.0),
                                  ("mode", 20.0), ("mode", 9.0)], sequence(emu)
         results = {r for c, _, r in COMMAND_LINE.findall(emu.log_text()) if c in ("176", "400", "22")}
-        assert results == {"ACCEPTED"}  # (gcs fly's optional ODOMETRY request is DENIED)
+        assert results == {"ACCEPTED"}
+        # every stream request was accepted but the optional ODOMETRY-off one: ArduPilot has no
+        # ap_message for ODOMETRY (nor TIMESYNC) and DENIES it; gcs fly does not use either
+        streams = {(p.split(", ")[0], r) for c, p, r in COMMAND_LINE.findall(emu.log_text())
+                   if c == "511"}
+        assert {m for m, r in streams if r != "ACCEPTED"} == {"331"}, streams
+        assert ("245", "ACCEPTED") in streams  # EXTENDED_SYS_STATE, asked for
+        # AND the link stayed up from the first HEARTBEAT on (1 Hz until the streams came)
+        assert "link lost" not in err
         s = stats(tmp_path, k)
         # LAND landed and disarmed it, and it stays in LAND (ArduPilot)
         assert (s["mode"], s["armed"]) == ("LAND", False)
@@ -167,21 +190,44 @@ def test_ardupilot_takes_off_flies_guided_nogps_and_lands(tmp_path: Path) -> Non
         assert "Disarming motors" in emu.log_text()
 
 
-def test_ardupilot_on_its_ephemeral_port_stops_gcs_fly_safely_in_preflight(tmp_path: Path) -> None:
-    """Today's gap (learning the vehicle's address is the next issue's job): the copters are
-    heard, but the commands go to the team file's remote_port, where nobody listens; gcs fly
-    stops in preflight with the unanswered command named, and no vehicle got any command."""
-    # GIVEN copters as SITL runs them: sending to the GCS's port from an ephemeral one; the
-    # team file names a remote_port (it must), where no vehicle listens
-    gcs_ports = [free_udp_port(), free_udp_port()]
-    with copters(tmp_path, 8, 8, bind=False, gcs_ports=gcs_ports) as emus:
-        code, _, err = fly(tmp_path, [free_udp_port(), free_udp_port()], "--duration-s", "1",
-                           "--connect-timeout-s", "10", gcs_ports=gcs_ports)
+def test_a_fixed_remote_port_misses_an_ephemeral_port_and_stops_at_once_commanding_nothing(
+        tmp_path: Path) -> None:
+    """Without `learn_remote` the commands go to the team file's remote_port, where nobody
+    listens: preflight stops on the first stream request, named, and the copters (disarmed on
+    the ground, landed state never received) get no LAND and are not waited for."""
+    # GIVEN copters on their ephemeral ports and a team file with fixed remote ports
+    ports = gcs_ports()
+    with copters(tmp_path, ports, 8, 8) as emus:
+        started = time.monotonic()
+        code, _, err = fly(tmp_path, ports, "--duration-s", "1", "--connect-timeout-s", "20",
+                           remote_ports=gcs_ports())
+        elapsed_s = time.monotonic() - started
     assert "heard vehicle 1 (sysid 1)" in err and "heard vehicle 2 (sysid 2)" in err
     assert code == 1, err[-2000:]
-    assert ("configure failed: vehicle 1 (sysid 1): MAV_CMD_SET_MESSAGE_INTERVAL (511) got no "
-            "COMMAND_ACK in 3 attempts") in err
+    assert ("configure failed: vehicle 1 (sysid 1): stream ATTITUDE_QUATERNION (31) at 100 Hz: "
+            "SET_MESSAGE_INTERVAL got no COMMAND_ACK in 3 attempts of 0.5 s") in err
+    # THEN no command reached a vehicle, and gcs fly sent nothing after the stream requests
     assert all(sequence(e) == [] for e in emus)
+    assert {c for _, c, _ in sent_commands(tmp_path)} == {511}
+    assert "vehicle 1: land" not in err and "vehicle 2: land" not in err
+    assert elapsed_s < 20.0, elapsed_s  # (measured 4 s; with LAND retries it took longer)
+
+
+def test_a_vehicle_that_never_sends_is_named_in_one_line_and_the_other_is_not_commanded(
+        tmp_path: Path) -> None:
+    # GIVEN a learned link to vehicle 1 (running) and to vehicle 2 (never started): the GCS has
+    # no address for vehicle 2 and can only wait to hear it
+    ports = gcs_ports()
+    with copters(tmp_path, ports, 8) as emus:
+        code, _, err = fly(tmp_path, ports, "--connect-timeout-s", "5")
+    # THEN it gives up after the connect timeout with one line for the silent vehicle
+    assert code == 1, err[-2000:]
+    assert (f"  vehicle 2 (sysid 2): nothing heard on udp 127.0.0.1:{ports[1]}; is it running, "
+            "and does it send there?") in err.splitlines()
+    assert "no link to 1 of 2 vehicles within 5 s (nothing was commanded)" in err
+    # AND vehicle 1, heard, got nothing either
+    assert sequence(emus[0]) == []
+    assert sent_commands(tmp_path) == []
 
 
 @dataclass

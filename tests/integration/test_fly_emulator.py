@@ -314,3 +314,59 @@ def test_ten_percent_packet_loss_on_every_link_still_converges(tmp_path):
     assert np.nanmax(fe[t >= 20.0]) <= 0.2
     lost = [report["link"][str(k)]["telemetry_lost_pct"] for k in (1, 2, 3, 4)]
     assert all(5.0 <= x <= 15.0 for x in lost), lost
+
+
+def test_four_vehicles_of_both_personalities_on_one_gcs_port_fly_to_completion(tmp_path):
+    """mavlink-router / MAVProxy --out: every vehicle sends to one GCS port; gcs fly tells them
+    apart by sysid and answers each at the address it learned (ArduPilot's ephemeral ones)."""
+    # GIVEN Scenario I with vehicles 1, 2 as px4 and 3, 4 as ardupilot, all sending to one port
+    gcs_port, bind_base = free_udp_port_block(1), free_udp_port_block(4)
+    data = yaml.safe_load(SQUARE4.read_text())
+    data["mission"]["duration_s"] = 8.0
+    data["fly"]["geofence"]["min_enu_m"][2] = 0.5
+    data["emulator"] = {"origin": "shared"}
+    autopilots = ["px4", "px4", "ardupilot", "ardupilot"]
+    for k, (v, autopilot) in enumerate(zip(data["vehicles"], autopilots, strict=True)):
+        # px4 binds remote_port (where the GCS sends until it hears the vehicle); ardupilot
+        # sends from an ephemeral port whatever the file says
+        v["link"] = {"local_port": gcs_port, "learn_remote": True, "remote_port": bind_base + k}
+        v["emulator"] = {"autopilot": autopilot}
+    team = tmp_path / "team.yaml"
+    team.write_text(yaml.safe_dump(data, sort_keys=False))
+    cmd = [sys.executable, "-m", "vehicle_emulator.cli", "--team", str(team), "--log-level",
+           "INFO"]
+    procs = []
+    try:
+        for k, autopilot in enumerate(autopilots, start=1):
+            extra = ["--param", "GUID_OPTIONS=8"] if autopilot == "ardupilot" else []
+            procs.append(subprocess.Popen(cmd + ["--id", str(k), *extra],
+                                          stdout=subprocess.DEVNULL,
+                                          stderr=open(tmp_path / f"emu{k}.log", "w")))  # noqa: SIM115
+        # WHEN gcs fly flies the team, holding at the end
+        gcs = Gcs(team, tmp_path / "run", "--mode", "rates", "--end-action", "hold")
+        code, out = gcs.finish(180)
+    finally:
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            p.wait(timeout=10)
+    log = gcs.log_path.read_text()
+    # THEN it flew the whole sequence and exits 0
+    assert code == 0, log[-3000:]
+    assert "gcs fly: done: formation complete (exit 0)" in out
+    # AND each vehicle was learned at its own address: px4 at its bound port, ardupilot at the
+    # ephemeral port its own log names
+    for k in range(1, 5):
+        line = next(x for x in log.splitlines()
+                    if f"vehicle {k} (sysid {k}): address learned" in x)
+        port = int(line.split("first message: 127.0.0.1:")[1].split()[0])
+        emu_log = (tmp_path / f"emu{k}.log").read_text()
+        if autopilots[k - 1] == "px4":
+            assert port == bind_base + k - 1, line
+        else:
+            assert f"sends from an ephemeral port 127.0.0.1:{port} " in emu_log, line
+    # AND every vehicle got setpoints, none was lost, no stranger was heard
+    report = gcs.report()
+    assert all(report["link"][str(k)]["setpoints_sent"] > 500 for k in range(1, 5))
+    assert not any(report["link"][str(k)]["lost"] for k in range(1, 5))
+    assert "which no vehicle on this port has" not in log and "stranger_address" not in log

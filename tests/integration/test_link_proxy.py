@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
-from collections.abc import Callable, Coroutine
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -21,6 +21,8 @@ from gcs.link.enums import LandedState, LinkState, MavCmd, MavResult, Px4MainMod
 from gcs.link.proxy import SetpointError, VehicleProxy
 from gcs.link.tlog import TlogWriter
 from gcs.link.udp import Address, LinkClosedError
+from vehicle_emulator.testing import UdpPeer, wait_until
+from vehicle_emulator.testing import run_bounded as run
 
 pytestmark = pytest.mark.integration
 
@@ -28,20 +30,6 @@ Msg = mavlink.MAVLink_message
 AckPolicy = Callable[[Msg], int | None]  # COMMAND_LONG -> MAV_RESULT to answer, None: no answer
 OFFBOARD = px4_custom_mode(Px4MainMode.OFFBOARD)
 KEY = bytes(range(100, 132))
-
-
-def run(coro: Coroutine[Any, Any, Any], timeout_s: float = 10.0) -> Any:
-    async def bounded() -> Any:
-        async with asyncio.timeout(timeout_s):
-            return await coro
-    return asyncio.run(bounded())
-
-
-async def wait_until(condition: Callable[[], bool], timeout_s: float = 2.0) -> None:
-    """Poll a condition on the loop (no fixed sleeps); TimeoutError after timeout_s."""
-    async with asyncio.timeout(timeout_s):
-        while not condition():
-            await asyncio.sleep(0.001)
 
 
 class ManualClock:
@@ -52,7 +40,7 @@ class ManualClock:
         return self.t_s
 
 
-class FakeVehicle(asyncio.DatagramProtocol):
+class FakeVehicle(UdpPeer):
     """A PX4-like peer written with plain pymavlink: answers COMMAND_LONG per ``ack_policy``,
     learns the GCS address from the first packet, records everything it receives."""
 
@@ -66,22 +54,10 @@ class FakeVehicle(asyncio.DatagramProtocol):
         self.ack_policy = ack_policy
         self.received: list[Msg] = []
         self.gcs: Address | None = None
-        self.transport: asyncio.DatagramTransport | None = None
-
-    async def __aenter__(self) -> FakeVehicle:
-        loop = asyncio.get_running_loop()
-        self.transport, _ = await loop.create_datagram_endpoint(
-            lambda: self, local_addr=("127.0.0.1", 0))
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        assert self.transport is not None
-        self.transport.close()
 
     @property
     def port(self) -> int:
-        assert self.transport is not None
-        return int(self.transport.get_extra_info("sockname")[1])
+        return self.address[1]
 
     def datagram_received(self, data: bytes, addr: Address) -> None:  # type: ignore[override]
         self.gcs = self.gcs or addr

@@ -5,30 +5,16 @@ from __future__ import annotations
 import asyncio
 import logging
 import socket
-from collections.abc import Callable, Coroutine
-from typing import Any
 
 import pytest
 from pymavlink import mavutil
 
 from gcs.link.codec import MavlinkCodec
 from gcs.link.udp import Address, LinkClosedError, UdpEndpoint
+from vehicle_emulator.testing import run_bounded as run
+from vehicle_emulator.testing import wait_until
 
 pytestmark = pytest.mark.integration
-
-
-def run(coro: Coroutine[Any, Any, Any], timeout_s: float = 10.0) -> Any:
-    async def bounded() -> Any:
-        async with asyncio.timeout(timeout_s):
-            return await coro
-    return asyncio.run(bounded())
-
-
-async def wait_until(condition: Callable[[], bool], timeout_s: float = 2.0) -> None:
-    """Poll a condition on the loop (no fixed sleeps); TimeoutError after timeout_s."""
-    async with asyncio.timeout(timeout_s):
-        while not condition():
-            await asyncio.sleep(0.001)
 
 
 def test_exchanges_mavlink_with_a_pymavlink_udpin_peer() -> None:

@@ -11,6 +11,8 @@ ROOT = Path(__file__).resolve().parents[2]
 IMPURE = {"asyncio", "socket", "time", "pymavlink", "mavsdk", "select", "threading", "subprocess"}
 PURE_MODULES = sorted((ROOT / "gcs" / "control").glob("*.py")) + [
     ROOT / "vehicle_emulator" / "physics.py",
+    ROOT / "gcs" / "frames.py",
+    ROOT / "gcs" / "geodesy.py",
 ]
 
 

@@ -62,7 +62,7 @@ def test_ardupilot_profile_holds_the_spec_facts():
     assert not a.takeoff_altitude_amsl and a.takeoff_done_modes == {"GUIDED"}
     assert a.setpoint_modes == {"GUIDED", "GUIDED_NOGPS"} and a.hold_before_prime
     assert (a.force_arm_magic, a.force_disarm_magic) == (2989, 21196)
-    assert a.control_modes == {"rates"}
+    assert a.control_modes == {"rates", "attitude"}
     assert a.required_params == (GUID_OPTIONS_THRUST,) and GUID_OPTIONS_THRUST.mask == 8
 
 
@@ -76,7 +76,7 @@ def test_px4_profile_is_what_gcs_fly_did_before():
     assert not p.arm_retryable("DENIED", "Arming denied: not landed")
     assert not p.arm_retryable("FAILED", "Arm: x") and not p.arm_retryable("TIMEOUT", "")
     assert not p.hold_before_prime and not p.required_params
-    assert p.control_modes == {"rates", "actuators"}
+    assert p.control_modes == {"rates", "actuators", "attitude"}
     assert (p.force_arm_magic, p.force_disarm_magic) == (21196, 21196)
 
 
@@ -113,7 +113,7 @@ def test_guid_options_bit_3_is_required(value, ok):
 def test_ardupilot_refuses_actuator_setpoints():
     assert ARDUPILOT.preflight_problems("vehicle 1 (sysid 1)", "actuators", {"GUID_OPTIONS": 8}) \
         == ["vehicle 1 (sysid 1): ArduPilot Copter does not act on actuators setpoints; fly it "
-            "with --mode rates"]
+            "with --mode attitude or rates"]
     assert ARDUPILOT.preflight_problems("v", "rates", {"GUID_OPTIONS": 8}) == []
 
 
@@ -307,7 +307,7 @@ def test_ardupilot_in_actuators_mode_is_refused():
     w.run(20.0)
     assert m.outcome.exit_code == EXIT_ABORTED
     assert m.outcome.reason == ("vehicle 2 (sysid 2): ArduPilot Copter does not act on actuators "
-                                "setpoints; fly it with --mode rates")
+                                "setpoints; fly it with --mode attitude or rates")
     assert Cmd.OFFBOARD not in w.cmds()
 
 

@@ -224,6 +224,7 @@ def test_defaults_optional_keys_and_explicit_link():
     assert team.sim.plant_rate_hz == team.sim.controller_rate_hz == 1000.0
     assert team.controller.derivative.method == "model"
     assert team.vehicles[1].link == LinkConfig(0, "10.0.0.2", 14581)
+    assert team.vehicles[0].link == LinkConfig(14540, "127.0.0.1", 14580, learn_remote=False)
     assert team.vehicles[2].plant is None and not team.has_plants()
     assert team.vehicles[0].initial.attitude_rpy_rad == (0.0, 0.0, 0.0)
     with pytest.raises(ConfigError, match=r"vehicles\[2\]\.plant: missing: the true mass"):
@@ -236,6 +237,27 @@ def test_defaults_optional_keys_and_explicit_link():
     )
     a = team_from_dict(data).adjacency()
     assert a[0, 1] == a[1, 0] == 0.5 and a[1, 2] == 2.0 and a[2, 3] == a[3, 0] == 1.0
+
+
+def test_shared_ports_and_learned_addresses():
+    # GIVEN four vehicles sending to one GCS port (a router, or SITL told to), whose addresses
+    # are learned, one of them with a first address to send to until it is heard
+    data = base()
+    for k in range(4):
+        edit(data, f"vehicles.{k}.link", {"local_port": 14550, "learn_remote": True})
+    edit(data, "vehicles.3.link.remote_port", 14583)
+    team = team_from_dict(data)
+    # THEN they share the port; the learned links have no address until heard
+    assert [v.link.local_port for v in team.vehicles] == [14550] * 4
+    assert team.vehicles[0].link == LinkConfig(14550, None, None, learn_remote=True)
+    assert team.vehicles[3].link == LinkConfig(14550, "127.0.0.1", 14583, learn_remote=True)
+    # AND gcs check says so
+    text = describe(team)
+    assert "link udp :14550 (shared with 2, 3, 4, by sysid) -> the address its first message " \
+           "comes from;" in text
+    assert "-> the address its first message comes from (until then 127.0.0.1:14583)" in text
+    # AND it round-trips
+    assert team_from_dict(team_to_dict(team)) == team
 
 
 def test_with_law_switches_and_checks_the_baseline():
@@ -340,14 +362,27 @@ ERRORS = [
     ("vehicles.3.sysid", 256, r"vehicles\[3\]\.sysid: expected a value in \[1, 255\], got 256"),
     ("vehicles.0.sysid", 0, r"vehicles\[0\]\.sysid: expected a value in \[1, 255\], got 0"),
     (
+        "vehicles.3.sysid",
+        3,
+        r"vehicles\[3\]\.sysid: duplicate sysid 3 \(also vehicles\[2\]\)",
+    ),
+    (
         "vehicles.2.link",
-        {"local_port": 14540},
-        r"vehicles\[2\]\.link\.local_port: duplicate local port 14540 \(also vehicles\[0\]\)",
+        {"learn_remote": "yes"},
+        r"vehicles\[2\]\.link\.learn_remote: expected true or false, got string 'yes'",
+    ),
+    (
+        "vehicles.2.link",
+        {"learn_remote": True, "remote_host": "10.0.0.2"},
+        r"vehicles\[2\]\.link\.remote_host: has no effect without remote_port: with "
+        r"learn_remote: true",
     ),
     (
         "vehicles.2.link",
         {"remote_port": 14580},
-        r"vehicles\[2\]\.link\.remote_port: duplicate remote endpoint \('127\.0\.0\.1', 14580\)",
+        r"vehicles\[2\]\.link\.remote_port: duplicate remote endpoint \('127\.0\.0\.1', 14580\) "
+        r"\(also vehicles\[0\]\); vehicles behind one router or relay share its address: set "
+        r"learn_remote: true and leave remote_port out$",
     ),
     (
         "vehicles.2.link",
@@ -493,14 +528,19 @@ ERRORS = [
         r"faults\[0\]\.x: unknown key; allowed keys: kind, vehicle, at_s, fraction",
     ),
     ("faults", {"kind": "mass_drop"}, r"faults: expected a list of faults, got a mapping"),
-    ("fly", [1], r"^<dict>: fly: expected a mapping with keys rates, actuators, start, "),
+    ("fly", [1], r"^<dict>: fly: expected a mapping with keys rates, actuators, attitude, heading, start, "),
     ("fly.rates.tick_hz", 100, r"fly\.rates\.tick_hz: unknown key; did you mean 'tick_rate_hz'"),
     ("fly.rates.tick_rate_hz", 0, r"fly\.rates\.tick_rate_hz: expected a value in \(0, 1000\], "
      r"got 0\.0$"),
     ("fly.actuators.alpha_omega", -3, r"fly\.actuators\.alpha_omega: expected > 0, got -3\.0"),
+    ("fly.heading", "north", r"fly\.heading: expected 'hold', 'paper' or a compass heading in degrees, got 'north'"),
+    ("fly.heading", 400, r"fly\.heading: expected a value in \[-360, 360\], got 400"),
+    ("fly.rates.max_yaw_rate_radps", 0, r"fly\.rates\.max_yaw_rate_radps: expected > 0, got 0"),
+    ("fly.attitude.tick_rate_hz", 2000, r"fly\.attitude\.tick_rate_hz: expected a value in "),
     ("fly.end_action", "crash",
      r"fly\.end_action: expected one of 'land', 'hold', got string 'crash'"),
     ("fly.start", "maybe", r"fly\.start: expected one of 'auto', 'in_air', 'takeoff'"),
+    ("fly.link_timeout_s", 0, r"fly\.link_timeout_s: expected > 0, got 0\.0$"),
     ("fly.link_lost_after_s", 0.05, r"fly\.link_lost_after_s: expected > stale_after_s 0\.1, "
      r"got 0\.05$"),
     ("fly.geofence", {"min_enu_m": [0, 0, 5], "max_enu_m": [1, 1, 5]},
@@ -534,6 +574,7 @@ def test_fly_section_is_optional_and_defaults_are_documented():
     assert fly.takeoff_tolerance_m == 0.3
     fc = fly.formation_check
     assert (fc.after_s, fc.max_error_m, fc.max_fraction) == (10.0, 1.0, 0.5)
+    assert fly.link_timeout_s == 3.0  # tolerates a 1 Hz HEARTBEAT-only vehicle
     # AND the shipped file flies the criterion's torque gains
     shipped = load_team(SQUARE4).fly
     assert (shipped.actuators.alpha_eps, shipped.actuators.alpha_omega) == (24.0, 3.0)
@@ -880,3 +921,29 @@ def test_a_name_that_reads_as_a_number_round_trips_through_yaml():
     text = team_to_yaml(team)
     assert "name: '0E0'" in text
     assert team_from_yaml(text, "gen") == team
+
+
+@pytest.mark.parametrize("heading", ["hold", "paper", 90.0, -45.0])
+def test_fly_heading_and_the_attitude_mode_load_and_round_trip(heading):
+    data = edit(edit(base(), "fly.heading", heading), "fly.attitude.tick_rate_hz", 50)
+    team = team_from_dict(data)
+    assert team.fly.heading == heading and team.fly.mode("attitude").tick_rate_hz == 50.0
+    assert team_from_yaml(team_to_yaml(team), "<rt>").fly == team.fly
+    # the defaults: hold the heading, yaw rate limited on its own to 0.5 rad/s
+    default = team_from_dict(base()).fly
+    assert default.heading == "hold" and default.rates.max_yaw_rate_radps == 0.5
+
+
+def test_mhat_from_hover_needs_a_mass_and_round_trips():
+    data = edit(base(), "vehicles.0.estimates.mhat", "from_hover")
+    team = team_from_dict(data)
+    v = team.vehicles[0]
+    # the stand-in (what gcs sim flies) is the plant's hover: phi(0) m / alpha_m
+    assert v.estimates.from_hover and v.estimates.mhat == pytest.approx(
+        2.0 * v.plant.mass_kg / team.controller.gains.alpha_m)
+    assert team_from_yaml(team_to_yaml(team), "<rt>").vehicles == team.vehicles
+    # without a plant it needs mass_bound_kg; a word other than from_hover is refused
+    del data["vehicles"][0]["plant"]
+    raises_at(data, r"vehicles\[0\]\.estimates\.mhat: from_hover needs estimates\.mass_bound_kg")
+    raises_at(edit(base(), "vehicles.0.estimates.mhat", "hover"),
+              r"vehicles\[0\]\.estimates\.mhat: expected a number > 0 or 'from_hover', got 'hover'")

@@ -12,14 +12,18 @@ import pytest
 from gcs.app import FlightSetupError, FlyOptions, prepare, true_mass_kg
 from gcs.config import load_team
 from gcs.control.formation import reference_velocity
+from gcs.control.geometry import rotation_from_rpy
 from gcs.control.law import TeamLaw, TeamMeasurement
 from gcs.fly.measure import (
+    command_heading_rad,
     desaturate_torque,
     effective_adjacency,
+    level_rotations,
     limit_rate_command,
     normalised_thrust,
     stale_neighbour_counts,
     torque_max_nm,
+    yaw_rad,
 )
 from gcs.fly.stats import AgeStats, TickStats, late_threshold_s, link_report
 from gcs.sim.runner import law_gains
@@ -33,8 +37,9 @@ def test_rates_setup_uses_the_file_and_checks_the_criterion():
     team = load_team(CONFIGS / "square4.yaml")
     setup = prepare(team, FlyOptions(out_dir=OUT, mode="rates"))
     assert setup.tick_rate_hz == 100.0 and setup.log_every == 2
+    # every stream the law and preflight need, EXTENDED_SYS_STATE (landed state) included
     assert setup.requested_rates_hz == {"ATTITUDE_QUATERNION": 100.0, "LOCAL_POSITION_NED": 100.0,
-                                        "HIGHRES_IMU": 100.0}
+                                        "EXTENDED_SYS_STATE": 5.0, "HIGHRES_IMU": 100.0}
     assert "rates mode at 100 Hz, k_eps 8" in setup.stability
 
 
@@ -89,6 +94,29 @@ def test_rate_limit_keeps_the_direction():
     out, clipped = limit_rate_command(np.array([[3.0, 4.0, 0.0], [0.1, 0.0, 0.0]]), 1.0)
     np.testing.assert_allclose(out, [[0.6, 0.8, 0.0], [0.1, 0.0, 0.0]])
     assert clipped.tolist() == [True, False]
+
+
+def test_the_yaw_rate_is_limited_on_its_own_and_never_shrinks_roll_and_pitch():
+    cmd = np.array([[0.3, -0.4, 2.0], [3.0, 4.0, -0.2], [0.1, 0.1, 0.1]])
+    out, clipped = limit_rate_command(cmd, 1.0, 0.5)
+    # THEN the first row keeps its roll/pitch and loses yaw; the second keeps its yaw
+    np.testing.assert_allclose(out, [[0.3, -0.4, 0.5], [0.6, 0.8, -0.2], [0.1, 0.1, 0.1]])
+    assert clipped.tolist() == [True, True, False]
+
+
+def test_heading_policies_hold_keep_the_start_heading_or_fix_a_compass_heading():
+    rot = np.stack([rotation_from_rpy(0.1, -0.05, yaw) for yaw in (0.3, -2.0, 3.0)])
+    np.testing.assert_allclose(yaw_rad(rot), [0.3, -2.0, 3.0], atol=1e-12)
+    np.testing.assert_allclose(command_heading_rad("hold", rot), [0.3, -2.0, 3.0], atol=1e-12)
+    np.testing.assert_array_equal(command_heading_rad("paper", rot), 0.0)
+    # compass 0 (north) is ENU yaw +90 deg; 90 (east) is ENU yaw 0
+    np.testing.assert_allclose(command_heading_rad(0.0, rot), np.pi / 2)
+    np.testing.assert_allclose(command_heading_rad(90.0, rot), 0.0, atol=1e-15)
+    with pytest.raises(ValueError, match="fly.heading 'north'"):
+        command_heading_rad("north", rot)
+    level = level_rotations(rot)
+    np.testing.assert_allclose(level[:, :, 2], [[0, 0, 1]] * 3, atol=1e-15)
+    np.testing.assert_allclose(yaw_rad(level), [0.3, -2.0, 3.0], atol=1e-12)
 
 
 def test_desaturated_torque_is_realised_exactly_by_the_mixer_at_the_commanded_thrust():
@@ -165,3 +193,37 @@ def test_each_row_of_the_team_call_is_what_that_vehicle_would_compute_alone():
         np.testing.assert_allclose(alone.rate_cmd_radps[0], batch.rate_cmd_radps[i], rtol=1e-12)
         np.testing.assert_allclose(alone.torque_nm[0], batch.torque_nm[i], rtol=1e-12)
         assert alone.thrust_n[0] == pytest.approx(batch.thrust_n[i], rel=1e-12)
+
+
+def test_hover_thrust_gives_the_thrust_equivalent_mass_and_checks_proposition_2():
+    from gcs.fly.measure import HOVER_MIN_SAMPLES, HoverThrust
+
+    h = HoverThrust(2)
+    for k in range(40):  # 4 s at 10 Hz, thrust 0.49 +- 0.01
+        assert h.add(0, 10.0 + 0.1 * k, 0.49 + 0.01 * (-1) ** k)
+    assert not h.add(0, 10.0, 0.5)  # not newer: ignored
+    assert not h.add(0, 20.0, float("nan")) and not h.add(0, 20.0, 1.5)
+    # THEN the last 2 s give 0.49 * 20 N / g, and mhat(0) = phi(0) m / alpha_m
+    est = h.estimate(0, 13.95, max_thrust_n=20.0, alpha_m=1.0, phi0=2.0, mass_bound_kg=1.5)
+    assert est is not None and est.samples == 20
+    assert est.mass_kg == pytest.approx(0.49 * 20.0 / 9.81, rel=1e-3)
+    assert est.mhat0 == pytest.approx(2.0 * est.mass_kg) and est.proposition2_holds
+    # a mass bound above twice the hover mass fails Proposition 2 (phi(0) = 2)
+    low = h.estimate(0, 13.95, max_thrust_n=20.0, alpha_m=1.0, phi0=2.0, mass_bound_kg=2.5)
+    assert low is not None and not low.proposition2_holds
+    # too few samples: no estimate
+    for k in range(HOVER_MIN_SAMPLES - 1):
+        h.add(1, 10.0 + 0.1 * k, 0.5)
+    assert h.estimate(1, 11.0, 20.0, 1.0, 2.0, None) is None
+
+
+def test_attitude_mode_is_prepared_for_gcs_fly_and_refused_by_gcs_sim(tmp_path):
+    from gcs.config import ConfigError
+    from gcs.sim.runner import SimOptions, simulate
+
+    team = load_team(CONFIGS / "square4.yaml")
+    setup = prepare(team, FlyOptions(out_dir=tmp_path, mode="attitude"))
+    assert setup.mode == "attitude" and setup.tick_rate_hz == team.fly.attitude.tick_rate_hz
+    assert "the autopilot closes the attitude loop" in setup.stability
+    with pytest.raises(ConfigError, match="controller mode 'attitude': the vehicle's autopilot"):
+        simulate(team, SimOptions(mode="attitude", duration_s=0.1))

@@ -13,6 +13,7 @@ from gcs.control.geometry import (
     hat,
     is_nonsingular,
     rotation_from_rpy,
+    turn_about_thrust_axis,
     vee,
 )
 
@@ -123,3 +124,51 @@ def test_rotation_from_rpy_is_zyx():
     assert np.allclose(r @ [1, 0, 0], [0, 1, 0])
     r = rotation_from_rpy(0.2, -0.4, 1.1)
     assert np.allclose(r.T @ r, np.eye(3))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_turned_command_keeps_the_thrust_axis_and_its_rates_match_finite_differences(seed):
+    # GIVEN a smooth random u(t) and a heading turn psi per call
+    rng = np.random.default_rng(seed)
+    u = _smooth_force(rng)
+    psi = np.array([rng.uniform(-np.pi, np.pi)])
+
+    def turned(t: float):
+        uu = u(t)[None, :]
+        rc = command_attitude(uu)
+        wc, dwc = command_angular_velocity(uu, u(t, 1)[None, :], u(t, 2)[None, :], rc)
+        return turn_about_thrust_axis(rc, wc, dwc, psi)
+
+    def rc_of(t: float) -> np.ndarray:
+        return turned(t)[0][0]
+
+    def omega_fd(t: float) -> np.ndarray:
+        return vee(rc_of(t).T @ _fd4(rc_of, t, 1e-4))
+
+    worst_w = worst_dw = 0.0
+    for t in np.linspace(0.0, 3.0, 31):
+        if not is_nonsingular(u(t)[None, :])[0] or 1 + u(t)[2] / np.linalg.norm(u(t)) < 0.02:
+            continue
+        rc2, wc2, dwc2 = turned(t)
+        rc = command_attitude(u(t)[None, :])[0]
+        # THEN the thrust axis is the command force's, the rotation proper, and the heading moved
+        np.testing.assert_allclose(rc2[0][:, 2], rc[:, 2], atol=1e-14)
+        np.testing.assert_allclose(rc2[0].T @ rc2[0], np.eye(3), atol=1e-12)
+        np.testing.assert_allclose(rc.T @ rc2[0], rotation_from_rpy(0.0, 0.0, psi[0]),
+                                   atol=1e-12)
+        # and its rate and rate derivative are the turned closed forms
+        w_ref = omega_fd(t)
+        dw_ref = _fd4(omega_fd, t, 1e-3)
+        worst_w = max(worst_w, np.linalg.norm(wc2[0] - w_ref) / max(1.0, np.linalg.norm(w_ref)))
+        worst_dw = max(worst_dw,
+                       np.linalg.norm(dwc2[0] - dw_ref) / max(1.0, np.linalg.norm(dw_ref)))
+    assert worst_w < 1e-7
+    assert worst_dw < 1e-4
+
+
+def test_no_turn_is_the_papers_command_unchanged():
+    u = np.array([[0.5, -0.3, 9.0], [0.0, 0.0, 5.0]])
+    rc = command_attitude(u)
+    wc, dwc = np.ones((2, 3)), np.ones((2, 3))
+    rc2, wc2, dwc2 = turn_about_thrust_axis(rc, wc, dwc, np.zeros(2))
+    assert rc2 is rc and wc2 is wc and dwc2 is dwc

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from gcs.link.config import VehicleLinkConfig, check_unique_sysids
+from gcs.link.config import VehicleLinkConfig, check_unique_sysids, shared_ports
 from gcs.link.enums import (
     LandedState,
     MavAutopilot,
@@ -161,12 +161,15 @@ def test_config_errors_name_the_key(kwargs: dict[str, object], message: str) -> 
         VehicleLinkConfig(**(base | kwargs))  # type: ignore[arg-type]
 
 
-def test_duplicate_sysids_and_ports_are_rejected() -> None:
+def test_duplicate_sysids_are_rejected_and_shared_ports_found() -> None:
     a = VehicleLinkConfig.px4_sitl(0)
     b = VehicleLinkConfig.px4_sitl(1, sysid=1)
     c = VehicleLinkConfig.px4_sitl(2, local_port=14540)
+    free = VehicleLinkConfig.px4_sitl(3, local_port=0)
     check_unique_sysids([a, VehicleLinkConfig.px4_sitl(1)])
     with pytest.raises(ValueError, match=r"sysid 1 used by vehicles \[1, 2\]"):
         check_unique_sysids([a, b])
-    with pytest.raises(ValueError, match=r"local port 14540 used by vehicles \[1, 3\]"):
-        check_unique_sysids([a, c])
+    # a shared GCS port is allowed (told apart by sysid); port 0 is never shared
+    check_unique_sysids([a, c])
+    assert shared_ports([a, c, free, VehicleLinkConfig.px4_sitl(4, local_port=0)]) == {
+        ("127.0.0.1", 14540): [1, 3]}

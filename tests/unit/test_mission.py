@@ -594,3 +594,31 @@ def test_mission_modules_are_pure():
         names |= {n.module.split(".")[0] for n in ast.walk(tree)
                   if isinstance(n, ast.ImportFrom) and n.module}
         assert not names & impure, f"{path.name} imports {names & impure}"
+
+
+def test_a_failed_preflight_never_commands_disarmed_vehicles_on_the_ground():
+    # GIVEN three disarmed vehicles on the ground, one of which (2) never reported its landed
+    # state (ArduPilot sends EXTENDED_SYS_STATE only when asked), so preflight fails
+    m = machine()
+    w = World(m, on_ground=True)
+    w.v[2] = dataclasses.replace(w.v[2], landed=None)
+    # WHEN the mission runs
+    w.run(5.0)
+    # THEN it ends at once with the preflight reason, and nothing but CONFIGURE was sent: no LAND
+    # or HOLD to a vehicle that is disarmed and not in the air, whatever its landed state
+    assert m.done and m.outcome.exit_code == EXIT_ABORTED
+    assert "vehicle 2 (sysid 2): landed state unknown (no EXTENDED_SYS_STATE)" in m.outcome.reason
+    assert {c for _, c in w.sent} == {Cmd.CONFIGURE}
+    assert w.t < 1.5  # the settle time, then done: no wait for a landing
+    assert "not landed" not in m.outcome.reason and "link lost" not in m.outcome.reason
+
+
+def test_a_requested_stream_that_never_arrives_is_named_with_the_vehicle():
+    # GIVEN EXTENDED_SYS_STATE asked for at 5 Hz (the landed state), and a vehicle that answered
+    # ACCEPTED but never sends it
+    rules = dataclasses.replace(RULES, required_rates_hz={**RATES, "EXTENDED_SYS_STATE": 5.0})
+    s = status(2, landed=None)
+    # THEN preflight names the message, the vehicle and the rates, and the landed state
+    texts = [p.text for p in preflight_problems([s], rules)]
+    assert "vehicle 2 (sysid 2): EXTENDED_SYS_STATE at 0.0 Hz, need >= 2.5 Hz (asked 5)" in texts
+    assert "vehicle 2 (sysid 2): landed state unknown (no EXTENDED_SYS_STATE)" in texts

@@ -1,0 +1,241 @@
+"""Shared GCS UDP port: one endpoint serving several vehicles, datagrams routed by MAVLink sysid.
+
+mavlink-router, MAVProxy ``--out`` and several SITL instances told to send to one port all put
+many vehicles behind one GCS port. A `MavlinkPort` owns that port's `UdpEndpoint` and hands each
+datagram to the vehicle whose sysid its MAVLink header carries; the vehicle's proxy decodes it
+(once, with its own parser) and tracks that vehicle's address. The routing reads the frame
+headers only (start marker, length, sysid), no CRC and no decoding:
+
+* every frame of a datagram from one sysid (the usual case): the datagram is delivered whole;
+* frames of several sysids in one datagram: split at frame boundaries, each part to its vehicle
+  (counted as ``split_datagrams``);
+* bytes before the first frame go with that frame (its vehicle's codec counts them as garbage);
+* a sysid no vehicle on the port has, or a datagram without any frame start (ArduPilot's
+  plain-text boot banner): decoded by the port's own codec, counted (``unknown_sysid_frames``
+  and ``unknown_sysids`` per sysid; ``codec`` for the bytes that were not MAVLink), logged once
+  per sysid, written to the tlog, and otherwise ignored. A port with a single vehicle (the
+  default, one port per vehicle) tells that vehicle's proxy about another vehicle's HEARTBEAT,
+  which then refuses to fly it (a team-file mistake); a shared port does not (other systems on
+  a router are normal).
+
+Lifetime: ``async with MavlinkPort(port) as p:``; the proxies ``attach`` to it (see
+`gcs.link.proxy.VehicleProxy`'s ``port`` argument) and ``detach`` when they close.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, fields
+from types import TracebackType
+from typing import Protocol
+
+from gcs.link.codec import (
+    CHECKSUM_LEN,
+    HEADER_LEN_V1,
+    HEADER_LEN_V2,
+    IFLAG_SIGNED,
+    SIGNATURE_LEN,
+    STX_V1,
+    STX_V2,
+    CodecStats,
+    MavlinkCodec,
+    MAVLinkMessage,
+)
+from gcs.link.tlog import TlogWriter
+from gcs.link.udp import Address, UdpEndpoint, UdpStats
+
+logger = logging.getLogger(__name__)
+
+
+class PortClient(Protocol):
+    """What a port needs of a vehicle's proxy."""
+
+    def _on_datagram(self, data: bytes, addr: Address) -> None:
+        """Bytes (whole MAVLink frames) from this vehicle's sysid, received from ``addr``."""
+
+    def _on_foreign(self, msg: MAVLinkMessage, addr: Address) -> None:
+        """A valid message from a sysid no vehicle on this port has (single-vehicle ports)."""
+
+
+@dataclass(frozen=True, slots=True)
+class PortStats:
+    """Counters of one port since it opened (the endpoint's and the port codec's are separate)."""
+
+    datagrams_routed: int  # delivered whole to one vehicle
+    split_datagrams: int  # carried frames of several sysids, split between them
+    unknown_sysid_frames: int  # frames from a sysid no vehicle on the port has (ignored)
+    unframed_datagrams: int  # no MAVLink start marker at all (e.g. a plain-text banner)
+    after_detach: int  # datagrams (or parts) of a vehicle whose proxy has closed (dropped)
+
+
+def frame_sysids(data: bytes | bytearray) -> list[tuple[int, int, int | None]]:
+    """Split a datagram into runs of consecutive frames of one sysid, reading headers only.
+
+    Returns ``(start, end, sysid)`` byte ranges covering ``data`` in order; bytes before a frame
+    start belong to the run of the frame after them, a frame cut off at the end to its run.
+    ``sysid`` is None for a datagram without any frame start. Pure; MAVLink 1 and 2 frames.
+    """
+    n = len(data)
+    runs: list[tuple[int, int, int | None]] = []
+    run_start, current = 0, None
+    pos = 0
+    while pos < n:
+        stx = data[pos]
+        if stx == STX_V2:
+            if n - pos < HEADER_LEN_V2:
+                break
+            sysid = data[pos + 5]
+            size = (HEADER_LEN_V2 + data[pos + 1] + CHECKSUM_LEN
+                    + (SIGNATURE_LEN if data[pos + 2] & IFLAG_SIGNED else 0))
+        elif stx == STX_V1:
+            if n - pos < HEADER_LEN_V1:
+                break
+            sysid = data[pos + 3]
+            size = HEADER_LEN_V1 + data[pos + 1] + CHECKSUM_LEN
+        else:
+            pos += 1
+            continue
+        if current is None:
+            current = sysid
+        elif sysid != current:
+            runs.append((run_start, pos, current))
+            run_start, current = pos, sysid
+        pos += size
+    runs.append((run_start, n, current))
+    return runs
+
+
+class MavlinkPort:
+    """One GCS UDP port (``local_host:local_port``, 0: any free port) shared by the vehicles
+    attached to it, each by its sysid. Sending is per datagram to an explicit address
+    (:meth:`send_to`): each vehicle's proxy keeps its own vehicle's address."""
+
+    def __init__(self, local_port: int, *, local_host: str = "127.0.0.1",
+                 tlog: TlogWriter | None = None, name: str | None = None) -> None:
+        self.name = name or f"udp port {local_host}:{local_port}"
+        self._endpoint = UdpEndpoint(local_port, None, local_host=local_host, learn_remote=True,
+                                     on_datagram=self._route, name=self.name)
+        self._codec = MavlinkCodec()  # frames no attached vehicle claims (counted, ignored)
+        self._tlog = tlog
+        self._clients: dict[int, PortClient] = {}
+        self._n: dict[str, int] = {f.name: 0 for f in fields(PortStats)}
+        self._unknown: dict[int, int] = {}
+        self._detached: set[int] = set()  # vehicles whose proxies closed first (shutdown)
+        self._most_clients = 0
+
+    # --- lifetime --------------------------------------------------------------------------------
+
+    async def open(self) -> None:
+        """Bind the socket; returns when bound."""
+        await self._endpoint.open()
+
+    def close(self) -> None:
+        """Close the socket; returns immediately. Idempotent."""
+        self._endpoint.close()
+
+    async def __aenter__(self) -> MavlinkPort:
+        await self.open()
+        return self
+
+    async def __aexit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                        tb: TracebackType | None) -> None:
+        self.close()
+
+    def attach(self, sysid: int, client: PortClient) -> None:
+        """Route this sysid's frames to ``client``; ValueError if another client has it."""
+        if sysid in self._clients and self._clients[sysid] is not client:
+            raise ValueError(f"{self.name}: sysid {sysid} is already attached")
+        self._clients[sysid] = client
+        self._detached.discard(sysid)
+        self._most_clients = max(self._most_clients, len(self._clients))
+
+    def detach(self, sysid: int) -> None:
+        """Stop routing this sysid; its later frames are dropped (counted ``after_detach``),
+        not taken for a stranger's."""
+        if self._clients.pop(sysid, None) is not None:
+            self._detached.add(sysid)
+
+    # --- state -----------------------------------------------------------------------------------
+
+    @property
+    def is_open(self) -> bool:
+        return self._endpoint.is_open
+
+    @property
+    def local_address(self) -> Address:
+        """(host, port) actually bound (raises LinkClosedError when closed)."""
+        return self._endpoint.local_address
+
+    @property
+    def shared(self) -> bool:
+        """More than one vehicle has been attached (it stays shared while they detach)."""
+        return self._most_clients > 1
+
+    @property
+    def sysids(self) -> tuple[int, ...]:
+        return tuple(sorted(self._clients))
+
+    def stats(self) -> PortStats:
+        return PortStats(**self._n)
+
+    def udp_stats(self) -> UdpStats:
+        return self._endpoint.stats()
+
+    def codec_stats(self) -> CodecStats:
+        """What the port decoded itself: unknown sysids and bytes without a frame."""
+        return self._codec.stats()
+
+    def unknown_sysids(self) -> dict[int, int]:
+        """Frames received per sysid that no attached vehicle has."""
+        return dict(self._unknown)
+
+    # --- I/O -------------------------------------------------------------------------------------
+
+    def send_to(self, data: bytes, addr: Address | None) -> bool:
+        """One datagram to ``addr``; returns immediately (see UdpEndpoint.send_to)."""
+        return self._endpoint.send_to(data, addr)
+
+    def _route(self, data: bytes, addr: Address) -> None:
+        runs = frame_sysids(data)
+        if len(runs) == 1:
+            sysid = runs[0][2]
+            client = self._clients.get(sysid) if sysid is not None else None
+            if client is not None:
+                self._n["datagrams_routed"] += 1
+                client._on_datagram(data, addr)
+                return
+            if sysid is None:
+                self._n["unframed_datagrams"] += 1
+            self._foreign(data, addr, sysid)
+            return
+        self._n["split_datagrams"] += 1
+        for start, end, sysid in runs:
+            part = data[start:end]
+            client = self._clients.get(sysid) if sysid is not None else None
+            if client is not None:
+                client._on_datagram(part, addr)
+            else:
+                self._foreign(part, addr, sysid)
+
+    def _foreign(self, data: bytes, addr: Address, sysid: int | None) -> None:
+        if sysid in self._detached:
+            self._n["after_detach"] += 1
+            return
+        single: Callable[[MAVLinkMessage, Address], None] | None = None
+        if not self.shared and self._clients:
+            single = next(iter(self._clients.values()))._on_foreign
+        for msg in self._codec.feed(data):
+            if self._tlog is not None:
+                self._tlog.write(bytes(msg.get_msgbuf()))
+            src = msg.get_srcSystem()
+            self._n["unknown_sysid_frames"] += 1
+            seen = self._unknown.get(src, 0)
+            self._unknown[src] = seen + 1
+            if seen == 0 and single is None:
+                logger.warning("%s: messages from sysid %d (compid %d) at %s:%d, which no vehicle "
+                               "on this port has (vehicles: sysids %s); counted and ignored",
+                               self.name, src, msg.get_srcComponent(), addr[0], addr[1],
+                               ", ".join(str(s) for s in self.sysids) or "none")
+            if single is not None:
+                single(msg, addr)
