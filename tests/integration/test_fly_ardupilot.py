@@ -11,9 +11,9 @@ The copters run as SITL does: each sends from an ephemeral port (udpclient) and 
 address it sends to, so the team file's links learn their addresses (`learn_remote: true`, no
 `remote_port`); they stream only a 1 Hz HEARTBEAT until `gcs fly` asks for every stream it needs
 (EXTENDED_SYS_STATE included) with SET_MESSAGE_INTERVAL; no message-intervals file, no forced
-bind. One gap is still configured around: ArduCopter refuses to arm in GUIDED until its EKF uses
-GPS (~41 s after boot) and `gcs fly` does not wait for that: the vehicles boot at once
-(EMU_BOOT_SCALE=0).
+bind. The vehicles boot at once (EMU_BOOT_SCALE=0) to keep the flights short; `gcs fly` waits for
+a copter that is not ready yet (no position estimate, GUIDED not armable, ~41 s after a real
+boot): test_fly_confirmed.py flies that.
 
 The PARAM_REQUEST_READ retry test keeps a small scripted peer: it needs a vehicle that leaves the
 first request unanswered, which no autopilot does on purpose.

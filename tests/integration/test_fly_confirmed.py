@@ -3,9 +3,10 @@ the real `gcs` CLI against real `vehicle-emu` processes of the px4 and ardupilot
 over 127.0.0.1 UDP, each failure of the issue reproduced on the personality, its message pinned.
 
 Set-up as in test_fly_emulator.py (the px4 fleet on the team file's ports, `origin: shared`) and
-test_fly_ardupilot.py (one process per copter with a forced bind and the team's
-message-intervals file, the crutches that test file documents; here the copters boot on a
-quarter of the recorded timeline, EMU_BOOT_SCALE=0.25, so GUIDED arming is refused for ~10 s).
+test_fly_ardupilot.py (one process per copter as SITL runs it: an ephemeral source port the team
+file's link learns, no forced bind, no message-intervals file); here the copters boot on a
+quarter of the recorded timeline (EMU_BOOT_SCALE=0.25: no position estimate, so no
+LOCAL_POSITION_NED and no GUIDED arming, for ~10.4 s) or on the real one.
 Flights are short (formation 3-12 s): what is tested is the sequence, not the figures.
 """
 
@@ -196,20 +197,16 @@ def test_px4_vehicle_that_cannot_follow_stops_the_flight_by_the_formation_rule(
 
 # --- ArduPilot ------------------------------------------------------------------------------------
 
-INTERVALS_FILE = "0 200\n245 200\n"  # as test_fly_ardupilot.py (the team's SITL flights)
-
-
 @contextlib.contextmanager
 def copters(tmp: Path, n: int = 2, boot_scale: float = 0.25) -> Iterator[list]:
     """`vehicle-emu --autopilot ardupilot` per vehicle, GUID_OPTIONS 8, booting on
-    `boot_scale` of the recorded timeline (0.25: GUIDED armable after ~10.4 s), bound ports."""
-    intervals = tmp / "message-intervals-chan0.txt"
-    intervals.write_text(INTERVALS_FILE)
+    `boot_scale` of the recorded timeline (0.25: GUIDED armable after ~10.4 s), on ArduPilot's
+    ephemeral port, each sending to a free GCS port (its `remote_port`)."""
     with contextlib.ExitStack() as stack:
         yield [stack.enter_context(run_emulator(
-            ["--id", str(k + 1), "--autopilot", "ardupilot", "--param", f"EMU_BOOT_SCALE={boot_scale}",
-             "--param", "GUID_OPTIONS=8", "--message-intervals", str(intervals)],
-            remote_port=free_udp_port(), log_dir=str(tmp))) for k in range(n)]
+            ["--id", str(k + 1), "--autopilot", "ardupilot", "--param",
+             f"EMU_BOOT_SCALE={boot_scale}", "--param", "GUID_OPTIONS=8"],
+            remote_port=free_udp_port(), log_dir=str(tmp), bind=False)) for k in range(n)]
 
 
 def ardupilot_team(tmp: Path, emus: list, fly: dict | None = None) -> Path:
@@ -221,8 +218,7 @@ def ardupilot_team(tmp: Path, emus: list, fly: dict | None = None) -> Path:
     data["mission"]["duration_s"] = 2.0
     data["fly"].update(fly or {})
     for v, emu in zip(data["vehicles"], emus, strict=True):
-        v["link"] = {"local_port": emu.remote_port, "remote_host": "127.0.0.1",
-                     "remote_port": emu.bind_port}
+        v["link"] = {"local_port": emu.remote_port, "learn_remote": True}
     path = tmp / "team.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path
