@@ -60,6 +60,10 @@ class VehicleStatus:
     sysid_mismatch: int | None = None
     rates_hz: Mapping[str, float] = field(default_factory=dict)
     listen: str = ""
+    # its local frame's tie to the team frame (gcs.fly.origins): why there is none (None: tied),
+    # and whether the origin is still awaited
+    frame_problem: str | None = None
+    frame_pending: bool = False
 
     @property
     def name(self) -> str:
@@ -191,4 +195,7 @@ def preflight_problems(team: Sequence[VehicleStatus], rules: SafetyRules) -> lis
                 out.append(g)
         if s.landed is None:
             out.append(Problem(s.vehicle_id, f"{n}: landed state unknown (no EXTENDED_SYS_STATE)"))
+        if s.frame_problem is not None:
+            out.append(Problem(s.vehicle_id, s.frame_problem if s.frame_problem.startswith(n)
+                               else f"{n}: {s.frame_problem}"))
     return out
