@@ -62,8 +62,14 @@ from gcs.fly.measure import (
     stale_neighbour_counts,
     torque_max_nm,
 )
+from gcs.fly.origins import (
+    TeamTies,
+    origin_from_gps_global_origin,
+    origin_from_home_position,
+)
 from gcs.fly.stats import AgeStats, TickStats, link_report
 from gcs.fly.telemetry import team_sample, vehicle_statuses
+from gcs.geodesy import Geodetic, TeamFrame
 from gcs.link import (
     CommandNotConfirmedError,
     CommandRejectedError,
@@ -299,6 +305,12 @@ class Flight:
         self.torque_max = torque_max_nm(self.arm_m, self.anti_torque_m, self.rotor_max_n)
         self.max_rate_radps = team.fly.rates.max_rate_radps
         self.hover = HoverThrust(self.n)
+        fr = team.frame
+        self.ties = TeamTies(TeamFrame(Geodetic(*fr.origin)),
+                             [f"vehicle {v.id} (sysid {v.sysid})" for v in vehicles],
+                             fr.vehicles == "shared", fr.max_origin_distance_m)
+        self._tie_arrays = (None if fr.vehicles == "shared"
+                            else (self.ties.offsets_enu_m, self.ties.rotations))
         self.hover_estimates: dict[int, HoverEstimate] = {}
         self.max_yaw_rate_radps = team.fly.rates.max_yaw_rate_radps
         self.limited_ticks = np.zeros(self.n, dtype=np.int64)  # rate or torque limit applied
@@ -386,6 +398,8 @@ class Flight:
                     async with asyncio.TaskGroup() as tg:
                         self._tg = tg
                         tg.create_task(self._tick_loop(), name="control tick")
+                        if not self.ties.complete:
+                            tg.create_task(self._origins_loop(), name="origins")
                         if self._status_factory is not None:
                             tg.create_task(self._status_factory(self).run(self._finished),
                                            name="status")
@@ -613,12 +627,12 @@ class Flight:
             self._finished.set()
 
     def _tick(self, k: int, deadline_s: float, now_s: float) -> None:
-        sample = team_sample(self.proxies, now_s, self.last_sample)
+        sample = team_sample(self.proxies, now_s, self.last_sample, self._tie_arrays)
         self.last_sample = sample
         m = self.machine
         if k % self.machine_every == 0:
             want_rates = m.phase in (Phase.CONNECT, Phase.PREFLIGHT)
-            statuses = vehicle_statuses(self.proxies, self.ids, sample, want_rates)
+            statuses = vehicle_statuses(self.proxies, self.ids, sample, want_rates, self.ties)
             self._dispatch(m.on_tick(deadline_s, statuses, self.formation_error_m))
             self._log_notes()
         streaming = m.streaming
@@ -630,11 +644,50 @@ class Flight:
                 self._send(command, streaming)
         elif m.phase is Phase.PRIME:
             # level and still: zero rates or torque; in attitude mode, level at the heading
-            level = (level_rotations(sample.rotation) if self.setup.mode == "attitude"
-                     else np.zeros((self.n, 3)))
+            level = (self.ties.rotations_to_local(level_rotations(sample.rotation))
+                     if self.setup.mode == "attitude" else np.zeros((self.n, 3)))
             for i, p in enumerate(self.proxies):
                 if self.ids[i] in streaming:
                     self._send_one(i, p, level[i], self.prime_thrust_norm[i])
+
+    async def _origins_loop(self) -> None:
+        """Tie each vehicle's local frame to the team frame through its origin: GPS_GLOBAL_ORIGIN
+        as it arrives (PX4 sends it once, just after boot), else asked for with REQUEST_MESSAGE
+        (49) once a second, else HOME_POSITION's; until every vehicle is tied or the flight ends.
+        A refused or unanswered request is retried (ArduPilot refuses until its EKF has an
+        origin); the preflight waits up to MissionPlan.origin_timeout_s, then reports why."""
+        asked = [-math.inf] * self.n
+        loop = asyncio.get_running_loop()
+        while not self.ties.complete and not self.machine.done:
+            for i, p in enumerate(self.proxies):
+                if self.ties.ties[i] is not None:
+                    continue
+                origin, source = None, ""
+                try:
+                    if (gpo := p.latest("GPS_GLOBAL_ORIGIN")) is not None:
+                        origin, source = origin_from_gps_global_origin(gpo.msg), "GPS_GLOBAL_ORIGIN"
+                    elif (home := p.latest("HOME_POSITION")) is not None:
+                        origin, source = origin_from_home_position(home.msg), "HOME_POSITION"
+                except ValueError as exc:
+                    self.ties.refuse(i, f"malformed origin: {exc}")
+                    continue
+                if origin is not None:
+                    line = self.ties.tie(i, origin, source)
+                    logger.log(logging.INFO if self.ties.ties[i] is not None else logging.WARNING,
+                               "%s", line)
+                elif p.latest("HEARTBEAT") is not None and loop.time() - asked[i] >= 1.0:
+                    asked[i] = loop.time()
+                    self._tg.create_task(self._ask_origin(p), name=f"origin of {p.name}")
+            await asyncio.sleep(0.1)
+
+    @staticmethod
+    async def _ask_origin(p: VehicleProxy) -> None:
+        """REQUEST_MESSAGE GPS_GLOBAL_ORIGIN (49); the answer lands in the telemetry cache."""
+        try:
+            await p.command_long(MavCmd.REQUEST_MESSAGE, (float(MSG_ID["GPS_GLOBAL_ORIGIN"]),),
+                                 timeout_s=0.5, retries=0)
+        except (CommandRejectedError, CommandTimeoutError, LinkClosedError) as exc:
+            logger.debug("%s: origin request: %s", p.name, exc)
 
     def _record_hover_thrust(self) -> None:
         """PRIME: the vehicles hold on their own; keep the thrust they report (from_hover)."""
@@ -741,7 +794,8 @@ class Flight:
                                                 self.anti_torque_m, self.rotor_max_n)
             vec = normalised_torque(torque, self.torque_max)
         elif self.setup.mode == "attitude":  # R^c itself; the autopilot limits its own tilt
-            vec, limited = c.command_rotation, np.zeros(self.n, dtype=bool)
+            vec = self.ties.rotations_to_local(c.command_rotation)
+            limited = np.zeros(self.n, dtype=bool)
         else:
             vec, limited = limit_rate_command(c.rate_cmd_radps, self.max_rate_radps,
                                               self.max_yaw_rate_radps)

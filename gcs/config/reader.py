@@ -22,6 +22,7 @@ from gcs.config.schema import (
     FLY_ACTIONS,
     FLY_HEADINGS,
     FLY_STARTS,
+    FRAME_VEHICLES,
     GAIN_NAMES,
     GRAVITY_MPS2,
     LAWS,
@@ -41,6 +42,7 @@ from gcs.config.schema import (
     FlyConfig,
     FlyModeConfig,
     FormationCheckConfig,
+    FrameConfig,
     Gains,
     GeofenceConfig,
     GraphConfig,
@@ -688,9 +690,34 @@ def _fly(node: _Node) -> FlyConfig:
     return fly
 
 
+def _frame(node: _Node) -> FrameConfig:
+    """The optional `frame:` section (docs/configuration.md)."""
+    d = FrameConfig()
+    if node.absent:
+        return d
+    node.keys("", "origin vehicles max_origin_distance_m")
+    origin = node.child("origin")
+    if origin.absent:
+        lat_lon_alt = d.origin
+    else:
+        lat_lon_alt = origin.vec3()
+        for k, (name, low, high) in enumerate((("latitude", -90.0, 90.0),
+                                               ("longitude", -180.0, 180.0),
+                                               ("altitude", -1000.0, 20000.0))):
+            if not low <= lat_lon_alt[k] <= high:
+                origin.fail(f"[lat_deg, lon_deg, alt_m]: {name} {lat_lon_alt[k]!r} outside "
+                            f"[{low:g}, {high:g}]")
+    return FrameConfig(
+        lat_lon_alt,
+        node.child("vehicles").string(d.vehicles, FRAME_VEHICLES),
+        node.child("max_origin_distance_m").number(d.max_origin_distance_m, gt=0.0),
+    )
+
+
 def _team(root: _Node) -> TeamConfig:
     root.keys(
-        "name mission controller reference_velocity graph vehicles", "sim faults fly emulator"
+        "name mission controller reference_velocity graph vehicles",
+        "sim faults fly emulator frame",
     )
     _emulator_section(root.child("emulator"), "autopilot origin")
     name = root.child("name").string()
@@ -768,6 +795,7 @@ def _team(root: _Node) -> TeamConfig:
 
     faults = [_fault(f, ids, mission.duration_s) for f in root.child("faults").items("faults")]
     fly = _fly(root.child("fly"))
+    frame = _frame(root.child("frame"))
     return TeamConfig(
         name,
         root.source,
@@ -779,6 +807,7 @@ def _team(root: _Node) -> TeamConfig:
         vehicles,
         tuple(faults),
         fly,
+        frame,
     )
 
 

@@ -396,6 +396,23 @@ class FlyConfig:
         return {"rates": self.rates, "actuators": self.actuators, "attitude": self.attitude}[name]
 
 
+FRAME_VEHICLES = ("own", "shared")
+#: PX4 SITL's default home: the bundled emulator's team-frame origin (lat deg, lon deg, alt m)
+DEFAULT_FRAME_ORIGIN = (47.397742, 8.545594, 488.0)
+
+
+@dataclass(frozen=True, slots=True)
+class FrameConfig:
+    """The `frame:` section: how `gcs fly` ties each vehicle's local frame to the team frame."""
+
+    origin: tuple[float, float, float] = DEFAULT_FRAME_ORIGIN  # lat deg, lon deg, alt m
+    # own: each vehicle's LOCAL_POSITION_NED is relative to its own EKF origin, read from the
+    # vehicle (GPS_GLOBAL_ORIGIN, else HOME_POSITION); shared: every vehicle's local frame is the
+    # team frame (no origin needed)
+    vehicles: str = "own"
+    max_origin_distance_m: float = 1000.0  # a vehicle's origin this far from `origin`: refused
+
+
 @dataclass(frozen=True, slots=True)
 class TeamConfig:
     name: str
@@ -408,6 +425,7 @@ class TeamConfig:
     vehicles: tuple[VehicleConfig, ...]
     faults: tuple[Fault, ...] = ()
     fly: FlyConfig = FlyConfig()
+    frame: FrameConfig = FrameConfig()
 
     @property
     def n(self) -> int:

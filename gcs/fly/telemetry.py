@@ -18,6 +18,7 @@ import numpy as np
 from gcs import frames
 from gcs.control.gains import GRAVITY_MPS2
 from gcs.fly.measure import TeamSample
+from gcs.fly.origins import WAITING, TeamTies
 from gcs.link import VehicleProxy
 from gcs.link.enums import LandedState, MavModeFlag, mode_name
 from gcs.mission.autopilots import profile_for
@@ -31,9 +32,12 @@ _LANDED = {LandedState.ON_GROUND: True, LandedState.IN_AIR: False, LandedState.T
 
 
 def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
-                fallback: TeamSample | None = None) -> TeamSample:
+                fallback: TeamSample | None = None,
+                ties: tuple[np.ndarray, np.ndarray] | None = None) -> TeamSample:
     """The team's latest telemetry (ENU/FLU), ages at `now_s`; rows with nothing received yet
-    take `fallback`'s row when given (else NaN, and finite[i] is False)."""
+    take `fallback`'s row when given (else NaN, and finite[i] is False). `ties`: (offsets (n, 3),
+    rotations (n, 3, 3)) of each vehicle's local frame in the team frame (gcs.fly.origins):
+    positions, velocities, attitudes and accelerations are then in the team frame."""
     n = len(proxies)
     pos = np.full((n, 3), np.nan)
     vel = np.full((n, 3), np.nan)
@@ -74,6 +78,12 @@ def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
     acc = np.einsum("nij,nj->ni", rot, f_flu)
     acc[:, 2] -= GRAVITY_MPS2
     acc[~np.isfinite(acc).all(axis=1)] = 0.0  # no IMU yet: assume v' = 0 rather than NaN
+    if ties is not None:  # local ENU -> team ENU: p = o + R p_local, and R for every vector
+        offsets, turn = ties
+        p_enu = offsets + np.einsum("nij,nj->ni", turn, p_enu)
+        v_enu = np.einsum("nij,nj->ni", turn, v_enu)
+        acc = np.einsum("nij,nj->ni", turn, acc)
+        rot = np.einsum("nij,njk->nik", turn, rot)
     finite = (np.isfinite(p_enu).all(axis=1) & np.isfinite(v_enu).all(axis=1) & have_q
               & np.isfinite(omega).all(axis=1))
     if fallback is not None and not finite.all():
@@ -94,8 +104,9 @@ def listen_label(p: VehicleProxy) -> str:
 
 
 def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample: TeamSample,
-                     want_rates: bool) -> list[VehicleStatus]:
-    """What the mission machine sees of each vehicle (see gcs.mission.safety.VehicleStatus)."""
+                     want_rates: bool, ties: TeamTies | None = None) -> list[VehicleStatus]:
+    """What the mission machine sees of each vehicle (see gcs.mission.safety.VehicleStatus);
+    `ties`: the frame ties, whose problems the preflight reports."""
     out = []
     for i, p in enumerate(proxies):
         hb = p.latest("HEARTBEAT")
@@ -134,5 +145,7 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
             rates_hz=rates, listen=listen_label(p), landed_state=landed_state,
             prearm_ok=prearm_ok, status_text=text.quoted() if text is not None else "",
             height_above_home_m=height,
+            frame_problem=None if ties is None else ties.problems[i],
+            frame_pending=ties is not None and ties.problems[i] == WAITING,
         ))
     return out

@@ -149,6 +149,7 @@ class MissionPlan:
     # PX4 requirement (PX4 only needs one setpoint younger than COM_OF_LOSS_T); it also proves
     # the stream reaches every vehicle before any of them acts on it
     hold_timeout_s: float = 10.0  # HOLD phase: vehicles reach their hold mode within this
+    origin_timeout_s: float = 10.0  # PREFLIGHT: every vehicle's origin (its frame tie) by then
     land_timeout_s: float = 120.0
     disarm_after_landed_s: float = 3.0  # PX4 auto-disarms after COM_DISARM_LAND (2 s)
     command_attempts: int = 3  # per stop command (each has its own ack retries)
@@ -439,6 +440,9 @@ class MissionMachine:
         reads = self._read_params(team)
         if reads:
             return reads
+        if any(s.frame_pending for s in team if s.link == "alive") and \
+                self._elapsed() < self.plan.origin_timeout_s:
+            return []  # the origins are asked for by the composition root; their answers wait
         problems = preflight_problems(team, self.plan.rules)
         for s in team:
             profile = self._v[s.vehicle_id].profile

@@ -71,6 +71,10 @@ class VehicleStatus:
     prearm_ok: bool | None = None
     status_text: str = ""
     height_above_home_m: float = math.nan
+    # its local frame's tie to the team frame (gcs.fly.origins): why there is none (None: tied),
+    # and whether the origin is still awaited
+    frame_problem: str | None = None
+    frame_pending: bool = False
 
     @property
     def name(self) -> str:
@@ -203,4 +207,8 @@ def preflight_problems(team: Sequence[VehicleStatus], rules: SafetyRules) -> lis
                 out.append(g)
         if s.landed is None:
             out.append(Problem(s.vehicle_id, f"{n}: landed state unknown (no EXTENDED_SYS_STATE)"))
+        if s.frame_problem is not None:
+            out.append(Problem(s.vehicle_id, s.frame_problem if s.frame_problem.startswith(n)
+                               else f"{n}: {s.frame_problem}",
+                               "ready" if s.frame_pending else "check"))
     return out

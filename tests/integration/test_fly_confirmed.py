@@ -138,7 +138,9 @@ def test_px4_left_in_offboard_by_a_failsafe_landing_is_armed_in_hold(tmp_path: P
 def test_px4_takeoff_is_judged_by_height_above_home_not_the_ekf_origin_z(tmp_path: Path) -> None:
     # GIVEN vehicles 2 and 3 whose EKF origin is 2 m above the ground they take off from: at
     # 2.5 m above home their LOCAL_POSITION_NED reads 0.5 m up (issue 9: "vehicles [2, 3] did not
-    # reach 2.5 m within 60 s", the check compared that z with the home-relative altitude)
+    # reach 2.5 m within 60 s", the check compared the EKF-origin z with the home-relative
+    # altitude; the team frame of gcs/fly/origins.py now places such a frame right, and the
+    # takeoff is judged without either: by the vehicle's own height above home)
     origins = {2: [3.0, -4.0, 2.0], 3: [-5.0, -4.0, 2.0]}
     team = px4_team(tmp_path, duration_s=3.0, origins=origins,
                     fly={"takeoff_timeout_s": 20.0,

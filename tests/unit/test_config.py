@@ -289,7 +289,8 @@ ERRORS = [
         "nmae",
         "x",
         r"^<dict>: nmae: unknown key; did you mean 'name'\? allowed keys: name, "
-        r"mission, controller, reference_velocity, graph, vehicles, sim, faults, fly, emulator$",
+        r"mission, controller, reference_velocity, graph, vehicles, sim, faults, fly, emulator, "
+        r"frame$",
     ),
     (
         "vehicles.2.plant.mas_kg",
@@ -947,3 +948,15 @@ def test_mhat_from_hover_needs_a_mass_and_round_trips():
     raises_at(data, r"vehicles\[0\]\.estimates\.mhat: from_hover needs estimates\.mass_bound_kg")
     raises_at(edit(base(), "vehicles.0.estimates.mhat", "hover"),
               r"vehicles\[0\]\.estimates\.mhat: expected a number > 0 or 'from_hover', got 'hover'")
+
+
+def test_the_frame_section_defaults_to_own_origins_at_px4_sitl_home_and_checks_its_values():
+    team = team_from_dict(base())
+    assert team.frame.vehicles == "own" and team.frame.origin == (47.397742, 8.545594, 488.0)
+    data = edit(edit(base(), "frame.origin", [52.0, 4.5, 3.0]), "frame.vehicles", "shared")
+    frame = team_from_dict(data).frame
+    assert frame.origin == (52.0, 4.5, 3.0) and frame.vehicles == "shared"
+    assert team_from_yaml(team_to_yaml(team_from_dict(data)), "<rt>").frame == frame
+    raises_at(edit(base(), "frame.origin", [95.0, 4.5, 3.0]),
+              r"frame\.origin: \[lat_deg, lon_deg, alt_m\]: latitude 95\.0 outside \[-90, 90\]")
+    raises_at(edit(base(), "frame.vehicles", "mine"), r"frame\.vehicles: expected one of")

@@ -622,3 +622,30 @@ def test_a_requested_stream_that_never_arrives_is_named_with_the_vehicle():
     texts = [p.text for p in preflight_problems([s], rules)]
     assert "vehicle 2 (sysid 2): EXTENDED_SYS_STATE at 0.0 Hz, need >= 2.5 Hz (asked 5)" in texts
     assert "vehicle 2 (sysid 2): landed state unknown (no EXTENDED_SYS_STATE)" in texts
+
+
+def test_preflight_waits_for_every_origin_then_flies_once_tied():
+    # GIVEN a vehicle whose origin is still awaited for 2 s
+    m = machine(origin_timeout_s=5.0)
+    w = World(m)
+    w.v[2] = dataclasses.replace(w.v[2], frame_problem="no origin yet", frame_pending=True)
+    w.run(2.0)
+    # THEN nothing is commanded past the configuration while it waits
+    assert m.phase is Phase.PREFLIGHT and Cmd.OFFBOARD not in [c for _, c in w.sent]
+    # AND once tied the flight goes on
+    w.v[2] = dataclasses.replace(w.v[2], frame_problem=None, frame_pending=False)
+    w.run(30.0)
+    assert m.outcome.exit_code == EXIT_OK
+
+
+def test_a_vehicle_without_an_origin_is_refused_when_the_wait_ends():
+    m = machine(origin_timeout_s=3.0)
+    w = World(m)
+    w.v[3] = dataclasses.replace(
+        w.v[3], frame_problem="no origin yet (GPS_GLOBAL_ORIGIN or HOME_POSITION)",
+        frame_pending=True)
+    w.run(10.0)
+    assert m.outcome.exit_code == EXIT_ABORTED
+    assert "vehicle 3 (sysid 3): no origin yet (GPS_GLOBAL_ORIGIN or HOME_POSITION)" in \
+        m.outcome.reason
+    assert Cmd.OFFBOARD not in [c for _, c in w.sent] and Cmd.LAND in [c for _, c in w.sent]
