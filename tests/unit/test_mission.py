@@ -504,6 +504,23 @@ def test_preflight_gives_up_on_a_vehicle_not_ready_after_arm_timeout():
     assert Cmd.ARM not in [c for _, c in w.sent]
 
 
+def test_an_origin_still_awaited_on_the_ground_is_waited_for_up_to_arm_timeout():
+    # GIVEN a ground vehicle whose EKF origin has not come yet (ArduPilot sets it ~20 s after
+    # boot), past the origin wait of the frame ties
+    m = one_vehicle(arm_timeout_s=4.0, origin_timeout_s=1.0)
+    w = Answering(m, [], on_ground=True)
+    w.v[1] = dataclasses.replace(w.v[1], frame_pending=True,
+                                 frame_problem="no origin yet (GPS_GLOBAL_ORIGIN or HOME_POSITION)")
+    w.run(3.0)
+    # THEN it is still waited for, then refused naming the origin and the vehicle's last text
+    assert m.outcome is None and m.phase is Phase.PREFLIGHT
+    w.run(5.0)
+    assert m.outcome.exit_code == EXIT_ABORTED
+    assert m.outcome.reason.startswith(
+        "vehicle 1 (sysid 1): no origin yet (GPS_GLOBAL_ORIGIN or HOME_POSITION); vehicle 1 "
+        "(sysid 1): not ready within 4 s (fly.arm_timeout_s)"), m.outcome.reason
+
+
 def test_preflight_does_not_wait_for_a_vehicle_in_the_air():
     m = one_vehicle()
     w = Answering(m, [])
