@@ -653,10 +653,12 @@ class Flight:
     async def _origins_loop(self) -> None:
         """Tie each vehicle's local frame to the team frame through its origin: GPS_GLOBAL_ORIGIN
         as it arrives (PX4 sends it once, just after boot), else asked for with REQUEST_MESSAGE
-        (49) once a second, else HOME_POSITION's; until every vehicle is tied or the flight ends.
+        (49) once a second, else (after two unanswered requests) HOME_POSITION's; until every
+        vehicle is tied or the flight ends.
         A refused or unanswered request is retried (ArduPilot refuses until its EKF has an
         origin); the preflight waits up to MissionPlan.origin_timeout_s, then reports why."""
         asked = [-math.inf] * self.n
+        requests = [0] * self.n
         loop = asyncio.get_running_loop()
         while not self.ties.complete and not self.machine.done:
             for i, p in enumerate(self.proxies):
@@ -666,7 +668,9 @@ class Flight:
                 try:
                     if (gpo := p.latest("GPS_GLOBAL_ORIGIN")) is not None:
                         origin, source = origin_from_gps_global_origin(gpo.msg), "GPS_GLOBAL_ORIGIN"
-                    elif (home := p.latest("HOME_POSITION")) is not None:
+                    elif (home := p.latest("HOME_POSITION")) is not None and requests[i] >= 2:
+                        # GPS_GLOBAL_ORIGIN is the origin itself: HOME_POSITION's only when two
+                        # requests for it went unanswered
                         origin, source = origin_from_home_position(home.msg), "HOME_POSITION"
                 except ValueError as exc:
                     self.ties.refuse(i, f"malformed origin: {exc}")
@@ -675,8 +679,10 @@ class Flight:
                     line = self.ties.tie(i, origin, source)
                     logger.log(logging.INFO if self.ties.ties[i] is not None else logging.WARNING,
                                "%s", line)
-                elif p.latest("HEARTBEAT") is not None and loop.time() - asked[i] >= 1.0:
+                elif (self.machine.phase is not Phase.CONNECT and p.latest("HEARTBEAT") is not None
+                      and loop.time() - asked[i] >= 1.0):  # asked once the team is connected
                     asked[i] = loop.time()
+                    requests[i] += 1
                     self._tg.create_task(self._ask_origin(p), name=f"origin of {p.name}")
             await asyncio.sleep(0.1)
 
