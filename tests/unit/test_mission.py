@@ -330,6 +330,12 @@ def one_vehicle(rules: SafetyRules = RULES, **plan) -> MissionMachine:
                                       **plan), (1,))
 
 
+def assert_aborted(m: MissionMachine, reason_start: str) -> None:
+    """The flight ended with exit 1 for a reason starting with `reason_start`."""
+    assert m.outcome is not None and m.outcome.exit_code == EXIT_ABORTED, m.outcome
+    assert m.outcome.reason.startswith(reason_start), m.outcome.reason
+
+
 def test_px4_left_in_offboard_disarmed_is_put_in_hold_before_arming():
     # GIVEN a PX4 vehicle on the ground in OFFBOARD, disarmed (PX4 v1.16.0 after a failsafe
     # landing: arming is refused there)
@@ -374,11 +380,10 @@ def test_arming_gives_up_after_arm_timeout_quoting_the_latest_statustext():
     m = one_vehicle(arm_timeout_s=3.0, arm_retry_s=1.0)
     w = Answering(m, [(False, "TEMPORARILY_REJECTED", text)] * 100, on_ground=True)
     w.run(10.0)
-    assert m.outcome.exit_code == EXIT_ABORTED
-    assert m.outcome.reason.startswith(
+    assert_aborted(m, (
         "not every vehicle armed within 3 s (fly.arm_timeout_s):\n  vehicle 1 (sysid 1): not "
         "armed after 3 attempts, last answer TEMPORARILY_REJECTED, mode AUTO_LOITER; latest "
-        f"STATUSTEXT: {text}"), m.outcome.reason
+        f"STATUSTEXT: {text}"))
     assert Cmd.TAKEOFF not in [c for _, c in w.sent]
 
 
@@ -425,11 +430,10 @@ def test_takeoff_not_in_air_times_out_naming_height_landed_state_and_mode():
                                              height_above_home_m=1.2)
     w.apply = apply
     w.run(10.0)
-    assert m.outcome.exit_code == EXIT_ABORTED
-    assert m.outcome.reason.startswith(
+    assert_aborted(m, (
         "vehicles [1] did not complete the takeoff to 2.5 m (tolerance 0.2 m) within 2 s:\n  "
         "vehicle 1 (sysid 1): 1.20 m above its takeoff point (home), landed state TAKEOFF (need "
-        "IN_AIR), mode AUTO_TAKEOFF (need AUTO_LOITER)"), m.outcome.reason
+        "IN_AIR), mode AUTO_TAKEOFF (need AUTO_LOITER)"))
 
 
 def test_a_formation_whose_error_does_not_fall_is_not_complete():
@@ -441,10 +445,9 @@ def test_a_formation_whose_error_does_not_fall_is_not_complete():
     w.error_m = lambda t: 6.0 - 0.04 * t
     w.run(80.0)
     # THEN the flight stops at t = 10 s with exit 1, naming the rule and the figures
-    assert m.outcome.exit_code == EXIT_ABORTED
-    assert m.outcome.reason.startswith(
+    assert_aborted(m, (
         "the vehicles do not follow the formation: error 5.60 m at t = 10.0 s > 3.00 m = "
-        "max(1 m, 0.5 x 6.00 m at t = 0) (fly.formation_check)"), m.outcome.reason
+        "max(1 m, 0.5 x 6.00 m at t = 0) (fly.formation_check)"))
 
 
 def test_a_formation_that_converges_as_the_law_predicts_completes():
@@ -515,10 +518,9 @@ def test_an_origin_still_awaited_on_the_ground_is_waited_for_up_to_arm_timeout()
     # THEN it is still waited for, then refused naming the origin and the vehicle's last text
     assert m.outcome is None and m.phase is Phase.PREFLIGHT
     w.run(5.0)
-    assert m.outcome.exit_code == EXIT_ABORTED
-    assert m.outcome.reason.startswith(
+    assert_aborted(m, (
         "vehicle 1 (sysid 1): no origin yet (GPS_GLOBAL_ORIGIN or HOME_POSITION); vehicle 1 "
-        "(sysid 1): not ready within 4 s (fly.arm_timeout_s)"), m.outcome.reason
+        "(sysid 1): not ready within 4 s (fly.arm_timeout_s)"))
 
 
 def test_preflight_does_not_wait_for_a_vehicle_in_the_air():
