@@ -56,9 +56,10 @@ def test_fleet_runs_every_vehicle_on_its_own_endpoint_and_exits_cleanly(tmp_path
             hb = c.wait("HEARTBEAT", 60)
             assert hb.get_srcSystem() == k + 1 and hb.base_mode & 128
             assert hb.custom_mode == (4 << 16) | (3 << 24)
-        # the initial positions of the team file, ENU -> NED
+        # its local position from its own EKF origin, the ground point below its team-file
+        # start (4, 4, 9) m ENU (the emulator's default, as real vehicles): 9 m up, NED
         pos = clients[0].wait("LOCAL_POSITION_NED", 3)
-        assert (pos.x, pos.y, pos.z) == pytest.approx((4.0, 4.0, -9.0), abs=0.05)
+        assert (pos.x, pos.y, pos.z) == pytest.approx((0.0, 0.0, -9.0), abs=0.05)
         # and every vehicle answers commands on its own port
         for c in clients:
             assert c.command_acks(176, 1 | 128, 3, 0, count=2) == [0, 0]  # PX4 v1.16.0: twice
