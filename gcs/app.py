@@ -43,6 +43,7 @@ from gcs.config import FLY_ACTIONS, MODES, ConfigError, TeamConfig
 from gcs.control.formation import reference_velocity
 from gcs.control.gains import GRAVITY_MPS2, LawGains
 from gcs.control.law import SingularCommandError, TeamCommand, TeamLaw
+from gcs.control.position import phi
 from gcs.flightlog import FlightLog, FlightLogBuilder, save_timeseries
 from gcs.fly.measure import (
     HOVER_MIN_SAMPLES,
@@ -305,6 +306,7 @@ class Flight:
         self.torque_max = torque_max_nm(self.arm_m, self.anti_torque_m, self.rotor_max_n)
         self.max_rate_radps = team.fly.rates.max_rate_radps
         self.hover = HoverThrust(self.n)
+        self._from_hover = any(v.estimates.from_hover for v in vehicles)
         fr = team.frame
         self.ties = TeamTies(TeamFrame(Geodetic(*fr.origin)),
                              [f"vehicle {v.id} (sysid {v.sysid})" for v in vehicles],
@@ -636,7 +638,7 @@ class Flight:
             self._dispatch(m.on_tick(deadline_s, statuses, self.formation_error_m))
             self._log_notes()
         streaming = m.streaming
-        if m.phase is Phase.PRIME:
+        if m.phase is Phase.PRIME and self._from_hover:
             self._record_hover_thrust()
         if m.law_active and (streaming or m.phase is Phase.FORMATION):
             command = self._run_law(k, sample, now_s)
@@ -708,12 +710,12 @@ class Flight:
         if self.setup.law != "adaptive":
             return True
         g = self.setup.gains
+        phi0_all = phi(np.ascontiguousarray(sample.velocity_mps), g.sigma_a)  # the law's (23)
         for i, v in enumerate(self.team.vehicles):
             if not v.estimates.from_hover:
                 continue
             name = f"vehicle {v.id} (sysid {v.sysid})"
-            sat = g.sigma_a * np.tanh(sample.velocity_mps[i] / g.sigma_a)
-            phi0 = 2.0 + float(sat.sum()) / (3.0 * g.sigma_a)
+            phi0 = float(phi0_all[i])
             est = self.hover.estimate(i, now_s, v.airframe.max_thrust_n, g.alpha_m, phi0,
                                       v.mass_bound_kg)
             if est is None:
