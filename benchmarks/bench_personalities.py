@@ -60,6 +60,11 @@ def team_for(autopilot: str, personality: str, work: Path, from_hover: bool = Fa
     # through the 0.5 m geofence floor at the formation start, against both personalities (one
     # of the team's SITL attempts did the same); 5 m leaves room for that sink
     data["fly"]["takeoff_altitude_m"] = TAKEOFF_M
+    # the gains today's gcs fly flies in rates and attitude mode (the bundled configs'; the
+    # recorded flights' paper gains are refused by the cascade criterion on both autopilots)
+    bundled = yaml.safe_load((ROOT / "configs" / "square4.yaml").read_text())["fly"]
+    for mode in ("rates", "attitude"):
+        data["fly"][mode] = bundled[mode]
     data["emulator"] = {"autopilot": personality, "origin": "shared"}
     path = work / f"{autopilot}-{personality}.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))

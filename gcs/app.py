@@ -85,7 +85,8 @@ from gcs.link import (
 )
 from gcs.link.config import shared_ports
 from gcs.link.enums import MSG_ID, MavCmd, MavModeFlag
-from gcs.mission.autopilots import AutopilotProfile, ModeSpec, version_text
+from gcs.mission.autopilots import PROFILES, AutopilotProfile, ModeSpec, version_text
+from gcs.mission.cascade import AutopilotResponse, CascadeGains, laplacian_eigenvalues, verdict
 from gcs.mission.machine import (
     EXIT_ABORTED,
     Cmd,
@@ -97,7 +98,7 @@ from gcs.mission.machine import (
     Phase,
 )
 from gcs.mission.safety import SafetyRules
-from gcs.mission.stability import MIN_DECAY_PER_S, describe_margins, rate_margin, torque_margins
+from gcs.mission.stability import MIN_DECAY_PER_S, describe_margins, torque_margins
 from gcs.report import build_report, write_report
 
 logger = logging.getLogger(__name__)
@@ -160,6 +161,35 @@ class FlyResult:
     report: dict[str, Any] | None
 
 
+def cascade_check(team: TeamConfig, mode: str, gains: LawGains,
+                  rate_hz: float) -> tuple[str, dict[int, str]]:
+    """The cascade criterion of `mode` for every autopilot gcs fly flies (gcs/mission/cascade.py).
+
+    With `fly.response` the vehicles' loops are known: a failure raises FlightSetupError before
+    anything is opened. Otherwise each autopilot's recorded default applies, and a failure is
+    returned as a refusal for the vehicles of that autopilot (preflight, one line each).
+    Returns (the evaluated criterion for the log, autopilot -> refusal).
+    """
+    fly = team.fly
+    eigenvalues = laplacian_eigenvalues(team.adjacency())
+    cascade_gains = CascadeGains(gains.alpha_p, gains.c_p, gains.k_eps, gains.k_eps_yaw)
+    explicit = (AutopilotResponse(**dataclasses.asdict(fly.response),
+                                  source="the team file's fly.response")
+                if fly.response is not None else None)
+    lines, refusals = [], {}
+    for profile in PROFILES.values():
+        ok, line = verdict(mode, cascade_gains, explicit or profile.response, eigenvalues,
+                           rate_hz, fly.link_delay_s, profile.name)
+        if not ok and explicit is not None:
+            raise FlightSetupError(line)
+        if not ok:
+            refusals[profile.autopilot] = line
+        lines.append(line)
+        if explicit is not None:
+            break  # one response for every vehicle
+    return "\n".join(lines), refusals
+
+
 def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
     """Resolve mode, law, rate and gains; check the discrete-time criterion (stability.py).
 
@@ -169,6 +199,11 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
     fly = team.fly
     mode = options.mode or team.controller.mode
     law = options.law or team.controller.law
+    if fly.initial_mass == "from_hover" and law == "adaptive":
+        try:
+            team = team.with_hover_masses()
+        except ConfigError as exc:
+            raise FlightSetupError(str(exc)) from None
     if mode not in MODES:
         raise FlightSetupError(f"mode {mode!r}: expected one of {MODES}")
     if law == "baseline":
@@ -185,11 +220,15 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
         raise FlightSetupError(
             f"tick rate {rate:g} Hz must be a multiple of fly.log_rate_hz {fly.log_rate_hz:g}")
     g = team.controller.gains
+    flown = {name: getattr(mode_cfg, name) for name in ("k_eps", "k_eps_yaw", "alpha_p", "c_p")
+             if getattr(mode_cfg, name) is not None}  # fly.<mode> gains over controller.gains
     gains = g._replace(
         alpha_eps=mode_cfg.alpha_eps if mode == "actuators" and mode_cfg.alpha_eps else g.alpha_eps,
         alpha_omega=(mode_cfg.alpha_omega if mode == "actuators" and mode_cfg.alpha_omega
                      else g.alpha_omega),
+        **flown,
     )
+    loop_refusals: dict[int, str] = {}
     if mode == "actuators":
         # The criterion needs an inertia per vehicle: the nominal one where the file gives it,
         # else the initial estimate (never the plant's true value: the GCS does not know it).
@@ -210,17 +249,8 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
                 f"{worst.spectral_radius:.3f} (decay {worst.decay_per_s:.3g} /s, need >= "
                 f"{MIN_DECAY_PER_S:g} /s with 1-2 ticks of delay); set fly.actuators.alpha_eps/"
                 f"alpha_omega or tick_rate_hz (docs/gcs.md)")
-    elif mode == "attitude":
-        # no attitude loop on the ground station: the autopilot closes it on board
-        stability = (f"attitude mode at {rate:g} Hz: the autopilot closes the attitude loop on "
-                     "board; the ground station runs the position loop (23)-(24) and R^c (14)")
-    else:
-        rho, decay = rate_margin(gains.k_eps, rate)
-        stability = (f"rates mode at {rate:g} Hz, k_eps {gains.k_eps:g}: rho {rho:.4f}, "
-                     f"decay {decay:.3g} /s")
-        if not (rho < 1.0 and decay >= MIN_DECAY_PER_S):
-            raise FlightSetupError(f"rates mode at {rate:g} Hz is not stable with k_eps "
-                                   f"{gains.k_eps:g}: spectral radius {rho:.3f}")
+    else:  # rates, attitude: the law's loops over each autopilot's own (cascade.py)
+        stability, loop_refusals = cascade_check(team, mode, gains, rate)
     end_action = options.end_action or fly.end_action
     if end_action not in FLY_ACTIONS:
         raise FlightSetupError(f"end action {end_action!r}: expected one of {FLY_ACTIONS}")
@@ -239,7 +269,7 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
         max_tilt_rad=fly.max_tilt_rad, link_lost_after_s=fly.link_lost_after_s,
         geofence_min_enu_m=gf.min_enu_m if gf else None,
         geofence_max_enu_m=gf.max_enu_m if gf else None,
-        required_rates_hz=required,
+        required_rates_hz=required, loop_refusals=loop_refusals,
     )
     plan = MissionPlan(
         duration_s=options.duration_s or team.mission.duration_s, rules=rules, control_mode=mode,

@@ -21,12 +21,14 @@ from gcs.config.schema import (
     FAULT_KINDS,
     FLY_ACTIONS,
     FLY_HEADINGS,
+    FLY_INITIAL_MASSES,
     FLY_STARTS,
     FRAME_VEHICLES,
     GAIN_NAMES,
     GRAVITY_MPS2,
     LAWS,
     MODES,
+    RESPONSE_KEYS,
     THRUST_MARGIN,
     ZERO3,
     Airframe,
@@ -54,6 +56,7 @@ from gcs.config.schema import (
     PacketLossFault,
     PlantParams,
     ReferenceVelocity,
+    ResponseConfig,
     SimConfig,
     TeamConfig,
     VehicleConfig,
@@ -318,8 +321,10 @@ class _Node:
 
 def _controller(node: _Node) -> ControllerConfig:
     node.keys("law mode gains", "derivative")
-    g = node.child("gains").keys(" ".join(GAIN_NAMES))
-    gains = Gains(**{name: g.child(name).number(gt=0.0) for name in GAIN_NAMES})
+    g = node.child("gains").keys(" ".join(n for n in GAIN_NAMES if n != "k_eps_yaw"), "k_eps_yaw")
+    values = {name: g.child(name).number(gt=0.0) for name in GAIN_NAMES if name != "k_eps_yaw"}
+    values["k_eps_yaw"] = g.child("k_eps_yaw").number(values["k_eps"], gt=0.0)  # default k_eps
+    gains = Gains(**values)
     d = node.child("derivative")
     if not d.absent:
         d.keys("", "method levant_lipschitz levant_substep_s")
@@ -587,14 +592,29 @@ _FAULT_KINDS: dict[str, tuple[type, str, str, Callable[[_Node], tuple[Any, ...]]
 def _fly_mode(node: _Node, default: FlyModeConfig) -> FlyModeConfig:
     if node.absent:
         return default
-    node.keys("", "tick_rate_hz alpha_eps alpha_omega max_rate_radps max_yaw_rate_radps")
+    node.keys("", "tick_rate_hz alpha_eps alpha_omega max_rate_radps max_yaw_rate_radps k_eps "
+                  "k_eps_yaw alpha_p c_p")
     return FlyModeConfig(
         node.child("tick_rate_hz").number(default.tick_rate_hz, gt=0.0, le=1000.0),
         node.child("alpha_eps").number(None, gt=0.0),
         node.child("alpha_omega").number(None, gt=0.0),
         node.child("max_rate_radps").number(default.max_rate_radps, gt=0.0),
         node.child("max_yaw_rate_radps").number(default.max_yaw_rate_radps, gt=0.0),
+        node.child("k_eps").number(None, gt=0.0),
+        node.child("k_eps_yaw").number(None, gt=0.0),
+        node.child("alpha_p").number(None, gt=0.0),
+        node.child("c_p").number(None, gt=0.0),
     )
+
+
+def _response(node: _Node) -> ResponseConfig | None:
+    if node.absent:
+        return None
+    node.keys(" ".join(RESPONSE_KEYS))
+    values = {k: node.child(k).number(ge=0.0 if k.endswith("dead_time_s") else None,
+                                      gt=None if k.endswith("dead_time_s") else 0.0)
+              for k in RESPONSE_KEYS}
+    return ResponseConfig(**values)
 
 
 def _formation_check(node: _Node, d: FormationCheckConfig) -> FormationCheckConfig:
@@ -630,7 +650,8 @@ def _fly(node: _Node) -> FlyConfig:
         "rates actuators attitude heading start takeoff_altitude_m end_action abort_action "
         "link_loss_action stale_after_s link_lost_after_s link_timeout_s max_tilt_rad geofence "
         "log_rate_hz connect_timeout_s takeoff_timeout_s land_timeout_s takeoff_tolerance_m "
-        "arm_timeout_s arm_retry_s mode_timeout_s formation_check",
+        "arm_timeout_s arm_retry_s mode_timeout_s formation_check response link_delay_s "
+        "initial_mass",
     )
     geofence = None
     g = node.child("geofence")
@@ -670,6 +691,9 @@ def _fly(node: _Node) -> FlyConfig:
         arm_retry_s=node.child("arm_retry_s").number(d.arm_retry_s, ge=0.1),
         mode_timeout_s=node.child("mode_timeout_s").number(d.mode_timeout_s, gt=0.0),
         formation_check=_formation_check(node.child("formation_check"), d.formation_check),
+        response=_response(node.child("response")),
+        link_delay_s=node.child("link_delay_s").number(d.link_delay_s, ge=0.0, le=1.0),
+        initial_mass=node.child("initial_mass").string(d.initial_mass, FLY_INITIAL_MASSES),
     )
     if not fly.takeoff_tolerance_m < fly.takeoff_altitude_m:
         node.child("takeoff_tolerance_m").fail(

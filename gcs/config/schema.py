@@ -26,6 +26,8 @@ FAULT_KINDS = ("mass_drop", "link_loss", "packet_loss", "motor_efficiency")
 FLY_ACTIONS = ("land", "hold")  # what `gcs fly` tells vehicles to do when it stops flying them
 FLY_STARTS = ("auto", "in_air", "takeoff")
 FLY_HEADINGS = ("hold", "paper")  # or a compass heading in degrees
+#: fly.initial_mass: the vehicles' `estimates.mhat`, or every one from its hover thrust
+FLY_INITIAL_MASSES = ("team", "from_hover")
 
 Vec3 = tuple[float, float, float]
 ZERO3: Vec3 = (0.0, 0.0, 0.0)
@@ -338,6 +340,12 @@ class FlyModeConfig:
     alpha_omega: float | None = None  # None: controller.gains.alpha_omega (actuators mode)
     max_rate_radps: float = 1.0  # rates mode: norm limit of the roll/pitch body-rate command
     max_yaw_rate_radps: float = 0.5  # rates mode: limit of the yaw-rate command, on its own
+    # the gains flown in this mode where the autopilot's own loops need softer ones than the
+    # paper's (gcs/mission/cascade.py); None: controller.gains
+    k_eps: float | None = None  # rates mode
+    k_eps_yaw: float | None = None  # rates mode
+    alpha_p: float | None = None
+    c_p: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -357,6 +365,23 @@ class FormationCheckConfig:
     after_s: float = 10.0
     max_error_m: float = 1.0
     max_fraction: float = 0.5
+
+
+@dataclass(frozen=True, slots=True)
+class ResponseConfig:
+    """`fly.response`: how the vehicles' own loops answer a setpoint, for the cascade criterion
+    (gcs/mission/cascade.py AutopilotResponse; absent: each autopilot's recorded default)."""
+
+    rate_damping: float
+    rate_natural_radps: float
+    rate_dead_time_s: float
+    yaw_time_constant_s: float
+    yaw_dead_time_s: float
+    attitude_p_per_s: float
+    thrust_time_constant_s: float
+
+
+RESPONSE_KEYS = tuple(ResponseConfig.__dataclass_fields__)
 
 
 @dataclass(frozen=True, slots=True)
@@ -390,6 +415,11 @@ class FlyConfig:
     arm_retry_s: float = 1.0  # between two arming attempts of one vehicle
     mode_timeout_s: float = 3.0  # a commanded mode (or arming) must show in HEARTBEAT within
     formation_check: FormationCheckConfig = FormationCheckConfig()
+    response: ResponseConfig | None = None  # None: the autopilot's recorded default
+    # "from_hover": every vehicle's mhat_i(0) from its hover thrust, as `estimates.mhat:
+    # from_hover` (gcs fly only; gcs sim keeps the scenario's estimates)
+    initial_mass: str = "team"
+    link_delay_s: float = 0.01  # one-way link delay the cascade criterion assumes [s]
 
     def mode(self, name: str) -> FlyModeConfig:
         """The settings of control mode `name` ('rates', 'actuators' or 'attitude')."""
@@ -517,6 +547,18 @@ class TeamConfig:
         return self._need(
             "nominal_mass_kg", lambda v: v.nominal_mass_kg, "the baseline law needs nominal_mass_kg"
         )
+
+    def with_hover_masses(self) -> TeamConfig:
+        """The same team with every vehicle's initial mass estimate taken from its hover
+        (`estimates.mhat: from_hover`; each needs mbar: mass_bound_kg or a plant)."""
+        for v in self.vehicles:
+            if v.mass_bound_kg is None:
+                raise ConfigError(self.source_path, "fly.initial_mass",
+                                  f"from_hover needs vehicle {v.id}'s estimates.mass_bound_kg "
+                                  "(Proposition 2's mbar) or a plant")
+        vehicles = tuple(dataclasses.replace(v, estimates=dataclasses.replace(
+            v.estimates, from_hover=True)) for v in self.vehicles)
+        return dataclasses.replace(self, vehicles=vehicles)
 
     def with_law(self, law: str) -> TeamConfig:
         """The same team flown with another law ("adaptive" | "baseline"), checked."""

@@ -125,14 +125,19 @@ def adaptive_torque(
 
 
 @njit(cache=True)
-def rate_command(eps: np.ndarray, wc_body: np.ndarray, k_eps: float) -> np.ndarray:
+def rate_command(eps: np.ndarray, wc_body: np.ndarray, k_eps: float,
+                 k_eps_yaw: float) -> np.ndarray:
     """Body-rate setpoint (n, 3) [rad/s, FLU] for the thrust + body-rate mode (spec section 9).
 
     omega_cmd = R^eT omega^c - k_eps eps: the command attitude's own rate as feed-forward plus
     attitude feedback (for small errors eps ~ 2 x rotation vector, so the error decays at 2 k_eps).
     The autopilot's rate loop tracks it; the inertia adaptation (27) has no role in this mode.
+    The yaw axis has its own gain k_eps_yaw (an autopilot's yaw-rate loop is several times slower
+    than its roll and pitch; gcs/mission/cascade.py).
     """
-    return wc_body - k_eps * eps
+    out = wc_body - k_eps * eps
+    out[:, 2] = wc_body[:, 2] - k_eps_yaw * eps[:, 2]
+    return out
 
 
 @njit(cache=True)

@@ -14,7 +14,8 @@ class LawGains(NamedTuple):
     alpha_m: I&I estimator scale (24); sigma_a: saturation bound; alpha_eps, alpha_omega:
     attitude and rate feedback of the torque (26) [N m]; c_eps: cross term of (27);
     alpha_rho: inertia adaptation rate (27); k_eps: attitude feedback of the body-rate command
-    [1/s] (rates mode); gravity_mps2: g.
+    [1/s] (rates mode; roll and pitch); k_eps_yaw: the same about the yaw axis (an autopilot's
+    yaw is far slower than its roll and pitch); gravity_mps2: g.
     """
 
     c_p: float
@@ -26,6 +27,7 @@ class LawGains(NamedTuple):
     c_eps: float
     alpha_rho: float
     k_eps: float
+    k_eps_yaw: float
     gravity_mps2: float = GRAVITY_MPS2
 
 
@@ -40,4 +42,5 @@ PAPER_GAINS = LawGains(
     c_eps=0.5,
     alpha_rho=0.5,
     k_eps=8.0,
+    k_eps_yaw=8.0,
 )

@@ -79,7 +79,7 @@ def attitude_stage(rotation, omega_radps, force_n, dforce, ddforce, rhohat, gain
     re, eps, tr_err, wc_body, we = attitude_errors(rotation, rc, omega_radps, wc)
     gam = regressor(re, omega_radps, wc, dwc, we, wc_body)
     tau, rho_rate = adaptive_torque(eps, tr_err, we, gam, rhohat, gains, adaptive)
-    omega_cmd = rate_command(eps, wc_body, gains.k_eps)
+    omega_cmd = rate_command(eps, wc_body, gains.k_eps, gains.k_eps_yaw)
     return rc, wc, dwc, tau, rho_rate, omega_cmd, eps, tr_err, we
 
 

@@ -25,6 +25,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from gcs.link.enums import mode_name
+from gcs.mission.cascade import ARDUPILOT_RESPONSE, PX4_RESPONSE, AutopilotResponse
 
 PX4_AUTOPILOT = 12  # MAV_AUTOPILOT_PX4
 ARDUPILOT_AUTOPILOT = 3  # MAV_AUTOPILOT_ARDUPILOTMEGA
@@ -93,6 +94,8 @@ class AutopilotProfile:
     # SYS_STATUS MAV_SYS_STATUS_PREARM_CHECK is a reliable "would arm now" (PX4: MAVSDK's
     # health.is_armable); ArduPilot sets it before its GUIDED needs are met, so it is not waited on
     prearm_bit_reliable: bool = False
+    # how its own loops answer a setpoint at default tuning (the cascade criterion's default)
+    response: AutopilotResponse = PX4_RESPONSE
 
     def arm_retryable(self, result: str, text: str) -> bool:
         """True when an arming attempt that ended with `result` (a MAV_RESULT name, or
@@ -153,6 +156,7 @@ PX4 = AutopilotProfile(
     control_modes=frozenset({"rates", "actuators", "attitude"}),  # actuators: PX4 <= 1.13
     actuators_until=(1, 13),  # PX4 1.14 moved actuator control to its ROS 2 bridge
     prearm_bit_reliable=True,
+    response=PX4_RESPONSE,
 )
 
 #: GUID_OPTIONS bit 3: SET_ATTITUDE_TARGET `thrust` is normalised thrust, not a climb rate.
@@ -179,6 +183,7 @@ ARDUPILOT = AutopilotProfile(
     # Position Estimate"); "PreArm: ..." comes every 30 s while one fails
     arm_retry_results=frozenset({"TEMPORARILY_REJECTED"}),
     arm_retry_texts=("Arm: ", "PreArm: "),
+    response=ARDUPILOT_RESPONSE,
 )
 
 def version_text(flight_sw_version: int) -> str:

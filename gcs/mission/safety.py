@@ -95,6 +95,8 @@ class SafetyRules:
     geofence_max_enu_m: tuple[float, float, float] | None = None
     #: message type -> minimum rate [Hz] required in preflight
     required_rates_hz: Mapping[str, float] = field(default_factory=dict)
+    #: HEARTBEAT.autopilot -> why the control mode is not stable on it (gcs/mission/cascade.py)
+    loop_refusals: Mapping[int, str] = field(default_factory=dict)
 
 
 def tilt_rad(rotation_enu_flu: np.ndarray) -> float:
@@ -182,6 +184,8 @@ def preflight_problems(team: Sequence[VehicleStatus], rules: SafetyRules) -> lis
                                              "answers on this link; check the team file"))
         if profile_for(s.autopilot) is None:
             out.append(Problem(s.vehicle_id, unsupported_text(n, s.autopilot)))
+        elif s.autopilot in rules.loop_refusals:
+            out.append(Problem(s.vehicle_id, f"{n}: {rules.loop_refusals[s.autopilot]}"))
         if s.vehicle_type != QUADROTOR_TYPE:
             out.append(Problem(s.vehicle_id, f"{n}: MAV_TYPE {s.vehicle_type} is not a quadrotor "
                                              f"({QUADROTOR_TYPE})"))

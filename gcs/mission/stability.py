@@ -3,15 +3,13 @@
 The paper designs its attitude loop in continuous time. Over MAVLink the command is computed at a
 fixed tick of period h from telemetry that is up to about one tick old, and held (zero-order hold)
 until the next one. The criterion used by `gcs fly` linearises each body axis about R^e = I
-(eps ~ 2 theta, omega^e ~ theta'):
+(eps ~ 2 theta, omega^e ~ theta'). In actuators mode, torque (26):
+J theta'' = -(2 alpha_eps + 1/2) theta - alpha_omega theta' (the 1/2 is -eps/(4 - tr(I - R^e)) at
+R^e = I); the Gamma rhohat feed-forward is not feedback. (The rates and attitude modes, whose
+innermost loops the autopilot closes, are checked by the cascade criterion of
+gcs/mission/cascade.py over each autopilot's measured response.)
 
-* actuators mode, torque (26): J theta'' = -(2 alpha_eps + 1/2) theta - alpha_omega theta'
-  (the 1/2 is -eps/(4 - tr(I - R^e)) at R^e = I); the Gamma rhohat feed-forward is not feedback.
-* rates mode: the body-rate command omega_cmd = R^eT omega^c - k_eps eps gives
-  theta' = -2 k_eps theta, closed by the autopilot's own rate loop (a first-order lag of
-  bandwidth `rate_loop_bandwidth_radps`, modelled as extra delay).
-
-Each is discretised exactly (ZOH) with a pure measurement delay of d = 1 and d = 2 ticks (telemetry
+It is discretised exactly (ZOH) with a pure measurement delay of d = 1 and d = 2 ticks (telemetry
 age plus the vehicle's own sampling). The criterion: for every vehicle, every axis and both
 delays, the spectral radius rho of the discrete closed loop is < 1, and its equivalent decay rate
 -ln(rho)/h is at least `min_decay_per_s` (default 1.5 /s; the paper's own continuous loop has a
@@ -67,17 +65,6 @@ def torque_loop_radius(
     return _delayed_loop_radius(phi, gam, gain, delay_ticks)
 
 
-def rate_loop_radius(
-    k_eps: float, period_s: float, delay_ticks: int, rate_loop_bandwidth_radps: float = 40.0
-) -> float:
-    """rho of the rates-mode attitude loop theta' = -2 k_eps theta(t - d h - 1/bandwidth)."""
-    h = period_s
-    extra = max(0, math.ceil(1.0 / (rate_loop_bandwidth_radps * h)))
-    return _delayed_loop_radius(
-        np.array([[1.0]]), np.array([h]), np.array([2.0 * k_eps]), delay_ticks + extra
-    )
-
-
 def _decay(rho: float, period_s: float) -> float:
     return -math.log(rho) / period_s if rho > 0.0 else math.inf
 
@@ -101,13 +88,6 @@ def torque_margins(
             rho = max(torque_loop_radius(alpha_eps, alpha_omega, j, h, d) for d in DELAYS_TICKS)
             out.append(AxisMargin(int(vid), axis, float(j), rho, _decay(rho, h)))
     return out
-
-
-def rate_margin(k_eps: float, tick_rate_hz: float) -> tuple[float, float]:
-    """(rho, decay_per_s) of the rates-mode attitude loop, worst case over DELAYS_TICKS."""
-    h = 1.0 / tick_rate_hz
-    rho = max(rate_loop_radius(k_eps, h, d) for d in DELAYS_TICKS)
-    return rho, _decay(rho, h)
 
 
 def describe_margins(margins: Sequence[AxisMargin],

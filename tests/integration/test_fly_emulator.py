@@ -9,6 +9,7 @@ the GCS's own log lines or exit, with timeouts; none sleeps to synchronise.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import datetime as dt
 import json
 import os
@@ -24,6 +25,7 @@ import pytest
 import yaml
 from pymavlink import mavutil
 
+from gcs.mission.cascade import NOMINAL_RESPONSE
 from vehicle_emulator.testing import free_udp_port_block
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(420)]
@@ -57,6 +59,14 @@ def team_file(
     # The law and the link against the paper's nominal model (actuator setpoints honoured, no
     # sensor noise); the px4 and ardupilot personalities are flown in test_fly_personalities.py
     data["emulator"] = {"autopilot": autopilot, "origin": "shared"}
+    if autopilot == "nominal":
+        # the paper's vehicle, declared (fly.response): its stiff loops fly the paper's position
+        # gains and the scenario's initial estimates (the cascade criterion passes k_eps 6 / 4)
+        response = dataclasses.asdict(NOMINAL_RESPONSE)
+        del response["source"]
+        data["fly"]["response"] = response
+        data["fly"]["rates"].update(k_eps=6.0, k_eps_yaw=4.0, alpha_p=2.0, c_p=4.0)
+        data["fly"]["initial_mass"] = "team"
     path = tmp / "team.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path

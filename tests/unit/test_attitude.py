@@ -140,6 +140,6 @@ def test_torque_is_pure_feedback_at_zero_error_and_rate_command_feeds_forward():
         [[1.0, 0, 0], [0, np.cos(0.01), -np.sin(0.01)], [0, np.sin(0.01), np.cos(0.01)]]
     )
     re, eps, tr_err, wc_body, we = attitude_errors(small[None], rot, np.zeros((1, 3)), wc)
-    cmd = rate_command(eps, wc_body, PAPER_GAINS.k_eps)
+    cmd = rate_command(eps, wc_body, PAPER_GAINS.k_eps, PAPER_GAINS.k_eps_yaw)
     assert cmd[0, 0] == pytest.approx(-2 * PAPER_GAINS.k_eps * 0.01, rel=1e-3)
     assert eps[0, 0] == pytest.approx(2 * np.sin(0.01))  # eps is not halved

@@ -11,6 +11,7 @@ import pytest
 
 from gcs.app import FlightSetupError, FlyOptions, prepare, true_mass_kg
 from gcs.config import load_team
+from gcs.config.schema import ResponseConfig
 from gcs.control.formation import reference_velocity
 from gcs.control.geometry import rotation_from_rpy
 from gcs.control.law import TeamLaw, TeamMeasurement
@@ -38,9 +39,55 @@ def test_rates_setup_uses_the_file_and_checks_the_criterion():
     setup = prepare(team, FlyOptions(out_dir=OUT, mode="rates"))
     assert setup.tick_rate_hz == 100.0 and setup.log_every == 2
     # every stream the law and preflight need, EXTENDED_SYS_STATE (landed state) included
+    # (and ATTITUDE_TARGET: fly.initial_mass from_hover reads the hover thrust)
     assert setup.requested_rates_hz == {"ATTITUDE_QUATERNION": 100.0, "LOCAL_POSITION_NED": 100.0,
-                                        "EXTENDED_SYS_STATE": 5.0, "HIGHRES_IMU": 100.0}
-    assert "rates mode at 100 Hz, k_eps 8" in setup.stability
+                                        "EXTENDED_SYS_STATE": 5.0, "HIGHRES_IMU": 100.0,
+                                        "ATTITUDE_TARGET": 10.0}
+    # fly.rates flies the cascade criterion's gains, not the paper's (gcs/mission/cascade.py)
+    assert (setup.gains.k_eps, setup.gains.k_eps_yaw, setup.gains.alpha_p, setup.gains.c_p) == (
+        1.5, 1.0, 1.0, 2.0)
+    assert ("rates mode with k_eps 1.5, k_eps_yaw 1, alpha_p 1, c_p 2 at 100 Hz, link delay "
+            "10 ms, on PX4") in setup.stability
+    assert setup.plan.rules.loop_refusals == {}
+
+
+def _paper_rates(team):
+    fly = dataclasses.replace(team.fly, rates=dataclasses.replace(
+        team.fly.rates, k_eps=None, k_eps_yaw=None, alpha_p=None, c_p=None))
+    return dataclasses.replace(team, fly=fly)
+
+
+def test_paper_gains_in_rates_mode_are_refused_for_px4_and_ardupilot_vehicles():
+    setup = prepare(_paper_rates(load_team(CONFIGS / "square4.yaml")),
+                    FlyOptions(out_dir=OUT, mode="rates"))
+    assert setup.gains.k_eps == 8.0 and setup.gains.alpha_p == 2.0
+    refusals = setup.plan.rules.loop_refusals
+    assert set(refusals) == {12, 3}
+    assert refusals[12].startswith(
+        "rates mode with k_eps 8, k_eps_yaw 8, alpha_p 2, c_p 4 at 100 Hz, link delay 10 ms, on "
+        "PX4 (PX4 v1.16.0 SIH default tuning (recorded rate doublets)) is not stable enough: ")
+    assert "; stable: rates mode with k_eps 1.5, k_eps_yaw 1, alpha_p 1, c_p 2 (fly.rates)" in (
+        refusals[12])
+
+
+def test_a_declared_response_that_fails_is_refused_before_any_link_opens():
+    team = _paper_rates(load_team(CONFIGS / "square4.yaml"))
+    response = ResponseConfig(rate_damping=0.3, rate_natural_radps=14.7, rate_dead_time_s=0.004,
+                              yaw_time_constant_s=0.59, yaw_dead_time_s=0.099,
+                              attitude_p_per_s=6.5, thrust_time_constant_s=0.05)
+    team = dataclasses.replace(team, fly=dataclasses.replace(team.fly, response=response))
+    with pytest.raises(FlightSetupError, match=r"^rates mode with k_eps 8, .* on PX4 \(the team "
+                       r"file's fly.response\) is not stable enough: "):
+        prepare(team, FlyOptions(out_dir=OUT, mode="rates"))
+
+
+def test_initial_mass_from_hover_applies_to_every_vehicle_in_flight_only():
+    team = load_team(CONFIGS / "square4.yaml")
+    assert team.fly.initial_mass == "from_hover"
+    assert not any(v.estimates.from_hover for v in team.vehicles)  # gcs sim: the scenario's
+    setup = prepare(team, FlyOptions(out_dir=OUT, mode="rates"))
+    assert all(v.estimates.from_hover for v in setup.team.vehicles)
+    assert setup.requested_rates_hz["ATTITUDE_TARGET"] == 10.0
 
 
 def test_actuators_setup_flies_the_criterion_gains_at_250_hz():
@@ -224,6 +271,7 @@ def test_attitude_mode_is_prepared_for_gcs_fly_and_refused_by_gcs_sim(tmp_path):
     team = load_team(CONFIGS / "square4.yaml")
     setup = prepare(team, FlyOptions(out_dir=tmp_path, mode="attitude"))
     assert setup.mode == "attitude" and setup.tick_rate_hz == team.fly.attitude.tick_rate_hz
-    assert "the autopilot closes the attitude loop" in setup.stability
+    assert setup.stability.startswith("attitude mode with alpha_p 1.5, c_p 0.6 at 100 Hz")
+    assert (setup.gains.alpha_p, setup.gains.c_p) == (1.5, 0.6)
     with pytest.raises(ConfigError, match="controller mode 'attitude': the vehicle's autopilot"):
         simulate(team, SimOptions(mode="attitude", duration_s=0.1))

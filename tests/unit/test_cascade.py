@@ -1,0 +1,125 @@
+"""The cascade criterion (gcs/mission/cascade.py): its stability verdicts against a direct
+time-domain simulation of the delayed loops, its margins against closed forms, and the gains it
+proposes."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gcs.mission.cascade import (
+    ARDUPILOT_RESPONSE,
+    PX4_RESPONSE,
+    AutopilotResponse,
+    CascadeGains,
+    cascade_margins,
+    laplacian_eigenvalues,
+    passes,
+    stable_gains,
+    verdict,
+)
+
+PAPER = CascadeGains(alpha_p=2.0, c_p=4.0, k_eps=8.0, k_eps_yaw=8.0)
+RING4 = np.array([[0, 1, 0, 1], [1, 0, 1, 0], [0, 1, 0, 1], [1, 0, 1, 0]], float)
+ROOT = Path(__file__).resolve().parents[2]
+IDEAL = AutopilotResponse(1.0, 1e4, 0.0, 1e-4, 0.0, 1e4, 1e-5, "ideal")
+
+
+def _attitude_loop_diverges(k: float, r: AutopilotResponse, loop_delay_s: float,
+                            t_end_s: float = 6.0) -> bool:
+    """Simulate theta' = w, w from the rate loop wn^2 / (s^2 + 2 zeta wn s + wn^2) driven by
+    2 k (0 - theta) delayed by the loop delay plus the rate loop's dead time (Euler, 0.1 ms)."""
+    dt = 1e-4
+    lag = int(round((loop_delay_s + r.rate_dead_time_s) / dt))
+    wn, z = r.rate_natural_radps, r.rate_damping
+    theta, w, dw = 0.01, 0.0, 0.0
+    history = [theta] * (lag + 1)
+    peak_late = 0.0
+    for step in range(int(t_end_s / dt)):
+        cmd = -2.0 * k * history[-lag - 1]
+        ddw = wn * wn * (cmd - w) - 2.0 * z * wn * dw
+        dw += ddw * dt
+        w += dw * dt
+        theta += w * dt
+        history.append(theta)
+        if len(history) > lag + 2:
+            history.pop(0)
+        if step * dt > t_end_s - 1.0:
+            peak_late = max(peak_late, abs(theta))
+    return peak_late > 0.01
+
+
+@pytest.mark.parametrize("k", [1.5, 3.0, 4.0, 8.0])
+def test_attitude_loop_verdict_matches_a_time_domain_simulation(k):
+    delay = 2 * (0.01 + 0.005)  # 10 ms each way plus half a 100 Hz tick each way
+    margins = cascade_margins("rates", CascadeGains(1.0, 2.0, k, 0.5), PX4_RESPONSE, [0.0],
+                              100.0, 0.01)
+    roll = next(m for m in margins if m.loop.endswith("roll/pitch"))
+    assert roll.stable == (not _attitude_loop_diverges(k, PX4_RESPONSE, delay))
+
+
+def test_paper_loop_on_an_ideal_autopilot_has_its_closed_form_margin():
+    # ideal inner loops: L = alpha_p (c_p lambda + 2 s) / s^2; |1 + L| = |s^2 + 4 s + 32| / |s|^2
+    margins = cascade_margins("rates", PAPER, IDEAL, [4.0], 1e4, 0.0)
+    horizontal = next(m for m in margins if "lambda=4" in m.loop and "horizontal" in m.loop)
+    w = np.linspace(0.1, 100.0, 200001)
+    closed_form = float(np.min(np.abs(-w * w + 4j * w + 32.0) / (w * w)))
+    assert horizontal.stable
+    assert horizontal.modulus_margin == pytest.approx(closed_form, abs=5e-3)
+
+
+def test_ring_laplacian_eigenvalues():
+    assert laplacian_eigenvalues(RING4) == pytest.approx([0.0, 2.0, 4.0])
+    assert laplacian_eigenvalues(RING4)[0] == 0.0  # exactly: the common mode
+
+
+def test_paper_gains_fail_on_px4_default_tuning_and_the_proposal_passes():
+    ok, line = verdict("rates", PAPER, PX4_RESPONSE, [0.0, 2.0, 4.0], 100.0, 0.01, "PX4")
+    assert not ok
+    assert "is not stable enough" in line and "stable: rates mode with" in line
+    proposal = stable_gains("rates", PAPER, PX4_RESPONSE, [0.0, 2.0, 4.0], 100.0, 0.01)
+    assert proposal is not None
+    assert passes(cascade_margins("rates", proposal, PX4_RESPONSE, [0.0, 2.0, 4.0], 100.0, 0.01))
+    assert proposal.k_eps <= PAPER.k_eps and proposal.alpha_p <= PAPER.alpha_p
+    assert proposal.c_p <= PAPER.c_p and proposal.k_eps_yaw <= PAPER.k_eps_yaw
+    assert f"k_eps {proposal.k_eps:g}, k_eps_yaw {proposal.k_eps_yaw:g}" in line
+
+
+def test_yaw_loop_of_the_paper_gain_is_unstable_on_both_autopilots():
+    # PX4's yaw rate reaches 0.82 of a 1 rad/s step in 0.6 s: k_eps 8 about yaw cannot be flown
+    for response in (PX4_RESPONSE, ARDUPILOT_RESPONSE):
+        yaw = next(m for m in cascade_margins("rates", PAPER, response, [0.0], 100.0, 0.01)
+                   if m.loop.endswith("yaw"))
+        assert not yaw.ok()
+
+
+def test_more_link_delay_never_helps():
+    g = CascadeGains(1.0, 2.0, 1.5, 1.0)
+    previous = math.inf
+    for delay in (0.0, 0.01, 0.02, 0.05):
+        smallest = min(m.modulus_margin for m in cascade_margins(
+            "rates", g, PX4_RESPONSE, [0.0, 2.0, 4.0], 100.0, delay))
+        assert smallest <= previous + 1e-9
+        previous = smallest
+    ok, _ = verdict("rates", g, PX4_RESPONSE, [0.0, 2.0, 4.0], 100.0, 0.1, "PX4")
+    assert not ok  # 100 ms each way is too much for these gains
+
+
+def test_bundled_gains_pass_on_both_autopilots():
+    from gcs.config import load_team
+
+    for name in ("square4.yaml", "square4_massdrop.yaml", "grid16.yaml"):
+        team = load_team(ROOT / "configs" / name)
+        eig = laplacian_eigenvalues(team.adjacency())
+        for mode in ("rates", "attitude"):
+            cfg = team.fly.mode(mode)
+            g = team.controller.gains
+            gains = CascadeGains(cfg.alpha_p or g.alpha_p, cfg.c_p or g.c_p,
+                                 cfg.k_eps or g.k_eps, cfg.k_eps_yaw or g.k_eps_yaw)
+            for response in (PX4_RESPONSE, ARDUPILOT_RESPONSE):
+                ok, line = verdict(mode, gains, response, eig, cfg.tick_rate_hz,
+                                   team.fly.link_delay_s, "x")
+                assert ok, f"{name}: {line}"
