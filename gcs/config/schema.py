@@ -359,6 +359,25 @@ class FormationCheckConfig:
     max_fraction: float = 0.5
 
 
+GO_TO_START_ENABLED = ("auto", "true", "false")
+
+
+@dataclass(frozen=True, slots=True)
+class GoToStartConfig:
+    """`fly.go_to_start`: before the formation, fly each vehicle to its team-file start position
+    (`initial.position_enu_m`) with position setpoints, first vertically to the start altitude,
+    then across at it, and start the law once every one has settled (docs/gcs.md, "Go to
+    start"). `enabled`: auto (the vehicles that took off in this flight), true (every vehicle),
+    false (none: the law starts where the vehicles are)."""
+
+    enabled: str = "auto"
+    tolerance_m: float = 0.3  # settled: within this of the start position ...
+    max_speed_mps: float = 0.2  # ... and slower than this ...
+    settle_s: float = 2.0  # ... continuously for this long
+    timeout_s: float = 60.0  # every vehicle settled within this, else the flight stops
+    min_altitude_m: float = 2.0  # start positions lower than this are refused (config error)
+
+
 @dataclass(frozen=True, slots=True)
 class FlyConfig:
     """The `fly:` section: flight sequence, safety rules and link timing of `gcs fly`."""
@@ -390,6 +409,7 @@ class FlyConfig:
     arm_retry_s: float = 1.0  # between two arming attempts of one vehicle
     mode_timeout_s: float = 3.0  # a commanded mode (or arming) must show in HEARTBEAT within
     formation_check: FormationCheckConfig = FormationCheckConfig()
+    go_to_start: GoToStartConfig = GoToStartConfig()
 
     def mode(self, name: str) -> FlyModeConfig:
         """The settings of control mode `name` ('rates', 'actuators' or 'attitude')."""

@@ -238,8 +238,11 @@ class World:
         for vid, s in self.v.items():
             # THE invariant: a vehicle in its offboard mode with its link up gets setpoints
             offboard = self.m.profile(vid).offboard.name
+            # (law setpoints, or the go-to-start's position setpoints; never both at once)
+            assert not self.m.streaming & set(self.m.position_targets)
             if s.mode == offboard and vid not in self.silent and not self.m.done:
-                assert vid in self.m.streaming, f"vehicle {vid} in {offboard} without setpoints"
+                assert vid in self.m.streaming or vid in self.m.position_targets, \
+                    f"vehicle {vid} in {offboard} without setpoints"
             # and priming is inert: before the formation no streamed setpoint is acted on
             if (self.m.formation_t0_s is None and vid in self.m.streaming
                     and s.autopilot == 3 and s.mode in ARDU_SETPOINT_MODES):
