@@ -60,6 +60,8 @@ def team_for(autopilot: str, personality: str, work: Path, from_hover: bool = Fa
     # through the 0.5 m geofence floor at the formation start, against both personalities (one
     # of the team's SITL attempts did the same); 5 m leaves room for that sink
     data["fly"]["takeoff_altitude_m"] = TAKEOFF_M
+    # as the recorded SITL flights: the law starts where the takeoff left the vehicles
+    data["fly"]["go_to_start"] = {"enabled": False}
     data["emulator"] = {"autopilot": personality, "origin": "shared"}
     path = work / f"{autopilot}-{personality}.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))

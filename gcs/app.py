@@ -278,7 +278,7 @@ def go_to_start_plan(team: TeamConfig) -> GoToStartPlan | None:
     starts = tuple((v.id, tuple(float(x) for x in v.initial.position_enu_m))
                    for v in team.vehicles)
     return GoToStartPlan(starts, g.enabled, g.tolerance_m, g.max_speed_mps, g.settle_s,
-                         g.timeout_s)
+                         g.timeout_s, g.cruise_speed_mps)
 
 
 def true_mass_kg(team: TeamConfig, t_s: float) -> np.ndarray:
@@ -680,8 +680,9 @@ class Flight:
 
     def _send_position_targets(self, sample: TeamSample) -> None:
         """Go to start: each vehicle the machine names gets SET_POSITION_TARGET_LOCAL_NED, its
-        team-frame target in its own local frame (p_local = R_i^T (p_team - o_i), ENU -> NED)
-        and the heading it had when it first got one (so it does not yaw)."""
+        team-frame target in its own local frame (p_local = R_i^T (p_team - o_i), ENU -> NED),
+        the target's velocity as feed-forward (R_i^T v_team), and the heading it had when it
+        first got one (so it does not yaw)."""
         targets = self.machine.position_targets
         if not targets:
             return
@@ -696,9 +697,11 @@ class Flight:
                     local = self.ties.rotations_to_local(sample.rotation)
                 yaw_enu = float(yaw_rad(local[i:i + 1])[0])
                 self._goto_yaw_ned[vid] = math.remainder(math.pi / 2.0 - yaw_enu, 2.0 * math.pi)
-            ned = frames.ned_from_enu(tie.local_from_team(targets[vid]))
+            position, velocity = targets[vid]
+            ned = frames.ned_from_enu(tie.local_from_team(position))
+            v_ned = frames.ned_from_enu(tie.vectors_local_from_team(velocity))
             try:
-                p.send_position_target(ned, self._goto_yaw_ned[vid])
+                p.send_position_target(ned, v_ned, self._goto_yaw_ned[vid])
             except SetpointError as exc:
                 self._setpoint_errors += 1
                 self.machine.request_abort(str(exc), operator=False)

@@ -615,7 +615,8 @@ def _go_to_start(node: _Node, d: GoToStartConfig) -> GoToStartConfig:
     """fly.go_to_start (docs/configuration.md); `enabled` is auto, true or false."""
     if node.absent:
         return d
-    node.keys("", "enabled tolerance_m max_speed_mps settle_s timeout_s min_altitude_m")
+    node.keys("", "enabled tolerance_m max_speed_mps settle_s timeout_s cruise_speed_mps "
+                  "min_altitude_m")
     enabled_node = node.child("enabled")
     if enabled_node.absent:
         enabled = d.enabled
@@ -629,6 +630,7 @@ def _go_to_start(node: _Node, d: GoToStartConfig) -> GoToStartConfig:
         node.child("max_speed_mps").number(d.max_speed_mps, gt=0.0),
         node.child("settle_s").number(d.settle_s, ge=0.0),
         node.child("timeout_s").number(d.timeout_s, gt=0.0),
+        node.child("cruise_speed_mps").number(d.cruise_speed_mps, gt=0.0, le=20.0),
         node.child("min_altitude_m").number(d.min_altitude_m, gt=0.0),
     )
 

@@ -372,9 +372,10 @@ class GoToStartConfig:
 
     enabled: str = "auto"
     tolerance_m: float = 0.3  # settled: within this of the start position ...
-    max_speed_mps: float = 0.2  # ... and slower than this ...
+    max_speed_mps: float = 0.1  # ... and drifting slower than this ...
     settle_s: float = 2.0  # ... continuously for this long
     timeout_s: float = 60.0  # every vehicle settled within this, else the flight stops
+    cruise_speed_mps: float = 2.0  # the position setpoint moves along each leg at this speed
     min_altitude_m: float = 2.0  # start positions lower than this are refused (config error)
 
 

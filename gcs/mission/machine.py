@@ -57,7 +57,14 @@ from enum import Enum
 
 from gcs.link.enums import LandedState
 from gcs.mission.autopilots import PX4, AutopilotProfile, profile_for
-from gcs.mission.goto import GotoResult, GoToStart, GoToStartPlan, crossing_pairs, going_line
+from gcs.mission.goto import (
+    GotoResult,
+    GoToStart,
+    GoToStartPlan,
+    Vec3,
+    crossing_pairs,
+    going_line,
+)
 from gcs.mission.safety import (
     Problem,
     SafetyRules,
@@ -277,8 +284,9 @@ class MissionMachine:
         return frozenset()
 
     @property
-    def position_targets(self) -> dict[int, tuple[float, float, float]]:
-        """Vehicles that must get a position setpoint this tick, and where (team ENU [m]): in
+    def position_targets(self) -> dict[int, tuple[Vec3, Vec3]]:
+        """Vehicles that must get a position setpoint this tick: (position [m], velocity
+        feed-forward [m/s]), team ENU; in
         GOTO every vehicle going to its start; afterwards (HOLD, STOPPING) each until it has
         acknowledged its hold or stop command and left its position mode. Never a vehicle that
         is in `streaming`."""
@@ -288,7 +296,7 @@ class MissionMachine:
         out = {}
         for vid, v in self._v.items():
             if v.goto is not None and not v.lost and not v.goto.released:
-                out[vid] = g.target(vid)
+                out[vid] = g.target(vid, self._now_s)
         return out
 
     @property
@@ -668,7 +676,7 @@ class MissionMachine:
             return out + self._to_prime()
         if g.timed_out(self._now_s):
             names = {vid: self._v[vid].status.name for vid in flown}
-            lines = g.not_settled_lines(self._now_s, names, positions, velocities)
+            lines = g.not_settled_lines(self._now_s, names, positions)
             self._begin_stop([Problem(None, "\n  ".join(
                 [f"not every vehicle settled at its start position within "
                  f"{plan.timeout_s:g} s (fly.go_to_start.timeout_s):", *lines]))], EXIT_ABORTED)

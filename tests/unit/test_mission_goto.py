@@ -16,7 +16,7 @@ from test_autopilots import RULES, World
 
 from gcs.app import go_to_start_plan
 from gcs.config import ConfigError, check_go_to_start, team_from_dict
-from gcs.mission.goto import GoToStart, GoToStartPlan, crossing_pairs
+from gcs.mission.goto import GoToStart, GoToStartPlan, carrot_travel_m, crossing_pairs
 from gcs.mission.machine import (
     EXIT_ABORTED,
     EXIT_INTERRUPTED,
@@ -65,7 +65,7 @@ class Flying(World):
 
     def tick(self, dt: float = 0.05) -> None:
         targets = self.m.position_targets
-        for vid, target in targets.items():
+        for vid, (target, _) in targets.items():
             self.first_target_s.setdefault(vid, self.t)
             s = self.v[vid]
             if self.m.phase is Phase.STOPPING:
@@ -174,26 +174,55 @@ def test_a_vehicle_that_does_not_get_there_stops_the_flight_at_the_timeout_namin
     reason = m.outcome.reason
     assert reason.startswith("not every vehicle settled at its start position within 20 s "
                              "(fly.go_to_start.timeout_s):\n  vehicle ")
-    assert ("vehicle 2 (sysid 2): 7.50 m from its start (7.00, -5.00, 8.00) m at 0.00 m/s "
-            "(need <= 0.3 m and <= 0.2 m/s for 2 s; climb leg)") in reason
+    assert ("vehicle 2 (sysid 2): 7.50 m from its start (7.00, -5.00, 8.00) m (need <= 0.3 m "
+            "and <= 0.1 m/s; climb leg)") in reason
     # AND both were landed (abort_action), no law setpoint was ever sent
     assert Cmd.OFFBOARD not in w.cmds() and w.cmds(2)[-1] is Cmd.LAND
     assert m.formation_t0_s is None and not m.goto_results[2].settled
 
 
-def test_settling_needs_the_whole_settle_time_inside_tolerance_and_slow():
+def test_settled_means_mean_position_within_tolerance_and_no_drift_over_settle_s():
     plan = goto_plan(ids=(1,), settle_s=2.0)
     g = GoToStart.begin(plan, 0.0, {1: (0.0, 6.0, 2.5)})
-    assert g.target(1) == (0.0, 6.0, 6.0)  # climb first, over where it was
+    # climb first, over where it was: 3.5 m, too short to reach 2 m/s and stop at 0.5 m/s^2, so
+    # the setpoint starts at sqrt(2 a L) and slows down to stop on the start altitude
+    v0 = math.sqrt(3.5)
+    assert g.target(1, 0.0)[0] == (0.0, 6.0, 2.5)
+    p1, v1 = g.target(1, 1.0)
+    assert p1[2] == pytest.approx(2.5 + v0 - 0.25) and v1[2] == pytest.approx(v0 - 0.5, abs=0.01)
+    assert g.target(1, 2.0 * v0) == g.target(1, 9.0) == ((0.0, 6.0, 6.0), (0.0, 0.0, 0.0))
     assert not g.update(0.1, {1: (0.0, 6.0, 5.9)}, {1: (0.0, 0.0, 0.0)})
-    assert g.stage == "across" and g.target(1) == STARTS[1]
-    here, still, moving = {1: STARTS[1]}, {1: (0.0, 0.0, 0.0)}, {1: (0.3, 0.0, 0.0)}
-    assert not g.update(1.0, here, still)
-    assert not g.update(2.5, here, moving)  # too fast: the settle clock restarts
-    assert not g.update(3.0, here, still)
-    assert not g.update(4.9, here, still)
-    assert g.update(5.0, here, still)
+    # THEN across, from over the entry point at the start altitude (here: the start itself)
+    assert g.stage == "across" and g.target(1, 0.1)[0] == STARTS[1]
+    x, y, z = STARTS[1]
+    # GIVEN a vehicle that jitters around its start (0.25 m, 0.3 m/s samples, mean zero)
+    def jitter(t: float) -> tuple[dict, dict]:
+        sign = 1.0 if round(t * 20) % 2 else -1.0
+        return {1: (x + 0.25 * sign, y, z)}, {1: (0.3 * sign, 0.0, 0.0)}
+    ticks = [1.0 + k * 0.05 for k in range(41)]
+    # THEN it is settled once the window spans settle_s (2 s), not before
+    assert not any(g.update(t, *jitter(t)) for t in ticks[:-1])
+    assert g.update(ticks[-1], *jitter(ticks[-1]))
     assert g.results[1].settled and g.results[1].duration_s == pytest.approx(3.0)
+    assert g.results[1].error_m < 0.02 and g.results[1].speed_mps < 0.02
+    # AND a vehicle drifting at 0.25 m/s through its start, or holding 0.4 m off it, is not
+    for p_of_t, v in ((lambda t: (x + 0.25 * (t - 2.0), y, z), (0.25, 0.0, 0.0)),
+                      (lambda t: (x, y + 0.4, z), (0.0, 0.0, 0.0))):
+        g = GoToStart.begin(plan, 0.0, {1: STARTS[1]})
+        g.update(0.05, {1: STARTS[1]}, {1: (0.0, 0.0, 0.0)})
+        assert not any(g.update(t, {1: p_of_t(t)}, {1: v}) for t in ticks)
+
+
+def test_the_carrot_cruises_then_slows_down_to_stop_at_the_end_of_the_leg():
+    # GIVEN 10 m at 2 m/s, slowing at 0.5 m/s^2: 3 s of cruise (6 m), then 4 s of braking (4 m)
+    travel = [carrot_travel_m(10.0, 2.0, 0.5, k * 0.01) for k in range(1000)]
+    assert carrot_travel_m(10.0, 2.0, 0.5, 3.0) == pytest.approx(6.0)
+    assert carrot_travel_m(10.0, 2.0, 0.5, 5.0) == pytest.approx(6.0 + 4.0 - 1.0)
+    assert carrot_travel_m(10.0, 2.0, 0.5, 7.0) == pytest.approx(10.0)
+    # THEN it never goes back, never beyond the end, never faster than 2 m/s or a jump in speed
+    speeds = [(b - a) / 0.01 for a, b in zip(travel, travel[1:], strict=False)]
+    assert min(speeds) >= 0.0 and max(travel) <= 10.0 and max(speeds) <= 2.0 + 1e-9
+    assert max(abs(b - a) for a, b in zip(speeds, speeds[1:], strict=False)) <= 0.5 * 0.01 + 1e-9
 
 
 def test_crossing_legs_are_named_only_at_similar_altitudes():
@@ -327,7 +356,7 @@ def test_go_to_start_defaults_and_block():
     team = team_from_dict(square4())
     g = team.fly.go_to_start
     assert (g.enabled, g.tolerance_m, g.max_speed_mps, g.settle_s, g.timeout_s,
-            g.min_altitude_m) == ("auto", 0.3, 0.2, 2.0, 60.0, 2.0)
+            g.cruise_speed_mps, g.min_altitude_m) == ("auto", 0.3, 0.1, 2.0, 60.0, 2.0, 2.0)
     team = team_from_dict(square4(go_to_start={"enabled": True, "tolerance_m": 0.5}))
     assert team.fly.go_to_start.enabled == "true" and team.fly.go_to_start.tolerance_m == 0.5
     plan = go_to_start_plan(team)
@@ -339,6 +368,7 @@ def test_go_to_start_defaults_and_block():
     ({"enabled": "maybe"}, r"fly\.go_to_start\.enabled: expected one of 'auto', 'true', 'false'"),
     ({"tolerance_m": 0.0}, r"fly\.go_to_start\.tolerance_m: expected > 0, got 0\.0"),
     ({"settle_s": -1}, r"fly\.go_to_start\.settle_s: expected >= 0, got -1\.0"),
+    ({"cruise_speed_mps": 50}, r"fly\.go_to_start\.cruise_speed_mps: expected a value in \(0, 20\], got 50\.0"),
     ({"timout_s": 5}, r"fly\.go_to_start\.timout_s: unknown key; did you mean 'timeout_s'\?"),
 ])
 def test_a_bad_go_to_start_block_names_the_key(block, message):
