@@ -142,3 +142,27 @@ def test_ardupilot_team_from_the_ground_goes_to_its_start_positions_in_guided(tm
         targets, modes = position_targets_before_the_first_mode(tlog, sysid)
         assert targets > 50, targets
         assert modes == [17, 20, 9], modes
+
+
+def test_a_start_position_on_the_ground_is_a_config_error_naming_the_vehicle(tmp_path):
+    # GIVEN a team file whose vehicle 3 starts on the ground (go-to-start on by default)
+    data = yaml.safe_load((ROOT / "configs" / "square4.yaml").read_text())
+    data["vehicles"][2]["initial"]["position_enu_m"] = [-5.0, -4.0, 0.0]
+    team = tmp_path / "low.yaml"
+    team.write_text(yaml.safe_dump(data, sort_keys=False))
+    # WHEN gcs fly is run THEN exit 2 before anything is opened, one line naming vehicle and key
+    fly = subprocess.run([sys.executable, "-m", "gcs.cli", "fly", "--team", str(team), "--out",
+                          str(tmp_path / "run"), "--status", "off"], capture_output=True,
+                         text=True, timeout=60, check=False)
+    assert fly.returncode == 2, fly.stderr
+    assert fly.stderr.splitlines() == [
+        f"gcs fly: config error: {team}: vehicles[2].initial.position_enu_m: vehicle 3 (sysid 3): "
+        "start altitude z = 0 m is below fly.go_to_start.min_altitude_m 2: the go-to-start phase "
+        "flies every vehicle to its start position; set it higher, or fly.go_to_start.enabled: "
+        "false to start the law where the vehicles are"]
+    assert not (tmp_path / "run" / "flight.tlog").exists()
+    # AND gcs check says so too
+    check = subprocess.run([sys.executable, "-m", "gcs.cli", "check", "--team", str(team)],
+                           capture_output=True, text=True, timeout=60, check=True)
+    assert "gcs fly refuses this team file: vehicle 3 (sysid 3): start altitude z = 0 m" in \
+        check.stdout
