@@ -65,6 +65,8 @@ def team_for(autopilot: str, personality: str, work: Path, from_hover: bool = Fa
     bundled = yaml.safe_load((ROOT / "configs" / "square4.yaml").read_text())["fly"]
     for mode in ("rates", "attitude"):
         data["fly"][mode] = bundled[mode]
+    # as the recorded SITL flights: the law starts where the takeoff left the vehicles
+    data["fly"]["go_to_start"] = {"enabled": False}
     data["emulator"] = {"autopilot": personality, "origin": "shared"}
     path = work / f"{autopilot}-{personality}.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))

@@ -39,7 +39,8 @@ from typing import Any
 
 import numpy as np
 
-from gcs.config import FLY_ACTIONS, MODES, ConfigError, TeamConfig
+from gcs import frames
+from gcs.config import FLY_ACTIONS, MODES, ConfigError, TeamConfig, check_go_to_start
 from gcs.control.formation import reference_velocity
 from gcs.control.gains import GRAVITY_MPS2, LawGains
 from gcs.control.law import SingularCommandError, TeamCommand, TeamLaw
@@ -62,6 +63,7 @@ from gcs.fly.measure import (
     normalised_torque,
     stale_neighbour_counts,
     torque_max_nm,
+    yaw_rad,
 )
 from gcs.fly.origins import (
     TeamTies,
@@ -87,6 +89,7 @@ from gcs.link.config import shared_ports
 from gcs.link.enums import MSG_ID, MavCmd, MavModeFlag
 from gcs.mission.autopilots import PROFILES, AutopilotProfile, ModeSpec, version_text
 from gcs.mission.cascade import AutopilotResponse, CascadeGains, laplacian_eigenvalues, verdict
+from gcs.mission.goto import GoToStartPlan
 from gcs.mission.machine import (
     EXIT_ABORTED,
     Cmd,
@@ -251,6 +254,10 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
                 f"alpha_omega or tick_rate_hz (docs/gcs.md)")
     else:  # rates, attitude: the law's loops over each autopilot's own (cascade.py)
         stability, loop_refusals = cascade_check(team, mode, gains, rate)
+    try:
+        check_go_to_start(team)
+    except ConfigError as exc:
+        raise FlightSetupError(f"config error: {exc}") from None
     end_action = options.end_action or fly.end_action
     if end_action not in FLY_ACTIONS:
         raise FlightSetupError(f"end action {end_action!r}: expected one of {FLY_ACTIONS}")
@@ -285,10 +292,23 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
         formation_check_s=fly.formation_check.after_s,
         formation_max_error_m=fly.formation_check.max_error_m,
         formation_max_fraction=fly.formation_check.max_fraction,
+        go_to_start=go_to_start_plan(team),
         **({"prime_s": HOVER_WINDOW_S + 0.5} if from_hover else {}),
     )
     return FlightSetup(team, mode, law, rate, gains, plan, required,
                        round(rate / fly.log_rate_hz), stability)
+
+
+def go_to_start_plan(team: TeamConfig) -> GoToStartPlan | None:
+    """The go-to-start phase of the team file (`fly.go_to_start`, the vehicles' start positions
+    `initial.position_enu_m` in the team frame); None when it is off."""
+    g = team.fly.go_to_start
+    if g.enabled == "false":
+        return None
+    starts = tuple((v.id, tuple(float(x) for x in v.initial.position_enu_m))
+                   for v in team.vehicles)
+    return GoToStartPlan(starts, g.enabled, g.tolerance_m, g.max_speed_mps, g.settle_s,
+                         g.timeout_s, g.cruise_speed_mps)
 
 
 def true_mass_kg(team: TeamConfig, t_s: float) -> np.ndarray:
@@ -387,6 +407,8 @@ class Flight:
         self._setpoint_errors = 0
         self._notes_logged = 0
         self._t0_s = time.monotonic()  # the proxies' clock; STATUSTEXT times in the report
+        self._goto_yaw_ned: dict[int, float] = {}  # heading held while going to start [rad]
+        self._start_error_m: dict[int, float] = {}  # |p(0) - start| at the formation start
 
     def _warm_up(self, team: TeamConfig, setup: FlightSetup, rhohat: np.ndarray,
                  nominal: np.ndarray | None) -> None:
@@ -531,6 +553,9 @@ class Flight:
                                 if profile.takeoff_altitude_amsl else c.altitude_m)
             elif c.cmd is Cmd.OFFBOARD:
                 await self._set_mode(p, profile, profile.offboard, confirm=self._mode_timeout_s)
+            elif c.cmd is Cmd.POSITION_MODE:
+                await self._set_mode(p, profile, profile.position_mode,
+                                     confirm=self._mode_timeout_s)
             elif c.cmd is Cmd.HOLD:
                 await self._set_mode(p, profile, profile.hold, confirm=self._mode_timeout_s)
             elif c.cmd is Cmd.LAND:
@@ -667,6 +692,7 @@ class Flight:
             statuses = vehicle_statuses(self.proxies, self.ids, sample, want_rates, self.ties)
             self._dispatch(m.on_tick(deadline_s, statuses, self.formation_error_m))
             self._log_notes()
+            self._send_position_targets(sample)
         streaming = m.streaming
         if m.phase is Phase.PRIME and self._from_hover:
             self._record_hover_thrust()
@@ -681,6 +707,34 @@ class Flight:
             for i, p in enumerate(self.proxies):
                 if self.ids[i] in streaming:
                     self._send_one(i, p, level[i], self.prime_thrust_norm[i])
+
+    def _send_position_targets(self, sample: TeamSample) -> None:
+        """Go to start: each vehicle the machine names gets SET_POSITION_TARGET_LOCAL_NED, its
+        team-frame target in its own local frame (p_local = R_i^T (p_team - o_i), ENU -> NED),
+        the target's velocity as feed-forward (R_i^T v_team), and the heading it had when it
+        first got one (so it does not yaw)."""
+        targets = self.machine.position_targets
+        if not targets:
+            return
+        local = None
+        for i, p in enumerate(self.proxies):
+            vid = self.ids[i]
+            tie = self.ties.ties[i]
+            if vid not in targets or tie is None:
+                continue
+            if vid not in self._goto_yaw_ned:
+                if local is None:
+                    local = self.ties.rotations_to_local(sample.rotation)
+                yaw_enu = float(yaw_rad(local[i:i + 1])[0])
+                self._goto_yaw_ned[vid] = math.remainder(math.pi / 2.0 - yaw_enu, 2.0 * math.pi)
+            position, velocity = targets[vid]
+            ned = frames.ned_from_enu(tie.local_from_team(position))
+            v_ned = frames.ned_from_enu(tie.vectors_local_from_team(velocity))
+            try:
+                p.send_position_target(ned, v_ned, self._goto_yaw_ned[vid])
+            except SetpointError as exc:
+                self._setpoint_errors += 1
+                self.machine.request_abort(str(exc), operator=False)
 
     async def _origins_loop(self) -> None:
         """Tie each vehicle's local frame to the team frame through its origin: GPS_GLOBAL_ORIGIN
@@ -782,6 +836,10 @@ class Flight:
             self._k0 = k
             fly = self.team.fly
             self.law.heading_rad = command_heading_rad(fly.heading, sample.rotation)
+            for vid, r in self.machine.goto_results.items():
+                i = self.team.index_of(vid)
+                self._start_error_m[vid] = float(np.linalg.norm(
+                    sample.position_m[i] - np.asarray(r.target_enu_m)))
             if not self._initial_mass_from_hover(sample, now_s):
                 return self.last_command
         t = (k - self._k0) * self.period_s
@@ -891,6 +949,9 @@ class Flight:
             "outcome": {"exit_code": outcome.exit_code, "reason": outcome.reason},
             "hover_estimates": {str(vid): dataclasses.asdict(e)
                                 for vid, e in self.hover_estimates.items()},
+            "go_to_start": {str(vid): {**dataclasses.asdict(r),
+                                       "error_at_t0_m": self._start_error_m.get(vid)}
+                            for vid, r in self.machine.goto_results.items()},
             "events": self.machine.notes[-50:],
             "statustext": self._statustexts(),
         })

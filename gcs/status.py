@@ -62,7 +62,7 @@ class _Rate:
 
 def snapshot(flight: Flight, rates: _Rate, now_s: float) -> StatusSnapshot:
     m = flight.machine
-    streaming = m.streaming
+    streaming = m.streaming | frozenset(m.position_targets)
     cmd = flight.last_command
     lines = []
     for i, p in enumerate(flight.proxies):

@@ -7,7 +7,10 @@ it uses with a wrong type or value raises ``TeamFileError`` naming the key path,
 
 Keys read: ``sim.plant_rate_hz``; ``vehicles[].id / sysid / initial / airframe / plant / link``;
 top-level ``faults`` (``{kind, vehicle, at_s, ...}``); ``emulator.autopilot / origin`` and
-``vehicles[].emulator.autopilot / origin_enu_m`` (personality.py). Positions are ENU metres, z up.
+``vehicles[].emulator.autopilot / origin_enu_m / boot_position_enu_m`` (personality.py). Positions
+are ENU metres, z up. A vehicle boots at ``emulator.boot_position_enu_m`` when given (e.g. on the
+ground, away from the team file's start position, which a ground station then flies it to), else
+at ``initial.position_enu_m``.
 """
 
 from __future__ import annotations
@@ -233,6 +236,10 @@ def _vehicle(raw: Any, index: int, team_emulator: dict[str, Any]) -> VehicleSpec
         else _vec3(inertia_raw, f"{path}.plant.inertia_kgm2", positive=True)
     )
     pos_raw = _get(initial, "position_enu_m", f"{path}.initial")
+    pos_path = f"{path}.initial.position_enu_m"
+    boot_raw = _get(emulator, "boot_position_enu_m", f"{path}.emulator")
+    if boot_raw is not None:
+        pos_raw, pos_path = boot_raw, f"{path}.emulator.boot_position_enu_m"
     vel_raw = _get(initial, "velocity_enu_mps", f"{path}.initial")
 
     # The team file describes the link from the ground station's side (local_port: where the
@@ -272,7 +279,7 @@ def _vehicle(raw: Any, index: int, team_emulator: dict[str, Any]) -> VehicleSpec
         position_enu_m=(
             base.position_enu_m
             if pos_raw is None
-            else _vec3(pos_raw, f"{path}.initial.position_enu_m")
+            else _vec3(pos_raw, pos_path)
         ),
         velocity_enu_mps=(
             (0.0, 0.0, 0.0)

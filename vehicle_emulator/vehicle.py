@@ -171,14 +171,20 @@ class VehicleNode:
     # --- state exchange with the fleet arrays ------------------------------------------------
 
     def observe(self) -> Observation:
-        """Current observation of this vehicle from the plant arrays."""
+        """This vehicle as its autopilot knows it: with a sensor model (the calibrated
+        personalities), its own estimates (what PX4 and ArduPilot hold, take off from and fly
+        their position loops on, and what LOCAL_POSITION_NED reports), else the plant's state;
+        the landed flag is the plant's."""
         i, p = self.index, self.plant
-        pos = p.position_enu_m[i]
-        vel = p.velocity_enu_mps[i]
+        ob = p.onboard
+        est = bool(ob.sensor_model[i])
+        pos = ob.position_est_enu_m[i] if est else p.position_enu_m[i]
+        vel = ob.velocity_est_enu_mps[i] if est else p.velocity_enu_mps[i]
+        rot = ob.rotation_est[i] if est else p.rotation[i]
         return Observation(
             (float(pos[0]), float(pos[1]), float(pos[2])),
             (float(vel[0]), float(vel[1]), float(vel[2])),
-            math.atan2(p.rotation[i, 1, 0], p.rotation[i, 0, 0]),
+            math.atan2(rot[1, 0], rot[0, 0]),
             bool(p.on_ground[i]),
             float(self.status.battery_remaining[i]),
         )

@@ -8,6 +8,7 @@ checks), describe (what `gcs check` prints).
 
 from gcs.config.describe import describe
 from gcs.config.reader import (
+    check_go_to_start,
     load_team,
     team_from_dict,
     team_from_yaml,
@@ -40,6 +41,7 @@ from gcs.config.schema import (
     FrameConfig,
     Gains,
     GeofenceConfig,
+    GoToStartConfig,
     GraphConfig,
     InitialState,
     LinkConfig,
@@ -81,6 +83,7 @@ __all__ = [
     "FlyModeConfig",
     "FormationCheckConfig",
     "GeofenceConfig",
+    "GoToStartConfig",
     "Gains",
     "GraphConfig",
     "InitialState",
@@ -94,6 +97,7 @@ __all__ = [
     "SimConfig",
     "TeamConfig",
     "VehicleConfig",
+    "check_go_to_start",
     "describe",
     "initial_phi",
     "load_team",

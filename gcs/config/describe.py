@@ -7,10 +7,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from gcs.config.reader import check_go_to_start
 from gcs.config.schema import (
     GAIN_NAMES,
     GRAVITY_MPS2,
     THRUST_MARGIN,
+    ConfigError,
     FaultConfig,
     FlyModeConfig,
     TeamConfig,
@@ -103,6 +105,7 @@ def describe(team: TeamConfig) -> str:
         f"{fly.link_loss_action}; stale after {fly.stale_after_s:g} s, lost after "
         f"{fly.link_lost_after_s:g} s in flight, link timeout {fly.link_timeout_s:g} s; max tilt "
         f"{fly.max_tilt_rad:g} rad; {fence}",
+        _go_to_start_line(team),
     ]
     out.append("faults:" + ("" if team.faults else " none"))
     for f in team.faults:
@@ -194,3 +197,18 @@ def _link(team: TeamConfig, v: VehicleConfig) -> str:
         return f"{text} -> {fixed}"
     first = f" (until then {fixed})" if lk.remote_port is not None else ""
     return f"{text} -> the address its first message comes from{first}"
+
+
+def _go_to_start_line(team: TeamConfig) -> str:
+    """fly.go_to_start, and whether `gcs fly` would refuse the start positions."""
+    g = team.fly.go_to_start
+    if g.enabled == "false":
+        return "     go to start: off (the law starts where the vehicles are)"
+    text = (f"     go to start {g.enabled}: settled within {g.tolerance_m:g} m, drift < "
+            f"{g.max_speed_mps:g} m/s over {g.settle_s:g} s, timeout {g.timeout_s:g} s, cruise "
+            f"{g.cruise_speed_mps:g} m/s; start positions >= {g.min_altitude_m:g} m")
+    try:
+        check_go_to_start(team)
+    except ConfigError as exc:
+        text += f"\n     gcs fly refuses this team file: {exc.problem}"
+    return text

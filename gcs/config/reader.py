@@ -25,6 +25,7 @@ from gcs.config.schema import (
     FLY_STARTS,
     FRAME_VEHICLES,
     GAIN_NAMES,
+    GO_TO_START_ENABLED,
     GRAVITY_MPS2,
     LAWS,
     MODES,
@@ -47,6 +48,7 @@ from gcs.config.schema import (
     FrameConfig,
     Gains,
     GeofenceConfig,
+    GoToStartConfig,
     GraphConfig,
     InitialState,
     LinkConfig,
@@ -369,8 +371,9 @@ def _emulator_section(node: _Node, allowed: str) -> None:
     node.child("autopilot").string(None, choices=EMULATOR_AUTOPILOTS)
     if "origin" in allowed.split():
         node.child("origin").string(None, choices=EMULATOR_ORIGINS)
-    if "origin_enu_m" in allowed.split() and not node.child("origin_enu_m").absent:
-        node.child("origin_enu_m").vec3()
+    for key in ("origin_enu_m", "boot_position_enu_m"):
+        if key in allowed.split() and not node.child(key).absent:
+            node.child(key).vec3()
 
 
 def _estimates(est: _Node, plant: _Node, gains: Gains) -> Estimates:
@@ -396,7 +399,7 @@ def _vehicle(node: _Node, gains: Gains) -> VehicleConfig:
         "id sysid offset_enu_m initial estimates airframe",
         "link plant nominal_mass_kg nominal_inertia_kgm2 emulator",
     )
-    _emulator_section(node.child("emulator"), "autopilot origin_enu_m")
+    _emulator_section(node.child("emulator"), "autopilot origin_enu_m boot_position_enu_m")
     vehicle_id = node.child("id").integer(ge=1)
     sysid = node.child("sysid").integer(ge=1, le=255)
     ini = node.child("initial").keys(
@@ -628,6 +631,55 @@ def _formation_check(node: _Node, d: FormationCheckConfig) -> FormationCheckConf
     )
 
 
+def _go_to_start(node: _Node, d: GoToStartConfig) -> GoToStartConfig:
+    """fly.go_to_start (docs/configuration.md); `enabled` is auto, true or false."""
+    if node.absent:
+        return d
+    node.keys("", "enabled tolerance_m max_speed_mps settle_s timeout_s cruise_speed_mps "
+                  "min_altitude_m")
+    enabled_node = node.child("enabled")
+    if enabled_node.absent:
+        enabled = d.enabled
+    elif isinstance(enabled_node.value, bool):
+        enabled = "true" if enabled_node.value else "false"
+    else:
+        enabled = enabled_node.string(choices=GO_TO_START_ENABLED)
+    return GoToStartConfig(
+        enabled,
+        node.child("tolerance_m").number(d.tolerance_m, gt=0.0),
+        node.child("max_speed_mps").number(d.max_speed_mps, gt=0.0),
+        node.child("settle_s").number(d.settle_s, ge=0.0),
+        node.child("timeout_s").number(d.timeout_s, gt=0.0),
+        node.child("cruise_speed_mps").number(d.cruise_speed_mps, gt=0.0, le=20.0),
+        node.child("min_altitude_m").number(d.min_altitude_m, gt=0.0),
+    )
+
+
+def check_go_to_start(team: TeamConfig) -> None:
+    """`gcs fly` with go-to-start on: every start position (`initial.position_enu_m`) must be a
+    safe place to fly to, at or above fly.go_to_start.min_altitude_m and inside fly.geofence;
+    raises ConfigError naming the key path and the vehicle. (`gcs sim` starts its plants there
+    whatever the altitude, so the reader itself does not ask for this.)"""
+    g = team.fly.go_to_start
+    if g.enabled == "false":
+        return
+    for k, v in enumerate(team.vehicles):
+        p = v.initial.position_enu_m
+        key, name = f"vehicles[{k}].initial.position_enu_m", f"vehicle {v.id} (sysid {v.sysid})"
+        if p[2] < g.min_altitude_m:
+            raise ConfigError(team.source_path, key, (
+                f"{name}: start altitude z = {p[2]:g} m is below fly.go_to_start.min_altitude_m "
+                f"{g.min_altitude_m:g}: the go-to-start phase flies every vehicle to its start "
+                "position; set it higher, or fly.go_to_start.enabled: false to start the law "
+                "where the vehicles are"))
+        fence = team.fly.geofence
+        for axis in range(3) if fence is not None else ():
+            if not fence.min_enu_m[axis] < p[axis] < fence.max_enu_m[axis]:
+                raise ConfigError(team.source_path, key, (
+                    f"{name}: start position {'xyz'[axis]} = {p[axis]:g} m is outside "
+                    f"fly.geofence [{fence.min_enu_m[axis]:g}, {fence.max_enu_m[axis]:g}] m"))
+
+
 def _heading(node: _Node) -> str | float:
     """fly.heading: 'hold', 'paper', or a compass heading in degrees."""
     if node.absent:
@@ -651,7 +703,7 @@ def _fly(node: _Node) -> FlyConfig:
         "link_loss_action stale_after_s link_lost_after_s link_timeout_s max_tilt_rad geofence "
         "log_rate_hz connect_timeout_s takeoff_timeout_s land_timeout_s takeoff_tolerance_m "
         "arm_timeout_s arm_retry_s mode_timeout_s formation_check response link_delay_s "
-        "initial_mass",
+        "initial_mass go_to_start",
     )
     geofence = None
     g = node.child("geofence")
@@ -694,6 +746,7 @@ def _fly(node: _Node) -> FlyConfig:
         response=_response(node.child("response")),
         link_delay_s=node.child("link_delay_s").number(d.link_delay_s, ge=0.0, le=1.0),
         initial_mass=node.child("initial_mass").string(d.initial_mass, FLY_INITIAL_MASSES),
+        go_to_start=_go_to_start(node.child("go_to_start"), d.go_to_start),
     )
     if not fly.takeoff_tolerance_m < fly.takeoff_altitude_m:
         node.child("takeoff_tolerance_m").fail(

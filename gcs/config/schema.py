@@ -367,6 +367,26 @@ class FormationCheckConfig:
     max_fraction: float = 0.5
 
 
+GO_TO_START_ENABLED = ("auto", "true", "false")
+
+
+@dataclass(frozen=True, slots=True)
+class GoToStartConfig:
+    """`fly.go_to_start`: before the formation, fly each vehicle to its team-file start position
+    (`initial.position_enu_m`) with position setpoints, first vertically to the start altitude,
+    then across at it, and start the law once every one has settled (docs/gcs.md, "Go to
+    start"). `enabled`: auto (the vehicles that took off in this flight), true (every vehicle),
+    false (none: the law starts where the vehicles are)."""
+
+    enabled: str = "auto"
+    tolerance_m: float = 0.3  # settled: within this of the start position ...
+    max_speed_mps: float = 0.1  # ... and drifting slower than this ...
+    settle_s: float = 2.0  # ... continuously for this long
+    timeout_s: float = 60.0  # every vehicle settled within this, else the flight stops
+    cruise_speed_mps: float = 2.0  # the position setpoint moves along each leg at this speed
+    min_altitude_m: float = 2.0  # start positions lower than this are refused (config error)
+
+
 @dataclass(frozen=True, slots=True)
 class ResponseConfig:
     """`fly.response`: how the vehicles' own loops answer a setpoint, for the cascade criterion
@@ -420,6 +440,7 @@ class FlyConfig:
     # from_hover` (gcs fly only; gcs sim keeps the scenario's estimates)
     initial_mass: str = "team"
     link_delay_s: float = 0.01  # one-way link delay the cascade criterion assumes [s]
+    go_to_start: GoToStartConfig = GoToStartConfig()
 
     def mode(self, name: str) -> FlyModeConfig:
         """The settings of control mode `name` ('rates', 'actuators' or 'attitude')."""

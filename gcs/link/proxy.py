@@ -54,6 +54,10 @@ logger = logging.getLogger(__name__)
 
 TYPE_MASK_RATES_THRUST = 128  # ATTITUDE_IGNORE: body rates + thrust
 TYPE_MASK_ATTITUDE_THRUST = 7  # roll/pitch/yaw rates ignored: attitude + thrust
+#: SET_POSITION_TARGET_LOCAL_NED: acceleration (64, 128, 256) and yaw rate (2048) ignored:
+#: position, velocity (the position loop's feed-forward) and yaw
+TYPE_MASK_POSITION_VELOCITY_YAW = 64 | 128 | 256 | 2048
+MAV_FRAME_LOCAL_NED = 1
 AUTOPILOT_VERSION_ID = 148  # REQUEST_MESSAGE param1
 FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 forcing arm/disarm (PX4; ArduPilot disarm)
 #: Stranger addresses logged per vehicle (all are counted); a flood does not flood the log.
@@ -568,6 +572,21 @@ class VehicleProxy:
         self._send(self._codec.mav.set_attitude_target_encode(
             self._time_boot_ms(), self.config.sysid, self.config.compid,
             TYPE_MASK_ATTITUDE_THRUST, [float(x) for x in q], 0.0, 0.0, 0.0, thrust))
+        self._n["setpoints_sent"] += 1
+
+    def send_position_target(self, position_ned_m: ArrayLike, velocity_ned_mps: ArrayLike,
+                             yaw_ned_rad: float) -> None:
+        """SET_POSITION_TARGET_LOCAL_NED, MAV_FRAME_LOCAL_NED (the vehicle's own local frame:
+        PX4's and ArduPilot's EKF origin): position [m, NED], velocity feed-forward [m/s, NED]
+        and yaw [rad, from north, clockwise], accelerations and yaw rate ignored (type_mask
+        2496); returns immediately."""
+        pos = self._finite(position_ned_m, (3,), "position_ned_m")
+        vel = self._finite(velocity_ned_mps, (3,), "velocity_ned_mps")
+        yaw = self._finite(yaw_ned_rad, (), "yaw_ned_rad")
+        self._send(self._codec.mav.set_position_target_local_ned_encode(
+            self._time_boot_ms(), self.config.sysid, self.config.compid, MAV_FRAME_LOCAL_NED,
+            TYPE_MASK_POSITION_VELOCITY_YAW, *(float(x) for x in pos), *(float(x) for x in vel),
+            0.0, 0.0, 0.0, float(yaw), 0.0))
         self._n["setpoints_sent"] += 1
 
     def send_actuator_controls(self, torque_flu_norm: ArrayLike, thrust_norm: float) -> None:

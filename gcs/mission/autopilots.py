@@ -10,12 +10,13 @@ mode was chosen).
   hold AUTO_LOITER; land with MAV_CMD_NAV_LAND; NAV_TAKEOFF with an AMSL
   altitude, after which PX4 switches itself to AUTO_LOITER; the OFFBOARD switch needs a setpoint
   younger than COM_OF_LOSS_T (1 s); the PRIME phase streams for longer than that first, as good
-  practice.
+  practice. Go-to-start: SET_POSITION_TARGET_LOCAL_NED in OFFBOARD, streamed before the switch.
 * ArduPilot Copter (3): GUIDED_NOGPS (20), the attitude-only guided mode; hold BRAKE (17); land
   with the LAND mode (9); take off in GUIDED (4) with NAV_TAKEOFF at a relative altitude, then
   BRAKE before the setpoint stream starts (ArduPilot acts on SET_ATTITUDE_TARGET at once in GUIDED
-  and GUIDED_NOGPS, and ignores it in every other mode). Preflight: GUID_OPTIONS bit 3 (8) must
-  be set, otherwise `thrust` is read as a climb rate.
+  and GUIDED_NOGPS, and ignores it in every other mode). Go-to-start: SET_POSITION_TARGET_LOCAL_NED
+  in GUIDED (relative to its EKF origin), where its takeoff leaves it. Preflight: GUID_OPTIONS
+  bit 3 (8) must be set, otherwise `thrust` is read as a climb rate.
 """
 
 from __future__ import annotations
@@ -81,6 +82,12 @@ class AutopilotProfile:
     setpoint_modes: frozenset[str]  # modes in which the autopilot acts on SET_ATTITUDE_TARGET
     hold_before_prime: bool  # airborne vehicles in setpoint_modes go to `hold` before priming
     control_modes: frozenset[str]  # `gcs fly --mode` values whose setpoints it acts on
+    # go-to-start: the mode that flies SET_POSITION_TARGET_LOCAL_NED (PX4 OFFBOARD, ArduPilot
+    # GUIDED), and whether the vehicle needs the setpoint stream in it (PX4: OFFBOARD is refused
+    # without a recent setpoint and left by a failsafe COM_OF_LOSS_T after the last one;
+    # ArduPilot's GUIDED holds position on its own)
+    position_mode: ModeSpec = ModeSpec("OFFBOARD", 6)
+    position_needs_stream: bool = True
     required_params: tuple[ParamRequirement, ...] = ()
     # newest firmware (major, minor) that acts on SET_ACTUATOR_CONTROL_TARGET; None: never. The
     # version is read from AUTOPILOT_VERSION before an `actuators` flight (`needs_version`)
@@ -175,6 +182,8 @@ ARDUPILOT = AutopilotProfile(
     setpoint_modes=frozenset({"GUIDED", "GUIDED_NOGPS"}),
     hold_before_prime=True,
     control_modes=frozenset({"rates", "attitude"}),  # SET_ATTITUDE_TARGET only
+    position_mode=ModeSpec("GUIDED", 4),  # where it is after NAV_TAKEOFF
+    position_needs_stream=False,
     required_params=(GUID_OPTIONS_THRUST,),
     force_arm_magic=2989,
     force_disarm_magic=21196,

@@ -1,7 +1,7 @@
 """The flight sequence of `gcs fly` as an explicit, pure state machine (sans-IO).
 
-Phases: CONNECT -> PREFLIGHT -> [ARM -> TAKEOFF] -> [HOLD] -> PRIME -> FORMATION -> STOPPING ->
-DONE.
+Phases: CONNECT -> PREFLIGHT -> [ARM -> TAKEOFF] -> [GOTO] -> [HOLD] -> PRIME -> FORMATION ->
+STOPPING -> DONE.
 
 Each vehicle is driven through its autopilot's profile (gcs.mission.autopilots, chosen from its
 HEARTBEAT.autopilot and fixed at preflight): "offboard" below means the profile's offboard mode
@@ -17,6 +17,13 @@ while `law_active`. Rules (docs/gcs.md):
 * Setpoints stream to a vehicle from PRIME until it has acknowledged its stop command (LAND or
   HOLD) AND reported a mode other than offboard: a vehicle is never left in offboard without
   setpoints while its link is up. A lost vehicle gets nothing (its own offboard-loss failsafe acts).
+* Go to start (GOTO, gcs.mission.goto): the vehicles the plan's `go_to_start` names (by default
+  those that took off) get position setpoints (`position_targets`, team ENU) towards their
+  team-file start positions, first vertically, then across; the setpoints stream before the
+  profile's position mode is commanded (PX4 OFFBOARD, ArduPilot GUIDED); once every one has
+  settled they go to hold (HOLD phase) and PRIME starts from there. A vehicle that got position
+  setpoints keeps getting them, in GOTO, HOLD and STOPPING, until it has acknowledged its hold
+  or stop command AND reports a mode other than its position mode.
 * Priming is inert: before PRIME, an airborne vehicle whose autopilot would act on the priming
   setpoints at once (ArduPilot in GUIDED, e.g. after its takeoff) is switched to hold (HOLD phase).
 * Autopilot parameters the profile requires (ArduPilot GUID_OPTIONS) are read in PREFLIGHT
@@ -50,6 +57,14 @@ from enum import Enum
 
 from gcs.link.enums import LandedState
 from gcs.mission.autopilots import PX4, AutopilotProfile, profile_for
+from gcs.mission.goto import (
+    GotoResult,
+    GoToStart,
+    GoToStartPlan,
+    Vec3,
+    crossing_pairs,
+    going_line,
+)
 from gcs.mission.safety import (
     Problem,
     SafetyRules,
@@ -72,6 +87,7 @@ class Phase(Enum):
     PREFLIGHT = "preflight"
     ARM = "arm"
     TAKEOFF = "takeoff"
+    GOTO = "goto"  # fly to the team file's start positions (position setpoints)
     HOLD = "hold"  # only when needed: airborne vehicles that would act on priming setpoints
     PRIME = "prime"
     FORMATION = "formation"
@@ -89,6 +105,8 @@ class Cmd(Enum):
     ARM = "arm"  # confirmed when HEARTBEAT shows armed
     TAKEOFF = "takeoff"  # altitude_m above home
     OFFBOARD = "offboard"  # the profile's offboard mode (PX4 OFFBOARD, ArduPilot GUIDED_NOGPS)
+    POSITION_MODE = "position_mode"  # the profile's position mode (PX4 OFFBOARD, ArduPilot
+    # GUIDED), for the go-to-start position setpoints; confirmed
     HOLD = "hold"  # the profile's hold mode (PX4 AUTO_LOITER, ArduPilot BRAKE)
     LAND = "land"  # PX4 NAV_LAND, ArduPilot LAND mode
     DISARM = "disarm"
@@ -154,6 +172,7 @@ class MissionPlan:
     disarm_after_landed_s: float = 3.0  # PX4 auto-disarms after COM_DISARM_LAND (2 s)
     command_attempts: int = 3  # per stop command (each has its own ack retries)
     command_retry_s: float = 1.0  # between two attempts of a refused stop command
+    go_to_start: GoToStartPlan | None = None  # None: no go-to-start phase
 
 
 @dataclass(slots=True)
@@ -200,6 +219,17 @@ class _Vehicle:
     version_asked: bool = False
     heard: bool = False  # a message has arrived since the flight started (CONNECT)
     arm: _Arm | None = None  # vehicles that take off
+    goto: _Goto | None = None  # vehicles that go to their start position
+
+
+@dataclass(slots=True)
+class _Goto:
+    """One vehicle's part in GOTO: position setpoints stream to it until `released`."""
+
+    mode_sent: bool = False
+    seen_position_mode: bool = False
+    hold_acked: bool = False
+    released: bool = False  # acknowledged its hold/stop and left its position mode
 
 
 @dataclass(slots=True)
@@ -224,6 +254,7 @@ class MissionMachine:
     _waiting_ready: bool = False  # PREFLIGHT waits for vehicles on the ground not ready yet
     _formation_error_m: float = math.nan  # latest, from the composition root
     _error_t0: float | None = None  # formation error at the formation start
+    _goto: GoToStart | None = None  # the team's go-to-start progress
 
     def __post_init__(self) -> None:
         self._v = {vid: _Vehicle() for vid in self.vehicle_ids}
@@ -251,6 +282,27 @@ class MissionMachine:
                 and not (v.stop.acked and v.status is not None and not self._in_offboard(vid))
             )
         return frozenset()
+
+    @property
+    def position_targets(self) -> dict[int, tuple[Vec3, Vec3]]:
+        """Vehicles that must get a position setpoint this tick: (position [m], velocity
+        feed-forward [m/s]), team ENU; in
+        GOTO every vehicle going to its start; afterwards (HOLD, STOPPING) each until it has
+        acknowledged its hold or stop command and left its position mode. Never a vehicle that
+        is in `streaming`."""
+        g = self._goto
+        if g is None or self.phase not in (Phase.GOTO, Phase.HOLD, Phase.STOPPING):
+            return {}
+        out = {}
+        for vid, v in self._v.items():
+            if v.goto is not None and not v.lost and not v.goto.released:
+                out[vid] = g.target(vid, self._now_s)
+        return out
+
+    @property
+    def goto_results(self) -> dict[int, GotoResult]:
+        """Per vehicle that went to its start: target, final error and speed, time taken."""
+        return dict(self._goto.results) if self._goto is not None else {}
 
     @property
     def lost(self) -> frozenset[int]:
@@ -300,6 +352,9 @@ class MissionMachine:
             v.arm.last_result = result.result or "FAILED"
             if self.profile(result.vehicle_id).arm_retryable(v.arm.last_result, result.text):
                 return self._drive()  # not ready yet: tried again after arm_retry_s
+        if result.cmd in (Cmd.HOLD, Cmd.LAND) and result.ok and v.goto is not None:
+            v.goto.hold_acked = True
+            self._update_goto_vehicle(result.vehicle_id)
         if result.cmd is Cmd.OFFBOARD:
             v.offboard_acked = result.ok
             if not result.ok and self.phase is Phase.FORMATION:
@@ -318,7 +373,7 @@ class MissionMachine:
                 v.stop.done = True
                 v.stop.failure = f"{result.cmd.value} not accepted ({result.detail})"
         elif not result.ok and self.phase in (Phase.CONNECT, Phase.PREFLIGHT, Phase.ARM,
-                                              Phase.TAKEOFF, Phase.HOLD):
+                                              Phase.TAKEOFF, Phase.GOTO, Phase.HOLD):
             self._begin_stop(
                 [Problem(result.vehicle_id, f"vehicle {result.vehicle_id}: {result.cmd.value} "
                                             f"failed: {result.detail}")],
@@ -340,6 +395,8 @@ class MissionMachine:
             v.status = s
             if v.offboard_sent and self._in_offboard(s.vehicle_id):
                 v.seen_offboard = True
+            if v.goto is not None:
+                self._update_goto_vehicle(s.vehicle_id)
         if self._abort:
             reasons = [r for r, _ in self._abort]
             code = max(c for _, c in self._abort)
@@ -361,6 +418,7 @@ class MissionMachine:
             Phase.PREFLIGHT: self._preflight,
             Phase.ARM: self._arm_and_take_off,
             Phase.TAKEOFF: self._takeoff,
+            Phase.GOTO: self._go_to_start,
             Phase.HOLD: self._hold,
             Phase.PRIME: self._prime,
             Phase.FORMATION: self._formation,
@@ -473,7 +531,7 @@ class MissionMachine:
                 self._v[vid].arm = _Arm()
             self._enter(Phase.ARM)
             return self._drive()
-        return self._to_prime()
+        return self._to_goto()
 
     def _not_ready_yet(self, problems: list[Problem]) -> bool:
         """Wait (True) while every problem is a vehicle on the ground not ready yet (a stream or
@@ -526,8 +584,9 @@ class MissionMachine:
         held = []
         for vid, v in self._v.items():
             s, profile = v.status, self.profile(vid)
-            if (s is not None and s.in_air and profile.hold_before_prime
-                    and s.mode in profile.setpoint_modes):
+            if s is not None and s.in_air and (
+                    (profile.hold_before_prime and s.mode in profile.setpoint_modes)
+                    or (v.goto is not None and not v.goto.released)):
                 held.append(vid)
         if not held:
             self._enter(Phase.PRIME)
@@ -542,7 +601,7 @@ class MissionMachine:
         waiting = [vid for vid in self._held
                    if not (self._v[vid].status is not None
                            and self._v[vid].status.mode == self.profile(vid).hold.name)]
-        if not waiting:
+        if not waiting and not self.position_targets:
             self._enter(Phase.PRIME)
         elif self._elapsed() > self.plan.hold_timeout_s:
             names = ", ".join(f"{vid} ({self.profile(vid).hold.name})" for vid in waiting)
@@ -551,6 +610,78 @@ class MissionMachine:
                              EXIT_ABORTED)
             return self._drive()
         return []
+
+    # --- go to start --------------------------------------------------------------------------
+
+    def _to_goto(self) -> list[Command]:
+        """GOTO for the vehicles the plan names (module docstring), else PRIME (via HOLD)."""
+        plan = self.plan.go_to_start
+        flown = plan.flown(self._arming, self.vehicle_ids) if plan is not None else ()
+        if not flown:
+            return self._to_prime()
+        positions = {vid: self._v[vid].status.position_enu_m for vid in flown}
+        self._goto = GoToStart.begin(plan, self._now_s, positions)
+        for vid in flown:
+            self._v[vid].goto = _Goto()
+        self._enter(Phase.GOTO)
+        for vid in flown:
+            self._note(going_line(self._v[vid].status.name, plan.start_of(vid), positions[vid]))
+        starts = {vid: plan.start_of(vid) for vid in flown}
+        for i, j, d in crossing_pairs(positions, starts, plan.separation_m):
+            self._note(f"warning: vehicles {i} and {j} start within {plan.separation_m:g} m of "
+                       f"one altitude and their horizontal legs come {d:.2f} m apart")
+        return self._drive()
+
+    def _update_goto_vehicle(self, vid: int) -> None:
+        """Track a go-to-start vehicle's mode: seen in its position mode; released once it has
+        acknowledged its hold/stop command and reports another mode."""
+        v = self._v[vid]
+        g, s = v.goto, v.status
+        if g is None or s is None:
+            return
+        in_mode = s.mode == self.profile(vid).position_mode.name
+        g.seen_position_mode = g.seen_position_mode or in_mode
+        if g.hold_acked and not in_mode:
+            g.released = True
+
+    def _go_to_start(self) -> list[Command]:
+        g, plan = self._goto, self.plan.go_to_start
+        assert g is not None and plan is not None
+        flown = [vid for vid, v in self._v.items() if v.goto is not None]
+        problems = flight_problems(self._statuses(), self.plan.rules)
+        for vid in flown:
+            v, s = self._v[vid], self._v[vid].status
+            name = self.profile(vid).position_mode.name
+            if v.goto.seen_position_mode and s is not None and s.link == "alive" \
+                    and s.mode != name and v.pending is None:
+                problems.append(Problem(vid, f"{s.name}: left {name} during the go-to-start "
+                                             f"(now {s.mode or '?'})", "mode"))
+        if problems:
+            self._begin_stop(problems, EXIT_ABORTED)
+            return self._drive()
+        out = []
+        for vid in flown:
+            v = self._v[vid]
+            if (v.pending is None and not v.goto.mode_sent
+                    and v.status.mode != self.profile(vid).position_mode.name
+                    and self._elapsed() >= plan.lead_s):
+                v.goto.mode_sent = True
+                out.append(self._send(vid, Cmd.POSITION_MODE))
+        positions = {vid: self._v[vid].status.position_enu_m for vid in flown}
+        velocities = {vid: self._v[vid].status.velocity_enu_mps for vid in flown}
+        in_mode = all(self._v[vid].status.mode == self.profile(vid).position_mode.name
+                      for vid in flown)
+        if in_mode and self._idle(flown) and g.update(self._now_s, positions, velocities):
+            self._note(g.settled_line())
+            return out + self._to_prime()
+        if g.timed_out(self._now_s):
+            names = {vid: self._v[vid].status.name for vid in flown}
+            lines = g.not_settled_lines(self._now_s, names, positions)
+            self._begin_stop([Problem(None, "\n  ".join(
+                [f"not every vehicle settled at its start position within "
+                 f"{plan.timeout_s:g} s (fly.go_to_start.timeout_s):", *lines]))], EXIT_ABORTED)
+            return out + self._drive()
+        return out
 
     def _arm_and_take_off(self) -> list[Command]:
         """Each ground vehicle on its own: its arm mode (unless it reports it), its pre-arm
@@ -610,7 +741,7 @@ class MissionMachine:
         alt, tol = self.plan.takeoff_altitude_m, self.plan.takeoff_tolerance_m
         waiting = [vid for vid in self._arming if not self._took_off(vid, alt - tol)]
         if not waiting:
-            return self._to_prime()
+            return self._to_goto()
         if self._elapsed() > self.plan.takeoff_timeout_s:
             lines = [self._takeoff_line(vid) for vid in waiting]
             self._begin_stop([Problem(None, "\n  ".join(

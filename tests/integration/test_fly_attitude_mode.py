@@ -43,6 +43,9 @@ def ground_team(tmp: Path, bind_base: int, duration_s: float) -> Path:
         v["initial"]["attitude_rpy_rad"] = [0.0, 0.0, YAWS_ENU_RAD[k]]
         v["estimates"]["mhat"] = "from_hover"
     data["fly"].update(start="takeoff", takeoff_altitude_m=2.5)
+    # the formation starts at 2.5 m, where PX4 SIH sank from: no go-to-start (the start
+    # positions are on the ground)
+    data["fly"]["go_to_start"] = {"enabled": False}
     data["fly"]["geofence"]["min_enu_m"][2] = 0.5
     data["emulator"] = {"autopilot": "px4"}  # each vehicle's own origin, where it boots
     path = tmp / "team.yaml"

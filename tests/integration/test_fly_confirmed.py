@@ -37,8 +37,9 @@ COMMAND_LINE = re.compile(r"command (\d+) \(([^)]*)\) -> (\w+)")
 def px4_team(tmp: Path, *, duration_s: float, ground: bool = True, name: str = "team",
              origins: dict[int, list[float]] | None = None, fly: dict | None = None,
              faults: list | None = None, params: dict[int, dict] | None = None) -> Path:
-    """configs/square4.yaml on free ports, rates mode, the px4 personality, vehicles on the
-    ground under their team-file positions (``ground``) or in the air there."""
+    """configs/square4.yaml on free ports, rates mode, the px4 personality, vehicles booting on
+    the ground under their team-file start positions (``ground``; the go-to-start phase then
+    climbs them there) or in the air there."""
     gcs_base, bind_base = free_udp_port_block(4), free_udp_port_block(4)
     data = yaml.safe_load((ROOT / "configs" / "square4.yaml").read_text())
     data["name"] = name
@@ -50,10 +51,12 @@ def px4_team(tmp: Path, *, duration_s: float, ground: bool = True, name: str = "
     data["emulator"] = {"autopilot": "px4", "origin": "shared"}
     for k, v in enumerate(data["vehicles"]):
         v["link"] = {"local_port": gcs_base + k, "remote_port": bind_base + k}
+        v["emulator"] = {}
         if ground:
-            v["initial"]["position_enu_m"][2] = 0.0
+            x, y, _ = v["initial"]["position_enu_m"]
+            v["emulator"]["boot_position_enu_m"] = [x, y, 0.0]
         if origins and v["id"] in origins:
-            v["emulator"] = {"origin_enu_m": origins[v["id"]]}
+            v["emulator"]["origin_enu_m"] = origins[v["id"]]
     path = tmp / f"{name}.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path

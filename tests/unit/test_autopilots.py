@@ -238,8 +238,11 @@ class World:
         for vid, s in self.v.items():
             # THE invariant: a vehicle in its offboard mode with its link up gets setpoints
             offboard = self.m.profile(vid).offboard.name
+            # (law setpoints, or the go-to-start's position setpoints; never both at once)
+            assert not self.m.streaming & set(self.m.position_targets)
             if s.mode == offboard and vid not in self.silent and not self.m.done:
-                assert vid in self.m.streaming, f"vehicle {vid} in {offboard} without setpoints"
+                assert vid in self.m.streaming or vid in self.m.position_targets, \
+                    f"vehicle {vid} in {offboard} without setpoints"
             # and priming is inert: before the formation no streamed setpoint is acted on
             if (self.m.formation_t0_s is None and vid in self.m.streaming
                     and s.autopilot == 3 and s.mode in ARDU_SETPOINT_MODES):
@@ -252,9 +255,40 @@ class World:
             self.tick()
 
 
+def fly_with_failures(m: MissionMachine, w, events, ticks: int) -> None:
+    """Tick the world `ticks` times (or until the mission ends), injecting the (tick, what,
+    vehicle) failures: operator abort, silent link, LAND refused, geofence breach, a mode of the
+    vehicle's own, or (worlds that fly position targets) a vehicle that does not move."""
+    at: dict[int, list] = {}
+    for k, what, vid in events:
+        at.setdefault(k, []).append((what, vid))
+    for k in range(ticks):
+        if m.done:
+            break
+        for what, vid in at.get(k, []):
+            if what == "abort":
+                m.request_abort("operator")
+            elif what == "silent":
+                w.silent.add(vid)
+            elif what == "reject":
+                w.reject.add((vid, Cmd.LAND))
+            elif what == "fence":
+                w.v[vid] = dataclasses.replace(w.v[vid], position_enu_m=(0.0, 0.0, 99.0))
+            elif what == "stuck":
+                w.stuck.add(vid)
+            else:
+                w.v[vid] = dataclasses.replace(w.v[vid], mode="LOITER")
+        w.tick()  # THEN World.tick's invariants hold
+
+
 def machine(ids=(1, 2), **plan) -> MissionMachine:
     return MissionMachine(MissionPlan(duration_s=plan.pop("duration_s", 5.0), rules=RULES, **plan),
                           tuple(ids))
+
+
+#: What an ArduPilot vehicle on the ground is sent over a whole flight
+ARDUPILOT_FROM_THE_GROUND = [Cmd.CONFIGURE, Cmd.READ_PARAMS, Cmd.ARM_MODE, Cmd.ARM, Cmd.TAKEOFF,
+                             Cmd.HOLD, Cmd.OFFBOARD, Cmd.LAND]
 
 
 def test_ardupilot_team_on_the_ground_takes_off_in_guided_brakes_flies_guided_nogps_and_lands():
@@ -267,8 +301,7 @@ def test_ardupilot_team_on_the_ground_takes_off_in_guided_brakes_flies_guided_no
     # the setpoints start, GUIDED_NOGPS, LAND
     assert m.outcome.exit_code == EXIT_OK, m.outcome
     for vid in (1, 2):
-        assert w.cmds(vid) == [Cmd.CONFIGURE, Cmd.READ_PARAMS, Cmd.ARM_MODE, Cmd.ARM,
-                               Cmd.TAKEOFF, Cmd.HOLD, Cmd.OFFBOARD, Cmd.LAND]
+        assert w.cmds(vid) == ARDUPILOT_FROM_THE_GROUND
         assert w.v[vid].mode == "LAND" and w.v[vid].landed and not w.v[vid].armed
     (read,) = [c for c in w.sent if c.cmd is Cmd.READ_PARAMS and c.vehicle_id == 1]
     assert read.names == ("GUID_OPTIONS",)
@@ -390,24 +423,7 @@ def test_mixed_team_invariants_under_random_failures(events, on_ground):
     # GIVEN a PX4 vehicle and two ArduPilot vehicles, random failures at random ticks
     m = machine(ids=(1, 2, 3), duration_s=8.0)
     w = World(m, {1: 12, 2: 3, 3: 3}, on_ground=on_ground)
-    at: dict[int, list] = {}
-    for k, what, vid in events:
-        at.setdefault(k, []).append((what, vid))
-    for k in range(1600):
-        if m.done:
-            break
-        for what, vid in at.get(k, []):
-            if what == "abort":
-                m.request_abort("operator")
-            elif what == "silent":
-                w.silent.add(vid)
-            elif what == "reject":
-                w.reject.add((vid, Cmd.LAND))
-            elif what == "fence":
-                w.v[vid] = dataclasses.replace(w.v[vid], position_enu_m=(0.0, 0.0, 99.0))
-            else:
-                w.v[vid] = dataclasses.replace(w.v[vid], mode="LOITER")
-        w.tick()  # THEN World.tick's invariants hold
+    fly_with_failures(m, w, events, 1600)
     assert m.done and m.outcome is not None
     assert w.acted_before_formation == []
 

@@ -1,0 +1,45 @@
+"""The emulated autopilots hold, take off from and fly to what they estimate, as PX4 and
+ArduPilot do: a mode that captures "here" (Hold, BRAKE, a position target's free axes) captures
+the vehicle's own position estimate, not the plant's true position (the calibrated personalities
+report, and fly their position loops on, truth plus an estimate error). Before, Hold captured the
+truth, and the reported position jumped by the estimate error at every switch (0.2-0.5 m on the
+px4 personality: the go-to-start's settled vehicles moved off their start positions in Hold)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mavlink
+
+from vehicle_emulator.codec import PeerDecoder
+from vehicle_emulator.runner import Emulator
+from vehicle_emulator.team import default_vehicle
+from vehicle_emulator.testing import RecordingLink, run_until
+
+GCS = mavlink.MAVLink(None, srcSystem=245, srcComponent=190)
+
+
+def _send(emu: Emulator, msg, link) -> None:
+    decoded = PeerDecoder().feed(msg.pack(GCS), "gcs")
+    emu.on_messages(emu.nodes[0], link, decoded, ("127.0.0.1", 1))
+
+
+def test_px4_hold_captures_the_position_estimate_so_the_reported_position_does_not_jump():
+    # GIVEN a vehicle of a calibrated personality holding in the air, noise on, long enough for
+    # its position estimate to be off the truth by centimetres to decimetres
+    spec = replace(default_vehicle(1, on_ground=False), autopilot="px4")
+    emu = Emulator([spec], seed=3, param_overrides={"EMU_NOISE": 1})
+    link = RecordingLink()
+    emu.nodes[0].links.append(link)
+    run_until(emu, 20.0)
+    plant = emu.plant
+    estimate = plant.onboard.position_est_enu_m[0].copy()
+    assert np.linalg.norm(estimate - plant.position_enu_m[0]) > 0.1  # the test can tell
+    # WHEN its hold mode is commanded (again): the autopilot captures "here"
+    _send(emu, mavlink.MAVLink_command_long_message(1, 1, 176, 0, 1 | 128, 4, 3, 0, 0, 0, 0), link)
+    # THEN "here" is where the vehicle believes it is (what it reports), not the truth
+    target = plant.position_sp_enu_m[0]
+    assert np.linalg.norm(target - estimate) < 0.01
+    assert math.isclose(plant.position_mask[0].min(), 1.0)
