@@ -182,7 +182,8 @@ def cascade_check(team: TeamConfig, mode: str, gains: LawGains,
     lines, refusals = [], {}
     for profile in PROFILES.values():
         ok, line = verdict(mode, cascade_gains, explicit or profile.response, eigenvalues,
-                           rate_hz, fly.link_delay_s, profile.name)
+                           rate_hz, fly.link_delay_s,
+                           "every vehicle" if explicit is not None else profile.name)
         if not ok and explicit is not None:
             raise FlightSetupError(line)
         if not ok:

@@ -76,8 +76,8 @@ def test_a_declared_response_that_fails_is_refused_before_any_link_opens():
                               yaw_time_constant_s=0.59, yaw_dead_time_s=0.099,
                               attitude_p_per_s=6.5, thrust_time_constant_s=0.05)
     team = dataclasses.replace(team, fly=dataclasses.replace(team.fly, response=response))
-    with pytest.raises(FlightSetupError, match=r"^rates mode with k_eps 8, .* on PX4 \(the team "
-                       r"file's fly.response\) is not stable enough: "):
+    with pytest.raises(FlightSetupError, match=r"^rates mode with k_eps 8, .* on every vehicle \(the "
+                       r"team file's fly.response\) is not stable enough: "):
         prepare(team, FlyOptions(out_dir=OUT, mode="rates"))
 
 
