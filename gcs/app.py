@@ -174,7 +174,7 @@ def cascade_check(team: TeamConfig, mode: str, gains: LawGains,
     Returns (the evaluated criterion for the log, autopilot -> refusal).
     """
     fly = team.fly
-    eigenvalues = laplacian_eigenvalues(team.adjacency())
+    eigenvalues = laplacian_eigenvalues(team.laplacian())
     cascade_gains = CascadeGains(gains.alpha_p, gains.c_p, gains.k_eps, gains.k_eps_yaw)
     explicit = (AutopilotResponse(**dataclasses.asdict(fly.response),
                                   source="the team file's fly.response")

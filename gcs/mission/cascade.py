@@ -229,11 +229,9 @@ def _position_loop(g: CascadeGains, lam: float, tilt, d_down: float) -> _Loop:
                  * tf(s))
 
 
-def laplacian_eigenvalues(adjacency: np.ndarray) -> list[float]:
+def laplacian_eigenvalues(laplacian: np.ndarray) -> list[float]:
     """Distinct eigenvalues of the weighted graph Laplacian D - A (0 included)."""
-    a = np.asarray(adjacency, dtype=float)
-    lap = np.diag(a.sum(axis=1)) - a
-    eig = np.sort(np.linalg.eigvalsh(lap))
+    eig = np.sort(np.linalg.eigvalsh(np.asarray(laplacian, dtype=float)))
     tiny = 1e-9 * max(1.0, float(eig[-1])) if eig.size else 0.0
     out: list[float] = []
     for value in eig:
