@@ -70,7 +70,7 @@ from gcs.fly.origins import (
     origin_from_gps_global_origin,
     origin_from_home_position,
 )
-from gcs.fly.stats import AgeStats, TickStats, link_report
+from gcs.fly.stats import AgeStats, TickStats, clock_report, link_report, round_trip_report
 from gcs.fly.telemetry import team_sample, vehicle_statuses
 from gcs.geodesy import Geodetic, TeamFrame
 from gcs.link import (
@@ -275,6 +275,7 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
         required["ATTITUDE_TARGET"] = HOVER_RATE_HZ
     rules = SafetyRules(
         max_tilt_rad=fly.max_tilt_rad, link_lost_after_s=fly.link_lost_after_s,
+        max_data_age_s=fly.max_data_age_s,
         geofence_min_enu_m=gf.min_enu_m if gf else None,
         geofence_max_enu_m=gf.max_enu_m if gf else None,
         required_rates_hz=required, loop_refusals=loop_refusals,
@@ -377,7 +378,8 @@ class Flight:
                               remote_port=v.link.remote_port,
                               remote_host=v.link.remote_host or "127.0.0.1",
                               learn_remote=v.link.learn_remote,
-                              link_timeout_s=team.fly.link_timeout_s)
+                              link_timeout_s=team.fly.link_timeout_s,
+                              timesync_period_s=team.fly.timesync_period_s)
             for v in vehicles
         ]
         check_unique_sysids(self.links)
@@ -421,7 +423,7 @@ class Flight:
         meas = TeamSample(
             np.ascontiguousarray(team.initial_positions_enu_m(), dtype=float), np.zeros((n, 3)),
             np.zeros((n, 3)), rotation, np.zeros((n, 3)), np.zeros(n), np.zeros(n),
-            np.ones(n, dtype=bool)).measurement()
+            np.ones(n, dtype=bool), np.zeros(n)).measurement()
         ref = reference_velocity(0.0, *self.ref_arrays)
         for _ in range(2):
             scratch.step(meas, ref, self.period_s)
@@ -865,7 +867,8 @@ class Flight:
         self.last_command = command
         self.formation_t_s = t
         if self.machine.phase is Phase.FORMATION:
-            self.ages.record(sample.age_s, fresh, stale_neighbour_counts(self.adjacency, fresh))
+            self.ages.record(sample.delay_s, sample.age_s, fresh,
+                             stale_neighbour_counts(self.adjacency, fresh))
             if (k - self._k0) % self.setup.log_every == 0:
                 self._log(t, sample, ref, command)
         return command
@@ -941,7 +944,9 @@ class Flight:
                     "stranger_address": s.proxy.stranger_address,
                     "unknown_sysid_frames": s.port.unknown_sysid_frames,
                     "command_retries": getattr(s.commands, "retries", None),
-                    "lost": self.ids[i] in self.machine.lost}
+                    "lost": self.ids[i] in self.machine.lost,
+                    "round_trip": round_trip_report(self.proxies[i].round_trips_s()),
+                    "clock": clock_report(self.proxies[i].clock.estimate())}
                    for i, s in enumerate(stats)],
         )
         tick = self.ticks.report()

@@ -27,7 +27,7 @@ class VehicleLine:
     armed: bool
     link: str
     rate_hz: float  # accepted messages per second
-    age_ms: float  # age of the older of position and attitude
+    age_ms: float  # true age of the older of position and attitude (taken how long ago)
     altitude_m: float
     mass_estimate_kg: float
     thrust_n: float
@@ -73,7 +73,7 @@ def snapshot(flight: Flight, rates: _Rate, now_s: float) -> StatusSnapshot:
         lines.append(VehicleLine(
             vehicle_id=vid, sysid=p.config.sysid, mode=s.mode or "-", armed=s.armed,
             link=p.link_state().value, rate_hz=rates.update(vid, now_s, count),
-            age_ms=1e3 * float(sample.age_s[i]) if sample is not None else math.nan,
+            age_ms=1e3 * float(sample.delay_s[i]) if sample is not None else math.nan,
             altitude_m=float(s.position_enu_m[2]),
             mass_estimate_kg=float(cmd.mass_estimate_kg[i]) if cmd is not None else math.nan,
             thrust_n=float(cmd.thrust_n[i]) if cmd is not None else math.nan,

@@ -103,7 +103,8 @@ def describe(team: TeamConfig) -> str:
         f"{fly.rates.max_rate_radps:g} rad/s); {mode_line('actuators', fly.actuators)}",
         f"     start {fly.start}, end {fly.end_action}, abort {fly.abort_action}, link loss "
         f"{fly.link_loss_action}; stale after {fly.stale_after_s:g} s, lost after "
-        f"{fly.link_lost_after_s:g} s in flight, link timeout {fly.link_timeout_s:g} s; max tilt "
+        f"{fly.link_lost_after_s:g} s in flight, link timeout {fly.link_timeout_s:g} s, data "
+        f"older than {fly.max_data_age_s:g} s stops; max tilt "
         f"{fly.max_tilt_rad:g} rad; {fence}",
         _go_to_start_line(team),
     ]

@@ -6,7 +6,9 @@ The staleness rule (docs/gcs.md), applied every tick to the data each vehicle wo
 
 * A vehicle's sample is the latest position (LOCAL_POSITION_NED), attitude (ATTITUDE_QUATERNION)
   and IMU (HIGHRES_IMU) received on its link, held (zero-order hold) until a newer one arrives.
-  Its age is the age of the older of its position and attitude.
+  Its age is the time since the older of its position and attitude arrived: how long the link has
+  not refreshed it. (Its *delay*, the true age from the vehicle's own stamps, is `delay_s`:
+  gcs.link.clock; the mission's delay rule reads that, gcs.mission.safety.)
 * Age <= stale_after_s: fresh; used as is.
 * Age > stale_after_s, as a NEIGHBOUR of i: vehicle i drops the edge for this tick (a_ij = 0 in
   row i only), i.e. it flies on its fresh neighbours; counted per (i, tick) as `stale_neighbour`.
@@ -32,8 +34,10 @@ class TeamSample:
     """The team's latest telemetry at one instant, rows in team order (n vehicles).
 
     position_m, velocity_mps, acceleration_mps2 (n, 3) world ENU; rotation (n, 3, 3) body FLU ->
-    world ENU; omega_radps (n, 3) body FLU; age_s (n,) age of the older of position and attitude;
-    finite (n,) whether the row came from a complete, finite sample.
+    world ENU; omega_radps (n, 3) body FLU; age_s (n,) time since the older of position and
+    attitude was received; imu_age_s likewise for HIGHRES_IMU; finite (n,) whether the row came
+    from a complete, finite sample; delay_s (n,) true age of the older of position and attitude:
+    now minus when the vehicle took it (its time_boot_ms through gcs.link.clock).
     """
 
     position_m: np.ndarray
@@ -44,6 +48,7 @@ class TeamSample:
     age_s: np.ndarray
     imu_age_s: np.ndarray
     finite: np.ndarray
+    delay_s: np.ndarray
 
     def measurement(self) -> TeamMeasurement:
         return TeamMeasurement(self.position_m, self.velocity_mps, self.acceleration_mps2,

@@ -1,5 +1,9 @@
 """Tick timing and per-vehicle telemetry-age statistics of a flight (for report.json). Pure.
 
+Telemetry ages are true ages: how long before the tick the vehicle took the sample, from its own
+time_boot_ms (gcs.link.clock), the link's transport and queueing included; receive ages (time
+since the sample arrived) are kept beside them.
+
 A tick is *late* when it starts more than `late_threshold_s(period)` after its deadline: a fifth
 of the period, but at least 1.5 ms (asyncio wakes up on a millisecond timer, so sub-millisecond
 thresholds would measure the timer, not the design). Lateness, compute time and telemetry ages are
@@ -12,6 +16,8 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+
+from gcs.link.clock import ClockEstimate
 
 MIN_LATE_THRESHOLD_S = 1.5e-3
 
@@ -83,24 +89,45 @@ class TickStats:
 
 
 class AgeStats:
-    """Per vehicle: the age [s] of the data each formation tick used, and stale counters."""
+    """Per vehicle, at each formation tick: the true age [s] of the data it used (taken how long
+    ago, from the vehicle's own stamps), the time since it was received, and stale counters."""
 
     def __init__(self, n: int) -> None:
         self._age = _Grow(n)
+        self._rx = _Grow(n)
         self.stale_own = np.zeros(n, dtype=np.int64)
         self.stale_neighbour = np.zeros(n, dtype=np.int64)
 
-    def record(self, age_s: np.ndarray, fresh: np.ndarray, stale_neighbours: np.ndarray) -> None:
+    def record(self, age_s: np.ndarray, rx_age_s: np.ndarray, fresh: np.ndarray,
+               stale_neighbours: np.ndarray) -> None:
         self._age.append(age_s)
+        self._rx.append(rx_age_s)
         self.stale_own += ~fresh
         self.stale_neighbour += stale_neighbours
 
-    def percentiles_ms(self, q: float) -> np.ndarray:
-        a = self._age.data
+    def percentiles_ms(self, q: float, *, received: bool = False) -> np.ndarray:
+        """(n,) the q-th percentile of the true ages (``received``: of the receive ages) [ms]."""
+        a = (self._rx if received else self._age).data
         if not a.shape[0]:
             return np.full(a.shape[1], np.nan)
         finite = np.where(np.isfinite(a), a, np.nan)
         return 1e3 * np.nanpercentile(finite, q, axis=0)
+
+
+def clock_report(est: ClockEstimate) -> dict[str, Any]:
+    """The vehicle clock filter's view at the end: offset [s], drift [ppm], least one-way
+    delay [ms] (half the least recent round trip), restarts."""
+    return {"synced": est.synced, "offset_s": est.offset_s if est.synced else None,
+            "drift_ppm": est.drift_ppm, "least_delay_ms": 1e3 * est.least_delay_s,
+            "restarts": est.resets}
+
+
+def round_trip_report(rtt_s: np.ndarray) -> dict[str, Any]:
+    """TIMESYNC round trips of one link: count and p50 / p99 / max [ms] (None without any)."""
+    if not rtt_s.size:
+        return {"n": 0, "p50_ms": None, "p99_ms": None, "max_ms": None}
+    return {"n": int(rtt_s.size), "p50_ms": 1e3 * _pct(rtt_s, 50),
+            "p99_ms": 1e3 * _pct(rtt_s, 99), "max_ms": 1e3 * float(rtt_s.max())}
 
 
 def link_report(
@@ -112,7 +139,8 @@ def link_report(
     extra: Sequence[dict[str, Any]] | None = None,
 ) -> dict[str, dict[str, Any]]:
     """The report's `link` object: per vehicle id, the spec's fields plus `extra[i]`."""
-    p50, p99 = ages.percentiles_ms(50), ages.percentiles_ms(99)
+    p50, p99, top = ages.percentiles_ms(50), ages.percentiles_ms(99), ages.percentiles_ms(100)
+    rx99 = ages.percentiles_ms(99, received=True)
     out: dict[str, dict[str, Any]] = {}
     for i, vid in enumerate(vehicle_ids):
         got, lost = int(telemetry_received[i]), int(telemetry_lost[i])
@@ -122,6 +150,8 @@ def link_report(
             "telemetry_lost_pct": 100.0 * lost / (got + lost) if got + lost else 0.0,
             "telemetry_age_p50_ms": float(p50[i]),
             "telemetry_age_p99_ms": float(p99[i]),
+            "telemetry_age_max_ms": float(top[i]),
+            "receive_age_p99_ms": float(rx99[i]),
             "stale_own_ticks": int(ages.stale_own[i]),
             "stale_neighbour_ticks": int(ages.stale_neighbour[i]),
         }

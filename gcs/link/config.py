@@ -40,6 +40,9 @@ class VehicleLinkConfig:
     # no HEARTBEAT for this long -> LOST: five 1 Hz periods (PX4 and ArduPilot keep HEARTBEAT at
     # 1 Hz; with 10 % loss, 3 s dropped a live link with p = 0.1^3 per beat, 5 s needs 0.1^5)
     heartbeat_timeout_s: float = 5.0
+    # TIMESYNC requests for the round trip (gcs.link.clock); 0: none. On a shared port one
+    # request per period reaches every vehicle behind one address, and all use its replies.
+    timesync_period_s: float = 0.5
     signing_key: bytes | None = None  # 32 bytes enables MAVLink 2 signing on this link
     signing_link_id: int = 0
     allow_unsigned: bool = False  # with a key: also accept unsigned packets
@@ -61,6 +64,8 @@ class VehicleLinkConfig:
         for key in ("heartbeat_period_s", "link_timeout_s", "heartbeat_timeout_s"):
             value = getattr(self, key)
             _check(value > 0.0, f"{where}: {key}: expected > 0, got {value}")
+        _check(self.timesync_period_s >= 0.0,
+               f"{where}: timesync_period_s: expected >= 0, got {self.timesync_period_s}")
         if self.signing_key is not None:
             _check(len(self.signing_key) == 32,
                    f"{where}: signing_key: expected 32 bytes, got {len(self.signing_key)}")

@@ -18,6 +18,11 @@ headers only (start marker, length, sysid), no CRC and no decoding:
   which then refuses to fly it (a team-file mistake); a shared port does not (other systems on
   a router are normal).
 
+TIMESYNC requests are the port's to ration: a request to one address reaches every vehicle behind
+it, and each answers with the request's ts1. The port hands out at most one request per address
+and period (:meth:`claim_timesync`) and remembers when each went out (:meth:`timesync_sent_s`),
+so every vehicle's proxy can time the replies of a request another proxy sent.
+
 Lifetime: ``async with MavlinkPort(port) as p:``; the proxies ``attach`` to it (see
 `gcs.link.proxy.VehicleProxy`'s ``port`` argument) and ``detach`` when they close.
 """
@@ -25,6 +30,7 @@ Lifetime: ``async with MavlinkPort(port) as p:``; the proxies ``attach`` to it (
 from __future__ import annotations
 
 import logging
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from types import TracebackType
@@ -46,6 +52,9 @@ from gcs.link.tlog import TlogWriter
 from gcs.link.udp import Address, UdpEndpoint, UdpStats
 
 logger = logging.getLogger(__name__)
+
+#: TIMESYNC requests remembered for their replies (at 2 Hz: the last minute or so).
+TIMESYNC_REMEMBERED = 128
 
 
 class PortClient(Protocol):
@@ -123,6 +132,8 @@ class MavlinkPort:
         self._unknown: dict[int, int] = {}
         self._detached: set[int] = set()  # vehicles whose proxies closed first (shutdown)
         self._most_clients = 0
+        self._ts_sent: OrderedDict[int, float] = OrderedDict()  # ts1 [ns] -> sent at [s]
+        self._ts_last: dict[Address, float] = {}  # address -> when its last request went out
 
     # --- lifetime --------------------------------------------------------------------------------
 
@@ -195,6 +206,24 @@ class MavlinkPort:
     def send_to(self, data: bytes, addr: Address | None) -> bool:
         """One datagram to ``addr``; returns immediately (see UdpEndpoint.send_to)."""
         return self._endpoint.send_to(data, addr)
+
+    def claim_timesync(self, addr: Address, now_s: float, period_s: float) -> int | None:
+        """ts1 [ns] for a TIMESYNC request to ``addr`` now, or None if one went there less than
+        ``period_s`` ago; the caller sends it. ts1 is ``now_s`` in ns (unique per port)."""
+        if now_s - self._ts_last.get(addr, -float("inf")) < period_s * 0.999:
+            return None
+        ts1 = int(now_s * 1e9)
+        while ts1 in self._ts_sent:
+            ts1 += 1
+        self._ts_last[addr] = now_s
+        self._ts_sent[ts1] = now_s
+        if len(self._ts_sent) > TIMESYNC_REMEMBERED:
+            self._ts_sent.popitem(last=False)
+        return ts1
+
+    def timesync_sent_s(self, ts1: int) -> float | None:
+        """When the request with this ts1 went out (None: not one of ours, or forgotten)."""
+        return self._ts_sent.get(ts1)
 
     def _route(self, data: bytes, addr: Address) -> None:
         runs = frame_sysids(data)

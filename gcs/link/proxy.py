@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from gcs import frames
+from gcs.link.clock import VehicleClock
 from gcs.link.codec import CodecStats, MavlinkCodec, MAVLinkMessage, message_name
 from gcs.link.commands import (
     AckLog,
@@ -64,6 +65,10 @@ FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 forcing arm/disarm (PX4; Ardu
 MAX_STRANGERS_LOGGED = 8
 #: q of rate setpoints: ignored (type_mask 128), but ArduPilot drops a non-unit one, so unit.
 _IDENTITY_Q = (1.0, 0.0, 0.0, 0.0)
+#: Messages whose time_boot_ms stamps the sample they carry (the clock filter's input).
+STAMPED_TYPES = frozenset({"LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "ATTITUDE"})
+#: Round trips kept for the flight report (at 2 Hz: over five hours).
+MAX_ROUND_TRIPS = 40_000
 
 
 class SetpointError(ValueError):
@@ -88,6 +93,8 @@ class ProxyCounters:
     thrust_clamped: int = 0  # thrust outside 0..1, clamped
     torque_clamped: int = 0  # actuator torque outside -1..1, clamped
     link_lost_events: int = 0
+    timesync_sent: int = 0  # TIMESYNC requests this proxy sent
+    timesync_replies: int = 0  # replies (to any request on its port) timed into the clock
 
 
 @dataclass(frozen=True, slots=True)
@@ -145,6 +152,8 @@ class VehicleProxy:
         self._t0_s = self._clock.now_s()
         self._link_state = LinkState.WAITING
         self._mismatch: int | None = None  # sysid of a foreign vehicle HEARTBEAT, if any
+        self.clock = VehicleClock()  # the vehicle's clock: true sample times (gcs.link.clock)
+        self._round_trips: list[float] = []
 
     # --- lifetime --------------------------------------------------------------------------------
 
@@ -159,6 +168,9 @@ class VehicleProxy:
             asyncio.create_task(self._heartbeat_loop(), name=f"{self.name} heartbeat"),
             asyncio.create_task(self._monitor_loop(), name=f"{self.name} link monitor"),
         ]
+        if self.config.timesync_period_s > 0.0:
+            self._tasks.append(asyncio.create_task(self._timesync_loop(),
+                                                   name=f"{self.name} timesync"))
         for task in self._tasks:
             task.add_done_callback(self._on_task_done)
         return self
@@ -221,6 +233,19 @@ class VehicleProxy:
     def state(self) -> VehicleState:
         """Snapshot of the latest telemetry in ENU/FLU with receive times; returns immediately."""
         return build_state(self._cache, self.config.sysid, self._clock.now_s())
+
+    def sample_time_s(self, kind: str) -> float:
+        """When the latest ``kind`` message's sample was taken, on the receive clock: from its
+        time_boot_ms through the clock filter (its receive time before the filter has a sample);
+        -inf if none arrived. ``kind`` is one of STAMPED_TYPES."""
+        rec = self._cache.latest(kind)
+        if rec is None:
+            return -math.inf
+        return self.clock.sample_time_s(rec.msg.time_boot_ms * 1e-3, rec.rx_time_s)
+
+    def round_trips_s(self) -> np.ndarray:
+        """Every TIMESYNC round trip measured on this link [s], oldest first."""
+        return np.asarray(self._round_trips, dtype=float)
 
     def link_state(self) -> LinkState:
         """WAITING before the first message, LOST if silent longer than the configured timeouts."""
@@ -287,12 +312,28 @@ class VehicleProxy:
             self._n["messages_accepted"] += 1
             self._seq.update(msg.get_seq())
             self._cache.update(msg, now_s)
-            if msg.get_type() == "COMMAND_ACK":
+            kind = msg.get_type()
+            if kind in STAMPED_TYPES:
+                self.clock.on_sample(msg.time_boot_ms * 1e-3, now_s)
+            elif kind == "COMMAND_ACK":
                 self._commands.on_ack(msg)
-            elif msg.get_type() == "STATUSTEXT":
+            elif kind == "STATUSTEXT":
                 self.statustexts.feed(msg, now_s)
+            elif kind == "TIMESYNC" and msg.tc1 != 0:
+                self._on_timesync_reply(msg.ts1, now_s)
             if self._waiters:
                 self._wake_waiters(msg, now_s)
+
+    def _on_timesync_reply(self, ts1: int, now_s: float) -> None:
+        """A TIMESYNC reply: its round trip, if the request was one of this port's. The vehicle's
+        own requests (tc1 = 0) are not answered: the ground station does not steer its clock."""
+        sent = self._port.timesync_sent_s(int(ts1))
+        if sent is None or now_s < sent:
+            return
+        self._n["timesync_replies"] += 1
+        self.clock.on_round_trip(now_s - sent)
+        if len(self._round_trips) < MAX_ROUND_TRIPS:
+            self._round_trips.append(now_s - sent)
 
     def _on_foreign(self, msg: MAVLinkMessage, addr: Address) -> None:
         """Called by a port serving only this vehicle: a valid message from another sysid."""
@@ -641,6 +682,16 @@ class VehicleProxy:
             next_s = max(next_s + period, loop.time())
             await asyncio.sleep(next_s - loop.time())
             self._send_heartbeat()
+
+    async def _timesync_loop(self) -> None:
+        period = self.config.timesync_period_s
+        while True:
+            if self._remote is not None:
+                ts1 = self._port.claim_timesync(self._remote, self._clock.now_s(), period)
+                if ts1 is not None:
+                    self._send(self._codec.mav.timesync_encode(0, ts1))
+                    self._n["timesync_sent"] += 1
+            await asyncio.sleep(period)
 
     def _send_heartbeat(self) -> None:
         self._send(self._codec.mav.heartbeat_encode(

@@ -29,7 +29,7 @@ class Problem:
 
     vehicle_id: int | None
     text: str
-    kind: str = "check"  # check | ready | link | geofence | tilt | mode | follow
+    kind: str = "check"  # check | ready | link | delay | geofence | tilt | mode | follow
     # ready: not yet (a stream or the position estimate still missing, e.g. ArduPilot before its
     # EKF uses GPS); preflight waits for it on the ground, up to fly.arm_timeout_s
 
@@ -42,8 +42,9 @@ class VehicleStatus:
     """One vehicle as the mission sees it at a tick (from its link, as received).
 
     link: 'waiting' | 'alive' | 'lost'; mode: e.g. 'OFFBOARD', 'AUTO_LOITER', 'GUIDED_NOGPS';
-    landed: True on the ground, False in the air, None unknown; data_age_s: age of the older of
-    its position and attitude samples; rates_hz: measured receive rate per message type;
+    landed: True on the ground, False in the air, None unknown; data_age_s: time since the older of
+    its position and attitude samples arrived (liveness); delay_s: their true age, from the
+    vehicle's own stamps (gcs.link.clock); rates_hz: measured receive rate per message type;
     listen: where the ground station listens for it (e.g. 'udp 127.0.0.1:14540'), for messages;
     landed_state: MAV_LANDED_STATE (0 unknown, 1 ON_GROUND, 2 IN_AIR, 3 TAKEOFF, 4 LANDING);
     prearm_ok: SYS_STATUS MAV_SYS_STATUS_PREARM_CHECK health, None when not reported;
@@ -62,6 +63,7 @@ class VehicleStatus:
     velocity_enu_mps: tuple[float, float, float] = (math.nan, math.nan, math.nan)
     tilt_rad: float = math.nan
     data_age_s: float = math.inf
+    delay_s: float = math.inf
     autopilot: int = 0
     vehicle_type: int = 0
     sysid_mismatch: int | None = None
@@ -91,6 +93,8 @@ class SafetyRules:
 
     max_tilt_rad: float = 1.0
     link_lost_after_s: float = 0.5
+    #: in flight: position/attitude taken longer ago than this (true age) stops the formation
+    max_data_age_s: float = 0.3
     geofence_min_enu_m: tuple[float, float, float] | None = None
     geofence_max_enu_m: tuple[float, float, float] | None = None
     #: message type -> minimum rate [Hz] required in preflight
@@ -135,6 +139,19 @@ def link_problem(status: VehicleStatus, rules: SafetyRules) -> Problem | None:
     return None
 
 
+def delay_problem(status: VehicleStatus, rules: SafetyRules) -> Problem | None:
+    """The vehicle's data arrives, but too old: taken more than `max_data_age_s` ago (true age,
+    from its own stamps). The law would act on where the vehicle was, not where it is."""
+    if status.delay_s > rules.max_data_age_s and math.isfinite(status.delay_s):
+        return Problem(
+            status.vehicle_id,
+            f"{status.name}: link delay: its position/attitude arrive {status.delay_s:.2f} s "
+            f"after they were taken (limit {rules.max_data_age_s:g} s, fly.max_data_age_s)",
+            "delay",
+        )
+    return None
+
+
 def tilt_problem(status: VehicleStatus, rules: SafetyRules) -> Problem | None:
     if not status.tilt_rad <= rules.max_tilt_rad:
         return Problem(
@@ -148,8 +165,8 @@ def tilt_problem(status: VehicleStatus, rules: SafetyRules) -> Problem | None:
 
 def flight_problems(team: Sequence[VehicleStatus], rules: SafetyRules,
                     skip: frozenset[int] = frozenset()) -> list[Problem]:
-    """In-flight rules for every vehicle not in `skip` (ids already handled): link, geofence,
-    tilt. Returns all problems found (empty: fly on)."""
+    """In-flight rules for every vehicle not in `skip` (ids already handled): link, delay,
+    geofence, tilt. Returns all problems found (empty: fly on)."""
     out: list[Problem] = []
     for s in team:
         if s.vehicle_id in skip:
@@ -158,7 +175,7 @@ def flight_problems(team: Sequence[VehicleStatus], rules: SafetyRules,
         if p is not None:
             out.append(p)
             continue  # the other values are stale
-        for check in (geofence_problem, tilt_problem):
+        for check in (delay_problem, geofence_problem, tilt_problem):
             q = check(s, rules)
             if q is not None:
                 out.append(q)

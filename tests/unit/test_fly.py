@@ -26,7 +26,7 @@ from gcs.fly.measure import (
     torque_max_nm,
     yaw_rad,
 )
-from gcs.fly.stats import AgeStats, TickStats, late_threshold_s, link_report
+from gcs.fly.stats import AgeStats, TickStats, late_threshold_s, link_report, round_trip_report
 from gcs.sim.runner import law_gains
 from vehicle_emulator.physics import rotors_from_wrench, wrench_from_rotors
 
@@ -201,12 +201,26 @@ def test_tick_stats_count_late_ticks_against_a_fifth_of_the_period():
 
 def test_link_report_has_the_spec_fields():
     ages = AgeStats(2)
-    ages.record(np.array([0.004, 0.2]), np.array([True, False]), np.array([1, 0]))
+    # true ages 54 / 200 ms, received 4 / 200 ms ago (vehicle 7's link adds 50 ms)
+    ages.record(np.array([0.054, 0.2]), np.array([0.004, 0.2]), np.array([True, False]),
+                np.array([1, 0]))
+    ages.record(np.array([0.060, 0.3]), np.array([0.010, 0.3]), np.array([True, False]),
+                np.array([1, 0]))
     r = link_report([7, 9], ages, [10, 20], [100, 90], [0, 10])
     assert set(r) == {"7", "9"}
     assert r["9"]["telemetry_lost_pct"] == pytest.approx(10.0)
-    assert r["7"]["telemetry_age_p50_ms"] == pytest.approx(4.0)
-    assert r["9"]["stale_own_ticks"] == 1 and r["7"]["stale_neighbour_ticks"] == 1
+    assert r["7"]["telemetry_age_p50_ms"] == pytest.approx(57.0)
+    assert r["7"]["telemetry_age_max_ms"] == pytest.approx(60.0)
+    assert r["7"]["receive_age_p99_ms"] == pytest.approx(9.94)
+    assert r["9"]["stale_own_ticks"] == 2 and r["7"]["stale_neighbour_ticks"] == 2
+
+
+def test_round_trips_are_reported_in_milliseconds_and_an_unanswered_link_says_so():
+    r = round_trip_report(np.array([0.1, 0.102, 0.104, 0.3]))
+    assert r["n"] == 4 and r["max_ms"] == pytest.approx(300.0)
+    assert r["p50_ms"] == pytest.approx(103.0)
+    assert round_trip_report(np.array([])) == {"n": 0, "p50_ms": None, "p99_ms": None,
+                                               "max_ms": None}
 
 
 def test_each_row_of_the_team_call_is_what_that_vehicle_would_compute_alone():

@@ -6,7 +6,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from gcs.link.codec import MavlinkCodec
-from gcs.link.port import frame_sysids
+from gcs.link.port import TIMESYNC_REMEMBERED, MavlinkPort, frame_sysids
 
 # HEARTBEAT from sysid 1 / compid 1 (MAVLink 2, 21 bytes; the codec tests' literal)
 HB_V2_SYS1 = bytes.fromhex("fd09000000010100000000000600020c810403d291")
@@ -57,3 +57,19 @@ def test_runs_cover_the_datagram_in_order(sysids: list[int]) -> None:
     # consecutive equal sysids merge; the sequence of run sysids is the deduplicated input
     merged = [s for k, s in enumerate(sysids) if k == 0 or sysids[k - 1] != s]
     assert [r[2] for r in runs] == merged
+
+
+def test_one_timesync_request_per_address_and_period_and_every_proxy_can_time_its_replies():
+    port = MavlinkPort(0)  # never opened: the rationing needs no socket
+    router, other = ("127.0.0.1", 14550), ("127.0.0.1", 14551)
+    first = port.claim_timesync(router, 10.0, 0.5)
+    # a second vehicle behind the same router asks in the same period: no second request
+    assert first is not None and port.claim_timesync(router, 10.2, 0.5) is None
+    assert port.claim_timesync(other, 10.2, 0.5) is not None
+    assert port.claim_timesync(router, 10.5, 0.5) is not None
+    # the replies echo ts1: any proxy on the port learns when that request went out
+    assert port.timesync_sent_s(first) == 10.0
+    assert port.timesync_sent_s(first + 12345) is None
+    for k in range(TIMESYNC_REMEMBERED):
+        port.claim_timesync(router, 20.0 + k, 0.5)
+    assert port.timesync_sent_s(first) is None  # forgotten, not grown without bound

@@ -223,6 +223,38 @@ def test_geofence_breach_aborts_naming_vehicle_axis_and_limit():
     assert "vehicle 1 (sysid 1): geofence breach: z = 55.00 m outside [1, 50] m" in m.outcome.reason
 
 
+def test_a_delay_spike_stops_the_formation_and_every_vehicle_gets_the_abort_action():
+    # GIVEN a team in formation whose data is 20 ms old
+    m = machine(duration_s=60.0, abort_action="land", link_loss_action="hold")
+    w = World(m)
+    for vid in IDS:
+        w.v[vid] = dataclasses.replace(w.v[vid], delay_s=0.02)
+    while m.phase is not Phase.FORMATION:
+        w.tick()
+    w.run(1.0)
+    assert m.phase is Phase.FORMATION
+    # WHEN vehicle 2's data keeps arriving, but taken 0.52 s before (the link's delay jumped)
+    w.v[2] = dataclasses.replace(w.v[2], delay_s=0.52, data_age_s=0.01)
+    w.tick()
+    # THEN the formation stops; vehicle 2 still answers, so it is landed with the others
+    assert m.phase in (Phase.STOPPING, Phase.DONE) and 2 not in m.lost
+    w.run(5.0)
+    assert m.outcome.exit_code == EXIT_ABORTED
+    assert ("vehicle 2 (sysid 2): link delay: its position/attitude arrive 0.52 s after they "
+            "were taken (limit 0.3 s, fly.max_data_age_s)") in m.outcome.reason
+    after = w.sent[[c for _, c in w.sent].index(Cmd.OFFBOARD):]
+    assert {(vid, Cmd.LAND) for vid in IDS} <= set(after)
+
+
+def test_a_delay_below_the_limit_is_flown():
+    m = machine(duration_s=3.0)
+    w = World(m)
+    for vid in IDS:
+        w.v[vid] = dataclasses.replace(w.v[vid], delay_s=0.29)
+    w.run(20.0)
+    assert m.outcome.exit_code == 0
+
+
 def test_no_link_at_start_fails_after_the_connect_timeout_commanding_nobody():
     m = machine(connect_timeout_s=2.0)
     w = World(m)

@@ -1,0 +1,172 @@
+"""One vehicle's clock as the ground station sees it: offset, drift, round trip, true data age.
+
+A telemetry sample carries the time the vehicle took it (``time_boot_ms``, the vehicle's boot
+clock). Its receive time on the ground station's monotonic clock minus that stamp is
+
+    rx - t_vehicle = offset(t_vehicle) + delay,
+
+the clocks' offset (which drifts: PX4 SITL's lockstep clock ran 1.2 % slow) plus the delay the
+sample spent in the autopilot's queues and on the link. The delay is never below the link's
+least one-way delay, so the *lower envelope* of those differences is offset + least delay. The
+envelope is tracked as a straight line in vehicle time, fitted to the minimum of every
+`BIN_S` bin over the last `WINDOW_BINS` bins; bins more than `SPIKE_S` above the first fit are
+dropped and the line refitted, so a delay spike of a few seconds does not lift the envelope. A
+delay increase that lasts longer than about half the window becomes the new envelope: without a
+round-trip measurement no filter can tell a lasting delay from a clock step.
+
+The least one-way delay comes from TIMESYNC round trips (request ts1 = our send time in ns, the
+vehicle answers with its own time in tc1 and ts1 echoed): half the least round trip of the last
+`RTT_WINDOW` replies. Without replies it is 0, and ages are then lower bounds by that much.
+
+The time a sample was taken, on the ground station's clock, is
+
+    t_gcs = t_vehicle + envelope(t_vehicle) - least_delay,
+
+never later than its receive time; its *true age* at ``now`` is ``now - t_gcs``. A vehicle clock
+that jumps back by more than `RESET_S` (a reboot; reordered packets step back far less)
+restarts the filter. Pure: times are
+arguments, nothing reads a clock.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Width of one envelope bin [s, vehicle time].
+BIN_S = 1.0
+#: Bins in the envelope fit (the window is WINDOW_BINS x BIN_S of vehicle time).
+WINDOW_BINS = 20
+#: Bins before the drift is fitted; before that the envelope is the least difference seen.
+MIN_FIT_BINS = 3
+#: A bin minimum this far above the first fit is a delay spike, not the envelope [s].
+SPIKE_S = 3e-3
+#: A vehicle time this far behind the newest stamp restarts the filter (a reboot) [s].
+RESET_S = 1.0
+#: TIMESYNC replies whose least round trip gives the least one-way delay.
+RTT_WINDOW = 20
+
+
+@dataclass(frozen=True, slots=True)
+class ClockEstimate:
+    """The filter's current view (for the report)."""
+
+    synced: bool  # at least one sample seen
+    offset_s: float  # ground-station time minus vehicle time at the newest sample, least delay out
+    drift_ppm: float  # how much faster the ground station's clock runs (0 until fitted)
+    least_delay_s: float  # half the least recent TIMESYNC round trip (0 without replies)
+    rtt_samples: int
+    resets: int
+
+
+class VehicleClock:
+    """Lower-envelope offset/drift filter on sample stamps, plus TIMESYNC round trips."""
+
+    def __init__(self) -> None:
+        self._bins_t = np.empty(WINDOW_BINS)  # vehicle time of each bin's minimum (ring)
+        self._bins_o = np.empty(WINDOW_BINS)  # that minimum of rx - t_vehicle
+        self._nbins = 0
+        self._head = 0
+        self._reset_state()
+        self.resets = 0
+        self._rtt = np.empty(RTT_WINDOW)
+        self._nrtt = 0
+        self._rtt_total = 0
+        self._least_delay_s = 0.0
+
+    def _reset_state(self) -> None:
+        self._nbins = 0
+        self._head = 0
+        self._t_ref = math.nan  # vehicle time origin of the fit (precision)
+        self._bin_end = -math.inf
+        self._cur_t = math.nan
+        self._cur_o = math.inf
+        self._last_t = -math.inf
+        self._a = math.nan  # envelope = a + b (t - t_ref)
+        self._b = 0.0
+
+    # --- input ----------------------------------------------------------------------------------
+
+    def on_sample(self, t_vehicle_s: float, rx_s: float) -> None:
+        """A sample stamped ``t_vehicle_s`` (vehicle boot clock) received at ``rx_s``."""
+        if not (math.isfinite(t_vehicle_s) and math.isfinite(rx_s)) or t_vehicle_s < 0.0:
+            return
+        if self._t_ref == self._t_ref and t_vehicle_s < self._last_t - RESET_S:
+            self._reset_state()
+            self.resets += 1
+        if self._t_ref != self._t_ref:
+            self._t_ref = t_vehicle_s
+            self._bin_end = t_vehicle_s + BIN_S
+        self._last_t = max(self._last_t, t_vehicle_s)
+        o = rx_s - t_vehicle_s
+        if t_vehicle_s >= self._bin_end:
+            self._close_bin()
+            self._bin_end = t_vehicle_s + BIN_S
+        if o < self._cur_o:
+            self._cur_o, self._cur_t = o, t_vehicle_s
+        if self._nbins < MIN_FIT_BINS:  # before the fit: the least difference seen so far
+            least = self._cur_o if self._nbins == 0 else min(self._cur_o, self._a)
+            self._a, self._b = least, 0.0
+
+    def on_round_trip(self, rtt_s: float) -> None:
+        """A TIMESYNC reply that came back ``rtt_s`` after its request."""
+        if not (math.isfinite(rtt_s) and rtt_s >= 0.0):
+            return
+        self._rtt[self._rtt_total % RTT_WINDOW] = rtt_s
+        self._rtt_total += 1
+        self._nrtt = min(self._nrtt + 1, RTT_WINDOW)
+        self._least_delay_s = 0.5 * float(self._rtt[: self._nrtt].min())
+
+    def _close_bin(self) -> None:
+        if not math.isfinite(self._cur_o):
+            return
+        self._bins_t[self._head] = self._cur_t - self._t_ref
+        self._bins_o[self._head] = self._cur_o
+        self._head = (self._head + 1) % WINDOW_BINS
+        self._nbins = min(self._nbins + 1, WINDOW_BINS)
+        self._cur_o, self._cur_t = math.inf, math.nan
+        if self._nbins >= MIN_FIT_BINS:
+            self._fit()
+        else:
+            self._a = float(self._bins_o[: self._nbins].min())
+
+    def _fit(self) -> None:
+        t, o = self._bins_t[: self._nbins], self._bins_o[: self._nbins]
+        b, a = np.polyfit(t, o, 1)
+        keep = o - (a + b * t) <= SPIKE_S
+        if 2 <= keep.sum() < keep.size:
+            b, a = np.polyfit(t[keep], o[keep], 1)
+        # the envelope lies below every kept minimum: lower the line onto the lowest of them
+        a += min(0.0, float((o[keep] - (a + b * t[keep])).min()))
+        self._a, self._b = float(a), float(b)
+
+    # --- output ---------------------------------------------------------------------------------
+
+    @property
+    def synced(self) -> bool:
+        return self._a == self._a
+
+    @property
+    def least_delay_s(self) -> float:
+        return self._least_delay_s
+
+    def round_trips_s(self) -> np.ndarray:
+        """The last (up to RTT_WINDOW) round trips, oldest first."""
+        k = self._rtt_total % RTT_WINDOW if self._nrtt == RTT_WINDOW else 0
+        return np.roll(self._rtt[: self._nrtt], -k)
+
+    def sample_time_s(self, t_vehicle_s: float, rx_s: float) -> float:
+        """When a sample stamped ``t_vehicle_s`` and received at ``rx_s`` was taken, on the
+        ground station's clock (``rx_s`` itself before the first sample, or for a bad stamp)."""
+        if not self.synced or not math.isfinite(t_vehicle_s):
+            return rx_s
+        env = self._a + self._b * (t_vehicle_s - self._t_ref)
+        return min(rx_s, t_vehicle_s + env - self._least_delay_s)
+
+    def estimate(self) -> ClockEstimate:
+        offset = (self._a + self._b * (self._last_t - self._t_ref) - self._least_delay_s
+                  if self.synced else math.nan)
+        return ClockEstimate(self.synced, offset, 1e6 * self._b, self._least_delay_s,
+                             self._rtt_total, self.resets)

@@ -1,0 +1,96 @@
+"""The vehicle-clock filter: true sample times from stamps under drift, jitter, spikes, reboots."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gcs.link.clock import VehicleClock
+
+RATE_HZ = 50.0
+
+
+def stream(clock: VehicleClock, seconds: float, *, rate_hz: float = RATE_HZ, offset_s: float = 7.0,
+           vehicle_rate: float = 1.0, delay_s=lambda t: 0.002, t0_s: float = 0.0,
+           stamp_ms: bool = True) -> list[tuple[float, float, float]]:
+    """Feed samples taken every 1/rate_hz s of ground-station time; returns (t_true, t_vehicle,
+    rx) per sample. The vehicle clock runs at ``vehicle_rate`` x ours, from ``offset_s`` back."""
+    out = []
+    for k in range(int(seconds * rate_hz)):
+        t_true = t0_s + k / rate_hz
+        t_vehicle = (t_true - offset_s) * vehicle_rate
+        if stamp_ms:
+            t_vehicle = np.floor(t_vehicle * 1e3) / 1e3
+        rx = t_true + delay_s(t_true)
+        clock.on_sample(t_vehicle, rx)
+        out.append((t_true, t_vehicle, rx))
+    return out
+
+
+def test_true_sample_time_under_the_recorded_sitl_drift():
+    # PX4 SITL's clock ran 1.2 % slow (data/sitl timing.json: 12090 ppm)
+    clock = VehicleClock()
+    rng = np.random.default_rng(1)
+    samples = stream(clock, 30.0, vehicle_rate=1 - 0.01209,
+                     delay_s=lambda t: 0.001 + rng.exponential(0.002))
+    for t_true, t_vehicle, rx in samples[-100:]:
+        # 1 ms stamps and the 1 ms least delay (no TIMESYNC here) bound the error
+        assert abs(clock.sample_time_s(t_vehicle, rx) - t_true) < 2.5e-3
+    assert clock.estimate().drift_ppm == pytest.approx(1e6 * 0.01209 / (1 - 0.01209), rel=0.02)
+
+
+def test_a_delay_spike_shows_as_age_and_does_not_move_the_envelope():
+    clock = VehicleClock()
+    spike = lambda t: 0.002 + (0.5 if 20.0 <= t < 22.0 else 0.0)  # noqa: E731
+    samples = stream(clock, 30.0, delay_s=spike)
+    during = [s for s in samples if 21.0 <= s[0] < 22.0]
+    for _t_true, t_vehicle, rx in during:
+        age_at_rx = rx - clock.sample_time_s(t_vehicle, rx)
+        assert age_at_rx == pytest.approx(0.5, abs=5e-3)
+    after = samples[-10:]
+    for t_true, t_vehicle, rx in after:
+        assert abs(clock.sample_time_s(t_vehicle, rx) - t_true) < 3.5e-3
+
+
+def test_timesync_round_trip_gives_the_least_one_way_delay():
+    clock = VehicleClock()
+    samples = stream(clock, 10.0, delay_s=lambda t: 0.050)
+    # without round trips the 50 ms transport is invisible: the age is a lower bound
+    t_true, t_vehicle, rx = samples[-1]
+    assert rx - clock.sample_time_s(t_vehicle, rx) < 2e-3
+    for rtt in (0.104, 0.101, 0.100, 0.130):
+        clock.on_round_trip(rtt)
+    assert clock.least_delay_s == pytest.approx(0.050)
+    assert clock.sample_time_s(t_vehicle, rx) == pytest.approx(t_true, abs=1.5e-3)
+    assert list(clock.round_trips_s()) == [0.104, 0.101, 0.100, 0.130]
+
+
+def test_a_sample_is_never_taken_after_it_arrived():
+    clock = VehicleClock()
+    stream(clock, 5.0, delay_s=lambda t: 0.010)
+    for rtt in (0.2, 0.2):  # a round trip far longer than the telemetry's own delay
+        clock.on_round_trip(rtt)
+    assert clock.sample_time_s(10.0, 17.01) <= 17.01
+
+
+def test_a_reboot_restarts_the_filter():
+    clock = VehicleClock()
+    stream(clock, 10.0, offset_s=-100.0)
+    # the vehicle rebooted: its clock restarts at 0 while ours goes on
+    samples = stream(clock, 5.0, offset_s=17.5, t0_s=17.5)
+    assert clock.estimate().resets == 1
+    t_true, t_vehicle, rx = samples[-1]
+    assert abs(clock.sample_time_s(t_vehicle, rx) - t_true) < 3e-3
+
+
+def test_before_any_sample_and_for_bad_stamps_the_receive_time_stands():
+    clock = VehicleClock()
+    assert clock.sample_time_s(1.0, 5.0) == 5.0
+    clock.on_sample(float("nan"), 5.0)
+    clock.on_sample(-1.0, 5.0)
+    assert not clock.synced
+    stream(clock, 3.0)
+    assert clock.sample_time_s(float("nan"), 9.0) == 9.0
+    clock.on_round_trip(float("nan"))
+    clock.on_round_trip(-0.1)
+    assert clock.estimate().rtt_samples == 0
