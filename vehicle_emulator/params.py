@@ -92,7 +92,12 @@ PARAMS: tuple[ParamDef, ...] = (
     ParamDef("EMU_MASS_DROP", _F, 0.0, 0.0, 0.95, "write f > 0: drop fraction f of mass now"),
     ParamDef("EMU_LINK_LOSS", _F, 0.0, 0.0, 3600.0, "write t > 0: link silent for t seconds now"),
     ParamDef("EMU_PKT_LOSS", _F, 0.0, 0.0, 1.0, "packet loss probability, both directions"),
-    ParamDef("EMU_LATENCY_MS", _F, 0.0, 0.0, 5000.0, "added one-way latency, both directions [ms]"),
+    ParamDef(
+        "EMU_LATENCY_MS", _F, 0.0, 0.0, 10000.0, "added one-way latency, both directions [ms]"
+    ),
+    ParamDef("EMU_JITTER_MS", _F, 0.0, 0.0, 10000.0, "jitter on top of the latency [ms]"),
+    ParamDef("EMU_JITTER_DIST", _I, 0, 0, 1, "jitter: 0 uniform [0, J], 1 half-normal |N(0, J)|"),
+    ParamDef("EMU_REORDER_P", _F, 0.0, 0.0, 1.0, "probability a packet is held back 20 ms"),
     ParamDef("EMU_MOT1_EFF", _F, 1.0, 0.0, 1.0, "rotor 1 efficiency (thrust factor)"),
     ParamDef("EMU_MOT2_EFF", _F, 1.0, 0.0, 1.0, "rotor 2 efficiency (thrust factor)"),
     ParamDef("EMU_MOT3_EFF", _F, 1.0, 0.0, 1.0, "rotor 3 efficiency (thrust factor)"),

@@ -4,8 +4,9 @@ Like PX4 SITL's UDP link, the endpoint sends to its configured remote (127.0.0.1
 default) until a valid MAVLink message arrives, then to the address that last sent one. A
 ``connect``ed endpoint (ArduPilot SITL's ``udpclient``) binds an ephemeral port unless one is
 given, sends only to its remote and receives only from it (a connected UDP socket). Link
-impairments (loss window, seeded loss, added latency) apply to both directions. Bytes are
-decoded by a per-link ``PeerDecoder`` (one parser per peer address) and handed to a callback.
+impairments (loss window, seeded loss, latency, jitter, reordering: faults.py) apply to both
+directions. Bytes are decoded by a per-link ``PeerDecoder`` (one parser per peer address) and
+handed to a callback.
 """
 
 from __future__ import annotations

@@ -38,6 +38,7 @@ __all__ = [
 ]
 
 FAULT_KINDS = ("mass_drop", "link_loss", "packet_loss", "motor_efficiency")
+JITTER_KINDS = ("uniform", "normal")  # packet_loss jitter distributions (faults.py)
 ORIGIN_KINDS = ("own", "shared")
 
 # Arm length, anti-torque coefficient and rotor limit per Table I airframe (the values of
@@ -101,7 +102,9 @@ class VehicleSpec:
 
 @dataclass(frozen=True, slots=True)
 class FaultSpec:
-    """A scheduled fault; ``at_s`` counts on the fault clock (see faults.py)."""
+    """A scheduled fault; ``at_s`` counts on the fault clock (see faults.py). ``duration_s``:
+    link_loss, how long the link is down; packet_loss, how long it lasts (0: the rest of the
+    run)."""
 
     kind: str
     vehicle_id: int
@@ -112,6 +115,9 @@ class FaultSpec:
     efficiency: float = 1.0
     probability: float = 0.0
     latency_ms: float = 0.0
+    jitter_ms: float = 0.0
+    jitter: str = "uniform"  # one of JITTER_KINDS
+    reorder_probability: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -352,6 +358,13 @@ def _fault(raw: Any, index: int, vehicle_ids: set[int]) -> FaultSpec:
         return x
 
     motor_raw = _get(raw, "motor", path)
+    jitter = _get(raw, "jitter", path)
+    if jitter is None:
+        jitter = "uniform"
+    elif jitter not in JITTER_KINDS:
+        raise TeamFileError(
+            f"{path}.jitter: expected one of {', '.join(JITTER_KINDS)}, got {jitter!r}"
+        )
     return FaultSpec(
         kind=kind,
         vehicle_id=vid,
@@ -362,6 +375,9 @@ def _fault(raw: Any, index: int, vehicle_ids: set[int]) -> FaultSpec:
         efficiency=num("efficiency", 1.0, 0.0, 1.0),
         probability=num("probability", 0.0, 0.0, 1.0),
         latency_ms=num("latency_ms", 0.0, 0.0, 10000.0),
+        jitter_ms=num("jitter_ms", 0.0, 0.0, 10000.0),
+        jitter=jitter,
+        reorder_probability=num("reorder_probability", 0.0, 0.0, 1.0),
     )
 
 

@@ -34,7 +34,13 @@ from vehicle_emulator.autopilot import (
     Severity,
 )
 from vehicle_emulator.codec import GenericEncoder, mavlink
-from vehicle_emulator.faults import FaultSchedule, LinkImpairment
+from vehicle_emulator.faults import (
+    LINK_PARAMS,
+    FaultSchedule,
+    LinkImpairment,
+    link_param_values,
+    link_text,
+)
 from vehicle_emulator.params import ParamError, ParamStore, decode_value, encode_value
 from vehicle_emulator.personality import Personality
 from vehicle_emulator.plant import ControlMode, FleetPlant
@@ -338,6 +344,10 @@ class VehicleNode:
         clock = self.faults.clock_s(now_s, self.autopilot.first_offboard_s)
         for f in self.faults.due(clock):
             self.apply_fault(now_s, f, clock)
+        for r in self.faults.restores_due(now_s):
+            self._set_link(r.values)
+            at = "" if clock is None else f" at {clock:.3f} s"
+            self.statustext(Severity.INFO, f"Fault end: {link_text(r.values)}{at}")
 
     def apply_fault(self, now_s: float, f: FaultSpec, clock: float | None) -> None:
         """Apply one fault now."""
@@ -355,18 +365,24 @@ class VehicleNode:
             self.impairment.down_until_s = now_s + f.duration_s
             self.statustext(Severity.WARNING, f"Fault: link lost for {f.duration_s:.1f} s{at}")
         elif f.kind == "packet_loss":
-            self.params.set("EMU_PKT_LOSS", f.probability)
-            self.params.set("EMU_LATENCY_MS", f.latency_ms)
-            self._sync_param("EMU_PKT_LOSS")
-            self._sync_param("EMU_LATENCY_MS")
-            self.statustext(
-                Severity.WARNING, f"Fault: loss {f.probability:.2f} +{f.latency_ms:.0f} ms{at}"
-            )
+            if f.duration_s > 0.0:
+                before = tuple(self.params[name] for name in LINK_PARAMS)
+                self.faults.restore_at(now_s + f.duration_s, before)
+            values = link_param_values(f)
+            self._set_link(values)
+            window = f" for {f.duration_s:g} s" if f.duration_s > 0.0 else ""
+            self.statustext(Severity.WARNING, f"Fault: {link_text(values)}{window}{at}")
         elif f.kind == "motor_efficiency":
             name = f"EMU_MOT{f.motor}_EFF"
             self.params.set(name, f.efficiency)
             self._sync_param(name)
             self.statustext(Severity.WARNING, f"Fault: motor {f.motor} eff {f.efficiency:.2f}{at}")
+
+    def _set_link(self, values: tuple[float, ...]) -> None:
+        """Write the link parameters (``LINK_PARAMS`` order) and apply them."""
+        for name, value in zip(LINK_PARAMS, values, strict=True):
+            self.params.set(name, value)
+            self._sync_param(name)
 
     def _sync_param(self, name: str) -> None:
         """Side effects of a parameter value on the arrays and the link."""
@@ -379,10 +395,8 @@ class VehicleNode:
             self.plant.airmode[i] = float(v)
         elif name == "EMU_NOISE":  # the sensor model's noise, or telemetry noise (nominal)
             self.status.noise[i] = self.plant.set_noise(i, bool(v))
-        elif name == "EMU_PKT_LOSS":
-            self.impairment.loss_probability = v
-        elif name == "EMU_LATENCY_MS":
-            self.impairment.latency_s = v * 1e-3
+        elif name in LINK_PARAMS:
+            self.impairment.set_param(name, v)
         elif name == "EMU_SEED":
             self.impairment.rng = np.random.default_rng(int(v) + self.index)
             self.plant.seed_noise(i, int(v))

@@ -27,6 +27,7 @@ from gcs.config.schema import (
     GAIN_NAMES,
     GO_TO_START_ENABLED,
     GRAVITY_MPS2,
+    JITTER_KINDS,
     LAWS,
     MODES,
     RESPONSE_KEYS,
@@ -574,10 +575,14 @@ _FAULT_KINDS: dict[str, tuple[type, str, str, Callable[[_Node], tuple[Any, ...]]
     "packet_loss": (
         PacketLossFault,
         "probability",
-        "latency_ms",
+        "latency_ms jitter_ms jitter reorder_probability duration_s",
         lambda n: (
             n.child("probability").number(ge=0.0, le=1.0),
             n.child("latency_ms").number(0.0, ge=0.0, le=10000.0),
+            n.child("jitter_ms").number(0.0, ge=0.0, le=10000.0),
+            n.child("jitter").string("uniform", choices=JITTER_KINDS),
+            n.child("reorder_probability").number(0.0, ge=0.0, le=1.0),
+            n.child("duration_s").number(0.0, ge=0.0, le=1e6),
         ),
     ),
     "motor_efficiency": (

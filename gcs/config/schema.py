@@ -23,6 +23,7 @@ MODES = ("rates", "actuators", "attitude")  # attitude: gcs fly only (the autopi
 SIM_MODES = ("rates", "actuators")
 DERIVATIVE_METHODS = ("model", "levant")
 FAULT_KINDS = ("mass_drop", "link_loss", "packet_loss", "motor_efficiency")
+JITTER_KINDS = ("uniform", "normal")  # packet_loss jitter distributions (as the emulator's)
 FLY_ACTIONS = ("land", "hold")  # what `gcs fly` tells vehicles to do when it stops flying them
 FLY_STARTS = ("auto", "in_air", "takeoff")
 FLY_HEADINGS = ("hold", "paper")  # or a compass heading in degrees
@@ -295,18 +296,29 @@ class LinkLossFault:
 
 @dataclass(frozen=True, slots=True)
 class PacketLossFault:
-    """From at_s each packet is lost with `probability` and delayed by latency_ms."""
+    """From at_s (for duration_s; 0: to the end) each packet is lost with `probability`, else
+    delayed by latency_ms + a jitter term (`jitter` 'uniform': U[0, jitter_ms]; 'normal':
+    |N(0, jitter_ms^2)|) + the emulator's reorder hold with `reorder_probability`."""
 
     kind: str
     vehicle: int
     at_s: float
     probability: float
     latency_ms: float = 0.0
+    jitter_ms: float = 0.0
+    jitter: str = "uniform"  # one of JITTER_KINDS
+    reorder_probability: float = 0.0
+    duration_s: float = 0.0
 
     def summary(self) -> str:
+        jitter = f" + {self.jitter} jitter {self.jitter_ms:g} ms" if self.jitter_ms else ""
+        reorder = (
+            f", {self.reorder_probability:.0%} reordered" if self.reorder_probability else ""
+        )
+        until = f" for {self.duration_s:g} s" if self.duration_s else ""
         return (
             f"vehicle {self.vehicle} loses {self.probability:.0%} of packets, "
-            f"+{self.latency_ms:g} ms latency, from t = {self.at_s:g} s"
+            f"+{self.latency_ms:g} ms latency{jitter}{reorder}, from t = {self.at_s:g} s{until}"
         )
 
 

@@ -230,7 +230,7 @@ def test_default_streams_message_intervals_parameters_and_statustext(tmp_path):
         with pytest.raises(TimeoutError):
             client.get_param("COM_OF_LOSS_T", timeout_s=1.0)  # PX4's, not ArduPilot's
         # STATUSTEXT is never chunked: a long text is cut at 50 bytes
-        client.set_param("EMU_LATENCY_MS", 99999)  # refused, with a 55-byte text
+        client.set_param("EMU_LATENCY_MS", 99999)  # refused, with a 56-byte text
         (text,) = [m for m in client.seen("STATUSTEXT") if m.text.startswith("parameter")]
         assert (text.text, text.id, text.chunk_seq) == (
             "parameter EMU_LATENCY_MS: value 99999 outside [0, ", 0, 0)  # 50 bytes
