@@ -423,7 +423,7 @@ class Flight:
         meas = TeamSample(
             np.ascontiguousarray(team.initial_positions_enu_m(), dtype=float), np.zeros((n, 3)),
             np.zeros((n, 3)), rotation, np.zeros((n, 3)), np.zeros(n), np.zeros(n),
-            np.ones(n, dtype=bool), np.zeros(n)).measurement()
+            np.ones(n, dtype=bool), np.zeros(n), np.zeros(n)).measurement()
         ref = reference_velocity(0.0, *self.ref_arrays)
         for _ in range(2):
             scratch.step(meas, ref, self.period_s)

@@ -574,10 +574,10 @@ _FAULT_KINDS: dict[str, tuple[type, str, str, Callable[[_Node], tuple[Any, ...]]
     ),
     "packet_loss": (
         PacketLossFault,
-        "probability",
-        "latency_ms jitter_ms jitter reorder_probability duration_s",
+        "",
+        "probability latency_ms jitter_ms jitter reorder_probability duration_s",
         lambda n: (
-            n.child("probability").number(ge=0.0, le=1.0),
+            n.child("probability").number(0.0, ge=0.0, le=1.0),
             n.child("latency_ms").number(0.0, ge=0.0, le=10000.0),
             n.child("jitter_ms").number(0.0, ge=0.0, le=10000.0),
             n.child("jitter").string("uniform", choices=JITTER_KINDS),

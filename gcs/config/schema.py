@@ -433,8 +433,8 @@ class FlyConfig:
     link_loss_action: str = "hold"  # the other vehicles when one link is lost
     stale_after_s: float = 0.1  # telemetry older than this is stale (see docs/gcs.md)
     link_lost_after_s: float = 0.5  # in flight: position/attitude older than this -> lost
-    # in flight: position/attitude taken longer ago than this (true age, from the vehicle's own
-    # stamps) stops the formation with abort_action (docs/gcs.md, "Link delay")
+    # in flight: position/attitude arriving more than this long after the vehicle took them (its
+    # own stamps) stops the formation with abort_action (docs/gcs.md, "Link delay")
     max_data_age_s: float = 0.3
     timesync_period_s: float = 0.5  # TIMESYNC round-trip requests; 0: none
     # any valid message from the vehicle keeps its link ALIVE; none for this long -> LOST (a

@@ -37,7 +37,9 @@ class TeamSample:
     world ENU; omega_radps (n, 3) body FLU; age_s (n,) time since the older of position and
     attitude was received; imu_age_s likewise for HIGHRES_IMU; finite (n,) whether the row came
     from a complete, finite sample; delay_s (n,) true age of the older of position and attitude:
-    now minus when the vehicle took it (its time_boot_ms through gcs.link.clock).
+    now minus when the vehicle took it (its time_boot_ms through gcs.link.clock); transit_s (n,)
+    how long after it was taken the later-arriving of the two arrived (the link's delay, what the
+    delay rule judges; a silent link leaves it unchanged, the receive age grows instead).
     """
 
     position_m: np.ndarray
@@ -49,6 +51,7 @@ class TeamSample:
     imu_age_s: np.ndarray
     finite: np.ndarray
     delay_s: np.ndarray
+    transit_s: np.ndarray
 
     def measurement(self) -> TeamMeasurement:
         return TeamMeasurement(self.position_m, self.velocity_mps, self.acceleration_mps2,

@@ -48,7 +48,8 @@ def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
     force = np.full((n, 3), np.nan)
     prx = np.full(n, -math.inf)
     arx = np.full(n, -math.inf)
-    taken = np.full(n, -math.inf)  # when the older of position and attitude was taken
+    ptaken = np.full(n, -math.inf)  # when the vehicle took them (gcs.link.clock)
+    ataken = np.full(n, -math.inf)
     irx = np.full(n, -math.inf)
     have_q = np.zeros(n, dtype=bool)
     for i, p in enumerate(proxies):
@@ -58,7 +59,7 @@ def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
             pos[i] = (m.x, m.y, m.z)
             vel[i] = (m.vx, m.vy, m.vz)
             prx[i] = lpn.rx_time_s
-            taken[i] = p.clock.sample_time_s(m.time_boot_ms * 1e-3, lpn.rx_time_s)
+            ptaken[i] = p.clock.sample_time_s(m.time_boot_ms * 1e-3, lpn.rx_time_s)
         aq = p.latest("ATTITUDE_QUATERNION")
         if aq is not None:
             m = aq.msg
@@ -68,8 +69,7 @@ def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
                 have_q[i] = True
             rates[i] = (m.rollspeed, m.pitchspeed, m.yawspeed)
             arx[i] = aq.rx_time_s
-            att_taken = p.clock.sample_time_s(m.time_boot_ms * 1e-3, aq.rx_time_s)
-            taken[i] = att_taken if lpn is None else min(taken[i], att_taken)
+            ataken[i] = p.clock.sample_time_s(m.time_boot_ms * 1e-3, aq.rx_time_s)
         imu = p.latest("HIGHRES_IMU")
         if imu is not None:
             m = imu.msg
@@ -98,10 +98,13 @@ def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
                                             fallback.rotation[bad])
         omega[bad], acc[bad] = fallback.omega_radps[bad], fallback.acceleration_mps2[bad]
     age = now_s - np.minimum(prx, arx)
-    delay = np.where(np.isfinite(prx) & np.isfinite(arx), now_s - taken, np.inf)
+    have = np.isfinite(prx) & np.isfinite(arx)
+    with np.errstate(invalid="ignore"):  # -inf - -inf where nothing arrived yet
+        delay = np.where(have, now_s - np.minimum(ptaken, ataken), np.inf)
+        transit = np.where(have, np.maximum(prx - ptaken, arx - ataken), np.inf)
     return TeamSample(np.ascontiguousarray(p_enu), np.ascontiguousarray(v_enu), acc,
                       np.ascontiguousarray(rot), np.ascontiguousarray(omega), age, now_s - irx,
-                      finite, delay)
+                      finite, delay, transit)
 
 
 def listen_label(p: VehicleProxy) -> str:
@@ -148,7 +151,7 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
             mode=mode, landed=landed, position_enu_m=tuple(sample.position_m[i].tolist()),
             velocity_enu_mps=tuple(sample.velocity_mps[i].tolist()),
             tilt_rad=tilt_rad(sample.rotation[i]), data_age_s=float(sample.age_s[i]),
-            delay_s=float(sample.delay_s[i]),
+            delay_s=float(sample.transit_s[i]),
             autopilot=autopilot, vehicle_type=vtype, sysid_mismatch=p.sysid_mismatch,
             rates_hz=rates, listen=listen_label(p), landed_state=landed_state,
             prearm_ok=prearm_ok, status_text=text.quoted() if text is not None else "",

@@ -43,8 +43,8 @@ class VehicleStatus:
 
     link: 'waiting' | 'alive' | 'lost'; mode: e.g. 'OFFBOARD', 'AUTO_LOITER', 'GUIDED_NOGPS';
     landed: True on the ground, False in the air, None unknown; data_age_s: time since the older of
-    its position and attitude samples arrived (liveness); delay_s: their true age, from the
-    vehicle's own stamps (gcs.link.clock); rates_hz: measured receive rate per message type;
+    its position and attitude samples arrived (liveness); delay_s: how long after the vehicle took
+    them they arrived (from its own stamps, gcs.link.clock: the link's delay, not the gap since); rates_hz: measured receive rate per message type;
     listen: where the ground station listens for it (e.g. 'udp 127.0.0.1:14540'), for messages;
     landed_state: MAV_LANDED_STATE (0 unknown, 1 ON_GROUND, 2 IN_AIR, 3 TAKEOFF, 4 LANDING);
     prearm_ok: SYS_STATUS MAV_SYS_STATUS_PREARM_CHECK health, None when not reported;
@@ -93,7 +93,7 @@ class SafetyRules:
 
     max_tilt_rad: float = 1.0
     link_lost_after_s: float = 0.5
-    #: in flight: position/attitude taken longer ago than this (true age) stops the formation
+    #: in flight: position/attitude arriving this long after they were taken stop the formation
     max_data_age_s: float = 0.3
     geofence_min_enu_m: tuple[float, float, float] | None = None
     geofence_max_enu_m: tuple[float, float, float] | None = None
@@ -140,8 +140,9 @@ def link_problem(status: VehicleStatus, rules: SafetyRules) -> Problem | None:
 
 
 def delay_problem(status: VehicleStatus, rules: SafetyRules) -> Problem | None:
-    """The vehicle's data arrives, but too old: taken more than `max_data_age_s` ago (true age,
-    from its own stamps). The law would act on where the vehicle was, not where it is."""
+    """The vehicle's data arrives, but late: more than `max_data_age_s` after it was taken (from
+    its own stamps). The law would act on where the vehicle was, not where it is. A vehicle that
+    falls silent is the link rule's (its last sample's delay does not grow)."""
     if status.delay_s > rules.max_data_age_s and math.isfinite(status.delay_s):
         return Problem(
             status.vehicle_id,
