@@ -46,6 +46,7 @@ from gcs.control.gains import GRAVITY_MPS2, LawGains
 from gcs.control.law import SingularCommandError, TeamCommand, TeamLaw
 from gcs.control.position import phi
 from gcs.flightlog import FlightLog, FlightLogBuilder, save_timeseries
+from gcs.fly.delay import DelayJudge
 from gcs.fly.measure import (
     HOVER_MIN_SAMPLES,
     HOVER_RATE_HZ,
@@ -154,6 +155,8 @@ class FlightSetup:
     requested_rates_hz: dict[str, float]
     log_every: int
     stability: str  # the discrete-time criterion, evaluated (for the log and the report)
+    # rates/attitude: the criterion again at each link's measured delay, in preflight
+    delay_judge: DelayJudge | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -165,13 +168,14 @@ class FlyResult:
 
 
 def cascade_check(team: TeamConfig, mode: str, gains: LawGains,
-                  rate_hz: float) -> tuple[str, dict[int, str]]:
+                  rate_hz: float) -> tuple[str, dict[int, str], DelayJudge]:
     """The cascade criterion of `mode` for every autopilot gcs fly flies (gcs/mission/cascade.py).
 
     With `fly.response` the vehicles' loops are known: a failure raises FlightSetupError before
     anything is opened. Otherwise each autopilot's recorded default applies, and a failure is
     returned as a refusal for the vehicles of that autopilot (preflight, one line each).
-    Returns (the evaluated criterion for the log, autopilot -> refusal).
+    Returns (the evaluated criterion for the log, autopilot -> refusal, the same criterion for
+    the delays preflight measures).
     """
     fly = team.fly
     eigenvalues = laplacian_eigenvalues(team.laplacian())
@@ -191,7 +195,8 @@ def cascade_check(team: TeamConfig, mode: str, gains: LawGains,
         lines.append(line)
         if explicit is not None:
             break  # one response for every vehicle
-    return "\n".join(lines), refusals
+    judge = DelayJudge(mode, cascade_gains, eigenvalues, rate_hz, fly.link_delay_s, explicit)
+    return "\n".join(lines), refusals, judge
 
 
 def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
@@ -233,6 +238,7 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
         **flown,
     )
     loop_refusals: dict[int, str] = {}
+    judge = None
     if mode == "actuators":
         # The criterion needs an inertia per vehicle: the nominal one where the file gives it,
         # else the initial estimate (never the plant's true value: the GCS does not know it).
@@ -254,7 +260,7 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
                 f"{MIN_DECAY_PER_S:g} /s with 1-2 ticks of delay); set fly.actuators.alpha_eps/"
                 f"alpha_omega or tick_rate_hz (docs/gcs.md)")
     else:  # rates, attitude: the law's loops over each autopilot's own (cascade.py)
-        stability, loop_refusals = cascade_check(team, mode, gains, rate)
+        stability, loop_refusals, judge = cascade_check(team, mode, gains, rate)
     try:
         check_go_to_start(team)
     except ConfigError as exc:
@@ -298,7 +304,7 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
         **({"prime_s": HOVER_WINDOW_S + 0.5} if from_hover else {}),
     )
     return FlightSetup(team, mode, law, rate, gains, plan, required,
-                       round(rate / fly.log_rate_hz), stability)
+                       round(rate / fly.log_rate_hz), stability, judge)
 
 
 def go_to_start_plan(team: TeamConfig) -> GoToStartPlan | None:
@@ -692,7 +698,9 @@ class Flight:
         m = self.machine
         if k % self.machine_every == 0:
             want_rates = m.phase in (Phase.CONNECT, Phase.PREFLIGHT)
-            statuses = vehicle_statuses(self.proxies, self.ids, sample, want_rates, self.ties)
+            judge = self.setup.delay_judge if m.phase is Phase.PREFLIGHT else None
+            statuses = vehicle_statuses(self.proxies, self.ids, sample, want_rates, self.ties,
+                                        judge)
             self._dispatch(m.on_tick(deadline_s, statuses, self.formation_error_m))
             self._log_notes()
             self._send_position_targets(sample)
@@ -941,6 +949,7 @@ class Flight:
                     "thrust_clamped": s.proxy.thrust_clamped,
                     "torque_clamped": s.proxy.torque_clamped,
                     "link_lost_events": s.proxy.link_lost_events,
+                    "heartbeat_stale_events": s.proxy.heartbeat_stale_events,
                     "stranger_address": s.proxy.stranger_address,
                     "unknown_sysid_frames": s.port.unknown_sysid_frames,
                     "command_retries": getattr(s.commands, "retries", None),

@@ -19,6 +19,7 @@ import numpy as np
 
 from gcs import frames
 from gcs.control.gains import GRAVITY_MPS2
+from gcs.fly.delay import DelayJudge
 from gcs.fly.measure import TeamSample
 from gcs.fly.origins import WAITING, TeamTies
 from gcs.link import VehicleProxy
@@ -114,9 +115,11 @@ def listen_label(p: VehicleProxy) -> str:
 
 
 def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample: TeamSample,
-                     want_rates: bool, ties: TeamTies | None = None) -> list[VehicleStatus]:
+                     want_rates: bool, ties: TeamTies | None = None,
+                     judge: DelayJudge | None = None) -> list[VehicleStatus]:
     """What the mission machine sees of each vehicle (see gcs.mission.safety.VehicleStatus);
-    `ties`: the frame ties, whose problems the preflight reports."""
+    `ties`: the frame ties, whose problems the preflight reports; `judge`: the criterion at each
+    link's measured delay (preflight only: pass it while the machine is there)."""
     out = []
     for i, p in enumerate(proxies):
         hb = p.latest("HEARTBEAT")
@@ -158,5 +161,7 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
             height_above_home_m=height,
             frame_problem=None if ties is None else ties.problems[i],
             frame_pending=ties is not None and ties.problems[i] == WAITING,
+            loop_problem=(judge.refusal(autopilot, p.clock.round_trips_s())
+                          if judge is not None else None),
         ))
     return out

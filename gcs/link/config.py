@@ -37,8 +37,9 @@ class VehicleLinkConfig:
     # sends only its 1 Hz HEARTBEAT (ArduPilot before its streams are asked for) ALIVE through
     # two lost beats (MAVSDK uses 3 s too)
     link_timeout_s: float = 3.0
-    # no HEARTBEAT for this long -> LOST: five 1 Hz periods (PX4 and ArduPilot keep HEARTBEAT at
-    # 1 Hz; with 10 % loss, 3 s dropped a live link with p = 0.1^3 per beat, 5 s needs 0.1^5)
+    # no HEARTBEAT for this long while other messages arrive: logged (armed state and mode are
+    # then stale); not LOST, since every message counts for liveness
+    # (5 s: five 1 Hz periods; PX4 and ArduPilot keep HEARTBEAT at 1 Hz)
     heartbeat_timeout_s: float = 5.0
     # TIMESYNC requests for the round trip (gcs.link.clock); 0: none. On a shared port one
     # request per period reaches every vehicle behind one address, and all use its replies.

@@ -60,7 +60,7 @@ class SequenceStats:
     """
 
     received: int
-    lost: int  # sum of forward gaps
+    lost: int  # sum of forward gaps, less the late packets that arrived after all
     duplicates: int  # same sequence number as the previous packet
     reordered: int  # arrived behind the newest one (a backward jump of < 128)
 
@@ -91,8 +91,9 @@ class SequenceTracker:
         elif delta < 128:
             self._lost += delta - 1
             self._last = seq
-        else:
+        else:  # a late packet: it arrived after all, so it is not in the gap it was counted in
             self._reordered += 1
+            self._lost = max(0, self._lost - 1)
 
     def stats(self) -> SequenceStats:
         return SequenceStats(self._received, self._lost, self._duplicates, self._reordered)

@@ -44,7 +44,8 @@ class VehicleStatus:
     link: 'waiting' | 'alive' | 'lost'; mode: e.g. 'OFFBOARD', 'AUTO_LOITER', 'GUIDED_NOGPS';
     landed: True on the ground, False in the air, None unknown; data_age_s: time since the older of
     its position and attitude samples arrived (liveness); delay_s: how long after the vehicle took
-    them they arrived (from its own stamps, gcs.link.clock: the link's delay, not the gap since); rates_hz: measured receive rate per message type;
+    them they arrived (from its own stamps, gcs.link.clock: the link's delay, not the gap since);
+    rates_hz: measured receive rate per message type;
     listen: where the ground station listens for it (e.g. 'udp 127.0.0.1:14540'), for messages;
     landed_state: MAV_LANDED_STATE (0 unknown, 1 ON_GROUND, 2 IN_AIR, 3 TAKEOFF, 4 LANDING);
     prearm_ok: SYS_STATUS MAV_SYS_STATUS_PREARM_CHECK health, None when not reported;
@@ -77,6 +78,8 @@ class VehicleStatus:
     # and whether the origin is still awaited
     frame_problem: str | None = None
     frame_pending: bool = False
+    # the control mode is not stable at this link's measured delay (gcs/fly/delay.py): why
+    loop_problem: str | None = None
 
     @property
     def name(self) -> str:
@@ -204,6 +207,8 @@ def preflight_problems(team: Sequence[VehicleStatus], rules: SafetyRules) -> lis
             out.append(Problem(s.vehicle_id, unsupported_text(n, s.autopilot)))
         elif s.autopilot in rules.loop_refusals:
             out.append(Problem(s.vehicle_id, f"{n}: {rules.loop_refusals[s.autopilot]}"))
+        elif s.loop_problem is not None:
+            out.append(Problem(s.vehicle_id, f"{n}: {s.loop_problem}"))
         if s.vehicle_type != QUADROTOR_TYPE:
             out.append(Problem(s.vehicle_id, f"{n}: MAV_TYPE {s.vehicle_type} is not a quadrotor "
                                              f"({QUADROTOR_TYPE})"))

@@ -74,10 +74,11 @@ def team_file(
 
 @contextlib.contextmanager
 def emulators(
-    team: Path, bind_base: int, tmp: Path, *, separate: bool = False, n: int = 4
+    team: Path, bind_base: int, tmp: Path, *, separate: bool = False, n: int = 4,
+    args: tuple[str, ...] = (),
 ) -> Iterator[list[subprocess.Popen]]:
-    """`vehicle-emu --fleet` (or one process per vehicle) on the team file's ports; stopped on
-    exit."""
+    """`vehicle-emu --fleet` (or one process per vehicle) on the team file's ports, with `args`
+    added; stopped on exit."""
     cmd = [
         sys.executable,
         "-m",
@@ -86,6 +87,7 @@ def emulators(
         str(team),
         "--log-level",
         "WARNING",
+        *args,
     ]
     argv = [cmd + ["--id", str(k + 1)] for k in range(n)] if separate else [cmd + ["--fleet"]]
     procs = [

@@ -3,9 +3,13 @@ by the delay rule (docs/gcs.md, "Link delay"), round trips in the report."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import numpy as np
 import pytest
 import yaml
-from test_fly_emulator import Gcs, emulators, team_file
+from pymavlink import mavutil
+from test_fly_emulator import Gcs, emulators, series, team_file
 
 from vehicle_emulator.testing import free_udp_port_block
 
@@ -47,3 +51,72 @@ def test_a_half_second_delay_step_on_one_vehicle_stops_the_formation_naming_it(t
         assert link[vid]["clock"]["synced"] and link[vid]["clock"]["restarts"] == 0
     # the step's round trips (1 s: 0.5 s each way) are in vehicle 2's record
     assert link["2"]["round_trip"]["max_ms"] >= 900.0
+
+
+def delayed_team(tmp_path, base: int, latency_ms: float, *, probability: float = 0.0,
+                 duration_s: float = 10.0, fly: dict | None = None) -> Path:
+    """Scenario I (test_fly_emulator.team_file) with `latency_ms` + 10 ms uniform jitter and
+    `probability` loss on every link, both directions, and `fly` settings over the file's."""
+    faults = [{"kind": "packet_loss", "vehicle": k, "at_s": 0.0, "probability": probability,
+               "latency_ms": latency_ms, "jitter_ms": 10.0} for k in (1, 2, 3, 4)]
+    team = team_file(tmp_path, base, duration_s=duration_s, faults=faults)
+    data = yaml.safe_load(team.read_text())
+    for key, value in (fly or {}).items():
+        if isinstance(value, dict):
+            data["fly"].setdefault(key, {}).update(value)
+        else:
+            data["fly"][key] = value
+    team.write_text(yaml.safe_dump(data, sort_keys=False))
+    return team
+
+
+def test_a_mode_unstable_at_the_measured_delay_is_refused_before_anything_is_commanded(tmp_path):
+    # GIVEN links with 50 ms (+ 0-10 ms jitter) each way from the vehicles' boot, and a team file
+    # that declares 10 ms (fly.link_delay_s) with the paper's gains, stable only at that delay
+    base = free_udp_port_block(4)
+    team = delayed_team(tmp_path, base, 50.0)
+    with emulators(team, base, tmp_path, args=("--param", "EMU_FLT_T0=1")):
+        gcs = Gcs(team, tmp_path / "run", "--mode", "rates")
+        code, out = gcs.finish(120)
+    log = gcs.log_path.read_text()
+    # THEN preflight measures the round trips and refuses rates mode, one line per vehicle,
+    # naming the measured delay and the settings that are stable at it
+    assert code == 1, log[-3000:]
+    for k in range(1, 5):
+        line = next(x for x in (log + out).splitlines()
+                    if f"vehicle {k} (sysid {k}): link delay measured " in x)
+        assert "more than fly.link_delay_s 10 ms: rates mode with k_eps 6" in line
+        assert "is not stable enough" in line and "; stable: rates mode with" in line
+        measured = float(line.split("link delay measured ")[1].split(" ms")[0])
+        assert 50.0 <= measured <= 62.0, line
+    # AND nothing was commanded: no mode change, no arming
+    conn = mavutil.mavlink_connection(str(tmp_path / "run" / "flight.tlog"))
+    sent = []
+    while (msg := conn.recv_match(type="COMMAND_LONG")) is not None:
+        sent.append(msg.command)
+    assert 176 not in sent and 400 not in sent
+
+
+def test_scenario_one_over_50_ms_links_with_jitter_and_loss_converges(tmp_path):
+    # GIVEN 50 ms + 0-10 ms jitter + 20 % loss on every link, both directions, from the
+    # formation's start, and the gains the criterion proposes at 60 ms (fly.link_delay_s)
+    base = free_udp_port_block(4)
+    team = delayed_team(tmp_path, base, 50.0, probability=0.2, duration_s=60.0, fly={
+        "link_delay_s": 0.06, "initial_mass": "from_hover",
+        "rates": {"k_eps": 2.0, "k_eps_yaw": 2.0, "alpha_p": 1.0, "c_p": 1.0}})
+    with emulators(team, base, tmp_path):
+        gcs = Gcs(team, tmp_path / "run", "--mode", "rates", "--end-action", "hold")
+        code, out = gcs.finish(240)
+    assert code == 0, gcs.log_path.read_text()[-3000:]
+    # THEN the formation holds within 5 cm from t = 30 s, the masses within 50 g at 20 s
+    report = gcs.report()
+    t, fe = series(report, "formation_error_m")
+    assert np.nanmax(fe[t >= 30.0]) <= 0.05
+    k20 = int(np.argmin(np.abs(t - 20.0)))
+    np.testing.assert_allclose(report["mass_estimate_kg"][k20], report["mass_true_kg"][k20],
+                               atol=0.05)
+    # AND the report shows the delay that was flown: true ages past the 50 ms transport,
+    # round trips of two transports
+    for vid, link in report["link"].items():
+        assert 50.0 <= link["telemetry_age_p50_ms"] <= 90.0, (vid, link)
+        assert 100.0 <= link["round_trip"]["p50_ms"] <= 125.0, (vid, link["round_trip"])

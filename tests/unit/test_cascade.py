@@ -118,3 +118,26 @@ def test_bundled_gains_pass_on_both_autopilots():
             setup = prepare(team, FlyOptions(out_dir=Path("/nonexistent"), mode=mode))
             assert setup.plan.rules.loop_refusals == {}, (name, mode, setup.stability)
             assert setup.stability.count("every loop passes") == 2, setup.stability
+
+
+def test_a_measured_delay_above_the_configured_one_is_judged_again_per_autopilot():
+    from gcs.fly.delay import DelayJudge
+
+    g = CascadeGains(1.0, 2.0, 1.5, 1.0)  # the bundled rates gains: pass at 10 ms on PX4
+    judge = DelayJudge("rates", g, [0.0, 2.0, 4.0], 100.0, 0.01)
+    px4, ardupilot = 12, 3
+    # within the configured delay, or nothing measured: nothing to say
+    assert judge.refusal(px4, np.array([0.004, 0.02, 0.019])) is None
+    assert judge.refusal(px4, np.array([])) is None
+    # a 110 ms round trip: 55 ms each way, where these gains fail (test_more_link_delay...)
+    assert not verdict("rates", g, PX4_RESPONSE, [0.0, 2.0, 4.0], 100.0, 0.055, "PX4")[0]
+    line = judge.refusal(px4, np.array([0.108, 0.110, 0.150]))
+    assert line is not None
+    assert line.startswith("link delay measured 55 ms each way (TIMESYNC round trip median "
+                           "110 ms), more than fly.link_delay_s 10 ms: rates mode with")
+    assert "link delay 55 ms, on PX4" in line and "stable: rates mode with" in line
+    assert "on ArduPilot Copter" in judge.refusal(ardupilot, np.array([0.11]))
+    # a flight configured for no delay at all measures 10 ms each way: stable there, flown
+    assert verdict("rates", g, PX4_RESPONSE, [0.0, 2.0, 4.0], 100.0, 0.010, "PX4")[0]
+    assert DelayJudge("rates", g, [0.0, 2.0, 4.0], 100.0, 0.0).refusal(
+        px4, np.array([0.0199, 0.0200, 0.0201])) is None

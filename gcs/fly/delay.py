@@ -1,0 +1,67 @@
+"""The cascade criterion at the link delay that exists: measured in preflight, judged per vehicle.
+
+`prepare` checks each control mode at the configured delay (`fly.link_delay_s`). In preflight the
+links' TIMESYNC round trips (gcs.link.clock) say what the delay is; where it exceeds the
+configured one, the criterion (gcs/mission/cascade.py) is evaluated again at the measured delay
+and a mode that fails there is refused with one line, naming the setting that passes.
+
+The measured one-way delay is half the median of the link's recent round trips, rounded up to
+`DELAY_STEP_S` (1 ms, so that verdicts can be cached).
+Pure apart from its cache.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from gcs.mission.autopilots import PROFILES
+from gcs.mission.cascade import AutopilotResponse, CascadeGains, verdict
+
+#: Measured delays are rounded up to this step before the criterion is evaluated [s].
+DELAY_STEP_S = 0.001
+
+
+def measured_delay_s(round_trips_s: np.ndarray) -> float:
+    """One-way delay [s] from round trips: half their median; NaN without any."""
+    return 0.5 * float(np.median(round_trips_s)) if round_trips_s.size else math.nan
+
+
+class DelayJudge:
+    """The criterion of one flight's mode and gains, re-evaluated at measured delays."""
+
+    def __init__(self, mode: str, gains: CascadeGains, eigenvalues: Sequence[float],
+                 tick_rate_hz: float, configured_delay_s: float,
+                 response: AutopilotResponse | None = None) -> None:
+        self.mode, self.gains, self.eigenvalues = mode, gains, tuple(eigenvalues)
+        self.tick_rate_hz, self.configured_delay_s = tick_rate_hz, configured_delay_s
+        self.response = response  # the team file's fly.response (every vehicle), else per autopilot
+        self._cache: dict[tuple[int, float], str | None] = {}
+
+    def refusal(self, autopilot: int, round_trips_s: np.ndarray) -> str | None:
+        """Why the mode is not stable at this link's measured delay (one line), or None when it
+        is, when the delay is within the configured one, or when nothing was measured."""
+        delay = measured_delay_s(round_trips_s)
+        if not delay > self.configured_delay_s:
+            return None
+        response = self.response
+        if response is None:
+            profile = PROFILES.get(autopilot)
+            if profile is None:
+                return None  # an unsupported autopilot is refused on its own
+            response = profile.response
+        step = math.ceil(delay / DELAY_STEP_S - 1e-9) * DELAY_STEP_S
+        key = (autopilot if self.response is None else 0, round(step, 6))
+        if key not in self._cache:
+            who = "this vehicle" if self.response is not None else PROFILES[autopilot].name
+            ok, line = verdict(self.mode, self.gains, response, self.eigenvalues,
+                               self.tick_rate_hz, step, who)
+            self._cache[key] = None if ok else line
+        line = self._cache[key]
+        if line is None:
+            return None
+        return (f"link delay measured {1e3 * delay:.0f} ms each way (TIMESYNC round trip median "
+                f"{2e3 * delay:.0f} ms), more than fly.link_delay_s "
+                f"{1e3 * self.configured_delay_s:.0f} ms: {line}")
