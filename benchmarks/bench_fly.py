@@ -21,6 +21,9 @@ ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## gcs fly"
 
+sys.path.insert(0, str(ROOT))
+from benchmarks.docsection import write_section  # noqa: E402
+
 
 def run(team: Path, duration_s: float, work: Path) -> dict:
     emu_stats = work / "emu.json"
@@ -100,17 +103,6 @@ def section(r: dict, team: Path, duration_s: float) -> str:
     return "\n".join(lines)
 
 
-def write_section(text: str) -> None:
-    doc = DOC.read_text() if DOC.exists() else "# Benchmarks\n\n"
-    start = doc.find(HEADING + "\n")
-    if start < 0:
-        doc = doc.rstrip("\n") + "\n\n" + text
-    else:
-        end = doc.find("\n## ", start + len(HEADING))
-        doc = doc[:start] + text + ("" if end < 0 else doc[end + 1:])
-    DOC.write_text(doc)
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--team", type=Path, default=ROOT / "configs" / "grid16.yaml")
@@ -122,7 +114,7 @@ def main() -> int:
     text = section(result, args.team.resolve(), args.duration_s)
     print(text)
     if not args.no_write:
-        write_section(text)
+        write_section(DOC, HEADING, text)
         print(f"wrote the '{HEADING}' section of {DOC}")
     return 0
 

@@ -39,6 +39,7 @@ BOOTED_S = 10.0  # the fleet runs this long before `gcs fly` starts (past every 
 SITL_NAMES = {"px4": "PX4 v1.16.0 SIH", "ardupilot": "ArduCopter 4.7.0-dev SITL"}
 
 sys.path.insert(0, str(ROOT))
+from benchmarks.docsection import write_section  # noqa: E402
 from vehicle_emulator.testing import free_udp_port_block  # noqa: E402
 
 
@@ -187,17 +188,6 @@ def section(results: dict[str, dict[str, dict]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_section(text: str) -> None:
-    doc = DOC.read_text()
-    start = doc.find(HEADING)
-    if start < 0:
-        doc = doc.rstrip("\n") + "\n\n" + text
-    else:
-        nxt = doc.find("\n## ", start + len(HEADING))
-        doc = doc[:start] + text + (doc[nxt + 1:] if nxt >= 0 else "")
-    DOC.write_text(doc)
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--autopilot", choices=sorted(TEAMS), action="append")
@@ -227,7 +217,7 @@ def main() -> None:
         if args.mode != "rates" or args.from_hover:
             raise SystemExit("the docs' section is today's rates mode with the file's estimates: "
                              "use --no-write with --mode/--from-hover")
-        write_section(text)
+        write_section(DOC, HEADING, text)
 
 
 if __name__ == "__main__":

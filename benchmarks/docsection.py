@@ -1,0 +1,18 @@
+"""Replace (or append) one `## ` section of a Markdown file: how each benchmark writes its
+figures into docs/benchmarks.md without touching the others' sections."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def write_section(doc_path: Path, heading: str, text: str) -> None:
+    """`text` (starting with `heading`) in place of that section, else appended."""
+    doc = doc_path.read_text() if doc_path.exists() else "# Benchmarks\n\n"
+    start = doc.find(heading + "\n")
+    if start < 0:
+        doc = doc.rstrip("\n") + "\n\n" + text
+    else:
+        end = doc.find("\n## ", start + len(heading))
+        doc = doc[:start] + text + ("" if end < 0 else doc[end + 1:])
+    doc_path.write_text(doc)
