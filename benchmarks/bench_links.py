@@ -35,6 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from benchmarks.docsection import write_section  # noqa: E402
 from gcs.config import load_team  # noqa: E402
+from gcs.control.position import phi  # noqa: E402
 from gcs.mission.cascade import (  # noqa: E402
     NOMINAL_RESPONSE,
     CascadeGains,
@@ -72,8 +73,10 @@ def team_file(work: Path, mode: str, gains: CascadeGains, delay_s: float, latenc
     gcs_base, emu_base = free_udp_port_block(4), free_udp_port_block(4)
     for k, v in enumerate(data["vehicles"]):
         v["link"] = {"local_port": gcs_base + k, "remote_port": emu_base + k}
-        if for_sim:  # what the hover gives the flight: the vehicle's own mass
-            v["estimates"]["mhat"] = v["plant"]["mass_kg"]
+        if for_sim:  # what the hover gives the flight, at rest: phi(0) m / alpha_m (docs/gcs.md)
+            g = data["controller"]["gains"]
+            phi0 = float(phi(np.zeros((1, 3)), g["sigma_a"])[0])
+            v["estimates"]["mhat"] = phi0 * v["plant"]["mass_kg"] / g["alpha_m"]
     data["emulator"] = {"autopilot": "nominal", "origin": "shared"}
     response = dataclasses.asdict(NOMINAL_RESPONSE)
     del response["source"]
