@@ -18,7 +18,7 @@ install: $(BIN)/activate
 
 test: install
 	$(BIN)/ruff check gcs vehicle_emulator tests benchmarks
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n 2 --dist loadfile
 
 # The main job: start the emulator fleet, fly the team over MAVLink, stop the emulators.
 demo: install

@@ -191,7 +191,7 @@ def section(rows: list[dict]) -> str:
         lines.append(f"{head} {exit_cell} | {_f(f['fe_30'])} | {_f(f['fe_60'])} | "
                      f"{_f(f['fe_max_30'])} | {_f(f['mass_err_20'], '.4f')} | "
                      f"{_f(f['age_ms'], '.0f')} / {_f(f['rtt_ms'], '.0f')} | {sim_cell} |")
-    lines += ["", f"![formation error at 60 s against latency]({FIGURE.relative_to(DOC.parent)})",
+    lines += ["", f"![max formation error for t >= 30 s against latency]({FIGURE.relative_to(DOC.parent)})",
               ""]
     return "\n".join(lines) + "\n"
 
