@@ -5,8 +5,12 @@ links' TIMESYNC round trips (gcs.link.clock) say what the delay is; where it exc
 configured one, the criterion (gcs/mission/cascade.py) is evaluated again at the measured delay
 and a mode that fails there is refused with one line, naming the setting that passes.
 
-The measured one-way delay is half the median of the link's recent round trips, rounded up to
-`DELAY_STEP_S` (1 ms, so that verdicts can be cached).
+The measured one-way delay is half the lower quartile of the link's recent round trips (20 at
+2 Hz): a latency that lasts shows in every round trip, while a busy machine delays some replies
+by 10-20 ms (seen with two test workers and a compile on two cores) and a quartile passes over
+those. It is judged only when it exceeds `fly.link_delay_s` by more than `DELAY_TOLERANCE_S`
+(the criterion's 0.4 modulus margin is a design margin, not the edge of stability), at the
+measured delay rounded up to `DELAY_STEP_S` (1 ms, so that verdicts can be cached).
 Pure apart from its cache.
 """
 
@@ -22,11 +26,13 @@ from gcs.mission.cascade import AutopilotResponse, CascadeGains, verdict
 
 #: Measured delays are rounded up to this step before the criterion is evaluated [s].
 DELAY_STEP_S = 0.001
+#: A measured delay up to this much above the configured one is flown as configured [s].
+DELAY_TOLERANCE_S = 0.005
 
 
 def measured_delay_s(round_trips_s: np.ndarray) -> float:
-    """One-way delay [s] from round trips: half their median; NaN without any."""
-    return 0.5 * float(np.median(round_trips_s)) if round_trips_s.size else math.nan
+    """One-way delay [s] from round trips: half their lower quartile; NaN without any."""
+    return 0.5 * float(np.percentile(round_trips_s, 25)) if round_trips_s.size else math.nan
 
 
 class DelayJudge:
@@ -42,9 +48,10 @@ class DelayJudge:
 
     def refusal(self, autopilot: int, round_trips_s: np.ndarray) -> str | None:
         """Why the mode is not stable at this link's measured delay (one line), or None when it
-        is, when the delay is within the configured one, or when nothing was measured."""
+        is, when the delay is within the configured one (and its tolerance), or when nothing was
+        measured."""
         delay = measured_delay_s(round_trips_s)
-        if not delay > self.configured_delay_s:
+        if not delay > self.configured_delay_s + DELAY_TOLERANCE_S:
             return None
         response = self.response
         if response is None:
@@ -62,6 +69,6 @@ class DelayJudge:
         line = self._cache[key]
         if line is None:
             return None
-        return (f"link delay measured {1e3 * delay:.0f} ms each way (TIMESYNC round trip median "
-                f"{2e3 * delay:.0f} ms), more than fly.link_delay_s "
+        return (f"link delay measured {1e3 * delay:.0f} ms each way (TIMESYNC round trip lower "
+                f"quartile {2e3 * delay:.0f} ms), more than fly.link_delay_s "
                 f"{1e3 * self.configured_delay_s:.0f} ms: {line}")
