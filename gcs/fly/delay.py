@@ -5,7 +5,7 @@ links' TIMESYNC round trips (gcs.link.clock) say what the delay is; where it exc
 configured one, the criterion (gcs/mission/cascade.py) is evaluated again at the measured delay
 and a mode that fails there is refused with one line, naming the setting that passes.
 
-The measured one-way delay is half the lower quartile of the link's recent round trips (20 at
+The measured one-way delay is half the lower quartile of the link's latest round trips (8, 4 s at
 2 Hz): a latency that lasts shows in every round trip, while a busy machine delays some replies
 by 10-20 ms (seen with two test workers and a compile on two cores) and a quartile passes over
 those. It is judged only when it exceeds `fly.link_delay_s` by more than `DELAY_TOLERANCE_S`

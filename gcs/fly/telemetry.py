@@ -28,6 +28,9 @@ from gcs.mission.autopilots import profile_for
 from gcs.mission.safety import VehicleStatus, tilt_rad
 
 _IDENTITY_Q = (1.0, 0.0, 0.0, 0.0)
+#: The latest TIMESYNC round trips the preflight's delay judge reads (4 s at 2 Hz: not the
+#: replies a vehicle sent late while it was still starting up).
+JUDGED_ROUND_TRIPS = 8
 #: SYS_STATUS onboard_control_sensors_* bit of the pre-arm checks (MAV_SYS_STATUS_PREARM_CHECK)
 PREARM_CHECK_BIT = 0x10000000
 _LANDED = {LandedState.ON_GROUND: True, LandedState.IN_AIR: False, LandedState.TAKEOFF: False,
@@ -161,7 +164,7 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
             height_above_home_m=height,
             frame_problem=None if ties is None else ties.problems[i],
             frame_pending=ties is not None and ties.problems[i] == WAITING,
-            loop_problem=(judge.refusal(autopilot, p.clock.round_trips_s())
+            loop_problem=(judge.refusal(autopilot, p.clock.round_trips_s()[-JUDGED_ROUND_TRIPS:])
                           if judge is not None else None),
         ))
     return out
