@@ -235,15 +235,6 @@ class VehicleProxy:
         """Snapshot of the latest telemetry in ENU/FLU with receive times; returns immediately."""
         return build_state(self._cache, self.config.sysid, self._clock.now_s())
 
-    def sample_time_s(self, kind: str) -> float:
-        """When the latest ``kind`` message's sample was taken, on the receive clock: from its
-        time_boot_ms through the clock filter (its receive time before the filter has a sample);
-        -inf if none arrived. ``kind`` is one of STAMPED_TYPES."""
-        rec = self._cache.latest(kind)
-        if rec is None:
-            return -math.inf
-        return self.clock.sample_time_s(rec.msg.time_boot_ms * 1e-3, rec.rx_time_s)
-
     def round_trips_s(self) -> np.ndarray:
         """Every TIMESYNC round trip measured on this link [s], oldest first."""
         return np.asarray(self._round_trips, dtype=float)
