@@ -8,7 +8,7 @@ socket. Frames: positions ENU [m], tilt = angle between body z and world z [rad]
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -78,8 +78,9 @@ class VehicleStatus:
     # and whether the origin is still awaited
     frame_problem: str | None = None
     frame_pending: bool = False
-    # the control mode is not stable at this link's measured delay (gcs/fly/delay.py): why
-    loop_problem: str | None = None
+    # the control mode is not stable at this link's measured delay (gcs/fly/delay.py): builds
+    # the line saying why (costly: called only when a preflight decides)
+    loop_problem: Callable[[], str] | None = None
 
     @property
     def name(self) -> str:
@@ -208,7 +209,7 @@ def preflight_problems(team: Sequence[VehicleStatus], rules: SafetyRules) -> lis
         elif s.autopilot in rules.loop_refusals:
             out.append(Problem(s.vehicle_id, f"{n}: {rules.loop_refusals[s.autopilot]}"))
         elif s.loop_problem is not None:
-            out.append(Problem(s.vehicle_id, f"{n}: {s.loop_problem}"))
+            out.append(Problem(s.vehicle_id, f"{n}: {s.loop_problem()}"))
         if s.vehicle_type != QUADROTOR_TYPE:
             out.append(Problem(s.vehicle_id, f"{n}: MAV_TYPE {s.vehicle_type} is not a quadrotor "
                                              f"({QUADROTOR_TYPE})"))

@@ -135,13 +135,40 @@ def test_a_measured_delay_above_the_configured_one_is_judged_again_per_autopilot
     assert judge.refusal(px4, np.array([])) is None
     # a 110 ms round trip: 55 ms each way, where these gains fail (test_more_link_delay...)
     assert not verdict("rates", g, PX4_RESPONSE, [0.0, 2.0, 4.0], 100.0, 0.055, "PX4")[0]
-    line = judge.refusal(px4, np.array([0.110, 0.110, 0.110, 0.150]))
-    assert line is not None
+    refusal = judge.refusal(px4, np.array([0.110, 0.110, 0.110, 0.150]))
+    assert refusal is not None
+    line = refusal()
     assert line.startswith("link delay measured 55 ms each way (TIMESYNC round trip lower "
                            "quartile 110 ms), more than fly.link_delay_s 10 ms: rates mode with")
     assert "link delay 55 ms, on PX4" in line and "stable: rates mode with" in line
-    assert "on ArduPilot Copter" in judge.refusal(ardupilot, np.array([0.11]))
+    assert "on ArduPilot Copter" in judge.refusal(ardupilot, np.array([0.11]))()
     # a flight configured for no delay at all measures 10 ms each way: stable there, flown
     assert verdict("rates", g, PX4_RESPONSE, [0.0, 2.0, 4.0], 100.0, 0.010, "PX4")[0]
     assert DelayJudge("rates", g, [0.0, 2.0, 4.0], 100.0, 0.0).refusal(
         px4, np.array([0.0199, 0.0200, 0.0201])) is None
+
+
+def test_the_delay_judge_answers_pass_or_fail_at_once_and_builds_the_refusal_line_when_read(
+        monkeypatch):
+    # the judge runs on every preflight tick: naming stable settings searches candidate gains
+    # (~0.2 s) and must not run there, or the stall would lift the round trips it measures
+    import gcs.fly.delay as delay
+
+    built = []
+
+    def counting_verdict(*args, **kwargs):
+        built.append(args[5])
+        return verdict(*args, **kwargs)
+
+    monkeypatch.setattr(delay, "verdict", counting_verdict)
+    judge = delay.DelayJudge("rates", CascadeGains(1.0, 2.0, 1.5, 1.0), [0.0, 2.0, 4.0], 100.0,
+                             0.01)
+    rtts = (0.110, 0.112, 0.114, 0.122)  # 55-61 ms each way
+    refusals = [judge.refusal(12, np.array([rtt])) for rtt in rtts]
+    assert all(r is not None for r in refusals) and built == []
+    # read: judged at the delay rounded up to 5 ms (55, 60, 60, 65 ms), the search run once per
+    # step; each line names its own measured delay
+    lines = [r() for r in refusals]
+    assert built == [0.055, 0.06, 0.065]
+    assert lines[1].startswith("link delay measured 56 ms") and "link delay 60 ms" in lines[1]
+    assert lines[2].split(": ", 1)[1] == lines[1].split(": ", 1)[1]
