@@ -11,11 +11,18 @@ flown (gcs/mission/cascade.py `stable_gains`); the initial mass comes from the h
 (`fly.initial_mass: from_hover`, the bundled default). Beside each, `gcs sim` of the same team and
 gains in-process (no link; rates only: gcs sim does not model an on-board attitude loop).
 
-Figures: formation error at 30 s and 60 s, its max for t >= 30 s, the largest mass-estimate error
-at 20 s, the true telemetry age p50 and the TIMESYNC round trip p50 of the flight. Writes the
-"## Link latency, jitter and loss" section and docs/figures/bench_links.png.
+Each case is flown with delay compensation (`fly.predict: true`, gcs/fly/predict.py; the criterion
+then judges the compensated loops) and without it; the gains are the criterion's for that setting.
 
-    python benchmarks/bench_links.py [--latency-ms 0 50] [--loss 0 0.2] [--mode rates] [--no-write]
+Figures: formation error at 30 s and 60 s, its max for t >= 30 s, the largest mass-estimate error
+at 20 s, the true telemetry age p50 and the TIMESYNC round trip p50 of the flight, and with
+compensation the predictor's position error p99 against what the vehicles later reported for the
+same instant (the nominal personality reports its true state) beside the error of the sample
+held without prediction. Writes the "## Link latency, jitter and loss" section and
+docs/figures/bench_links.png.
+
+    python benchmarks/bench_links.py [--latency-ms 0 50] [--loss 0 0.2] [--mode rates]
+                                     [--predict on off] [--no-write]
 """
 
 from __future__ import annotations
@@ -55,19 +62,19 @@ PAPER = CascadeGains(alpha_p=2.0, c_p=4.0, k_eps=6.0, k_eps_yaw=4.0)
 TICK_HZ = 100.0
 
 
-def gains_at(mode: str, delay_s: float) -> tuple[CascadeGains | None, str]:
+def gains_at(mode: str, delay_s: float, predicted: bool) -> tuple[CascadeGains | None, str]:
     """The paper's gains if the criterion passes them at delay_s, else its proposal."""
     team = load_team(SQUARE4)
     eig = laplacian_eigenvalues(team.laplacian())
-    ok, _ = verdict(mode, PAPER, NOMINAL_RESPONSE, eig, TICK_HZ, delay_s, "nominal")
+    ok, _ = verdict(mode, PAPER, NOMINAL_RESPONSE, eig, TICK_HZ, delay_s, "nominal", predicted)
     if ok:
         return PAPER, "paper"
-    g = stable_gains(mode, PAPER, NOMINAL_RESPONSE, eig, TICK_HZ, delay_s)
+    g = stable_gains(mode, PAPER, NOMINAL_RESPONSE, eig, TICK_HZ, delay_s, predicted)
     return g, "proposed" if g is not None else "none stable"
 
 
 def team_file(work: Path, mode: str, gains: CascadeGains, delay_s: float, latency_ms: float,
-              loss: float, *, for_sim: bool = False) -> Path:
+              loss: float, *, predicted: bool = True, for_sim: bool = False) -> Path:
     data = yaml.safe_load(SQUARE4.read_text())
     data["mission"]["duration_s"] = DURATION_S
     gcs_base, emu_base = free_udp_port_block(4), free_udp_port_block(4)
@@ -83,6 +90,7 @@ def team_file(work: Path, mode: str, gains: CascadeGains, delay_s: float, latenc
     fly = data["fly"]
     fly["response"] = response
     fly["link_delay_s"] = delay_s
+    fly["predict"] = predicted
     fly["initial_mass"] = "from_hover"
     fly["geofence"]["min_enu_m"][2] = 0.5
     fly[mode].update(alpha_p=gains.alpha_p, c_p=gains.c_p)
@@ -139,6 +147,8 @@ def figures(report: dict) -> dict:
     late = t >= 30.0
     link = report.get("link", {})
     ages = [v["telemetry_age_p50_ms"] for v in link.values()]
+    pred = [v.get("prediction", {}) for v in link.values()]
+    pred = [p for p in pred if p.get("enabled") and p["position_m"]["p99"] is not None]
     rtts = [v["round_trip"]["p50_ms"] for v in link.values() if v["round_trip"]["n"]]
     return {
         "fe_30": at(30.0), "fe_60": at(60.0),
@@ -146,6 +156,8 @@ def figures(report: dict) -> dict:
         "mass_err_20": float(m_err.max()) if t[-1] >= 19.8 else float("nan"),
         "age_ms": float(np.mean(ages)) if ages else float("nan"),
         "rtt_ms": float(np.mean(rtts)) if rtts else float("nan"),
+        "pred_p99": max(p["position_m"]["p99"] for p in pred) if pred else float("nan"),
+        "held_p99": max(p["position_held_m"]["p99"] for p in pred) if pred else float("nan"),
         "t_end": float(t[-1]),
         "outcome": report.get("extra", {}).get("outcome", {}).get("reason", ""),
     }
@@ -161,17 +173,21 @@ def section(rows: list[dict]) -> str:
         "`benchmarks/bench_links.py` (rerun: `.venv/bin/python benchmarks/bench_links.py`). "
         "Scenario I (configs/square4.yaml, 60 s) flown by `gcs fly` against `vehicle-emu "
         "--fleet`, nominal personality, with every link impaired both ways from the formation's "
-        f"start: the latency, 0-{JITTER_MS:g} ms uniform jitter, and the loss. `fly.link_delay_s` "
+        f"start: the latency, 0-{JITTER_MS:g} ms uniform jitter, and the loss; with delay "
+        "compensation (`fly.predict`, predict on) and without. `fly.link_delay_s` "
         f"= latency + {JITTER_MS:g} ms; gains: the paper's (alpha_p 2, c_p 4, k_eps 6, k_eps_yaw "
         "4) where the cascade criterion passes them at that delay, else its proposal (the one "
-        "the ground station's refusal names); initial mass from the hover. `sim`: `gcs sim` of "
+        "the ground station's refusal names, for that fly.predict); initial mass from the hover. "
+        "`pred / held p99`: the largest over the vehicles of the predicted position's error p99 "
+        "against what the vehicle later reported for that instant (the nominal personality "
+        "reports its true state), beside the sample held without prediction [mm]. `sim`: `gcs sim` of "
         "the same team and gains in-process, without a link (rates only). Errors in m, mass "
         "error in kg (largest over the team), age: mean over the vehicles of the true telemetry "
         "age p50, RTT: of the TIMESYNC round trip p50.", "",
-        "| mode | latency | loss | gains (alpha_p, c_p, k_eps, k_eps_yaw) | exit | error 30 s | "
-        "error 60 s | max t >= 30 s | mass error 20 s | age / RTT [ms] | sim 30 s / 60 s / mass "
-        "20 s |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| mode | predict | latency | loss | gains (alpha_p, c_p, k_eps, k_eps_yaw) | exit | "
+        "error 30 s | error 60 s | max t >= 30 s | mass error 20 s | age / RTT [ms] | pred / held "
+        "p99 [mm] | sim 30 s / 60 s / mass 20 s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         g = r["gains"]
@@ -179,18 +195,21 @@ def section(rows: list[dict]) -> str:
                  f"{g.alpha_p:g}, {g.c_p:g}" + (f", {g.k_eps:g}, {g.k_eps_yaw:g}"
                                                  if r["mode"] == "rates" else "")
                  + f" ({r['source']})")
-        head = f"| {r['mode']} | {r['latency_ms']:g} ms | {100 * r['loss']:.0f} % | {gains} |"
+        head = (f"| {r['mode']} | {'on' if r['predicted'] else 'off'} | {r['latency_ms']:g} ms | "
+                f"{100 * r['loss']:.0f} % | {gains} |")
         f, s = r.get("fly"), r.get("sim")
         sim_cell = (f"{_f(s['fe_30'])} / {_f(s['fe_60'])} / {_f(s['mass_err_20'], '.4f')}"
                     if s else "-")
         if f is None:
-            lines.append(f"{head} {r.get('exit', '-')} | {r.get('why') or 'not flown'} | | | | | "
+            lines.append(f"{head} {r.get('exit', '-')} | {r.get('why') or 'not flown'} | | | | | | "
                          f"{sim_cell} |")
             continue
         exit_cell = f"{r['exit']}" + ("" if r["exit"] == 0 else f" ({f['outcome'][:80]})")
         lines.append(f"{head} {exit_cell} | {_f(f['fe_30'])} | {_f(f['fe_60'])} | "
                      f"{_f(f['fe_max_30'])} | {_f(f['mass_err_20'], '.4f')} | "
-                     f"{_f(f['age_ms'], '.0f')} / {_f(f['rtt_ms'], '.0f')} | {sim_cell} |")
+                     f"{_f(f['age_ms'], '.0f')} / {_f(f['rtt_ms'], '.0f')} | "
+                     f"{_f(1e3 * f['pred_p99'], '.1f')} / {_f(1e3 * f['held_p99'], '.0f')} | "
+                     f"{sim_cell} |")
     lines += ["", f"![max formation error for t >= 30 s against latency]({FIGURE.relative_to(DOC.parent)})",
               ""]
     return "\n".join(lines) + "\n"
@@ -204,13 +223,16 @@ def plot(rows: list[dict]) -> None:
 
     fig, ax = plt.subplots(figsize=(7, 4))
     for mode in sorted({r["mode"] for r in rows}):
-        for loss in sorted({r["loss"] for r in rows}):
-            pts = [(r["latency_ms"], r["fly"]["fe_max_30"]) for r in rows
-                   if r["mode"] == mode and r["loss"] == loss and r.get("fly")
-                   and r["exit"] == 0]
-            if pts:
-                x, y = zip(*sorted(pts), strict=True)
-                ax.plot(x, y, "o-", label=f"{mode}, {100 * loss:.0f} % loss")
+        for predicted in (True, False):
+            for loss in sorted({r["loss"] for r in rows}):
+                pts = [(r["latency_ms"], r["fly"]["fe_max_30"]) for r in rows
+                       if r["mode"] == mode and r["loss"] == loss and r.get("fly")
+                       and r["predicted"] == predicted and r["exit"] == 0]
+                if pts:
+                    x, y = zip(*sorted(pts), strict=True)
+                    ax.plot(x, y, "o-" if predicted else "s--",
+                            label=f"{mode}, predict {'on' if predicted else 'off'}, "
+                                  f"{100 * loss:.0f} % loss")
     sims = sorted({(r["latency_ms"], r["sim"]["fe_max_30"]) for r in rows if r.get("sim")})
     if sims:
         x, y = zip(*sims, strict=True)
@@ -227,45 +249,54 @@ def plot(rows: list[dict]) -> None:
     plt.close(fig)
 
 
+def fly_case(rows: list[dict], sims: dict, tmp: Path, mode: str, predicted: bool,
+             latency: float, losses: list[float]) -> None:
+    """One mode x predict x latency, for every loss: the flights and the gcs sim reference."""
+    delay_s = (latency + JITTER_MS) * 1e-3
+    gains, source = gains_at(mode, delay_s, predicted)
+    for loss in losses:
+        row = {"mode": mode, "predicted": predicted, "latency_ms": latency, "loss": loss,
+               "gains": gains, "source": source}
+        rows.append(row)
+        if gains is None:
+            continue
+        work = tmp / f"{mode}-{predicted}-{latency:g}-{loss:g}"
+        work.mkdir()
+        team = team_file(work, mode, gains, delay_s, latency, loss, predicted=predicted)
+        r = fly(team, work / "run", mode)
+        row.update(exit=r["exit"], why=r["why"])
+        if r["report"] is not None:
+            row["fly"] = figures(r["report"])
+        if mode == "rates":
+            key = (latency, gains)
+            if key not in sims:
+                rep = sim(team_file(work, mode, gains, delay_s, latency, loss, for_sim=True),
+                          work / "sim")
+                sims[key] = figures(rep) if rep is not None else None
+            row["sim"] = sims[key]
+        f = row.get("fly")
+        print(f"{mode} predict {'on' if predicted else 'off'} {latency:g} ms {100 * loss:.0f} %: "
+              f"exit {row['exit']}, "
+              + (f"fe30 {_f(f['fe_30'])} fe60 {_f(f['fe_60'])} max {_f(f['fe_max_30'])} "
+                 f"mass20 {_f(f['mass_err_20'], '.4f')} pred/held p99 {_f(f['pred_p99'], '.4f')}"
+                 f"/{_f(f['held_p99'], '.4f')}" if f else r["why"]), flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--mode", nargs="+", default=["rates", "attitude"])
     ap.add_argument("--latency-ms", nargs="+", type=float, default=[0, 10, 20, 50, 100, 200])
     ap.add_argument("--loss", nargs="+", type=float, default=[0.0, 0.2])
+    ap.add_argument("--predict", nargs="+", choices=["on", "off"], default=["on", "off"])
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args()
     rows = []
     sims: dict[tuple[float, CascadeGains], dict | None] = {}
     with tempfile.TemporaryDirectory(prefix="bench_links_") as tmp:
         for mode in args.mode:
-            for latency in args.latency_ms:
-                delay_s = (latency + JITTER_MS) * 1e-3
-                gains, source = gains_at(mode, delay_s)
-                for loss in args.loss:
-                    row = {"mode": mode, "latency_ms": latency, "loss": loss, "gains": gains,
-                           "source": source}
-                    rows.append(row)
-                    if gains is None:
-                        continue
-                    work = Path(tmp) / f"{mode}-{latency:g}-{loss:g}"
-                    work.mkdir()
-                    team = team_file(work, mode, gains, delay_s, latency, loss)
-                    r = fly(team, work / "run", mode)
-                    row.update(exit=r["exit"], why=r["why"])
-                    if r["report"] is not None:
-                        row["fly"] = figures(r["report"])
-                    if mode == "rates":
-                        key = (latency, gains)
-                        if key not in sims:
-                            rep = sim(team_file(work, mode, gains, delay_s, latency, loss,
-                                                for_sim=True), work / "sim")
-                            sims[key] = figures(rep) if rep is not None else None
-                        row["sim"] = sims[key]
-                    f = row.get("fly")
-                    print(f"{mode} {latency:g} ms {100 * loss:.0f} %: exit {row['exit']}, "
-                          + (f"fe30 {_f(f['fe_30'])} fe60 {_f(f['fe_60'])} max "
-                             f"{_f(f['fe_max_30'])} mass20 {_f(f['mass_err_20'], '.4f')}"
-                             if f else r["why"]), flush=True)
+            for predicted in (p == "on" for p in args.predict):
+                for latency in args.latency_ms:
+                    fly_case(rows, sims, Path(tmp), mode, predicted, latency, args.loss)
     text = section(rows)
     print(text)
     if not args.no_write:

@@ -43,7 +43,7 @@ from gcs import frames
 from gcs.config import FLY_ACTIONS, MODES, ConfigError, TeamConfig, check_go_to_start
 from gcs.control.formation import reference_velocity
 from gcs.control.gains import GRAVITY_MPS2, LawGains
-from gcs.control.law import SingularCommandError, TeamCommand, TeamLaw
+from gcs.control.law import SingularCommandError, TeamCommand, TeamLaw, TeamMeasurement
 from gcs.control.position import phi
 from gcs.flightlog import FlightLog, FlightLogBuilder, save_timeseries
 from gcs.fly.delay import DelayJudge
@@ -71,7 +71,15 @@ from gcs.fly.origins import (
     origin_from_gps_global_origin,
     origin_from_home_position,
 )
-from gcs.fly.stats import AgeStats, TickStats, clock_report, link_report, round_trip_report
+from gcs.fly.predict import PredictionAudit, horizons_s, predict, uplink_delay_s
+from gcs.fly.stats import (
+    AgeStats,
+    TickStats,
+    clock_report,
+    link_report,
+    prediction_report,
+    round_trip_report,
+)
 from gcs.fly.telemetry import team_sample, vehicle_statuses
 from gcs.geodesy import Geodetic, TeamFrame
 from gcs.link import (
@@ -187,7 +195,8 @@ def cascade_check(team: TeamConfig, mode: str, gains: LawGains,
     for profile in PROFILES.values():
         ok, line = verdict(mode, cascade_gains, explicit or profile.response, eigenvalues,
                            rate_hz, fly.link_delay_s,
-                           "every vehicle" if explicit is not None else profile.name)
+                           "every vehicle" if explicit is not None else profile.name,
+                           fly.predict)
         if not ok and explicit is not None:
             raise FlightSetupError(line)
         if not ok:
@@ -195,7 +204,8 @@ def cascade_check(team: TeamConfig, mode: str, gains: LawGains,
         lines.append(line)
         if explicit is not None:
             break  # one response for every vehicle
-    judge = DelayJudge(mode, cascade_gains, eigenvalues, rate_hz, fly.link_delay_s, explicit)
+    judge = DelayJudge(mode, cascade_gains, eigenvalues, rate_hz, fly.link_delay_s, explicit,
+                       fly.predict)
     return "\n".join(lines), refusals, judge
 
 
@@ -401,6 +411,8 @@ class Flight:
         )
         self.ticks = TickStats(setup.tick_rate_hz)
         self.ages = AgeStats(self.n)
+        # delay compensation (gcs/fly/predict.py) and its measured error
+        self.audit = PredictionAudit(self.n) if team.fly.predict else None
         self.machine_every = max(1, round(setup.tick_rate_hz / MACHINE_RATE_HZ))
         offsets = team.offsets_enu_m()
         self._pair_offsets = offsets[:, None, :] - offsets[None, :, :]
@@ -429,7 +441,8 @@ class Flight:
         meas = TeamSample(
             np.ascontiguousarray(team.initial_positions_enu_m(), dtype=float), np.zeros((n, 3)),
             np.zeros((n, 3)), rotation, np.zeros((n, 3)), np.zeros(n), np.zeros(n),
-            np.ones(n, dtype=bool), np.zeros(n), np.zeros(n)).measurement()
+            np.ones(n, dtype=bool), np.zeros(n), np.zeros(n), np.zeros(n),
+            np.zeros(n)).measurement()
         ref = reference_velocity(0.0, *self.ref_arrays)
         for _ in range(2):
             scratch.step(meas, ref, self.period_s)
@@ -859,11 +872,11 @@ class Flight:
         fresh = fresh_mask(sample, self.team.fly.stale_after_s)
         self.law.adjacency = np.ascontiguousarray(effective_adjacency(self.adjacency, fresh))
         ref = reference_velocity(t, *self.ref_arrays)
+        meas = self._law_input(sample, now_s)
         try:
             # The estimators adapt only while the formation is flown: afterwards the vehicles
             # switch to their own modes (land/hold) and the thrust applied is no longer ours.
-            command = self.law.step(sample.measurement(), ref, dt,
-                                    adapt=self.machine.phase is Phase.FORMATION)
+            command = self.law.step(meas, ref, dt, adapt=self.machine.phase is Phase.FORMATION)
         except SingularCommandError as exc:
             self.machine.request_abort(f"t = {t:.2f} s: {exc}", operator=False)
             return self.last_command
@@ -880,6 +893,22 @@ class Flight:
             if (k - self._k0) % self.setup.log_every == 0:
                 self._log(t, sample, ref, command)
         return command
+
+    def _law_input(self, sample: TeamSample, now_s: float) -> TeamMeasurement:
+        """The samples as they are, or (fly.predict) predicted to when this tick's setpoints act:
+        now plus the team's uplink delay (gcs/fly/predict.py); in formation, the audit compares
+        each prediction with what the vehicles report for that instant."""
+        held = sample.measurement()
+        if self.audit is None:
+            return held
+        act = now_s + uplink_delay_s(np.array([p.clock.least_delay_s for p in self.proxies]))
+        h_pos = horizons_s(act, sample.position_taken_s)
+        predicted = predict(held, h_pos, horizons_s(act, sample.attitude_taken_s))
+        if self.machine.phase is Phase.FORMATION:
+            self.audit.observe(sample.position_m, sample.velocity_mps, sample.position_taken_s,
+                               sample.rotation, sample.omega_radps, sample.attitude_taken_s)
+            self.audit.record(act, predicted, held, h_pos)
+        return predicted
 
     def _log(self, t: float, sample: TeamSample, ref: np.ndarray, c: TeamCommand) -> None:
         p = sample.position_m
@@ -955,7 +984,9 @@ class Flight:
                     "command_retries": getattr(s.commands, "retries", None),
                     "lost": self.ids[i] in self.machine.lost,
                     "round_trip": round_trip_report(self.proxies[i].round_trips_s()),
-                    "clock": clock_report(self.proxies[i].clock.estimate())}
+                    "clock": clock_report(self.proxies[i].clock.estimate()),
+                    "prediction": prediction_report(
+                        self.audit.figures(i) if self.audit is not None else None)}
                    for i, s in enumerate(stats)],
         )
         tick = self.ticks.report()

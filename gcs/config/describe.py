@@ -106,6 +106,9 @@ def describe(team: TeamConfig) -> str:
         f"{fly.link_lost_after_s:g} s in flight, link timeout {fly.link_timeout_s:g} s, data "
         f"older than {fly.max_data_age_s:g} s stops; max tilt "
         f"{fly.max_tilt_rad:g} rad; {fence}",
+        "     delay compensation: " + ("the law reads states predicted to when its setpoints act "
+                                       "(fly.predict)" if fly.predict else
+                                       "off, the law reads the latest samples (fly.predict)"),
         _go_to_start_line(team),
     ]
     out.append("faults:" + ("" if team.faults else " none"))

@@ -708,7 +708,7 @@ def _fly(node: _Node) -> FlyConfig:
         "link_loss_action stale_after_s link_lost_after_s link_timeout_s max_tilt_rad geofence "
         "log_rate_hz connect_timeout_s takeoff_timeout_s land_timeout_s takeoff_tolerance_m "
         "arm_timeout_s arm_retry_s mode_timeout_s formation_check response link_delay_s "
-        "initial_mass go_to_start max_data_age_s timesync_period_s",
+        "initial_mass go_to_start max_data_age_s timesync_period_s predict",
     )
     geofence = None
     g = node.child("geofence")
@@ -739,6 +739,7 @@ def _fly(node: _Node) -> FlyConfig:
         max_data_age_s=node.child("max_data_age_s").number(d.max_data_age_s, gt=0.0, le=10.0),
         timesync_period_s=node.child("timesync_period_s").number(d.timesync_period_s, ge=0.0,
                                                                  le=60.0),
+        predict=node.child("predict").boolean(d.predict),
         max_tilt_rad=node.child("max_tilt_rad").number(d.max_tilt_rad, gt=0.0, le=math.pi),
         geofence=geofence,
         log_rate_hz=node.child("log_rate_hz").number(d.log_rate_hz, gt=0.0),

@@ -437,6 +437,8 @@ class FlyConfig:
     # own stamps) stops the formation with abort_action (docs/gcs.md, "Link delay")
     max_data_age_s: float = 0.3
     timesync_period_s: float = 0.5  # TIMESYNC round-trip requests; 0: none
+    # the law reads the states predicted to when its setpoints act (gcs/fly/predict.py)
+    predict: bool = True
     # any valid message from the vehicle keeps its link ALIVE; none for this long -> LOST (a
     # vehicle that sends only its 1 Hz HEARTBEAT, as ArduPilot does until asked, stays ALIVE)
     link_timeout_s: float = 3.0

@@ -51,10 +51,11 @@ class DelayJudge:
 
     def __init__(self, mode: str, gains: CascadeGains, eigenvalues: Sequence[float],
                  tick_rate_hz: float, configured_delay_s: float,
-                 response: AutopilotResponse | None = None) -> None:
+                 response: AutopilotResponse | None = None, predicted: bool = False) -> None:
         self.mode, self.gains, self.eigenvalues = mode, gains, tuple(eigenvalues)
         self.tick_rate_hz, self.configured_delay_s = tick_rate_hz, configured_delay_s
         self.response = response  # the team file's fly.response (every vehicle), else per autopilot
+        self.predicted = predicted  # fly.predict: the law reads predicted states
         self._passes: dict[tuple[int, float], bool] = {}
         self._lines: dict[tuple[int, float], str] = {}
 
@@ -76,7 +77,8 @@ class DelayJudge:
         key = (autopilot if self.response is None else 0, step)
         if key not in self._passes:
             self._passes[key] = passes(cascade_margins(
-                self.mode, self.gains, response, self.eigenvalues, self.tick_rate_hz, step))
+                self.mode, self.gains, response, self.eigenvalues, self.tick_rate_hz, step,
+                self.predicted))
         if self._passes[key]:
             return None
         return functools.partial(self._line, key, response, delay)
@@ -85,7 +87,7 @@ class DelayJudge:
         if key not in self._lines:
             who = "this vehicle" if self.response is not None else PROFILES[key[0]].name
             self._lines[key] = verdict(self.mode, self.gains, response, self.eigenvalues,
-                                       self.tick_rate_hz, key[1], who)[1]
+                                       self.tick_rate_hz, key[1], who, self.predicted)[1]
         return (f"link delay measured {1e3 * delay:.0f} ms each way (TIMESYNC round trip lower "
                 f"quartile {2e3 * delay:.0f} ms), more than fly.link_delay_s "
                 f"{1e3 * self.configured_delay_s:.0f} ms: {self._lines[key]}")

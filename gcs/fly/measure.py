@@ -39,7 +39,9 @@ class TeamSample:
     from a complete, finite sample; delay_s (n,) true age of the older of position and attitude:
     now minus when the vehicle took it (its time_boot_ms through gcs.link.clock); transit_s (n,)
     how long after it was taken the later-arriving of the two arrived (the link's delay, what the
-    delay rule judges; a silent link leaves it unchanged, the receive age grows instead).
+    delay rule judges; a silent link leaves it unchanged, the receive age grows instead);
+    position_taken_s, attitude_taken_s (n,) when the vehicle took its position and its attitude,
+    on the ground station's clock (-inf before the first; gcs.fly.predict reads them).
     """
 
     position_m: np.ndarray
@@ -52,6 +54,8 @@ class TeamSample:
     finite: np.ndarray
     delay_s: np.ndarray
     transit_s: np.ndarray
+    position_taken_s: np.ndarray
+    attitude_taken_s: np.ndarray
 
     def measurement(self) -> TeamMeasurement:
         return TeamMeasurement(self.position_m, self.velocity_mps, self.acceleration_mps2,

@@ -12,11 +12,13 @@ stored in preallocated, growing arrays (no per-tick allocation beyond amortised 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
+from gcs.fly.predict import AuditFigures
 from gcs.link.clock import ClockEstimate
 
 MIN_LATE_THRESHOLD_S = 1.5e-3
@@ -120,6 +122,26 @@ def clock_report(est: ClockEstimate) -> dict[str, Any]:
     return {"synced": est.synced, "offset_s": est.offset_s if est.synced else None,
             "drift_ppm": est.drift_ppm, "least_delay_ms": 1e3 * est.least_delay_s,
             "restarts": est.resets}
+
+
+def prediction_report(f: AuditFigures | None) -> dict[str, Any]:
+    """The delay compensation of one vehicle (gcs.fly.predict): its horizons [ms] and the error
+    of its predicted states, beside the samples held without prediction, p50 / p99 / max
+    (position [m], attitude [deg]); {"enabled": False} when fly.predict is off."""
+    if f is None:
+        return {"enabled": False}
+
+    def dist(x: np.ndarray, scale: float = 1.0) -> dict[str, float | None]:
+        if not x.size:
+            return {"p50": None, "p99": None, "max": None}
+        return {"p50": scale * _pct(x, 50), "p99": scale * _pct(x, 99),
+                "max": scale * float(x.max())}
+
+    deg = math.degrees(1.0)
+    return {"enabled": True, "resolved": f.resolved, "horizon_ms": dist(f.horizon_s, 1e3),
+            "position_m": dist(f.position_m), "position_held_m": dist(f.position_held_m),
+            "attitude_deg": dist(f.attitude_rad, deg),
+            "attitude_held_deg": dist(f.attitude_held_rad, deg)}
 
 
 def round_trip_report(rtt_s: np.ndarray) -> dict[str, Any]:

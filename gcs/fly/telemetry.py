@@ -108,7 +108,7 @@ def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
         transit = np.where(have, np.maximum(prx - ptaken, arx - ataken), np.inf)
     return TeamSample(np.ascontiguousarray(p_enu), np.ascontiguousarray(v_enu), acc,
                       np.ascontiguousarray(rot), np.ascontiguousarray(omega), age, now_s - irx,
-                      finite, delay, transit)
+                      finite, delay, transit, ptaken, ataken)
 
 
 def listen_label(p: VehicleProxy) -> str:

@@ -28,6 +28,17 @@ written out (exact e^{-sT} on the frequency grid, Pade (3,3) for the poles):
   velocity loop), in the linear range of sat: a = -alpha_p (c_p lambda e + 2 e'), so
   L_pos = alpha_p (c_p lambda + 2 s) / s^2 e^{-s d_down} T(s); vertically with the thrust lag.
 
+With delay compensation (`fly.predict`, gcs/fly/predict.py) the law reads each state predicted
+over the horizon tau = d_down + link delay (the sample's age plus the uplink) from the sample and
+its derivatives: the attitude by its rates, the position by its velocity and acceleration, the
+velocity by its acceleration. Linearised, a measured signal x(t - d_down) becomes
+x(t - d_down) + tau x'(t - d_down) (+ tau^2 x''(t - d_down) / 2 for the position), so each
+feedback path gains the lead P1 = 1 + s tau (attitude, velocity) or P2 = 1 + s tau + s^2 tau^2 / 2
+(position): L_att = 2 k_eps G_r e^{-s (d_up + d_down)} P1 / s, the tilt's inner loop likewise,
+and L_pos = alpha_p (c_p lambda P2 + 2 s P1) / s^2 e^{-s d_down} T(s). The lead cancels the
+delay's phase lag to second order at low frequency and raises the loop gain above 1 / tau; the
+criterion weighs both.
+
 A loop passes when its closed loop is stable (every pole in the open left half plane) and its
 modulus margin min_w |1 + L(jw)| is at least `MIN_MODULUS_MARGIN` (0.5: gain margin >= 2 and
 phase margin >= 29 deg whatever the number of crossings).
@@ -178,17 +189,32 @@ def _delay(t):
     return _pade(t), lambda s: np.exp(-s * t)
 
 
-def _attitude_loop(k: float, plant, d_loop: float) -> _Loop:
-    """L = 2 k plant e^{-s d} / s (the ground station's attitude loop of rates mode)."""
-    (pr, pf), (dr, df) = plant, _delay(d_loop)
-    rational = _mul((np.array([2.0 * k]), np.array([1.0, 0.0])), pr, dr)
-    return _Loop(rational, lambda s: 2.0 * k * pf(s) * df(s) / s)
+def _lead(tau: float, order: int):
+    """The predictor's lead on a delayed signal: 1 + s tau (+ s^2 tau^2 / 2 for order 2)."""
+    coeffs = [1.0, tau] if order == 1 else [1.0, tau, 0.5 * tau * tau]
+    poly = np.array(coeffs[::-1])
+    return (poly, np.array([1.0])), lambda s: np.polyval(poly, s)
 
 
-def _tilt_rates(k: float, r: AutopilotResponse, d_up: float, d_down: float):
-    """theta / theta_c in rates mode (module docstring)."""
-    (gr, gf), (ur, uf), (lr, lf) = _rate_loop(r), _delay(d_up), _delay(d_up + d_down)
+def _attitude_loop(k: float, plant, d_loop: float, tau: float = 0.0) -> _Loop:
+    """L = 2 k plant e^{-s d} P1 / s (the ground station's attitude loop of rates mode; P1 the
+    predictor's lead over tau, 1 without prediction)."""
+    (pr, pf), (dr, df), (lr, lf) = plant, _delay(d_loop), _lead(tau, 1)
+    rational = _mul((np.array([2.0 * k]), np.array([1.0, 0.0])), pr, dr, lr)
+    return _Loop(rational, lambda s: 2.0 * k * pf(s) * df(s) * lf(s) / s)
+
+
+def _tilt_rates(k: float, r: AutopilotResponse, d_up: float, d_down: float, tau: float = 0.0):
+    """theta / theta_c in rates mode (module docstring; the inner loop's feedback with the
+    predictor's lead P1 over tau)."""
+    (gr, gf), (ur, uf), (lr, lf0) = _rate_loop(r), _delay(d_up), _delay(d_up + d_down)
+    (pn, _), pf = _lead(tau, 1)
     (gn, gd), (un, ud), (ln, ld) = gr, ur, lr
+    ln = np.polymul(ln, pn)
+
+    def lf(s):
+        return lf0(s) * pf(s)
+
     # T = G U (s + 2k) / (s + 2k G L) = gn un (s + 2k) ld / (ud (s gd ld + 2k gn ln))
     num = np.polymul(np.polymul(gn, un), np.polymul(np.array([1.0, 2.0 * k]), ld))
     den = np.polymul(ud, np.polyadd(np.polymul(np.array([1.0, 0.0]), np.polymul(gd, ld)),
@@ -218,15 +244,19 @@ def _thrust(r: AutopilotResponse, d_up: float):
     return rational, lambda s: uf(s) / (r.thrust_time_constant_s * s + 1.0)
 
 
-def _position_loop(g: CascadeGains, lam: float, tilt, d_down: float) -> _Loop:
+def _position_loop(g: CascadeGains, lam: float, tilt, d_down: float, tau: float = 0.0) -> _Loop:
+    """L_pos (module docstring), with the predictor's leads over tau (none at tau 0)."""
     (tr, tf), (dr, df) = tilt, _delay(d_down)
+    (p1, _), p1f = _lead(tau, 1)
+    (p2, _), p2f = _lead(tau, 2)
     if lam == 0.0:  # the common mode: velocity feedback only, one integrator (s cancels)
-        law = (np.array([2.0 * g.alpha_p]), np.array([1.0, 0.0]))
+        law = (2.0 * g.alpha_p * p1, np.array([1.0, 0.0]))
     else:
-        law = (g.alpha_p * np.array([2.0, g.c_p * lam]), np.array([1.0, 0.0, 0.0]))
+        law = (g.alpha_p * np.polyadd(g.c_p * lam * p2, np.polymul([2.0, 0.0], p1)),
+               np.array([1.0, 0.0, 0.0]))
     rational = _mul(law, dr, tr)
-    return _Loop(rational, lambda s: g.alpha_p * (g.c_p * lam + 2.0 * s) / (s * s) * df(s)
-                 * tf(s))
+    return _Loop(rational, lambda s: g.alpha_p * (g.c_p * lam * p2f(s) + 2.0 * s * p1f(s))
+                 / (s * s) * df(s) * tf(s))
 
 
 def laplacian_eigenvalues(laplacian: np.ndarray) -> list[float]:
@@ -244,20 +274,27 @@ def laplacian_eigenvalues(laplacian: np.ndarray) -> list[float]:
     return out
 
 
+def prediction_horizon_s(tick_rate_hz: float, link_delay_s: float, predicted: bool) -> float:
+    """tau of the module docstring: the sample's age (link delay + h / 2) plus the uplink."""
+    return 2.0 * link_delay_s + 0.5 / tick_rate_hz if predicted else 0.0
+
+
 def cascade_margins(mode: str, gains: CascadeGains, response: AutopilotResponse,
                     eigenvalues: Sequence[float], tick_rate_hz: float,
-                    link_delay_s: float) -> list[LoopMargin]:
-    """Every loop of `mode` ('rates' or 'attitude') on this autopilot over this link."""
+                    link_delay_s: float, predicted: bool = False) -> list[LoopMargin]:
+    """Every loop of `mode` ('rates' or 'attitude') on this autopilot over this link;
+    `predicted`: the law reads predicted states (fly.predict)."""
     h = 1.0 / tick_rate_hz
     d_up = link_delay_s + h / 2.0
     d_down = link_delay_s + h / 2.0
+    tau = prediction_horizon_s(tick_rate_hz, link_delay_s, predicted)
     out: list[LoopMargin] = []
     if mode == "rates":
-        out.append(_attitude_loop(gains.k_eps, _rate_loop(response), d_up + d_down)
+        out.append(_attitude_loop(gains.k_eps, _rate_loop(response), d_up + d_down, tau)
                    .margin("ground-station attitude loop, roll/pitch"))
-        out.append(_attitude_loop(gains.k_eps_yaw, _yaw_loop(response), d_up + d_down)
+        out.append(_attitude_loop(gains.k_eps_yaw, _yaw_loop(response), d_up + d_down, tau)
                    .margin("ground-station attitude loop, yaw"))
-        tilt = _tilt_rates(gains.k_eps, response, d_up, d_down)
+        tilt = _tilt_rates(gains.k_eps, response, d_up, d_down, tau)
     elif mode == "attitude":
         tilt = _tilt_attitude(response, d_up)
     else:
@@ -267,9 +304,9 @@ def cascade_margins(mode: str, gains: CascadeGains, response: AutopilotResponse,
     for lam in eigenvalues:
         label = "common velocity loop" if lam == 0.0 else f"formation mode lambda={lam:.3g}"
         if inner_ok:  # the tilt response is only meaningful on a stable attitude loop
-            out.append(_position_loop(gains, lam, tilt, d_down).margin(
+            out.append(_position_loop(gains, lam, tilt, d_down, tau).margin(
                 f"position loop, {label}, horizontal"))
-        out.append(_position_loop(gains, lam, thrust, d_down).margin(
+        out.append(_position_loop(gains, lam, thrust, d_down, tau).margin(
             f"position loop, {label}, vertical"))
     return out
 
@@ -294,22 +331,26 @@ _SCALES = (1.0, 0.75, 0.5, 0.35, 0.25, 0.15, 0.1)
 
 def stable_gains(mode: str, gains: CascadeGains, response: AutopilotResponse,
                  eigenvalues: Sequence[float], tick_rate_hz: float,
-                 link_delay_s: float) -> CascadeGains | None:
+                 link_delay_s: float, predicted: bool = False) -> CascadeGains | None:
     """The passing candidate with the stiffest position loop (largest alpha_p c_p, the loop's
     low-frequency gain, which sets how well it holds against disturbances), never stiffer than
     `gains` in any gain; None if none passes."""
     def ok(g: CascadeGains) -> bool:
         return passes(cascade_margins(mode, g, response, eigenvalues, tick_rate_hz,
-                                      link_delay_s))
+                                      link_delay_s, predicted))
 
     inner = [(gains.k_eps, gains.k_eps_yaw)]
     if mode == "rates":  # the two attitude loops first: each depends on its own gain only
         loop = 2.0 * (link_delay_s + 0.5 / tick_rate_hz)
+        tau = prediction_horizon_s(tick_rate_hz, link_delay_s, predicted)
+
+        def attitude_ok(k: float, plant) -> bool:
+            return _attitude_loop(k, plant, loop, tau).margin("").ok()
+
         kys = [k for k in _K_YAW if k <= gains.k_eps_yaw] or [gains.k_eps_yaw]
-        ky = next((k for k in kys if _attitude_loop(k, _yaw_loop(response), loop).margin("").ok()),
-                  None)
+        ky = next((k for k in kys if attitude_ok(k, _yaw_loop(response))), None)
         ks = [k for k in _K_EPS if k <= gains.k_eps] or [gains.k_eps]
-        ks = [k for k in ks if _attitude_loop(k, _rate_loop(response), loop).margin("").ok()]
+        ks = [k for k in ks if attitude_ok(k, _rate_loop(response))]
         if ky is None or not ks:
             return None
         inner = [(k, ky) for k in ks]
@@ -328,12 +369,15 @@ def stable_gains(mode: str, gains: CascadeGains, response: AutopilotResponse,
 
 def verdict(mode: str, gains: CascadeGains, response: AutopilotResponse,
             eigenvalues: Sequence[float], tick_rate_hz: float, link_delay_s: float,
-            autopilot: str) -> tuple[bool, str]:
-    """(passes, one line) for `mode` with `gains` on `autopilot` (its `response`)."""
-    margins = cascade_margins(mode, gains, response, eigenvalues, tick_rate_hz, link_delay_s)
+            autopilot: str, predicted: bool = False) -> tuple[bool, str]:
+    """(passes, one line) for `mode` with `gains` on `autopilot` (its `response`); `predicted`:
+    the law reads predicted states (fly.predict)."""
+    margins = cascade_margins(mode, gains, response, eigenvalues, tick_rate_hz, link_delay_s,
+                              predicted)
     w = worst(margins)
     where = (f"{mode} mode with {gains.describe(mode)} at {tick_rate_hz:g} Hz, link delay "
-             f"{1e3 * link_delay_s:.0f} ms, on {autopilot} ({response.source})")
+             f"{1e3 * link_delay_s:.0f} ms{' (compensated, fly.predict)' if predicted else ''}, "
+             f"on {autopilot} ({response.source})")
     if passes(margins):
         return True, (f"{where}: every loop passes, smallest modulus margin "
                       f"{w.modulus_margin:.2f} ({w.loop})")
@@ -341,9 +385,16 @@ def verdict(mode: str, gains: CascadeGains, response: AutopilotResponse,
             f"{MIN_MODULUS_MARGIN:g})")
     fixes = []
     for other in ("rates", "attitude"):
-        g = stable_gains(other, gains, response, eigenvalues, tick_rate_hz, link_delay_s)
+        g = stable_gains(other, gains, response, eigenvalues, tick_rate_hz, link_delay_s,
+                         predicted)
         if g is not None:
             fixes.append(f"{other} mode with {g.describe(other)} (fly.{other})")
+    for other in ("rates", "attitude") if not fixes else ():  # the other fly.predict
+        g = stable_gains(other, gains, response, eigenvalues, tick_rate_hz, link_delay_s,
+                         not predicted)
+        if g is not None:
+            fixes.append(f"{other} mode with {g.describe(other)} (fly.{other}) and "
+                         f"fly.predict {'false' if predicted else 'true'}")
     line += "; stable: " + " or ".join(fixes) if fixes else "; no candidate gains are stable"
     return False, line
 

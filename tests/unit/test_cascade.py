@@ -29,22 +29,25 @@ IDEAL = AutopilotResponse(1.0, 1e4, 0.0, 1e-4, 0.0, 1e4, 1e-5, "ideal")
 
 
 def _attitude_loop_diverges(k: float, r: AutopilotResponse, loop_delay_s: float,
-                            t_end_s: float = 6.0) -> bool:
+                            tau_s: float = 0.0, t_end_s: float = 6.0) -> bool:
     """Simulate theta' = w, w from the rate loop wn^2 / (s^2 + 2 zeta wn s + wn^2) driven by
-    2 k (0 - theta) delayed by the loop delay plus the rate loop's dead time (Euler, 0.1 ms)."""
+    2 k (0 - theta) delayed by the loop delay plus the rate loop's dead time (Euler, 0.1 ms);
+    with tau_s, the delayed attitude is carried forward by tau_s with the delayed rate,
+    theta + tau w (the predictor, gcs/fly/predict.py)."""
     dt = 1e-4
     lag = int(round((loop_delay_s + r.rate_dead_time_s) / dt))
     wn, z = r.rate_natural_radps, r.rate_damping
     theta, w, dw = 0.01, 0.0, 0.0
-    history = [theta] * (lag + 1)
+    history = [(theta, w)] * (lag + 1)
     peak_late = 0.0
     for step in range(int(t_end_s / dt)):
-        cmd = -2.0 * k * history[-lag - 1]
+        th_d, w_d = history[-lag - 1]
+        cmd = -2.0 * k * (th_d + tau_s * w_d)
         ddw = wn * wn * (cmd - w) - 2.0 * z * wn * dw
         dw += ddw * dt
         w += dw * dt
         theta += w * dt
-        history.append(theta)
+        history.append((theta, w))
         if len(history) > lag + 2:
             history.pop(0)
         if step * dt > t_end_s - 1.0:
@@ -172,3 +175,88 @@ def test_the_delay_judge_answers_pass_or_fail_at_once_and_builds_the_refusal_lin
     assert built == [0.055, 0.06, 0.065]
     assert lines[1].startswith("link delay measured 56 ms") and "link delay 60 ms" in lines[1]
     assert lines[2].split(": ", 1)[1] == lines[1].split(": ", 1)[1]
+
+
+@pytest.mark.parametrize("k", [1.5, 2.0, 3.0, 4.0])
+def test_the_predicted_attitude_loop_verdict_matches_a_time_domain_simulation(k):
+    # 100 ms each way on the nominal autopilot, the law reading the attitude predicted over the
+    # sample's age plus the uplink: tau = 2 x 100 ms + half a tick
+    from gcs.mission.cascade import NOMINAL_RESPONSE, prediction_horizon_s
+
+    link = 0.1
+    margins = cascade_margins("rates", CascadeGains(1.0, 1.0, k, 0.5), NOMINAL_RESPONSE, [0.0],
+                              100.0, link, predicted=True)
+    roll = next(m for m in margins if m.loop.endswith("roll/pitch"))
+    tau = prediction_horizon_s(100.0, link, True)
+    assert tau == pytest.approx(0.205)
+    assert roll.stable == (not _attitude_loop_diverges(
+        k, NOMINAL_RESPONSE, 2 * (link + 0.005), tau))
+
+
+def _vertical_loop_grows(alpha_p: float, c_p: float, lam: float, d_down: float, d_up: float,
+                         tau: float, t_end_s: float = 60.0) -> bool:
+    """x'' = u(t - d_up), u = -alpha_p (c_p lam xh + 2 vh) from the states d_down old, predicted
+    over tau (xh = x + v tau + a tau^2 / 2, vh = v + a tau, a the measured x''): True when the
+    last 5 s swing wider than the first (Euler, 1 ms)."""
+    dt = 1e-3
+    n_down, n_up = int(round(d_down / dt)), int(round(d_up / dt))
+    x, v = 1.0, 0.0
+    states = [(x, v, 0.0)] * (n_down + 1)
+    commands = [0.0] * (n_up + 1)
+    early = late = 0.0
+    for step in range(int(t_end_s / dt)):
+        xd, vd, ad = states[-n_down - 1]
+        commands.append(-alpha_p * (c_p * lam * (xd + vd * tau + 0.5 * ad * tau * tau)
+                                    + 2.0 * (vd + ad * tau)))
+        a = commands[-n_up - 2]
+        v += a * dt
+        x += v * dt
+        states.append((x, v, a))
+        del states[0], commands[0]
+        t = step * dt
+        if t < 5.0:
+            early = max(early, abs(x))
+        elif t > t_end_s - 5.0:
+            late = max(late, abs(x))
+    return late > early
+
+
+@pytest.mark.parametrize(("link", "predicted", "alpha_p", "c_p"), [
+    (0.1, False, 2.0, 2.0), (0.1, False, 2.0, 4.0),
+    (0.1, True, 0.5, 1.0), (0.1, True, 1.0, 2.0), (0.1, True, 2.0, 4.0), (0.1, True, 4.0, 4.0),
+    (0.2, False, 0.5, 1.0), (0.2, True, 0.5, 1.0), (0.2, True, 1.0, 2.0),
+    # where the verdicts differ: prediction stabilises a soft loop, destabilises a stiffer one
+    (0.2, False, 0.25, 4.0), (0.2, True, 0.25, 4.0), (0.3, False, 0.25, 2.0),
+    (0.3, True, 0.25, 2.0),
+])
+def test_the_position_loop_verdict_with_and_without_prediction_matches_a_simulation(
+        link, predicted, alpha_p, c_p):
+    # the vertical loop on an ideal autopilot (thrust applied at once) over `link` each way
+    from gcs.mission.cascade import prediction_horizon_s
+
+    tick = 1e4
+    margins = cascade_margins("rates", CascadeGains(alpha_p, c_p, 1.0, 0.5), IDEAL, [2.0], tick,
+                              link, predicted=predicted)
+    vertical = next(m for m in margins if "vertical" in m.loop)
+    d = link + 0.5 / tick
+    tau = prediction_horizon_s(tick, link, predicted)
+    assert vertical.stable == (not _vertical_loop_grows(alpha_p, c_p, 2.0, d, d, tau))
+
+
+def test_prediction_buys_stiffness_at_a_lasting_delay_and_makes_attitude_mode_the_tolerant_one():
+    from gcs.mission.cascade import NOMINAL_RESPONSE
+
+    def stiffness(mode, response, delay, predicted):
+        g = stable_gains(mode, PAPER, response, [0.0, 2.0, 4.0], 100.0, delay, predicted)
+        return 0.0 if g is None else g.alpha_p * g.c_p
+
+    for response in (NOMINAL_RESPONSE, PX4_RESPONSE, ARDUPILOT_RESPONSE):
+        # attitude mode: the autopilot closes the attitude loop on board, the link is in the
+        # position loop only, which the predictor compensates: stiffer at every delay from 20 ms,
+        # and the only mode with stable gains at 200 ms each way
+        for delay in (0.02, 0.05, 0.1):
+            assert stiffness("attitude", response, delay, True) > stiffness(
+                "attitude", response, delay, False), (response.source, delay)
+        assert stiffness("attitude", response, 0.2, True) > 0.0
+        assert stiffness("rates", response, 0.2, True) == 0.0
+        assert stiffness("rates", response, 0.2, False) == 0.0

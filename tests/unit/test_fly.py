@@ -46,8 +46,9 @@ def test_rates_setup_uses_the_file_and_checks_the_criterion():
     # fly.rates flies the cascade criterion's gains, not the paper's (gcs/mission/cascade.py)
     assert (setup.gains.k_eps, setup.gains.k_eps_yaw, setup.gains.alpha_p, setup.gains.c_p) == (
         1.5, 1.0, 1.0, 2.0)
+    # judged with the delay compensation the law flies with (fly.predict, on by default)
     assert ("rates mode with k_eps 1.5, k_eps_yaw 1, alpha_p 1, c_p 2 at 100 Hz, link delay "
-            "10 ms, on PX4") in setup.stability
+            "10 ms (compensated, fly.predict), on PX4") in setup.stability
     assert setup.plan.rules.loop_refusals == {}
 
 
@@ -64,8 +65,8 @@ def test_paper_gains_in_rates_mode_are_refused_for_px4_and_ardupilot_vehicles():
     refusals = setup.plan.rules.loop_refusals
     assert set(refusals) == {12, 3}
     assert refusals[12].startswith(
-        "rates mode with k_eps 8, k_eps_yaw 8, alpha_p 2, c_p 4 at 100 Hz, link delay 10 ms, on "
-        "PX4 (PX4 v1.16.0 SIH default tuning (recorded rate doublets)) is not stable enough: ")
+        "rates mode with k_eps 8, k_eps_yaw 8, alpha_p 2, c_p 4 at 100 Hz, link delay 10 ms "
+        "(compensated, fly.predict), on PX4 (PX4 v1.16.0 SIH default tuning (recorded rate doublets)) is not stable enough: ")
     assert "; stable: rates mode with k_eps 1.5, k_eps_yaw 1, alpha_p 1, c_p 2 (fly.rates)" in (
         refusals[12])
 
