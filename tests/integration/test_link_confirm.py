@@ -78,13 +78,22 @@ def test_px4_refusal_after_accepted_wins_and_a_shown_mode_is_confirmed(tmp_path:
             "HEARTBEAT reports AUTO_LOITER, armed; COMMAND_ACKs seen: ACCEPTED, "
             "TEMPORARILY_REJECTED; the vehicle said CRITICAL \"Switching to Offboard is "
             "currently not available\"")
-        # AND with a setpoint first, OFFBOARD is confirmed by a HEARTBEAT showing it
-        proxy.send_rates_thrust([0.0, 0.0, 0.0], 0.5)
+        # AND with setpoints streamed (20 Hz, as a ground station does: a single one would let
+        # PX4's COM_OF_LOSS_T failsafe, 1 s, race its 1 Hz HEARTBEAT), OFFBOARD is confirmed by
+        # a HEARTBEAT showing it
+        async def stream() -> None:
+            while True:
+                proxy.send_rates_thrust([0.0, 0.0, 0.0], 0.5)
+                await asyncio.sleep(0.05)
+
+        setpoints = asyncio.create_task(stream())
+        await asyncio.sleep(0.1)
         acks = await set_mode(proxy, OFFBOARD, [129.0, 6.0, 0.0], "OFFBOARD")
         assert acks == (MavResult.ACCEPTED, MavResult.ACCEPTED)
         assert proxy.state().mode == "OFFBOARD"
         # back to Hold (confirmed), so the vehicle is not left without setpoints
         await set_mode(proxy, HOLD, [129.0, 4.0, 3.0], "AUTO_LOITER")
+        setpoints.cancel()
         assert proxy.state().mode == "AUTO_LOITER"
         assert proxy.stats().commands.acks_unexpected == 0
 
@@ -160,6 +169,84 @@ def test_a_mode_acknowledged_but_never_shown_is_not_confirmed() -> None:
                     "vehicle 3 (sysid 1): mode OFFBOARD not confirmed within 0.5 s: HEARTBEAT "
                     "reports AUTO_LOITER, armed; COMMAND_ACKs seen: ACCEPTED, ACCEPTED")
                 assert err.value.acks == (MavResult.ACCEPTED, MavResult.ACCEPTED)
+                task.cancel()
+        finally:
+            transport.close()
+
+    run(scenario())
+
+
+class LossyModePeer(SilentModePeer):
+    """Takes the mode it is asked for (its HEARTBEAT shows it), but the link loses every HEARTBEAT
+    for `mute_s` after each command (a lossy radio); `mute_s` None: it falls silent for good."""
+
+    def __init__(self, mute_s: float | None) -> None:
+        super().__init__()
+        self.mute_s = mute_s
+        self.custom_mode = HOLD
+        self.muted_until = 0.0
+
+    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:  # type: ignore[override]
+        for msg in self.mav.parse_buffer(bytes(data)) or []:
+            if msg.get_type() == "COMMAND_LONG":
+                self.custom_mode = px4_custom_mode(int(msg.param2), int(msg.param3))
+                now = asyncio.get_running_loop().time()
+                self.muted_until = now + self.mute_s if self.mute_s is not None else float("inf")
+        # the ACKs (and the GCS's address) as the silent peer does; the bytes are parsed again
+        super().datagram_received(data, addr)
+
+    def heartbeat(self) -> None:
+        if self.transport is None or self.gcs is None:
+            return
+        if asyncio.get_running_loop().time() < self.muted_until:
+            return  # lost on the way
+        self.transport.sendto(self.mav.heartbeat_encode(2, 12, 129, self.custom_mode, 4).pack(
+            self.mav), self.gcs)
+
+
+@pytest.mark.parametrize("mute_s", [0.9, None])
+def test_heartbeats_lost_after_the_ack_extend_the_wait_and_silence_is_named(mute_s) -> None:
+    # GIVEN a vehicle that switches to OFFBOARD when asked, behind a link that loses its
+    # HEARTBEATs for 0.9 s after the command (or for good); the timeout is 0.5 s
+    async def scenario() -> None:
+        loop = asyncio.get_running_loop()
+        peer = LossyModePeer(mute_s)
+        transport, _ = await loop.create_datagram_endpoint(lambda: peer,
+                                                           local_addr=("127.0.0.1", 0))
+        peer.transport = transport
+        port = int(transport.get_extra_info("sockname")[1])
+        cfg = VehicleLinkConfig(vehicle_id=3, sysid=1, local_port=0, remote_port=port,
+                                heartbeat_period_s=0.05)
+
+        async def beat() -> None:
+            while True:
+                peer.heartbeat()
+                await asyncio.sleep(0.1)
+
+        try:
+            async with VehicleProxy(cfg) as proxy, asyncio.TaskGroup() as tg:
+                task = tg.create_task(beat())
+                await heard(proxy)
+                t0 = loop.time()
+                if mute_s is not None:
+                    # THEN no HEARTBEAT said otherwise, so the wait went on past 0.5 s, and
+                    # the first one that got through confirmed the mode
+                    acks = await set_mode(proxy, OFFBOARD, [129.0, 6.0, 0.0], "OFFBOARD",
+                                          timeout_s=0.5)
+                    assert acks == (MavResult.ACCEPTED, MavResult.ACCEPTED)
+                    assert 0.85 <= loop.time() - t0 <= 1.4
+                    assert proxy.state().mode == "OFFBOARD"
+                else:
+                    # THEN a vehicle heard no more is not confirmed after 3 x the timeout, and
+                    # the message says nothing was heard
+                    with pytest.raises(CommandNotConfirmedError) as err:
+                        await set_mode(proxy, OFFBOARD, [129.0, 6.0, 0.0], "OFFBOARD",
+                                       timeout_s=0.5)
+                    assert 1.5 <= loop.time() - t0 <= 2.2
+                    assert str(err.value) == (
+                        "vehicle 3 (sysid 1): mode OFFBOARD not confirmed within 1.5 s (0 "
+                        "HEARTBEATs heard after the ACK): HEARTBEAT reports AUTO_LOITER, armed; "
+                        "COMMAND_ACKs seen: ACCEPTED, ACCEPTED")
                 task.cancel()
         finally:
             transport.close()
