@@ -403,8 +403,8 @@ class VehicleProxy:
         ``shows(heartbeat)`` is true. It is not confirmed (CommandNotConfirmedError) once
         ``timeout_s`` has passed since that ACK and at least CONFIRM_DENIALS HEARTBEATs since it
         did not show the effect: what the vehicle said, not what the link lost. With fewer heard
-        (at 20 % loss, two of PX4's three 1 Hz HEARTBEATs in 3 s are missing one time in ten)
-        the wait goes on, up to CONFIRM_LOSSY_FACTOR x ``timeout_s``. Both messages name the
+        the wait goes on, up to CONFIRM_LOSSY_FACTOR x ``timeout_s`` (at 20 % loss all three of
+        PX4's 1 Hz HEARTBEATs in 3 s are lost 0.8 % of the time; all nine in 9 s, 5e-7). Both messages name the
         vehicle, ``want`` (e.g. 'mode OFFBOARD'), what the latest HEARTBEAT reports
         (``reported``), the ACKs seen, and the vehicle's latest STATUSTEXT since the command was
         sent."""
