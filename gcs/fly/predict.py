@@ -124,11 +124,13 @@ class PredictionAudit:
         self._errors: list[list[np.ndarray]] = [[] for _ in range(4)]  # per kind: (vehicle, err)
         self._vehicles: list[list[np.ndarray]] = [[] for _ in range(4)]
         self._horizons: list[np.ndarray] = []
+        self._joined: tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray] | None = None
 
     def record(self, act_time_s: float, predicted: TeamMeasurement, held: TeamMeasurement,
                position_horizon_s: np.ndarray) -> None:
         """One tick's prediction to `act_time_s` and the samples it started from."""
         self._horizons.append(np.array(position_horizon_s, dtype=float))
+        self._joined = None
         k = self._slot % AUDIT_SLOTS
         self._slot += 1
         self._t[k] = act_time_s
@@ -163,13 +165,16 @@ class PredictionAudit:
     def _keep(self, kind: int, vehicles: np.ndarray, errors: np.ndarray) -> None:
         self._vehicles[kind].append(vehicles)
         self._errors[kind].append(errors)
+        self._joined = None
 
     def figures(self, i: int) -> AuditFigures:
         """Vehicle index i's errors so far."""
-        per_kind = []
-        for veh, err in zip(self._vehicles, self._errors, strict=True):
-            v = np.concatenate(veh) if veh else np.zeros(0, dtype=int)
-            e = np.concatenate(err) if err else np.zeros(0)
-            per_kind.append(e[v == i])
-        horizon = (np.array([h[i] for h in self._horizons]) if self._horizons else np.zeros(0))
-        return AuditFigures(int(per_kind[0].size), horizon, *per_kind)
+        if self._joined is None:  # joined once for every vehicle's figures
+            kinds = [(np.concatenate(v) if v else np.zeros(0, dtype=int),
+                      np.concatenate(e) if e else np.zeros(0))
+                     for v, e in zip(self._vehicles, self._errors, strict=True)]
+            horizons = np.stack(self._horizons) if self._horizons else np.zeros((0, self.n))
+            self._joined = (kinds, horizons)
+        kinds, horizons = self._joined
+        per_kind = [e[v == i] for v, e in kinds]
+        return AuditFigures(int(per_kind[0].size), horizons[:, i], *per_kind)

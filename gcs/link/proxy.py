@@ -404,10 +404,10 @@ class VehicleProxy:
         ``timeout_s`` has passed since that ACK and at least CONFIRM_DENIALS HEARTBEATs since it
         did not show the effect: what the vehicle said, not what the link lost. With fewer heard
         the wait goes on, up to CONFIRM_LOSSY_FACTOR x ``timeout_s`` (at 20 % loss all three of
-        PX4's 1 Hz HEARTBEATs in 3 s are lost 0.8 % of the time; all nine in 9 s, 5e-7). Both messages name the
-        vehicle, ``want`` (e.g. 'mode OFFBOARD'), what the latest HEARTBEAT reports
-        (``reported``), the ACKs seen, and the vehicle's latest STATUSTEXT since the command was
-        sent."""
+        PX4's 1 Hz HEARTBEATs in 3 s are lost 0.8 % of the time; all nine in 9 s, 5e-7). Both
+        messages name the vehicle, ``want`` (e.g. 'mode OFFBOARD'), what the latest HEARTBEAT
+        reports (``reported``), the ACKs seen, and the vehicle's latest STATUSTEXT since the
+        command was sent."""
         loop = asyncio.get_running_loop()
         sent_s = self._clock.now_s()
         label = command_label(command)
