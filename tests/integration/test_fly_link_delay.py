@@ -104,13 +104,13 @@ def test_a_mode_unstable_at_the_measured_delay_is_refused_before_anything_is_com
 
 
 def test_scenario_one_over_50_ms_links_with_jitter_and_loss_converges(tmp_path):
-    # GIVEN 50 ms + 0-10 ms jitter + 20 % loss on every link, both directions, from 2 s after
-    # the switch to OFFBOARD (the switch itself at the onset of the loss failed once in three
-    # runs: the vehicle was back in AUTO_LOITER; see the note), and the gains the
-    # criterion proposes at 60 ms (fly.link_delay_s) for the default mode with the default delay
-    # compensation (fly.predict)
+    # GIVEN 50 ms + 0-10 ms jitter + 20 % loss on every link, both directions, from the switch
+    # to OFFBOARD on (the switch is confirmed over the lossy link: HEARTBEATs lost after its ACK
+    # extend the wait, VehicleProxy.command_confirmed), and the gains the criterion proposes at
+    # 60 ms (fly.link_delay_s) for the default mode with the default delay compensation
+    # (fly.predict)
     base = free_udp_port_block(4)
-    team = delayed_team(tmp_path, base, 50.0, probability=0.2, duration_s=60.0, at_s=2.0, fly={
+    team = delayed_team(tmp_path, base, 50.0, probability=0.2, duration_s=60.0, at_s=0.0, fly={
         "link_delay_s": 0.06, "initial_mass": "from_hover",
         "rates": {"k_eps": 1.5, "k_eps_yaw": 2.0, "alpha_p": 1.0, "c_p": 1.0}})
     with emulators(team, base, tmp_path):
