@@ -25,7 +25,7 @@ sys.path.insert(0, str(ROOT))
 from benchmarks.docsection import write_section  # noqa: E402
 
 
-def run(team: Path, duration_s: float, work: Path) -> dict:
+def run(team: Path, duration_s: float, work: Path, mode: str = "rates") -> dict:
     emu_stats = work / "emu.json"
     emu = subprocess.Popen(
         [sys.executable, "-m", "vehicle_emulator.cli", "--fleet", "--team", str(team),
@@ -37,7 +37,7 @@ def run(team: Path, duration_s: float, work: Path) -> dict:
         t0 = time.monotonic()
         gcs = subprocess.Popen(
             [sys.executable, "-m", "gcs.cli", "fly", "--team", str(team), "--out", str(out),
-             "--mode", "rates", "--duration-s", str(duration_s), "--end-action", "hold",
+             "--mode", mode, "--duration-s", str(duration_s), "--end-action", "hold",
              "--no-figures", "--status", "off"],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         _, status, usage = os.wait4(gcs.pid, 0)

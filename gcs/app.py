@@ -72,6 +72,7 @@ from gcs.fly.origins import (
     origin_from_home_position,
 )
 from gcs.fly.predict import PredictionAudit, horizons_s, predict, uplink_delay_s
+from gcs.fly.sched import Scheduling
 from gcs.fly.stats import (
     AgeStats,
     TickStats,
@@ -382,6 +383,7 @@ class Flight:
         self._tie_arrays = (None if fr.vehicles == "shared"
                             else (self.ties.offsets_enu_m, self.ties.rotations))
         self.hover_estimates: dict[int, HoverEstimate] = {}
+        self.scheduling: Scheduling | None = None  # what the OS gave (gcs fly sets it)
         self.max_yaw_rate_radps = team.fly.rates.max_yaw_rate_radps
         self.limited_ticks = np.zeros(self.n, dtype=np.int64)  # rate or torque limit applied
         # Before the formation starts (PRIME), vehicles get level, zero-rate setpoints at the
@@ -991,7 +993,9 @@ class Flight:
         )
         tick = self.ticks.report()
         log = self.builder.build(extra={
-            "link": link, "tick": tick,
+            "link": link,
+            "tick": {**tick, "scheduling": (self.scheduling.detail if self.scheduling is not None
+                                            else "not set")},
             "outcome": {"exit_code": outcome.exit_code, "reason": outcome.reason},
             "hover_estimates": {str(vid): dataclasses.asdict(e)
                                 for vid, e in self.hover_estimates.items()},

@@ -109,6 +109,8 @@ def describe(team: TeamConfig) -> str:
         "     delay compensation: " + ("the law reads states predicted to when its setpoints act "
                                        "(fly.predict)" if fly.predict else
                                        "off, the law reads the latest samples (fly.predict)"),
+        f"     scheduling {fly.scheduling} (fly.scheduling: the operating system's priority for "
+        "the tick)",
         _go_to_start_line(team),
     ]
     out.append("faults:" + ("" if team.faults else " none"))

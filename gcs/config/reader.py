@@ -22,6 +22,7 @@ from gcs.config.schema import (
     FLY_ACTIONS,
     FLY_HEADINGS,
     FLY_INITIAL_MASSES,
+    FLY_SCHEDULING,
     FLY_STARTS,
     FRAME_VEHICLES,
     GAIN_NAMES,
@@ -708,7 +709,7 @@ def _fly(node: _Node) -> FlyConfig:
         "link_loss_action stale_after_s link_lost_after_s link_timeout_s max_tilt_rad geofence "
         "log_rate_hz connect_timeout_s takeoff_timeout_s land_timeout_s takeoff_tolerance_m "
         "arm_timeout_s arm_retry_s mode_timeout_s formation_check response link_delay_s "
-        "initial_mass go_to_start max_data_age_s timesync_period_s predict",
+        "initial_mass go_to_start max_data_age_s timesync_period_s predict scheduling",
     )
     geofence = None
     g = node.child("geofence")
@@ -740,6 +741,7 @@ def _fly(node: _Node) -> FlyConfig:
         timesync_period_s=node.child("timesync_period_s").number(d.timesync_period_s, ge=0.0,
                                                                  le=60.0),
         predict=node.child("predict").boolean(d.predict),
+        scheduling=node.child("scheduling").string(d.scheduling, FLY_SCHEDULING),
         max_tilt_rad=node.child("max_tilt_rad").number(d.max_tilt_rad, gt=0.0, le=math.pi),
         geofence=geofence,
         log_rate_hz=node.child("log_rate_hz").number(d.log_rate_hz, gt=0.0),

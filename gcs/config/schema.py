@@ -29,6 +29,7 @@ FLY_STARTS = ("auto", "in_air", "takeoff")
 FLY_HEADINGS = ("hold", "paper")  # or a compass heading in degrees
 #: fly.initial_mass: the vehicles' `estimates.mhat`, or every one from its hover thrust
 FLY_INITIAL_MASSES = ("team", "from_hover")
+FLY_SCHEDULING = ("auto", "realtime", "raised", "normal")  # gcs/fly/sched.py
 
 Vec3 = tuple[float, float, float]
 ZERO3: Vec3 = (0.0, 0.0, 0.0)
@@ -439,6 +440,8 @@ class FlyConfig:
     timesync_period_s: float = 0.5  # TIMESYNC round-trip requests; 0: none
     # the law reads the states predicted to when its setpoints act (gcs/fly/predict.py)
     predict: bool = True
+    # the operating system's priority for the ground station (gcs/fly/sched.py)
+    scheduling: str = "auto"
     # any valid message from the vehicle keeps its link ALIVE; none for this long -> LOST (a
     # vehicle that sends only its 1 Hz HEARTBEAT, as ArduPilot does until asked, stays ALIVE)
     link_timeout_s: float = 3.0

@@ -16,10 +16,13 @@ from typing import TextIO
 
 from gcs.app import Flight, FlightSetupError, FlyOptions, prepare
 from gcs.config import TeamConfig, load_team
+from gcs.fly.sched import SchedulingError, apply_scheduling
 from gcs.precompile import compile_law
 from gcs.report import summary_table
 from gcs.status import StatusView
 from vehicle_emulator.cli import READY_PREFIX
+
+logger = logging.getLogger(__name__)
 
 EXIT_SETUP = 2
 EXIT_INTERRUPTED = 130
@@ -174,8 +177,12 @@ def run_fly(args: argparse.Namespace) -> int:
                 fleet.wait_ready(setup.plan.connect_timeout_s)
                 up = fleet.ready_line.removeprefix(READY_PREFIX).strip()
                 print(f"gcs fly: emulator fleet up: {up}", file=sys.stderr, flush=True)
+            # after the fleet started: the emulators keep the scheduling they were given
+            flight.scheduling = apply_scheduling(team.fly.scheduling)
+            (logger.info if flight.scheduling.policy != "normal" or team.fly.scheduling == "normal"
+             else logger.warning)("%s", flight.scheduling.detail)
             result = asyncio.run(flight.run())
-    except (FlightSetupError, EmulatorFleetError) as exc:
+    except (FlightSetupError, EmulatorFleetError, SchedulingError) as exc:
         print(f"gcs fly: {exc}", file=sys.stderr)
         return EXIT_SETUP
     except KeyboardInterrupt:  # before the links opened: nothing was commanded

@@ -1,0 +1,78 @@
+"""The ground station's scheduling (gcs/fly/sched.py), applied in a child process (never to the
+test runner), as the user running the tests and, where the tests run as root, as an unprivileged
+user (setpriv), for whom the operating system refuses both raises."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from gcs.fly.sched import POLICIES, RAISED_NICE, RT_PRIORITY, apply_scheduling
+
+PROBE = """
+import json, os, sys
+from gcs.fly.sched import SchedulingError, apply_scheduling
+try:
+    s = apply_scheduling(sys.argv[1])
+    out = {"policy": s.policy, "detail": s.detail}
+except SchedulingError as exc:
+    out = {"error": str(exc)}
+out["fifo"] = os.sched_getscheduler(0) & ~getattr(os, "SCHED_RESET_ON_FORK", 0) == os.SCHED_FIFO
+out["priority"] = os.sched_getparam(0).sched_priority
+out["nice"] = os.getpriority(os.PRIO_PROCESS, 0)
+print(json.dumps(out))
+"""
+ROOT = os.geteuid() == 0
+
+
+def probe(policy: str, *, unprivileged: bool = False) -> dict:
+    cmd = [sys.executable, "-c", PROBE, policy]
+    if unprivileged:  # nobody, no capabilities, no rtprio limit
+        cmd = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", "--inh-caps=-all",
+               *cmd]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=60, env=env, check=True)
+    return json.loads(done.stdout)
+
+
+def test_each_policy_gets_what_it_says():
+    out = probe("auto")
+    if out["policy"] == "realtime":
+        assert out["fifo"] and out["priority"] == RT_PRIORITY
+        assert out["detail"] == f"real-time scheduling: SCHED_FIFO priority {RT_PRIORITY}"
+    elif out["policy"] == "raised":
+        assert not out["fifo"] and out["nice"] <= RAISED_NICE
+    else:
+        assert not out["fifo"] and "grant it with root" in out["detail"]
+    if ROOT:
+        assert out["policy"] == "realtime", out  # root may
+    normal = probe("normal")
+    assert normal["policy"] == "normal" and not normal["fifo"]
+    assert normal["nice"] == os.getpriority(os.PRIO_PROCESS, 0)
+
+
+@pytest.mark.skipif(not (ROOT and shutil.which("setpriv")),
+                    reason="needs root to run a child as an unprivileged user")
+def test_an_unprivileged_user_falls_back_and_is_told_how_to_grant_more():
+    out = probe("auto", unprivileged=True)
+    assert out["policy"] == "normal" and not out["fifo"]
+    assert out["detail"].startswith("normal scheduling: SCHED_FIFO refused (Operation not "
+                                    "permitted); nice -10 refused (Permission denied)")
+    assert "setcap cap_sys_nice+ep" in out["detail"]
+    # asked for explicitly, a refusal is an error naming the policy and the way to grant it
+    out = probe("realtime", unprivileged=True)
+    assert out["error"].startswith("fly.scheduling realtime: SCHED_FIFO refused (Operation "
+                                   "not permitted); grant it with root")
+    assert probe("raised", unprivileged=True)["error"].startswith(
+        "fly.scheduling raised: nice -10 refused (Permission denied)")
+
+
+def test_an_unknown_policy_is_a_value_error():
+    assert POLICIES == ("auto", "realtime", "raised", "normal")
+    with pytest.raises(ValueError, match=r"fly.scheduling 'fast': expected one of auto, "):
+        apply_scheduling("fast")
