@@ -79,6 +79,7 @@ def section(r: dict, team: Path, duration_s: float) -> str:
         f"| tick lateness p50 / p99 / max | {tick['lateness_p50_ms']:.2f} / "
         f"{tick['lateness_p99_ms']:.2f} / {tick['lateness_max_ms']:.2f} ms |",
         f"| skipped ticks | {tick['skipped_ticks']} |",
+        f"| scheduling the ground station got (fly.scheduling) | {tick.get('scheduling', '-')} |",
         f"| tick compute (snapshot + law for the team + 16 setpoints) p50 / p99 | "
         f"{tick['compute_p50_ms']:.2f} / {tick['compute_p99_ms']:.2f} ms |",
         f"| telemetry age used by the law, worst vehicle p50 / p99 | {age50:.1f} / "
@@ -95,6 +96,9 @@ def section(r: dict, team: Path, duration_s: float) -> str:
         f"{100 * emu['cpu_fraction']:.0f} % of one core; its tick lateness mean "
         f"{emu['late_mean_ms']:.2f} ms, p99 {emu['late_p99_ms']:.2f} ms |",
         "",
+        "The emulator flies its default personality (px4): the formation error is the noise "
+        "floor of its PX4-like position estimates, the largest over the team's pairs (docs/gcs.md, "
+        "\"Did the vehicles follow?\"; bench_personalities.py), not the law's accuracy. "
         "The acceptance asks >= 99 % of ticks on time. Lateness is measured from the tick's "
         "absolute deadline t0 + k h (the loop never sleeps a relative period, so it does not "
         "drift); a tick more than a period late is skipped and counted, never run twice.",
