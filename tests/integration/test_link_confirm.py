@@ -5,7 +5,8 @@ and against a scripted peer for a vehicle that acknowledges a mode it never show
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Awaitable, Callable, Coroutine
+import contextlib
+from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
 from pathlib import Path
 from typing import Any
 
@@ -143,35 +144,43 @@ class SilentModePeer(asyncio.DatagramProtocol):
                                   self.gcs)
 
 
+@contextlib.asynccontextmanager
+async def linked_to(peer: SilentModePeer) -> AsyncIterator[VehicleProxy]:
+    """A proxy (vehicle 3, sysid 1) linked to the scripted `peer` over real UDP, the peer's
+    HEARTBEAT beating at 10 Hz, once it is heard."""
+    loop = asyncio.get_running_loop()
+    transport, _ = await loop.create_datagram_endpoint(lambda: peer, local_addr=("127.0.0.1", 0))
+    peer.transport = transport
+    port = int(transport.get_extra_info("sockname")[1])
+    cfg = VehicleLinkConfig(vehicle_id=3, sysid=1, local_port=0, remote_port=port,
+                            heartbeat_period_s=0.05)
+
+    async def beat() -> None:
+        while True:
+            peer.heartbeat()
+            await asyncio.sleep(0.1)
+
+    try:
+        async with VehicleProxy(cfg) as proxy, asyncio.TaskGroup() as tg:
+            task = tg.create_task(beat())
+            await heard(proxy)
+            try:
+                yield proxy
+            finally:
+                task.cancel()
+    finally:
+        transport.close()
+
+
 def test_a_mode_acknowledged_but_never_shown_is_not_confirmed() -> None:
     async def scenario() -> None:
-        loop = asyncio.get_running_loop()
-        peer = SilentModePeer()
-        transport, _ = await loop.create_datagram_endpoint(lambda: peer,
-                                                           local_addr=("127.0.0.1", 0))
-        peer.transport = transport
-        port = int(transport.get_extra_info("sockname")[1])
-        cfg = VehicleLinkConfig(vehicle_id=3, sysid=1, local_port=0, remote_port=port,
-                                heartbeat_period_s=0.05)
-
-        async def beat() -> None:
-            while True:
-                peer.heartbeat()
-                await asyncio.sleep(0.1)
-
-        try:
-            async with VehicleProxy(cfg) as proxy, asyncio.TaskGroup() as tg:
-                task = tg.create_task(beat())
-                await heard(proxy)
-                with pytest.raises(CommandNotConfirmedError) as err:
-                    await set_mode(proxy, OFFBOARD, [129.0, 6.0, 0.0], "OFFBOARD", timeout_s=0.5)
-                assert str(err.value) == (
-                    "vehicle 3 (sysid 1): mode OFFBOARD not confirmed within 0.5 s: HEARTBEAT "
-                    "reports AUTO_LOITER, armed; COMMAND_ACKs seen: ACCEPTED, ACCEPTED")
-                assert err.value.acks == (MavResult.ACCEPTED, MavResult.ACCEPTED)
-                task.cancel()
-        finally:
-            transport.close()
+        async with linked_to(SilentModePeer()) as proxy:
+            with pytest.raises(CommandNotConfirmedError) as err:
+                await set_mode(proxy, OFFBOARD, [129.0, 6.0, 0.0], "OFFBOARD", timeout_s=0.5)
+            assert str(err.value) == (
+                "vehicle 3 (sysid 1): mode OFFBOARD not confirmed within 0.5 s: HEARTBEAT "
+                "reports AUTO_LOITER, armed; COMMAND_ACKs seen: ACCEPTED, ACCEPTED")
+            assert err.value.acks == (MavResult.ACCEPTED, MavResult.ACCEPTED)
 
     run(scenario())
 
@@ -210,45 +219,26 @@ def test_heartbeats_lost_after_the_ack_extend_the_wait_and_silence_is_named(mute
     # HEARTBEATs for 0.9 s after the command (or for good); the timeout is 0.5 s
     async def scenario() -> None:
         loop = asyncio.get_running_loop()
-        peer = LossyModePeer(mute_s)
-        transport, _ = await loop.create_datagram_endpoint(lambda: peer,
-                                                           local_addr=("127.0.0.1", 0))
-        peer.transport = transport
-        port = int(transport.get_extra_info("sockname")[1])
-        cfg = VehicleLinkConfig(vehicle_id=3, sysid=1, local_port=0, remote_port=port,
-                                heartbeat_period_s=0.05)
-
-        async def beat() -> None:
-            while True:
-                peer.heartbeat()
-                await asyncio.sleep(0.1)
-
-        try:
-            async with VehicleProxy(cfg) as proxy, asyncio.TaskGroup() as tg:
-                task = tg.create_task(beat())
-                await heard(proxy)
-                t0 = loop.time()
-                if mute_s is not None:
-                    # THEN no HEARTBEAT said otherwise, so the wait went on past 0.5 s, and
-                    # the first one that got through confirmed the mode
-                    acks = await set_mode(proxy, OFFBOARD, [129.0, 6.0, 0.0], "OFFBOARD",
-                                          timeout_s=0.5)
-                    assert acks == (MavResult.ACCEPTED, MavResult.ACCEPTED)
-                    assert 0.85 <= loop.time() - t0 <= 1.4
-                    assert proxy.state().mode == "OFFBOARD"
-                else:
-                    # THEN a vehicle heard no more is not confirmed after 3 x the timeout, and
-                    # the message says nothing was heard
-                    with pytest.raises(CommandNotConfirmedError) as err:
-                        await set_mode(proxy, OFFBOARD, [129.0, 6.0, 0.0], "OFFBOARD",
-                                       timeout_s=0.5)
-                    assert 1.5 <= loop.time() - t0 <= 2.2
-                    assert str(err.value) == (
-                        "vehicle 3 (sysid 1): mode OFFBOARD not confirmed within 1.5 s (0 "
-                        "HEARTBEATs heard after the ACK): HEARTBEAT reports AUTO_LOITER, armed; "
-                        "COMMAND_ACKs seen: ACCEPTED, ACCEPTED")
-                task.cancel()
-        finally:
-            transport.close()
+        async with linked_to(LossyModePeer(mute_s)) as proxy:
+            t0 = loop.time()
+            if mute_s is not None:
+                # THEN no HEARTBEAT said otherwise, so the wait went on past 0.5 s, and the
+                # first one that got through confirmed the mode
+                acks = await set_mode(proxy, OFFBOARD, [129.0, 6.0, 0.0], "OFFBOARD",
+                                      timeout_s=0.5)
+                assert acks == (MavResult.ACCEPTED, MavResult.ACCEPTED)
+                assert 0.85 <= loop.time() - t0 <= 1.4
+                assert proxy.state().mode == "OFFBOARD"
+            else:
+                # THEN a vehicle heard no more is not confirmed after 3 x the timeout, and the
+                # message says nothing was heard
+                with pytest.raises(CommandNotConfirmedError) as err:
+                    await set_mode(proxy, OFFBOARD, [129.0, 6.0, 0.0], "OFFBOARD",
+                                   timeout_s=0.5)
+                assert 1.5 <= loop.time() - t0 <= 2.2
+                assert str(err.value) == (
+                    "vehicle 3 (sysid 1): mode OFFBOARD not confirmed within 1.5 s (0 "
+                    "HEARTBEATs heard after the ACK): HEARTBEAT reports AUTO_LOITER, armed; "
+                    "COMMAND_ACKs seen: ACCEPTED, ACCEPTED")
 
     run(scenario())
