@@ -179,8 +179,9 @@ def run_fly(args: argparse.Namespace) -> int:
                 print(f"gcs fly: emulator fleet up: {up}", file=sys.stderr, flush=True)
             # after the fleet started: the emulators keep the scheduling they were given
             flight.scheduling = apply_scheduling(team.fly.scheduling)
-            (logger.info if flight.scheduling.policy != "normal" or team.fly.scheduling == "normal"
-             else logger.warning)("%s", flight.scheduling.detail)
+            fell_back = team.fly.scheduling == "auto" and flight.scheduling.policy == "normal"
+            logger.log(logging.WARNING if fell_back else logging.INFO, "%s",
+                       flight.scheduling.detail)
             result = asyncio.run(flight.run())
     except (FlightSetupError, EmulatorFleetError, SchedulingError) as exc:
         print(f"gcs fly: {exc}", file=sys.stderr)

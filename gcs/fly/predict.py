@@ -70,13 +70,10 @@ def predict(m: TeamMeasurement, position_horizon_s: np.ndarray,
     """The team's state after the given horizons (n,) [s] (module docstring)."""
     h = position_horizon_s[:, None]
     a = m.acceleration_mps2
-    return TeamMeasurement(
-        np.ascontiguousarray(m.position_m + m.velocity_mps * h + 0.5 * a * h * h),
-        np.ascontiguousarray(m.velocity_mps + a * h),
-        a,
-        np.ascontiguousarray(rotation_step(m.rotation, m.omega_radps, attitude_horizon_s)),
-        m.omega_radps,
-    )
+    return TeamMeasurement(m.position_m + m.velocity_mps * h + 0.5 * a * h * h,
+                           m.velocity_mps + a * h, a,
+                           rotation_step(m.rotation, m.omega_radps, attitude_horizon_s),
+                           m.omega_radps)
 
 
 def uplink_delay_s(least_delays_s: np.ndarray) -> float:
@@ -143,24 +140,28 @@ class PredictionAudit:
                 attitude_taken_s: np.ndarray) -> None:
         """Resolve the pending predictions whose act time the newest samples reached."""
         # position: the sample carried back to the act time by its own velocity
-        back = position_taken_s[None, :] - self._t  # (slots, n), >= 0 once reached
-        hit = self._pos_pending & (back >= 0.0)
-        self._pos_pending &= ~hit
-        hit &= back <= RESOLVE_WITHIN_S
-        if hit.any():
-            slot, veh = np.nonzero(hit)
-            truth = position_m[veh] - velocity_mps[veh] * back[slot, veh][:, None]
+        slot, veh, back = self._reached(self._pos_pending, position_taken_s)
+        if veh.size:
+            truth = position_m[veh] - velocity_mps[veh] * back[:, None]
             self._keep(0, veh, np.linalg.norm(self._p[slot, veh] - truth, axis=1))
             self._keep(1, veh, np.linalg.norm(self._p0[slot, veh] - truth, axis=1))
-        back = attitude_taken_s[None, :] - self._t
-        hit = self._att_pending & (back >= 0.0)
-        self._att_pending &= ~hit
-        hit &= back <= RESOLVE_WITHIN_S
-        if hit.any():
-            slot, veh = np.nonzero(hit)
-            truth = rotation_step(rotation[veh], omega_radps[veh], -back[slot, veh])
+        # attitude: carried back by its own body rates
+        slot, veh, back = self._reached(self._att_pending, attitude_taken_s)
+        if veh.size:
+            truth = rotation_step(rotation[veh], omega_radps[veh], -back)
             self._keep(2, veh, rotation_angle_rad(self._r[slot, veh], truth))
             self._keep(3, veh, rotation_angle_rad(self._r0[slot, veh], truth))
+
+    def _reached(self, pending: np.ndarray, taken_s: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The pending predictions (slot, vehicle) whose act time a sample taken at `taken_s`
+        has reached, no longer pending, and of those the ones it resolves (taken at most
+        RESOLVE_WITHIN_S later), with how much later (back, >= 0)."""
+        back = taken_s[None, :] - self._t  # (slots, n), >= 0 once reached
+        hit = pending & (back >= 0.0)
+        pending &= ~hit
+        slot, veh = np.nonzero(hit & (back <= RESOLVE_WITHIN_S))
+        return slot, veh, back[slot, veh]
 
     def _keep(self, kind: int, vehicles: np.ndarray, errors: np.ndarray) -> None:
         self._vehicles[kind].append(vehicles)
