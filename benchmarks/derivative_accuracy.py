@@ -18,7 +18,7 @@ sys.path.insert(0, str(ROOT))
 
 from gcs.config import load_team  # noqa: E402
 from gcs.control.derivatives import force_derivatives, levant_advance  # noqa: E402
-from gcs.control.formation import reference_velocity  # noqa: E402
+from gcs.control.formation import edge_list, reference_velocity  # noqa: E402
 from gcs.control.law import attitude_stage, position_stage  # noqa: E402
 from gcs.sim.loop import _acceleration  # noqa: E402
 from gcs.sim.runner import law_gains  # noqa: E402
@@ -37,7 +37,7 @@ def main() -> int:
     w = np.zeros((n, 3))
     mhat = team.initial_mhat().copy()
     rho = team.initial_inertia_estimates_kgm2().copy()
-    adj, off = team.adjacency(), team.offsets_enu_m()
+    adj, off = edge_list(team.adjacency()), team.offsets_enu_m()
     ref_args = team.reference_velocity.as_arrays()
     thrust_hold = m * gains.gravity_mps2
     levant = np.zeros((n, 3, 3))

@@ -56,13 +56,13 @@ from gcs.fly.measure import (
     TeamSample,
     command_heading_rad,
     desaturate_torque,
-    effective_adjacency,
+    drop_stale_neighbours,
+    formation_error_m,
     fresh_mask,
     level_rotations,
     limit_rate_command,
     normalised_thrust,
     normalised_torque,
-    stale_neighbour_counts,
     torque_max_nm,
     yaw_rad,
 )
@@ -353,7 +353,6 @@ class Flight:
         self.ids = team.ids()
         self.period_s = 1.0 / setup.tick_rate_hz
         self.machine = MissionMachine(setup.plan, self.ids)
-        self.adjacency = np.ascontiguousarray(team.adjacency(), dtype=float)
         adaptive = setup.law == "adaptive"
         vehicles = team.vehicles
         nominal = (team.nominal_masses_kg() if not adaptive else None)
@@ -361,12 +360,13 @@ class Flight:
                            for v in vehicles], dtype=float)
         d = team.controller.derivative
         self.law = TeamLaw(
-            setup.gains, self.adjacency, team.offsets_enu_m(), team.initial_mhat(), rhohat,
+            setup.gains, team.adjacency(), team.offsets_enu_m(), team.initial_mhat(), rhohat,
             nominal_mass_kg=nominal, adaptive=adaptive, derivative=d.method,
             levant_lipschitz=d.levant_lipschitz, levant_substep_s=d.levant_substep_s,
         )
         self.ref_arrays = tuple(np.ascontiguousarray(a, dtype=float)
                                 for a in team.reference_velocity.as_arrays())
+        self._offsets_m = np.ascontiguousarray(team.offsets_enu_m(), dtype=float)
         self._warm_up(team, setup, rhohat, nominal)
         self.max_thrust_n = np.array([v.airframe.max_thrust_n for v in vehicles])
         self.arm_m = np.array([v.airframe.arm_length_m for v in vehicles])
@@ -416,8 +416,6 @@ class Flight:
         # delay compensation (gcs/fly/predict.py) and its measured error
         self.audit = PredictionAudit(self.n) if team.fly.predict else None
         self.machine_every = max(1, round(setup.tick_rate_hz / MACHINE_RATE_HZ))
-        offsets = team.offsets_enu_m()
-        self._pair_offsets = offsets[:, None, :] - offsets[None, :, :]
         self.last_sample: TeamSample | None = None
         self.last_command: TeamCommand | None = None
         self.formation_error_m = math.nan
@@ -446,9 +444,11 @@ class Flight:
             np.ones(n, dtype=bool), np.zeros(n), np.zeros(n), np.zeros(n),
             np.zeros(n)).measurement()
         ref = reference_velocity(0.0, *self.ref_arrays)
+        fresh = np.ones(n, dtype=bool)
         for _ in range(2):
+            drop_stale_neighbours(scratch.graph, fresh, scratch.active_graph.weight)
             scratch.step(meas, ref, self.period_s)
-        stale_neighbour_counts(self.adjacency, np.ones(n, dtype=bool))
+        formation_error_m(meas.position_m, self._offsets_m)
 
     # --- lifetime --------------------------------------------------------------------------------
 
@@ -872,7 +872,9 @@ class Flight:
         dt = (k - (self._last_law_k if self._last_law_k is not None else k - 1)) * self.period_s
         self._last_law_k = k
         fresh = fresh_mask(sample, self.team.fly.stale_after_s)
-        self.law.adjacency = np.ascontiguousarray(effective_adjacency(self.adjacency, fresh))
+        # the staleness rule, per edge and in place: the law's weights a_ij of this tick
+        stale_neighbours = drop_stale_neighbours(self.law.graph, fresh,
+                                                 self.law.active_graph.weight)
         ref = reference_velocity(t, *self.ref_arrays)
         meas = self._law_input(sample, now_s)
         try:
@@ -890,8 +892,7 @@ class Flight:
         self.last_command = command
         self.formation_t_s = t
         if self.machine.phase is Phase.FORMATION:
-            self.ages.record(sample.delay_s, sample.age_s, fresh,
-                             stale_neighbour_counts(self.adjacency, fresh))
+            self.ages.record(sample.delay_s, sample.age_s, fresh, stale_neighbours)
             if (k - self._k0) % self.setup.log_every == 0:
                 self._log(t, sample, ref, command)
         return command
@@ -914,8 +915,7 @@ class Flight:
 
     def _log(self, t: float, sample: TeamSample, ref: np.ndarray, c: TeamCommand) -> None:
         p = sample.position_m
-        rel = p[:, None, :] - p[None, :, :] - self._pair_offsets
-        self.formation_error_m = float(np.sqrt((rel * rel).sum(axis=2)).max())
+        self.formation_error_m = formation_error_m(p, self._offsets_m)  # no (n, n, 3) array
         self.builder.append(
             t_s=t, position_enu_m=p, velocity_enu_mps=sample.velocity_mps,
             reference_velocity_enu_mps=ref[0], attitude_error=c.attitude_error,

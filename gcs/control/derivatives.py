@@ -18,6 +18,7 @@ import math
 import numpy as np
 from numba import njit
 
+from gcs.control.formation import EdgeList
 from gcs.control.gains import LawGains
 from gcs.control.position import ddsat, dsat
 
@@ -37,7 +38,7 @@ def force_derivatives(
     mhat: np.ndarray,
     mhat_rate: np.ndarray,
     jerk_gain: np.ndarray,
-    adjacency: np.ndarray,
+    graph: EdgeList,
     reference_mps: np.ndarray,
     gains: LawGains,
     adaptive: bool,
@@ -46,9 +47,11 @@ def force_derivatives(
 
     Inputs are the outputs of position.force_law (accel_cmd = a, s, ve, phi, kappa) and
     position.mass_estimator_rate (mhat_rate); omega is body FLU, everything else world ENU.
-    With the baseline (adaptive=False) kappa is constant, so kappa' = kappa'' = 0.
+    With the baseline (adaptive=False) kappa is constant, so kappa' = kappa'' = 0. The graph
+    terms s' and s'' sum over row i of the edge list, as s does in position.sliding_variable.
     """
     n = velocity_mps.shape[0]
+    row_start, neighbour, weight = graph.row_start, graph.neighbour, graph.weight
     sig = gains.sigma_a
     g = gains.gravity_mps2
     am = gains.alpha_m
@@ -65,9 +68,10 @@ def force_derivatives(
         phi_d = 0.0
         for k in range(3):
             coupling_d = 0.0
-            for j in range(n):
-                aij = adjacency[i, j]
+            for e in range(row_start[i], row_start[i + 1]):
+                aij = weight[e]
                 if aij != 0.0:
+                    j = neighbour[e]
                     coupling_d += aij * (velocity_mps[i, k] - velocity_mps[j, k])
             ve_d[k] = acceleration_mps2[i, k] - reference_mps[1, k]
             s_d[k] = gains.c_p * coupling_d + ve_d[k]
@@ -126,9 +130,10 @@ def force_derivatives(
             kap_dd = 0.0
         for k in range(3):
             coupling_dd = 0.0
-            for j in range(n):
-                aij = adjacency[i, j]
+            for e in range(row_start[i], row_start[i + 1]):
+                aij = weight[e]
                 if aij != 0.0:
+                    j = neighbour[e]
                     coupling_dd += aij * (acceleration_mps2[i, k] - acceleration_mps2[j, k])
             ve_dd = v_dd[k] - reference_mps[2, k]
             s_dd = gains.c_p * coupling_dd + ve_dd

@@ -15,6 +15,7 @@ from numba import njit
 
 from gcs.control.attitude import adaptive_torque, attitude_errors, rate_command, regressor
 from gcs.control.derivatives import force_derivatives, levant_advance
+from gcs.control.formation import EdgeList, edge_list
 from gcs.control.gains import LawGains
 from gcs.control.geometry import (
     command_angular_velocity,
@@ -36,13 +37,14 @@ def position_stage(
     rotation,
     mhat,
     nominal_mass_kg,
-    adjacency,
+    graph,
     offsets_m,
     reference_mps,
     gains,
     adaptive,
 ):
-    """Command force u (23), thrust T = |u| (12) and mhat' (24) for the team.
+    """Command force u (23), thrust T = |u| (12) and mhat' (24) for the team; `graph` is the
+    formation.EdgeList of the weights a_ij.
 
     Returns (u, a, s, ve, phi, kappa, thrust_n, mhat_rate); mhat_rate is zero for the baseline.
     """
@@ -51,7 +53,7 @@ def position_stage(
         velocity_mps,
         mhat,
         nominal_mass_kg,
-        adjacency,
+        graph,
         offsets_m,
         reference_mps,
         gains,
@@ -124,6 +126,12 @@ class TeamLaw:
     Row i of every computation uses only vehicle i's measurement and its graph neighbours'
     (a_ij != 0); the states mhat_i, rhohat_i, and the differentiator of vehicle i are vehicle
     i's own. Estimator states are integrated by forward Euler over the tick.
+
+    The weight matrix `adjacency` (n, n) is read once, into `graph` (formation.EdgeList, as
+    configured). `step` sums over `active_graph`: the same rows and neighbours with its own
+    weight array, which a ground station may change in place between ticks (gcs fly zeroes the
+    entries of stale neighbours: gcs.fly.measure.drop_stale_neighbours); a tick then costs
+    O(n + m) for m edges and allocates nothing n x n.
     """
 
     def __init__(
@@ -145,7 +153,8 @@ class TeamLaw:
                 f"derivative method {derivative!r}: expected one of {sorted(DERIVATIVE_METHODS)}"
             )
         self.gains = gains
-        self.adjacency = np.ascontiguousarray(adjacency, dtype=float)
+        self.graph: EdgeList = edge_list(adjacency)
+        self.active_graph: EdgeList = self.graph._replace(weight=self.graph.weight.copy())
         self.offsets_m = np.ascontiguousarray(offsets_m, dtype=float)
         self.mhat = np.array(mhat0, dtype=float).reshape(n)
         self.rhohat = np.array(rhohat0_kgm2, dtype=float).reshape(n, 3)
@@ -178,7 +187,7 @@ class TeamLaw:
             meas.rotation,
             self.mhat,
             self.nominal_mass_kg,
-            self.adjacency,
+            self.active_graph,
             self.offsets_m,
             reference_mps,
             g,
@@ -223,7 +232,7 @@ class TeamLaw:
                 self.mhat,
                 mhat_rate,
                 1.0 / kappa,
-                self.adjacency,
+                self.active_graph,
                 reference_mps,
                 g,
                 self.adaptive,

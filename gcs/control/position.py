@@ -1,9 +1,10 @@
 """Position loop: command force (23) with tanh saturation, I&I mass estimator (24), thrust (12).
 
-All vectors are world ENU (z up). Batched over the team: p, v (n, 3); the graph enters through
-the symmetric weight matrix `adjacency` (n, n) and the offsets theta_i (n, 3), so row i reads
-only its own state and its neighbours' (a_ij != 0). `reference` is (4, 3): v_r and its first
-three time derivatives (see formation.reference_velocity).
+All vectors are world ENU (z up). Batched over the team: p, v (n, 3); the graph enters as an
+edge list `graph` (formation.EdgeList: row i's neighbours j and weights a_ij) and the offsets
+theta_i (n, 3), so row i reads only its own state and its neighbours' (a_ij != 0), and a tick
+costs O(n + m) for m edges. `reference` is (4, 3): v_r and its first three time derivatives (see
+formation.reference_velocity).
 
 Saturation: sat(x) = sigma_a tanh(x / sigma_a), dsat = 1 - tanh^2(x / sigma_a),
 ddsat = -(2 / sigma_a) tanh(x / sigma_a) dsat (spec section 1; sigma_a = 1 in the paper).
@@ -14,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from gcs.control.formation import EdgeList
 from gcs.control.gains import LawGains
 
 
@@ -51,24 +53,27 @@ def phi(velocity_mps: np.ndarray, sigma_a: float) -> np.ndarray:
 def sliding_variable(
     position_m: np.ndarray,
     velocity_mps: np.ndarray,
-    adjacency: np.ndarray,
+    graph: EdgeList,
     offsets_m: np.ndarray,
     c_p: float,
     reference_mps: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """s_i of (21) and v_i^e = v_i - v_r, both (n, 3).
 
-    s_i = c_p sum_j a_ij (p_i - p_j - theta_ij) + v_i^e with theta_ij = theta_i - theta_j.
+    s_i = c_p sum_j a_ij (p_i - p_j - theta_ij) + v_i^e with theta_ij = theta_i - theta_j,
+    the sum over row i of the edge list (its neighbours j in ascending order, a_ij != 0).
     """
     n = position_m.shape[0]
     s = np.empty((n, 3))
     ve = np.empty((n, 3))
+    row_start, neighbour, weight = graph.row_start, graph.neighbour, graph.weight
     for i in range(n):
         for k in range(3):
             coupling = 0.0
-            for j in range(n):
-                a = adjacency[i, j]
+            for e in range(row_start[i], row_start[i + 1]):
+                a = weight[e]
                 if a != 0.0:
+                    j = neighbour[e]
                     coupling += a * (
                         position_m[i, k] - offsets_m[i, k] - position_m[j, k] + offsets_m[j, k]
                     )
@@ -83,7 +88,7 @@ def force_law(
     velocity_mps: np.ndarray,
     mhat: np.ndarray,
     nominal_mass_kg: np.ndarray,
-    adjacency: np.ndarray,
+    graph: EdgeList,
     offsets_m: np.ndarray,
     reference_mps: np.ndarray,
     gains: LawGains,
@@ -99,7 +104,7 @@ def force_law(
     """
     sig = gains.sigma_a
     s, ve = sliding_variable(
-        position_m, velocity_mps, adjacency, offsets_m, gains.c_p, reference_mps
+        position_m, velocity_mps, graph, offsets_m, gains.c_p, reference_mps
     )
     ph = phi(velocity_mps, sig)
     n = position_m.shape[0]

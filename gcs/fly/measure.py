@@ -12,6 +12,7 @@ The staleness rule (docs/gcs.md), applied every tick to the data each vehicle wo
 * Age <= stale_after_s: fresh; used as is.
 * Age > stale_after_s, as a NEIGHBOUR of i: vehicle i drops the edge for this tick (a_ij = 0 in
   row i only), i.e. it flies on its fresh neighbours; counted per (i, tick) as `stale_neighbour`.
+  Applied to the law's edge list in place (`drop_stale_neighbours`): O(m) per tick for m edges.
 * Age > stale_after_s, its OWN data: the row is still computed from the held sample (the law is
   robust to a few missing samples and the vehicle must keep getting setpoints); counted as
   `stale_own`. Beyond link_lost_after_s the mission declares the link lost (gcs.mission).
@@ -24,7 +25,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
+from gcs.control.formation import EdgeList
 from gcs.control.gains import GRAVITY_MPS2
 from gcs.control.law import TeamMeasurement
 
@@ -67,14 +70,50 @@ def fresh_mask(sample: TeamSample, stale_after_s: float) -> np.ndarray:
     return sample.finite & (sample.age_s <= stale_after_s)
 
 
-def effective_adjacency(adjacency: np.ndarray, fresh: np.ndarray) -> np.ndarray:
-    """Row i keeps a_ij only for fresh neighbours j (the staleness rule); the diagonal is 0."""
-    return adjacency * fresh[None, :].astype(float)
+@njit(cache=True)
+def drop_stale_neighbours(graph: EdgeList, fresh: np.ndarray, weight_out: np.ndarray
+                          ) -> np.ndarray:
+    """The staleness rule on the edge list: entry (i, j) of `graph` keeps its weight a_ij in
+    `weight_out` (2m,) only if neighbour j is fresh, else 0 (row i only: row j keeps a_ji while
+    i is fresh). Written in place; `graph` is the configured graph, `weight_out` the weights
+    the law reads (TeamLaw.active_graph.weight). Returns (n,) how many of each vehicle's graph
+    neighbours are stale this tick."""
+    n = graph.row_start.shape[0] - 1
+    stale = np.zeros(n, dtype=np.int64)
+    for i in range(n):
+        for e in range(graph.row_start[i], graph.row_start[i + 1]):
+            a = graph.weight[e]
+            if fresh[graph.neighbour[e]]:
+                weight_out[e] = a
+            else:
+                weight_out[e] = 0.0
+                if a != 0.0:
+                    stale[i] += 1
+    return stale
 
 
-def stale_neighbour_counts(adjacency: np.ndarray, fresh: np.ndarray) -> np.ndarray:
-    """(n,) how many of each vehicle's graph neighbours are stale this tick."""
-    return ((adjacency != 0.0) & ~fresh[None, :]).sum(axis=1)
+@njit(cache=True)
+def formation_error_m(position_m: np.ndarray, offsets_m: np.ndarray) -> float:
+    """The formation error of one sample: max over all pairs of |p_i - p_j - (theta_i -
+    theta_j)| [m] (gcs.metrics.formation_error), without an (n, n, 3) array. NaN if a position
+    is NaN; 0 for one vehicle. O(n^2) arithmetic, nothing allocated."""
+    n = position_m.shape[0]
+    worst = 0.0
+    for i in range(n):
+        for j in range(i + 1, n):
+            d2 = 0.0
+            for k in range(3):
+                d = (position_m[i, k] - position_m[j, k]) - (offsets_m[i, k] - offsets_m[j, k])
+                d2 += d * d
+            if not d2 <= worst:  # larger, or NaN
+                if d2 != d2:
+                    return math.nan
+                worst = d2
+    if n == 1:
+        for k in range(3):
+            if position_m[0, k] != position_m[0, k]:
+                return math.nan
+    return math.sqrt(worst)
 
 
 def torque_max_nm(arm_length_m: np.ndarray, anti_torque_m: np.ndarray,

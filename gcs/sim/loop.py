@@ -9,7 +9,8 @@ Two kernels share the law (gcs.control.law) and the physics (vehicle_emulator.ph
   stage with the exact u', u'' of spec 2.9, which use the TRUE masses; tests only.
 
 Both advance the state arrays in place and write log rows every `log_every` plant steps, so
-the Python caller can run a long flight in chunks and show progress between them.
+the Python caller can run a long flight in chunks and show progress between them. The graph is
+the law's edge list (gcs.control.formation.EdgeList), so a law step costs O(n + m) for m edges.
 """
 
 from __future__ import annotations
@@ -109,7 +110,7 @@ def run_sampled(
     mhat,
     rhohat,
     nominal_mass,
-    adjacency,
+    graph,
     offsets,
     ref_c,
     ref_a,
@@ -150,7 +151,7 @@ def run_sampled(
         if step % ctrl_every == 0:
             ref = reference_velocity(t, ref_c, ref_a, ref_w, ref_ph)
             u, a, s, ve, ph, kappa, t_n, mhat_rate = position_stage(
-                p, v, rot, mhat, nominal_mass, adjacency, offsets, ref, gains, adaptive
+                p, v, rot, mhat, nominal_mass, graph, offsets, ref, gains, adaptive
             )
             ok = is_nonsingular(u)
             for i in range(n):
@@ -188,7 +189,7 @@ def run_sampled(
                     mhat,
                     mhat_rate,
                     1.0 / kappa,
-                    adjacency,
+                    graph,
                     ref,
                     gains,
                     adaptive,
@@ -255,7 +256,7 @@ def _oracle_rates(
     mass,
     inertia,
     nominal_mass,
-    adjacency,
+    graph,
     offsets,
     ref_c,
     ref_a,
@@ -268,7 +269,7 @@ def _oracle_rates(
     derivatives and the law's diagnostics at this state."""
     ref = reference_velocity(t, ref_c, ref_a, ref_w, ref_ph)
     u, a, s, ve, ph, kappa, t_n, mhat_rate = position_stage(
-        p, v, rot, mhat, nominal_mass, adjacency, offsets, ref, gains, adaptive
+        p, v, rot, mhat, nominal_mass, graph, offsets, ref, gains, adaptive
     )
     acc = _acceleration(rot, t_n, mass, gains.gravity_mps2)
     du, ddu = force_derivatives(
@@ -285,7 +286,7 @@ def _oracle_rates(
         mhat,
         mhat_rate,
         1.0 / mass,
-        adjacency,
+        graph,
         ref,
         gains,
         adaptive,
@@ -314,7 +315,7 @@ def run_oracle(
     mhat,
     rhohat,
     nominal_mass,
-    adjacency,
+    graph,
     offsets,
     ref_c,
     ref_a,
@@ -335,7 +336,7 @@ def run_oracle(
             mass,
             inertia,
             nominal_mass,
-            adjacency,
+            graph,
             offsets,
             ref_c,
             ref_a,

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gcs.config import ConfigError, TeamConfig
-from gcs.control.formation import reference_velocity
+from gcs.control.formation import edge_list, reference_velocity
 from gcs.control.gains import LawGains
 from gcs.control.geometry import rotation_from_rpy
 from gcs.control.law import DERIVATIVE_METHODS
@@ -122,7 +122,7 @@ def simulate(
     )
     if law == "baseline" and np.isnan(nominal).any():
         raise ConfigError("the baseline law needs nominal_mass_kg on every vehicle")
-    adjacency = np.ascontiguousarray(team.adjacency(), dtype=float)
+    graph = edge_list(team.adjacency())  # the law sums over edges (formation.EdgeList)
     offsets = np.ascontiguousarray(team.offsets_enu_m(), dtype=float)
     ref_c, ref_a, ref_w, ref_ph = (
         np.ascontiguousarray(x, dtype=float) for x in team.reference_velocity.as_arrays()
@@ -155,7 +155,7 @@ def simulate(
         row0 = done // log_every
         # The plant, fault and law arguments both kernels share, in their order.
         shared = (p, v, rot, w, mass, inertia, drop_step, drop_factor, mhat, rhohat, nominal,
-                  adjacency, offsets, ref_c, ref_a, ref_w, ref_ph, gains, adaptive)
+                  graph, offsets, ref_c, ref_a, ref_w, ref_ph, gains, adaptive)
         if options.oracle:
             chunk_min = run_oracle(done, count, dt_s, log_every, *shared, log, row0)
             singular = 0

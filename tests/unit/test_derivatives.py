@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from gcs.control.derivatives import levant_advance
-from gcs.control.formation import adjacency_from_edges
+from gcs.control.formation import adjacency_from_edges, edge_list
 from gcs.control.gains import PAPER_GAINS
 from gcs.sim.loop import _oracle_rates
 from vehicle_emulator.physics import TABLE_I, orthonormalise
@@ -81,7 +81,8 @@ def _scenario_state():
     w = rng.normal(scale=0.3, size=(4, 3))
     mhat = np.array([1.0, 4.0, 1.0, 4.0])
     rhohat = np.full((4, 3), 0.08)
-    adjacency = adjacency_from_edges(4, [(0, 1, 1.0), (1, 2, 1.0), (2, 3, 1.0), (3, 0, 1.0)])
+    graph = edge_list(
+        adjacency_from_edges(4, [(0, 1, 1.0), (1, 2, 1.0), (2, 3, 1.0), (3, 0, 1.0)]))
     offsets = np.array([[2.0, 2, 0], [2, -2, 0], [-2, -2, 0], [-2, 2, 0]])
     ref = (
         np.zeros(3),
@@ -90,7 +91,7 @@ def _scenario_state():
         np.zeros((3, 1)),
     )
     ref_c = np.array([0.0, 0.0, 0.2])
-    return p, v, rot, w, mhat, rhohat, masses, inertia, adjacency, offsets, ref_c, ref
+    return p, v, rot, w, mhat, rhohat, masses, inertia, graph, offsets, ref_c, ref
 
 
 @pytest.mark.parametrize("adaptive", [True, False])

@@ -12,17 +12,16 @@ import pytest
 from gcs.app import FlightSetupError, FlyOptions, prepare, true_mass_kg
 from gcs.config import load_team
 from gcs.config.schema import ResponseConfig
-from gcs.control.formation import reference_velocity
+from gcs.control.formation import edge_list, reference_velocity
 from gcs.control.geometry import rotation_from_rpy
 from gcs.control.law import TeamLaw, TeamMeasurement
 from gcs.fly.measure import (
     command_heading_rad,
     desaturate_torque,
-    effective_adjacency,
+    drop_stale_neighbours,
     level_rotations,
     limit_rate_command,
     normalised_thrust,
-    stale_neighbour_counts,
     torque_max_nm,
     yaw_rad,
 )
@@ -125,10 +124,21 @@ def test_true_mass_follows_the_scheduled_drop():
 def test_stale_neighbour_edges_are_dropped_in_their_neighbours_rows_only():
     a = np.array([[0, 1, 0, 1], [1, 0, 1, 0], [0, 1, 0, 1], [1, 0, 1, 0]], dtype=float)
     fresh = np.array([True, False, True, True])
-    eff = effective_adjacency(a, fresh)
-    assert eff[0, 1] == 0 and eff[2, 1] == 0  # vehicles 1 and 3 stop using vehicle 2
-    np.testing.assert_array_equal(eff[1], a[1])  # vehicle 2 still uses its fresh neighbours
-    np.testing.assert_array_equal(stale_neighbour_counts(a, fresh), [1, 0, 1, 0])
+    graph = edge_list(a)
+    weight = np.full_like(graph.weight, np.nan)
+    # WHEN the staleness rule is applied to the edge list in place
+    stale = drop_stale_neighbours(graph, fresh, weight)
+    eff = np.zeros((4, 4))
+    for i in range(4):
+        for e in range(graph.row_start[i], graph.row_start[i + 1]):
+            eff[i, graph.neighbour[e]] = weight[e]
+    # THEN vehicles 1 and 3 stop using vehicle 2, which still uses its fresh neighbours
+    assert eff[0, 1] == 0 and eff[2, 1] == 0
+    np.testing.assert_array_equal(eff[1], a[1])
+    np.testing.assert_array_equal(eff, a * fresh[None, :])
+    np.testing.assert_array_equal(stale, [1, 0, 1, 0])
+    # AND the configured weights are untouched (the next tick starts from them)
+    np.testing.assert_array_equal(graph.weight, np.ones(8))
 
 
 def test_thrust_is_normalised_by_max_thrust_never_by_mass():

@@ -10,6 +10,7 @@ from hypothesis.extra.numpy import arrays
 
 from gcs.control.formation import (
     adjacency_from_edges,
+    edge_list,
     is_connected,
     laplacian,
     pair_offsets,
@@ -21,6 +22,7 @@ from gcs.control.law import position_stage
 from gcs.control.position import force_law, mass_estimator_rate, phi, sliding_variable
 
 RING = adjacency_from_edges(4, [(0, 1, 1.0), (1, 2, 1.0), (2, 3, 1.0), (3, 0, 1.0)])
+RING_EDGES = edge_list(RING)
 SQUARE = np.array([[2.0, 2, 0], [2, -2, 0], [-2, -2, 0], [-2, 2, 0]])
 REF = reference_velocity(
     0.7,
@@ -39,8 +41,9 @@ mhats = arrays(np.float64, (4,), elements=st.floats(0.05, 20.0))
 @given(vec, vel, mhats, st.tuples(*(st.floats(-1e3, 1e3, allow_nan=False),) * 3))
 def test_force_law_is_translation_invariant_bounded_and_finite(p, v, mhat, shift):
     # GIVEN any team state WHEN every vehicle is shifted by the same vector
-    u, *_ = force_law(p, v, mhat, mhat, RING, SQUARE, REF, PAPER_GAINS, True)
-    u2, *_ = force_law(p + np.array(shift), v, mhat, mhat, RING, SQUARE, REF, PAPER_GAINS, True)
+    u, *_ = force_law(p, v, mhat, mhat, RING_EDGES, SQUARE, REF, PAPER_GAINS, True)
+    u2, *_ = force_law(p + np.array(shift), v, mhat, mhat, RING_EDGES, SQUARE, REF, PAPER_GAINS,
+                       True)
     # THEN the command force is unchanged (the law sees only relative positions)
     np.testing.assert_allclose(u, u2, atol=1e-9 * (1 + np.abs(u).max()))
     # AND it is finite and bounded by kappa (2 alpha_p sqrt3 sigma + g + |v_r'|), kappa < alpha_m mhat
@@ -66,12 +69,12 @@ def test_sliding_variable_is_the_laplacian_form():
     # GIVEN random positions WHEN s is formed THEN s = c_p (L (x) I)(p - theta) + v - v_r
     rng = np.random.default_rng(3)
     p, v = rng.normal(size=(2, 4, 3))
-    s, ve = sliding_variable(p, v, RING, SQUARE, 4.0, REF)
+    s, ve = sliding_variable(p, v, RING_EDGES, SQUARE, 4.0, REF)
     expected = 4.0 * laplacian(RING) @ (p - SQUARE) + v - REF[0]
     np.testing.assert_allclose(s, expected, atol=1e-12)
     np.testing.assert_allclose(ve, v - REF[0])
     # AND a team exactly in formation, moving at v_r, has s = 0
-    s0, _ = sliding_variable(SQUARE + 5.0, np.tile(REF[0], (4, 1)), RING, SQUARE, 4.0, REF)
+    s0, _ = sliding_variable(SQUARE + 5.0, np.tile(REF[0], (4, 1)), RING_EDGES, SQUARE, 4.0, REF)
     np.testing.assert_allclose(s0, 0.0, atol=1e-12)
 
 
@@ -84,7 +87,7 @@ def test_mass_estimator_invariance_identity_37():
     rot *= np.sign(np.linalg.det(rot))[:, None, None]
     mhat = rng.uniform(0.5, 4.0, size=4)
     u, a, s, ve, ph, kappa, t_n, mhat_rate = position_stage(
-        p, v, rot, mhat, m, RING, SQUARE, REF, PAPER_GAINS, True
+        p, v, rot, mhat, m, RING_EDGES, SQUARE, REF, PAPER_GAINS, True
     )
     vdot = -9.81 * np.array([0, 0, 1.0]) + t_n[:, None] * rot[:, :, 2] / m[:, None]
     phidot = ((1 - np.tanh(v) ** 2) * vdot).sum(axis=1) / 3.0
@@ -104,7 +107,7 @@ def test_baseline_uses_the_nominal_mass_and_does_not_adapt():
     rot = np.tile(np.eye(3), (4, 1, 1))
     nominal = np.array([0.85, 1.2, 0.35, 3.4])
     u, a, s, ve, ph, kappa, t_n, mhat_rate = position_stage(
-        p, v, rot, np.ones(4), nominal, RING, SQUARE, REF, PAPER_GAINS, False
+        p, v, rot, np.ones(4), nominal, RING_EDGES, SQUARE, REF, PAPER_GAINS, False
     )
     np.testing.assert_allclose(kappa, nominal)
     np.testing.assert_allclose(u, nominal[:, None] * a)
