@@ -4,6 +4,7 @@ from gcs.link.codec import CodecStats, MavlinkCodec
 from gcs.link.commands import CommandNotConfirmedError, CommandRejectedError, CommandTimeoutError
 from gcs.link.config import VehicleLinkConfig, check_unique_sysids
 from gcs.link.enums import LinkState, MavResult
+from gcs.link.fastpath import HotTable
 from gcs.link.port import MavlinkPort, PortStats
 from gcs.link.proxy import LinkStats, SetpointError, VehicleProxy
 from gcs.link.telemetry import Clock, MonotonicClock, VehicleState
@@ -16,6 +17,7 @@ __all__ = [
     "CommandNotConfirmedError",
     "CommandRejectedError",
     "CommandTimeoutError",
+    "HotTable",
     "LinkClosedError",
     "LinkState",
     "LinkStats",

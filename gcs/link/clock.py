@@ -165,6 +165,11 @@ class VehicleClock:
         env = self._a + self._b * (t_vehicle_s - self._t_ref)
         return min(rx_s, t_vehicle_s + env - self._least_delay_s)
 
+    def line(self) -> tuple[float, float, float, float]:
+        """(a, b, t_ref, least_delay) of :meth:`sample_time_s` (a NaN: not synced), for callers
+        that map a whole team's stamps at once."""
+        return (self._a, self._b, self._t_ref, self._least_delay_s)
+
     def estimate(self) -> ClockEstimate:
         offset = (self._a + self._b * (self._last_t - self._t_ref) - self._least_delay_s
                   if self.synced else math.nan)

@@ -195,6 +195,16 @@ class MavlinkCodec:
         self._counts["messages_out"] += 1
         return data
 
+    def take_seq(self) -> int:
+        """The next sequence number, for a frame packed elsewhere (gcs.link.fastpath) with this
+        codec's ids; counted as sent. Unsigned links only: ValueError when signing is on."""
+        if self._mav.signing.sign_outgoing:
+            raise ValueError("take_seq: this link signs its frames; encode() them instead")
+        seq = self._mav.seq
+        self._mav.seq = (seq + 1) % 256
+        self._counts["messages_out"] += 1
+        return seq
+
     # --- decode ----------------------------------------------------------------------------------
 
     def feed(self, data: bytes) -> list[MAVLinkMessage]:

@@ -30,11 +30,14 @@ Lifetime: ``async with MavlinkPort(port) as p:``; the proxies ``attach`` to it (
 from __future__ import annotations
 
 import logging
+import time
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from types import TracebackType
 from typing import Protocol
+
+import numpy as np
 
 from gcs.link.codec import (
     CHECKSUM_LEN,
@@ -48,8 +51,9 @@ from gcs.link.codec import (
     MavlinkCodec,
     MAVLinkMessage,
 )
+from gcs.link.fastpath import HotTable, crc_extra_table, kind_table, scan
 from gcs.link.tlog import TlogWriter
-from gcs.link.udp import Address, UdpEndpoint, UdpStats
+from gcs.link.udp import MAX_BATCH_DATAGRAMS, Address, UdpEndpoint, UdpStats
 
 logger = logging.getLogger(__name__)
 
@@ -60,8 +64,12 @@ TIMESYNC_REMEMBERED = 128
 class PortClient(Protocol):
     """What a port needs of a vehicle's proxy."""
 
-    def _on_datagram(self, data: bytes, addr: Address) -> None:
-        """Bytes (whole MAVLink frames) from this vehicle's sysid, received from ``addr``."""
+    def _on_datagram(self, data: bytes, addr: Address, seq_counted: bool = False) -> None:
+        """Bytes (whole MAVLink frames) from this vehicle's sysid, received from ``addr``;
+        ``seq_counted``: the hot path accepted these frames and counted their sequence numbers."""
+
+    def _on_hot(self) -> None:
+        """The hot path stored new messages of this vehicle in the port's table."""
 
     def _on_foreign(self, msg: MAVLinkMessage, addr: Address) -> None:
         """A valid message from a sysid no vehicle on this port has (single-vehicle ports)."""
@@ -118,13 +126,38 @@ def frame_sysids(data: bytes | bytearray) -> list[tuple[int, int, int | None]]:
 class MavlinkPort:
     """One GCS UDP port (``local_host:local_port``, 0: any free port) shared by the vehicles
     attached to it, each by its sysid. Sending is per datagram to an explicit address
-    (:meth:`send_to`): each vehicle's proxy keeps its own vehicle's address."""
+    (:meth:`send_to`): each vehicle's proxy keeps its own vehicle's address.
+
+    With a `HotTable` (``table``) the port reads its socket in bulk and runs the hot path
+    (gcs.link.fastpath) on each batch: the attached vehicles' hot messages go straight into the
+    table (row ``slot`` given at :meth:`attach`), everything else to the proxies as above.
+    ``clock`` (monotonic seconds) stamps those batches; give the proxies' clock.
+    """
 
     def __init__(self, local_port: int, *, local_host: str = "127.0.0.1",
-                 tlog: TlogWriter | None = None, name: str | None = None) -> None:
+                 tlog: TlogWriter | None = None, name: str | None = None,
+                 table: HotTable | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.name = name or f"udp port {local_host}:{local_port}"
-        self._endpoint = UdpEndpoint(local_port, None, local_host=local_host, learn_remote=True,
-                                     on_datagram=self._route, name=self.name)
+        self._table = table
+        self._now_s = clock
+        if table is None:
+            self._endpoint = UdpEndpoint(local_port, None, local_host=local_host,
+                                         learn_remote=True, on_datagram=self._route,
+                                         name=self.name)
+        else:
+            self._endpoint = UdpEndpoint(local_port, None, local_host=local_host,
+                                         learn_remote=True, on_batch=self._on_batch,
+                                         name=self.name)
+            self._slot_of_sysid = np.full(256, -1, dtype=np.int64)
+            self._slot_clients: dict[int, PortClient] = {}
+            self._addr_codes: dict[Address, int] = {}
+            self._crc_extra = crc_extra_table()
+            self._kinds = kind_table()
+            self._slow = np.zeros((4 * MAX_BATCH_DATAGRAMS, 4), dtype=np.int64)
+            self._tlog_buf = np.zeros(0, dtype=np.uint8)
+            self._hot_batches = 0
+            self._hot_frames = 0
         self._codec = MavlinkCodec()  # frames no attached vehicle claims (counted, ignored)
         self._tlog = tlog
         self._clients: dict[int, PortClient] = {}
@@ -153,11 +186,24 @@ class MavlinkPort:
                         tb: TracebackType | None) -> None:
         self.close()
 
-    def attach(self, sysid: int, client: PortClient) -> None:
-        """Route this sysid's frames to ``client``; ValueError if another client has it."""
+    @property
+    def table(self) -> HotTable | None:
+        """The hot path's table (None: every frame goes through the proxies' codecs)."""
+        return self._table
+
+    def attach(self, sysid: int, client: PortClient, slot: int | None = None) -> None:
+        """Route this sysid's frames to ``client``; ValueError if another client has it.
+        ``slot``: the client's row in the port's table (hot path); the client sets
+        ``table.compid_of_slot``/``addr_of_slot`` for it (see `HotTable`)."""
         if sysid in self._clients and self._clients[sysid] is not client:
             raise ValueError(f"{self.name}: sysid {sysid} is already attached")
         self._clients[sysid] = client
+        if self._table is not None and slot is not None:
+            if not 0 <= slot < self._table.n:
+                raise ValueError(f"{self.name}: slot {slot} outside the table "
+                                 f"(0..{self._table.n - 1})")
+            self._slot_of_sysid[sysid] = slot
+            self._slot_clients[slot] = client
         self._detached.discard(sysid)
         self._most_clients = max(self._most_clients, len(self._clients))
 
@@ -166,6 +212,9 @@ class MavlinkPort:
         not taken for a stranger's."""
         if self._clients.pop(sysid, None) is not None:
             self._detached.add(sysid)
+        if self._table is not None and self._slot_of_sysid[sysid] >= 0:
+            self._slot_clients.pop(int(self._slot_of_sysid[sysid]), None)
+            self._slot_of_sysid[sysid] = -1
 
     # --- state -----------------------------------------------------------------------------------
 
@@ -225,14 +274,66 @@ class MavlinkPort:
         """When the request with this ts1 went out (None: not one of ours, or forgotten)."""
         return self._ts_sent.get(ts1)
 
-    def _route(self, data: bytes, addr: Address) -> None:
+    def address_code(self, addr: Address) -> int:
+        """The hot path's number for a source address of this port (stable while open)."""
+        code = self._addr_codes.get(addr)
+        if code is None:
+            code = self._addr_codes[addr] = len(self._addr_codes)
+        return code
+
+    def hot_counts(self) -> tuple[int, int]:
+        """(batches, frames) the hot path stored in the table (0, 0 without one)."""
+        if self._table is None:
+            return (0, 0)
+        return (self._hot_batches, self._hot_frames)
+
+    def _on_batch(self, buffer: bytearray, offsets: list[int], lengths: list[int],
+                  sources: list[Address]) -> None:
+        table = self._table
+        assert table is not None
+        now_s = self._now_s()
+        codes = self._addr_codes
+        addr_codes = np.fromiter((codes[a] if a in codes else self.address_code(a)
+                                  for a in sources), dtype=np.int64, count=len(sources))
+        offs = np.asarray(offsets, dtype=np.int64)
+        lens = np.asarray(lengths, dtype=np.int64)
+        total = int(offs[-1] + lens[-1])
+        if self._tlog_buf.shape[0] < 2 * total + 64:  # a record: 8 bytes + a frame of >= 12
+            self._tlog_buf = np.zeros(4 * total + 64, dtype=np.uint8)
+        if self._slow.shape[0] < total // 12 + len(offsets):  # a row per frame at most
+            self._slow = np.zeros((2 * (total // 12 + len(offsets)), 4), dtype=np.int64)
+        data = np.frombuffer(buffer, dtype=np.uint8, count=total)
+        n_slow, t_len, n_hot = scan(
+            data, offs, lens, addr_codes, now_s, int(time.time() * 1e6),
+            self._slot_of_sysid, table.compid_of_slot, table.addr_of_slot, self._crc_extra,
+            self._kinds,
+            table.lpn, table.attq, table.imu, table.misc, table.rx_s, table.count, table.interval_s,
+            table.raw, table.rawlen, table.seq_last, table.seq, table.last_any_rx_s,
+            table.accepted, table.touched, table.clock, self._tlog_buf, self._slow)
+        if n_hot:
+            self._hot_batches += 1
+            self._hot_frames += n_hot
+            if self._tlog is not None:
+                self._tlog.write_records(self._tlog_buf[:t_len].tobytes(), n_hot)
+            touched = np.flatnonzero(table.touched)
+            for slot in touched.tolist():
+                client = self._slot_clients.get(slot)
+                if client is not None:
+                    client._on_hot()
+            table.touched[touched] = 0
+            table.clock[touched, 4] = 0.0
+        view = memoryview(buffer)
+        for d, start, end, counted in self._slow[:n_slow].tolist():
+            self._route(bytes(view[start:end]), sources[d], seq_counted=bool(counted))
+
+    def _route(self, data: bytes, addr: Address, seq_counted: bool = False) -> None:
         runs = frame_sysids(data)
         if len(runs) == 1:
             sysid = runs[0][2]
             client = self._clients.get(sysid) if sysid is not None else None
             if client is not None:
                 self._n["datagrams_routed"] += 1
-                client._on_datagram(data, addr)
+                client._on_datagram(data, addr, seq_counted)
                 return
             if sysid is None:
                 self._n["unframed_datagrams"] += 1
@@ -243,7 +344,7 @@ class MavlinkPort:
             part = data[start:end]
             client = self._clients.get(sysid) if sysid is not None else None
             if client is not None:
-                client._on_datagram(part, addr)
+                client._on_datagram(part, addr, seq_counted)
             else:
                 self._foreign(part, addr, sysid)
 

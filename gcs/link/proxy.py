@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike
 
 from gcs import frames
 from gcs.link.clock import VehicleClock
-from gcs.link.codec import CodecStats, MavlinkCodec, MAVLinkMessage, message_name
+from gcs.link.codec import CodecStats, MavlinkCodec, MAVLinkMessage, mavlink, message_name
 from gcs.link.commands import (
     AckLog,
     CommandChannel,
@@ -34,6 +34,13 @@ from gcs.link.enums import (
     MavResult,
     MavState,
     MavType,
+)
+from gcs.link.fastpath import (
+    ANY_ADDRESS,
+    SET_ATTITUDE_TARGET_LEN,
+    TABLE_NAMES,
+    UNLEARNED,
+    encode_set_attitude_target,
 )
 from gcs.link.port import MavlinkPort, PortStats
 from gcs.link.statustext import StatusTextLog
@@ -132,7 +139,8 @@ class VehicleProxy:
     """
 
     def __init__(self, config: VehicleLinkConfig, *, clock: Clock | None = None,
-                 tlog: TlogWriter | None = None, port: MavlinkPort | None = None) -> None:
+                 tlog: TlogWriter | None = None, port: MavlinkPort | None = None,
+                 slot: int | None = None) -> None:
         self.config = config
         self.name = config.name
         self._clock: Clock = clock if clock is not None else MonotonicClock()
@@ -160,6 +168,15 @@ class VehicleProxy:
         self._mismatch: int | None = None  # sysid of a foreign vehicle HEARTBEAT, if any
         self.clock = VehicleClock()  # the vehicle's clock: true sample times (gcs.link.clock)
         self._round_trips: list[float] = []
+        # the hot path (gcs.link.fastpath): this vehicle's row in its port's table, if it has one
+        table = self._port.table
+        self._slot = slot if table is not None else None
+        self._hot_decoded: dict[int, tuple[int, Received]] = {}
+        self._hot_parser = mavlink.MAVLink(None)
+        if table is not None and slot is not None:
+            signed = config.signing_key is not None  # the codec checks signatures: no hot path
+            table.compid_of_slot[slot] = -1 if signed else config.compid
+            table.addr_of_slot[slot] = UNLEARNED if config.learn_remote else ANY_ADDRESS
 
     # --- lifetime --------------------------------------------------------------------------------
 
@@ -167,7 +184,7 @@ class VehicleProxy:
         """Bind the socket and start the owned tasks; returns when bound (first HEARTBEAT sent)."""
         if self._owns_port:
             await self._port.open()
-        self._port.attach(self.config.sysid, self)
+        self._port.attach(self.config.sysid, self, self._slot)
         self._t0_s = self._clock.now_s()
         self._send_heartbeat()
         self._tasks = [
@@ -222,7 +239,7 @@ class VehicleProxy:
         """Another vehicle's sysid heard where this one was expected: on its own port, a
         HEARTBEAT of another vehicle (preflight refuses); on a shared port, while nothing of this
         vehicle has arrived, a sysid no vehicle of the port has (for the connect diagnostics)."""
-        if self._mismatch is not None or not self._port.shared or self._n["messages_accepted"]:
+        if self._mismatch is not None or not self._port.shared or self._accepted():
             return self._mismatch
         unknown = self._port.unknown_sysids()
         return min(unknown) if unknown else None
@@ -234,11 +251,49 @@ class VehicleProxy:
 
     def latest(self, kind: str) -> Received | None:
         """Latest accepted message of type ``kind`` (e.g. 'ATTITUDE') with its receive time."""
-        return self._cache.latest(kind)
+        cached = self._cache.latest(kind)
+        if self._slot is None or kind not in TABLE_NAMES:
+            return cached
+        hot = self._hot_latest(TABLE_NAMES.index(kind))
+        if hot is None or (cached is not None and cached.rx_time_s > hot.rx_time_s):
+            return cached
+        return hot
+
+    @property
+    def slot(self) -> int | None:
+        """This vehicle's row in its port's `HotTable` (None: no hot path)."""
+        return self._slot
+
+    def _hot_latest(self, kind: int) -> Received | None:
+        table = self._port.table
+        assert table is not None and self._slot is not None
+        count = int(table.count[self._slot, kind])
+        if count == 0:
+            return None
+        done = self._hot_decoded.get(kind)
+        if done is not None and done[0] == count:
+            return done[1]
+        frame = table.frame(self._slot, kind)
+        assert frame is not None
+        got = Received(self._hot_parser.decode(bytearray(frame)),
+                       float(table.rx_s[self._slot, kind]))
+        self._hot_decoded[kind] = (count, got)
+        return got
+
+    def _last_any_rx_s(self) -> float:
+        table = self._port.table
+        if self._slot is None or table is None:
+            return self._cache.last_any_rx_s
+        return max(self._cache.last_any_rx_s, float(table.last_any_rx_s[self._slot]))
+
+    def _accepted(self) -> int:
+        table = self._port.table
+        own = self._n["messages_accepted"]
+        return own if self._slot is None or table is None else own + int(table.accepted[self._slot])
 
     def state(self) -> VehicleState:
         """Snapshot of the latest telemetry in ENU/FLU with receive times; returns immediately."""
-        return build_state(self._cache, self.config.sysid, self._clock.now_s())
+        return build_state(self, self.config.sysid, self._clock.now_s())
 
     def round_trips_s(self) -> np.ndarray:
         """Every TIMESYNC round trip measured on this link [s], oldest first."""
@@ -248,7 +303,7 @@ class VehicleProxy:
         """WAITING before the first message, LOST when nothing at all arrived for
         `link_timeout_s`: every message counts, not HEARTBEAT alone (at 20 % loss five 1 Hz
         beats in a row go missing every ~50 min per vehicle while its telemetry streams on)."""
-        last_any = self._cache.last_any_rx_s
+        last_any = self._last_any_rx_s()
         if last_any == -math.inf:
             return LinkState.WAITING
         if self._clock.now_s() - last_any > self.config.link_timeout_s:
@@ -260,13 +315,44 @@ class VehicleProxy:
         but armed state and mode are those of the last HEARTBEAT (logged when it happens)."""
         hb = self._cache.latest("HEARTBEAT")
         hb_rx = hb.rx_time_s if hb is not None else self._t0_s
-        return (self._cache.last_any_rx_s > -math.inf
+        return (self._last_any_rx_s() > -math.inf
                 and self._clock.now_s() - hb_rx > self.config.heartbeat_timeout_s)
 
+    def rate_hz(self, kind: str) -> float:
+        """Receive rate of one message type (EWMA of its intervals; NaN before two arrived,
+        0 if never); cheaper than `stats` for the few a check needs."""
+        table = self._port.table
+        if self._slot is not None and table is not None and kind in TABLE_NAMES:
+            k = TABLE_NAMES.index(kind)
+            if table.count[self._slot, k] > 0:
+                interval = float(table.interval_s[self._slot, k])
+                return 1.0 / interval if interval > 0.0 else math.nan
+        return self._cache.rate_hz(kind)
+
     def stats(self) -> LinkStats:
-        return LinkStats(ProxyCounters(**self._n), self._codec.stats(), self._port.udp_stats(),
-                         self._commands.stats(), self._seq.stats(), self._cache.type_stats(),
-                         self._port.stats())
+        """Every counter of the link; the hot path's counts (gcs.link.fastpath) included."""
+        counters, seq, by_type = dict(self._n), self._seq.stats(), self._cache.type_stats()
+        table = self._port.table
+        if self._slot is not None and table is not None:
+            i = self._slot
+            counters["messages_accepted"] = self._accepted()
+            hot = table.seq[i]
+            seq = SequenceStats(seq.received + int(hot[0]), seq.lost + int(hot[1]),
+                                seq.duplicates + int(hot[2]), seq.reordered + int(hot[3]))
+            for k, kind in enumerate(TABLE_NAMES):
+                count = int(table.count[i, k])
+                if count == 0:
+                    continue
+                slow = by_type.get(kind)
+                interval = float(table.interval_s[i, k])
+                rate = 1.0 / interval if interval > 0.0 else math.nan
+                last = float(table.rx_s[i, k])
+                if slow is not None:
+                    last = max(last, slow.last_rx_s)
+                    count += slow.count
+                by_type[kind] = TypeStats(count, last, rate)
+        return LinkStats(ProxyCounters(**counters), self._codec.stats(), self._port.udp_stats(),
+                         self._commands.stats(), seq, by_type, self._port.stats())
 
     async def wait_message(self, kind: str, timeout_s: float,
                            predicate: Callable[[MAVLinkMessage], bool] | None = None) -> Received:
@@ -291,7 +377,24 @@ class VehicleProxy:
 
     # --- receive path ----------------------------------------------------------------------------
 
-    def _on_datagram(self, data: bytes, addr: Address) -> None:
+    def _on_hot(self) -> None:
+        """The port's hot path stored new messages of this vehicle: feed the clock filter the
+        batch's least-delayed and newest stamps (in time order), wake waiters for them."""
+        table = self._port.table
+        assert table is not None and self._slot is not None
+        least_o, least_t, newest_t, newest_rx, samples = table.clock[self._slot].tolist()
+        if samples > 0:
+            if least_t < newest_t:
+                self.clock.on_sample(least_t, least_t + least_o)
+            self.clock.on_sample(newest_t, newest_rx)
+        if self._waiters:
+            for k, kind in enumerate(TABLE_NAMES):
+                if any(w[0] == kind for w in self._waiters):
+                    got = self._hot_latest(k)
+                    if got is not None:
+                        self._wake_waiters(got.msg, got.rx_time_s)
+
+    def _on_datagram(self, data: bytes, addr: Address, seq_counted: bool = False) -> None:
         now_s = self._clock.now_s()
         cfg = self.config
         for msg in self._codec.feed(data):
@@ -312,8 +415,9 @@ class VehicleProxy:
                     continue
             elif cfg.learn_remote:
                 self._learn(addr)
-            self._n["messages_accepted"] += 1
-            self._seq.update(msg.get_seq())
+            if not seq_counted:  # else the hot path has counted it
+                self._n["messages_accepted"] += 1
+                self._seq.update(msg.get_seq())
             self._cache.update(msg, now_s)
             kind = msg.get_type()
             if kind in STAMPED_TYPES:
@@ -349,6 +453,9 @@ class VehicleProxy:
         logger.info("%s: address learned from its first message: %s:%d%s", self.name, *addr, same)
         self._remote = addr
         self._remote_learned = True
+        table = self._port.table
+        if self._slot is not None and table is not None:
+            table.addr_of_slot[self._slot] = self._port.address_code(addr)
 
     def _stranger(self, addr: Address) -> None:
         self._n["stranger_address"] += 1
@@ -615,6 +722,12 @@ class VehicleProxy:
             _IDENTITY_Q, *(float(x) for x in rates_frd), thrust))
         self._n["setpoints_sent"] += 1
 
+    @property
+    def batch_sendable(self) -> bool:
+        """Setpoints may be packed for the team at once (:func:`send_team_rates_thrust`): an
+        unsigned link."""
+        return not self._codec.signing_enabled
+
     def send_attitude_thrust(self, rotation_enu_flu: ArrayLike, thrust_norm: float) -> None:
         """SET_ATTITUDE_TARGET, type_mask 7: attitude R_enu_flu (sent as the quaternion of
         R_ned_frd) and collective thrust (0..1, clamped and counted); returns immediately."""
@@ -732,3 +845,40 @@ class VehicleProxy:
                                    "arrive; armed state and mode are those of the last one",
                                    self.name, self.config.heartbeat_timeout_s)
             await asyncio.sleep(period)
+
+
+def send_team_rates_thrust(proxies: Sequence[VehicleProxy], rates_flu_radps: np.ndarray,
+                           thrust_norm: np.ndarray) -> None:
+    """`VehicleProxy.send_rates_thrust` for many vehicles, packed in one call
+    (gcs.link.fastpath.encode_set_attitude_target); returns immediately. Row i goes to
+    ``proxies[i]``, which must be `batch_sendable`; rates (n, 3) FLU rad/s, thrust (n,) 0..1
+    (clamped and counted per vehicle). Rows with NaN/inf must not be passed (the caller sends
+    them one by one, which raises `SetpointError` for each)."""
+    n = len(proxies)
+    if n == 0:
+        return
+    rates_frd = frames.frd_from_flu(np.asarray(rates_flu_radps, dtype=np.float64))
+    thrust = np.asarray(thrust_norm, dtype=np.float64)
+    clamped = (thrust < 0.0) | (thrust > 1.0)
+    for i in np.flatnonzero(clamped).tolist():
+        proxies[i]._n["thrust_clamped"] += 1
+    thrust = np.clip(thrust, 0.0, 1.0)
+    seq = np.array([p._codec.take_seq() for p in proxies], dtype=np.uint8)
+    boot_ms = np.array([p._time_boot_ms() for p in proxies], dtype=np.int64)
+    target_sys = np.array([p.config.sysid for p in proxies], dtype=np.int64)
+    target_comp = np.array([p.config.compid for p in proxies], dtype=np.int64)
+    first = proxies[0]._codec
+    out = np.empty((n, 12 + SET_ATTITUDE_TARGET_LEN), dtype=np.uint8)
+    lengths = np.empty(n, dtype=np.int64)
+    encode_set_attitude_target(seq, first.src_system, first.src_component, boot_ms, target_sys,
+                               target_comp, TYPE_MASK_RATES_THRUST,
+                               np.tile(np.array(_IDENTITY_Q), (n, 1)), rates_frd, thrust, out,
+                               lengths)
+    for i, p in enumerate(proxies):
+        data = out[i, : lengths[i]].tobytes()
+        if p._tlog is not None:
+            p._tlog.write(data)
+        if p._remote is None:
+            p._n["send_no_remote"] += 1
+        p._port.send_to(data, p._remote)
+        p._n["setpoints_sent"] += 1

@@ -129,6 +129,13 @@ class TelemetryCache:
         """Receive time of the newest message of any type; -inf if none."""
         return self._last_any_rx_s
 
+    def rate_hz(self, kind: str) -> float:
+        """Receive rate of one type (NaN before two messages arrived, 0 if none did)."""
+        if kind not in self._latest:
+            return 0.0
+        interval = self._interval_s.get(kind)
+        return 1.0 / interval if interval is not None and interval > 0.0 else math.nan
+
     def type_stats(self) -> dict[str, TypeStats]:
         out: dict[str, TypeStats] = {}
         for kind, rec in self._latest.items():
@@ -198,7 +205,14 @@ class VehicleState:
         return self.time_s - self.landed_state_rx_s
 
 
-def build_state(cache: TelemetryCache, sysid: int, now_s: float) -> VehicleState:
+class LatestSource(Protocol):
+    """What build_state reads: the latest message of a type (a cache, or a proxy)."""
+
+    def latest(self, kind: str) -> Received | None:
+        ...
+
+
+def build_state(cache: LatestSource, sysid: int, now_s: float) -> VehicleState:
     """Snapshot of the cache converted to ENU/FLU (pure; conversions via gcs.frames)."""
     position, velocity, position_rx = _NAN3, _NAN3, -math.inf
     lpn = cache.latest("LOCAL_POSITION_NED")

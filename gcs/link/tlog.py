@@ -78,19 +78,26 @@ class TlogWriter:
         An OS error is counted (the first one logged), never raised: losing the log must not
         take the flight down. Writing to a closed writer raises RuntimeError.
         """
+        t_s = self._wall_clock_s() if unix_time_s is None else unix_time_s
+        self._append(_TIMESTAMP.pack(int(t_s * 1e6)) + packet, 1)
+
+    def write_records(self, records: bytes, count: int) -> None:
+        """Append ``count`` records already in the file's format (timestamp + packet each, as
+        the hot path builds them); returns immediately, errors as :meth:`write`."""
+        self._append(records, count)
+
+    def _append(self, data: bytes, count: int) -> None:
         if self._file is None:
             raise RuntimeError(f"tlog {self.path}: write on a closed writer")
-        t_s = self._wall_clock_s() if unix_time_s is None else unix_time_s
         try:
-            self._file.write(_TIMESTAMP.pack(int(t_s * 1e6)))
-            self._file.write(packet)
+            self._file.write(data)
         except OSError as exc:
             if self.write_errors == 0:
                 logger.error("tlog %s: write failed: %s", self.path, exc)
             self.write_errors += 1
             return
-        self.records += 1
-        self.bytes_written += _TIMESTAMP.size + len(packet)
+        self.records += count
+        self.bytes_written += len(data)
 
     def flush(self) -> None:
         """Push buffered records to the OS; returns when done."""

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
+import socket
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from types import TracebackType
@@ -12,10 +14,21 @@ logger = logging.getLogger(__name__)
 
 Address = tuple[str, int]
 DatagramCallback = Callable[[bytes, Address], None]
+#: ``on_batch(buffer, offsets, lengths, sources)``: datagram d is
+#: ``buffer[offsets[d]:offsets[d] + lengths[d]]``, from ``sources[d]``; the buffer is reused
+#: after the call returns.
+BatchCallback = Callable[[bytearray, list[int], list[int], list[Address]], None]
 
 #: Bytes the transport may hold unsent before send() drops (a healthy UDP socket holds none).
 DEFAULT_MAX_WRITE_BUFFER_BYTES = 256 * 1024
 DEFAULT_RX_QUEUE_SIZE = 1024
+#: Bulk reading (on_batch): at most this many datagrams per wake-up (the rest wait for the next
+#: one, so a flood cannot hold the event loop), into a buffer of this many bytes.
+MAX_BATCH_DATAGRAMS = 512
+BATCH_BUFFER_BYTES = 1 << 20
+MAX_DATAGRAM_BYTES = 65536
+#: Kernel receive buffer asked for in bulk mode (hundreds of vehicles' telemetry between wake-ups).
+BULK_RCVBUF_BYTES = 4 << 20
 
 
 class LinkClosedError(RuntimeError):
@@ -57,6 +70,11 @@ class UdpEndpoint:
     cannot tell valid from invalid bytes). Received datagrams go to ``on_datagram`` (called on the
     event loop, must not block) if given, else to a bounded queue read with :meth:`recv` (when full,
     the oldest datagram is dropped and counted). Lifetime: ``async with UdpEndpoint(...) as ep:``.
+
+    ``on_batch`` (bulk mode, for ports serving many vehicles): the endpoint reads its socket itself
+    (``loop.add_reader``) and, at each wake-up, drains up to MAX_BATCH_DATAGRAMS datagrams into one
+    buffer and hands them over in one call. Sends go straight to the non-blocking socket; a full
+    socket buffer drops the datagram (counted as ``send_dropped_backpressure``).
     """
 
     def __init__(
@@ -67,6 +85,7 @@ class UdpEndpoint:
         local_host: str = "127.0.0.1",
         learn_remote: bool = False,
         on_datagram: DatagramCallback | None = None,
+        on_batch: BatchCallback | None = None,
         rx_queue_size: int = DEFAULT_RX_QUEUE_SIZE,
         max_write_buffer_bytes: int = DEFAULT_MAX_WRITE_BUFFER_BYTES,
         name: str = "udp",
@@ -77,6 +96,8 @@ class UdpEndpoint:
             raise ValueError(f"{name}: remote port: expected 1..65535, got {remote[1]}")
         if remote is None and not learn_remote:
             raise ValueError(f"{name}: no remote address and learn_remote is False")
+        if on_datagram is not None and on_batch is not None:
+            raise ValueError(f"{name}: on_datagram or on_batch, not both")
         if rx_queue_size < 1:
             raise ValueError(f"{name}: rx_queue_size: expected >= 1, got {rx_queue_size}")
         self.name = name
@@ -85,6 +106,11 @@ class UdpEndpoint:
         self._remote = remote
         self._learn_remote = learn_remote
         self._on_datagram_cb = on_datagram
+        self._on_batch_cb = on_batch
+        self._sock: socket.socket | None = None  # bulk mode: the socket, read and written directly
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._bound: Address | None = None  # local_address, once asked while open
+        self._batch_buf = bytearray(BATCH_BUFFER_BYTES if on_batch is not None else 0)
         self._rx_queue: asyncio.Queue[tuple[bytes, Address]] = asyncio.Queue(rx_queue_size)
         self._max_write_buffer_bytes = max_write_buffer_bytes
         self._transport: asyncio.DatagramTransport | None = None
@@ -95,9 +121,24 @@ class UdpEndpoint:
 
     async def open(self) -> None:
         """Bind the socket; returns when bound (``local_address`` is then known)."""
-        if self._transport is not None:
+        if self._transport is not None or self._sock is not None:
             raise RuntimeError(f"{self.name}: already open")
         loop = asyncio.get_running_loop()
+        if self._on_batch_cb is not None:
+            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            try:
+                sock.setblocking(False)
+                with contextlib.suppress(OSError):
+                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, BULK_RCVBUF_BYTES)
+                sock.bind((self._local_host, self._local_port))
+            except OSError:
+                sock.close()
+                raise
+            self._sock, self._loop = sock, loop
+            loop.add_reader(sock.fileno(), self._drain)
+            logger.debug("%s: bound %s (bulk), remote %s", self.name, self.local_address,
+                         self._remote)
+            return
         transport, _ = await loop.create_datagram_endpoint(
             lambda: _Protocol(self), local_addr=(self._local_host, self._local_port)
         )
@@ -106,9 +147,16 @@ class UdpEndpoint:
 
     def close(self) -> None:
         """Close the socket; returns immediately. Idempotent."""
+        if self._sock is not None:
+            if self._loop is not None and not self._loop.is_closed():
+                self._loop.remove_reader(self._sock.fileno())
+            self._sock.close()
+            self._sock = None
+            self._bound = None
         if self._transport is not None:
             self._transport.close()
             self._transport = None
+            self._bound = None
 
     async def __aenter__(self) -> UdpEndpoint:
         await self.open()
@@ -126,15 +174,18 @@ class UdpEndpoint:
 
     @property
     def is_open(self) -> bool:
-        return self._transport is not None
+        return self._transport is not None or self._sock is not None
 
     @property
     def local_address(self) -> Address:
         """(host, port) actually bound; the port is resolved when 0 was asked for."""
-        if self._transport is None:
+        if self._sock is None and self._transport is None:
             raise LinkClosedError(f"{self.name}: not open")
-        host, port = self._transport.get_extra_info("sockname")[:2]
-        return (str(host), int(port))
+        if self._bound is None:
+            host, port = (self._sock.getsockname() if self._sock is not None else
+                          self._transport.get_extra_info("sockname"))[:2]  # type: ignore[union-attr]
+            self._bound = (str(host), int(port))
+        return self._bound
 
     @property
     def remote(self) -> Address | None:
@@ -173,6 +224,8 @@ class UdpEndpoint:
         """Queue one datagram to ``addr`` (None: not known yet, dropped and counted as
         ``send_no_remote``); otherwise as :meth:`send`, which sends to the endpoint's remote.
         A port shared by several peers sends with this, each peer at its own address."""
+        if self._sock is not None:
+            return self._send_direct(data, addr)
         transport = self._transport
         if transport is None:
             raise LinkClosedError(f"{self.name}: send on a closed endpoint")
@@ -186,6 +239,59 @@ class UdpEndpoint:
         self._counts["packets_out"] += 1
         self._counts["bytes_out"] += len(data)
         return True
+
+    def _send_direct(self, data: bytes, addr: Address | None) -> bool:
+        if addr is None:
+            self._counts["send_no_remote"] += 1
+            return False
+        assert self._sock is not None
+        try:
+            self._sock.sendto(data, addr)
+        except BlockingIOError:
+            self._counts["send_dropped_backpressure"] += 1
+            return False
+        except OSError as exc:  # e.g. ICMP port unreachable reported on a later call
+            self._on_error(exc)
+            return False
+        self._counts["packets_out"] += 1
+        self._counts["bytes_out"] += len(data)
+        return True
+
+    def _drain(self) -> None:
+        """Bulk mode: read what the socket holds (bounded), hand it over in one call."""
+        sock, cb = self._sock, self._on_batch_cb
+        if sock is None or cb is None:
+            return
+        view = memoryview(self._batch_buf)
+        limit = len(self._batch_buf) - MAX_DATAGRAM_BYTES
+        offsets: list[int] = []
+        lengths: list[int] = []
+        sources: list[Address] = []
+        total = 0
+        while len(offsets) < MAX_BATCH_DATAGRAMS and total <= limit:
+            try:
+                nbytes, addr = sock.recvfrom_into(view[total:])
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError as exc:  # an ICMP error queued on the socket: counted, read on
+                self._on_error(exc)
+                continue
+            offsets.append(total)
+            lengths.append(nbytes)
+            sources.append((addr[0], addr[1]))
+            total += nbytes
+        if not offsets:
+            return
+        counts = self._counts
+        counts["packets_in"] += len(offsets)
+        counts["bytes_in"] += total
+        if self._remote is not None:
+            counts["packets_in_foreign"] += sum(1 for a in sources if a != self._remote)
+        try:
+            cb(self._batch_buf, offsets, lengths, sources)
+        except Exception:
+            counts["callback_errors"] += 1
+            logger.exception("%s: on_batch callback failed", self.name)
 
     async def recv(self, timeout_s: float) -> tuple[bytes, Address]:
         """Next received datagram and its source; returns when one is there, raises TimeoutError

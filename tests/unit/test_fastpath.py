@@ -1,0 +1,274 @@
+"""The link's hot path (gcs.link.fastpath): batch decode against pymavlink's, the slow path's
+share of what it does not accept, sequence counting as SequenceTracker's, and the team's setpoints
+packed byte for byte as pymavlink packs them; then a shared port over real UDP sockets."""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+
+import numpy as np
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mavlink
+
+from gcs.link import HotTable, MavlinkPort, TlogWriter, VehicleLinkConfig, VehicleProxy
+from gcs.link.fastpath import (
+    ANY_ADDRESS,
+    ATTQ,
+    EXTENDED_SYS_STATE,
+    GLOBAL_POSITION_INT,
+    IMU,
+    LANDED_STATE,
+    LPN,
+    RELATIVE_ALT_M,
+    SENSORS_HEALTH,
+    SENSORS_PRESENT,
+    SYS_STATUS,
+    TABLE_NAMES,
+    TARGET_THRUST,
+    UNLEARNED,
+    crc_extra_table,
+    encode_set_attitude_target,
+    kind_table,
+    scan,
+)
+from gcs.link.telemetry import SequenceTracker
+
+
+def _sender(sysid: int = 3, compid: int = 1) -> mavlink.MAVLink:
+    return mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+
+
+def _pack(mav: mavlink.MAVLink, msg: mavlink.MAVLink_message) -> bytes:
+    data = msg.pack(mav)
+    mav.seq = (mav.seq + 1) % 256
+    return data
+
+
+class _Scanner:
+    """A table of ``n`` slots and the arrays scan needs; sysid s -> slot s - 1."""
+
+    def __init__(self, n: int = 4, compid: int = 1, address: int = ANY_ADDRESS) -> None:
+        self.t = HotTable(n)
+        self.slot_of_sysid = np.full(256, -1, dtype=np.int64)
+        for k in range(n):
+            self.slot_of_sysid[k + 1] = k
+        self.t.compid_of_slot[:] = compid
+        self.t.addr_of_slot[:] = address
+        self.crc, self.kinds = crc_extra_table(), kind_table()
+
+    def __call__(self, datagrams: list[bytes], rx_s: float = 10.0,
+                 codes: list[int] | None = None) -> tuple[list[tuple[int, bytes, int]], bytes]:
+        """Slow ranges as (datagram, bytes, seq_counted) and the tlog bytes."""
+        buf = b"".join(datagrams)
+        offs = np.cumsum([0] + [len(d) for d in datagrams[:-1]]).astype(np.int64)
+        lens = np.array([len(d) for d in datagrams], dtype=np.int64)
+        addr = np.array(codes if codes is not None else [0] * len(datagrams), dtype=np.int64)
+        tlog = np.zeros(2 * len(buf) + 64, dtype=np.uint8)
+        slow = np.zeros((len(buf) // 12 + len(datagrams), 4), dtype=np.int64)
+        t = self.t
+        n_slow, t_len, _ = scan(
+            np.frombuffer(buf, dtype=np.uint8), offs, lens, addr, rx_s, 1_700_000_000_000_000,
+            self.slot_of_sysid, t.compid_of_slot, t.addr_of_slot, self.crc, self.kinds, t.lpn,
+            t.attq, t.imu, t.misc, t.rx_s, t.count, t.interval_s, t.raw, t.rawlen, t.seq_last,
+            t.seq, t.last_any_rx_s, t.accepted, t.touched, t.clock, tlog, slow)
+        return ([(int(d), buf[s:e], int(c)) for d, s, e, c in slow[:n_slow]],
+                tlog[:t_len].tobytes())
+
+
+def test_the_hot_messages_decode_as_pymavlink_decodes_them() -> None:
+    rng = np.random.default_rng(7)
+    mav = _sender()
+    scanner = _Scanner()
+    for _ in range(20):
+        v = rng.normal(size=12).astype(np.float32).tolist()
+        boot = int(rng.integers(0, 2**32))
+        q = np.asarray(v[:4]) / np.linalg.norm(v[:4])
+        msgs = [mavlink.MAVLink_local_position_ned_message(boot, *v[:6]),
+                mavlink.MAVLink_attitude_quaternion_message(boot, *q, *v[4:7], [0.0] * 4),
+                mavlink.MAVLink_highres_imu_message(int(rng.integers(0, 2**50)), *v[6:9],
+                                                    *([0.0] * 10), 0, 0),
+                mavlink.MAVLink_extended_sys_state_message(0, int(rng.integers(0, 5))),
+                mavlink.MAVLink_sys_status_message(int(rng.integers(0, 2**31)), 0,
+                                                   int(rng.integers(0, 2**31)), *([0] * 9), 0),
+                mavlink.MAVLink_global_position_int_message(boot, 1, 2, 3,
+                                                            int(rng.integers(-10**6, 10**6)),
+                                                            0, 0, 0, 0),
+                mavlink.MAVLink_attitude_target_message(boot, 7, list(q), 0.0, 0.0, 0.0,
+                                                        float(rng.random()))]
+        frames = [_pack(mav, m) for m in msgs]
+        slow, _ = scanner([b"".join(frames)])
+        assert slow == []
+        t = scanner.t
+        parser = mavlink.MAVLink(None)
+        lpn, attq, imu, ess, sys, gpi, at = (parser.decode(bytearray(f)) for f in frames)
+        np.testing.assert_array_equal(t.lpn[2], [lpn.time_boot_ms * 1e-3, lpn.x, lpn.y, lpn.z,
+                                                  lpn.vx, lpn.vy, lpn.vz])
+        np.testing.assert_array_equal(t.attq[2], [attq.time_boot_ms * 1e-3, attq.q1, attq.q2,
+                                                   attq.q3, attq.q4, attq.rollspeed,
+                                                   attq.pitchspeed, attq.yawspeed])
+        np.testing.assert_array_equal(t.imu[2], [imu.time_usec * 1e-6, imu.xacc, imu.yacc,
+                                                  imu.zacc])
+        assert t.misc[2, LANDED_STATE] == ess.landed_state
+        assert t.misc[2, SENSORS_PRESENT] == sys.onboard_control_sensors_present
+        assert t.misc[2, SENSORS_HEALTH] == sys.onboard_control_sensors_health
+        assert t.misc[2, RELATIVE_ALT_M] == pytest.approx(gpi.relative_alt * 1e-3, abs=1e-12)
+        assert t.misc[2, TARGET_THRUST] == at.thrust
+        for k, f in zip((LPN, ATTQ, IMU, EXTENDED_SYS_STATE, SYS_STATUS, GLOBAL_POSITION_INT),
+                        frames, strict=False):
+            assert t.frame(2, k) == f
+    assert t.count[2, :7].tolist() == [20] * 7
+    assert t.count[[0, 1, 3]].sum() == 0
+
+
+def test_frames_it_does_not_accept_go_to_the_slow_path_whole_and_untouched() -> None:
+    good = _pack(_sender(), mavlink.MAVLink_local_position_ned_message(1, 1, 2, 3, 0, 0, 0))
+    heartbeat = _pack(_sender(), mavlink.MAVLink_heartbeat_message(2, 12, 0, 0, 0, 3))
+    bad_crc = bytearray(good)
+    bad_crc[-1] ^= 0xFF
+    other_comp = _pack(_sender(3, 2), mavlink.MAVLink_local_position_ned_message(1, 0, 0, 0,
+                                                                                 0, 0, 0))
+    stranger = _pack(_sender(99), mavlink.MAVLink_local_position_ned_message(1, 0, 0, 0, 0, 0,
+                                                                             0))
+    v1 = mavlink.MAVLink_local_position_ned_message(1, 0, 0, 0, 0, 0, 0).pack(
+        _sender(), force_mavlink1=True)
+    cut = good[:-5]
+    scanner = _Scanner()
+    slow, tlog = scanner([good + heartbeat, bytes(bad_crc), other_comp + stranger, v1, cut,
+                          b"garbage" + good])
+    assert slow == [(0, heartbeat, 1), (1, bytes(bad_crc), 0), (2, other_comp + stranger, 0),
+                    (3, v1, 0), (4, cut, 0), (5, b"garbage" + good, 0)]
+    assert scanner.t.count[2, LPN] == 1  # the first datagram's, nothing else
+    assert tlog[8:] == good  # big-endian microseconds, then the frame
+    assert int.from_bytes(tlog[:8], "big") == 1_700_000_000_000_000
+
+
+def test_an_unlearned_or_other_address_goes_the_slow_way() -> None:
+    lpn = _pack(_sender(), mavlink.MAVLink_local_position_ned_message(1, 1, 2, 3, 0, 0, 0))
+    scanner = _Scanner(address=UNLEARNED)
+    slow, _ = scanner([lpn])
+    assert slow == [(0, lpn, 0)]
+    scanner.t.addr_of_slot[2] = 5
+    slow, _ = scanner([lpn, lpn], codes=[4, 5])
+    assert slow == [(0, lpn, 0)]
+    assert scanner.t.count[2, LPN] == 1
+
+
+def test_a_vehicles_timesync_request_is_kept_and_a_reply_goes_to_the_proxy() -> None:
+    mav = _sender()
+    request = _pack(mav, mavlink.MAVLink_timesync_message(0, 123))
+    reply = _pack(mav, mavlink.MAVLink_timesync_message(456, 123))
+    scanner = _Scanner()
+    slow, _ = scanner([request, reply])
+    assert slow == [(1, reply, 1)]
+    assert scanner.t.count[2, TABLE_NAMES.index("TIMESYNC")] == 1
+
+
+def test_sequence_numbers_are_counted_as_the_sequence_tracker_counts_them() -> None:
+    rng = np.random.default_rng(3)
+    seqs = np.cumsum(rng.choice([1, 1, 1, 2, 5, 0, -3], size=400)) % 256
+    mav = _sender()
+    scanner = _Scanner()
+    tracker = SequenceTracker()
+    datagrams = []
+    for s in seqs.tolist():
+        mav.seq = s
+        datagrams.append(mavlink.MAVLink_local_position_ned_message(1, 0, 0, 0, 0, 0, 0)
+                         .pack(mav))
+        tracker.update(s)
+    scanner(datagrams)
+    got = tracker.stats()
+    assert scanner.t.seq[2].tolist() == [got.received, got.lost, got.duplicates, got.reordered]
+    assert got.lost > 0 and got.duplicates > 0 and got.reordered > 0
+
+
+@pytest.mark.parametrize("type_mask", [128, 7, 0])
+def test_the_teams_setpoints_are_packed_as_pymavlink_packs_them(type_mask: int) -> None:
+    rng = np.random.default_rng(type_mask)
+    n = 8
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    rates = rng.normal(size=(n, 3))
+    thrust = rng.random(n)
+    rates[0], thrust[0], q[0] = 0.0, 0.0, (1.0, 0.0, 0.0, 0.0)  # trailing zeros trimmed
+    seq = rng.integers(0, 256, n).astype(np.uint8)
+    boot = rng.integers(0, 2**32, n)
+    target = rng.integers(1, 255, n)
+    out = np.zeros((n, 51), dtype=np.uint8)
+    lengths = np.zeros(n, dtype=np.int64)
+    encode_set_attitude_target(seq, 255, 190, boot, target, np.ones(n, np.int64), type_mask,
+                               q, rates, thrust, out, lengths)
+    for i in range(n):
+        mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+        mav.seq = int(seq[i])
+        want = mavlink.MAVLink_set_attitude_target_message(
+            int(boot[i]), int(target[i]), 1, type_mask, q[i].tolist(), *rates[i].tolist(),
+            float(thrust[i])).pack(mav)
+        assert out[i, : lengths[i]].tobytes() == want
+
+
+def _udp(port_to: int) -> tuple[socket.socket, int]:
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    s.connect(("127.0.0.1", port_to))
+    return s, s.getsockname()[1]
+
+
+def test_a_shared_port_fills_the_table_and_the_proxies_read_it(tmp_path) -> None:  # noqa: ANN001
+    asyncio.run(asyncio.wait_for(_shared_port(tmp_path), 20.0))
+    log = mavutil.mavlink_connection(str(tmp_path / "t.tlog"))
+    kinds = []
+    while (m := log.recv_match()) is not None:
+        kinds.append((m.get_srcSystem(), m.get_type()))
+    assert kinds.count((1, "LOCAL_POSITION_NED")) == 6  # the stranger's included
+    assert kinds.count((2, "LOCAL_POSITION_NED")) == 5
+    assert kinds.count((2, "HEARTBEAT")) == 5
+
+
+async def _shared_port(tmp_path) -> None:  # noqa: ANN001
+    table = HotTable(2)
+    with TlogWriter(tmp_path / "t.tlog") as tlog:
+        async with MavlinkPort(0, table=table, tlog=tlog) as port:
+            gcs_port = port.local_address[1]
+            a, a_port = _udp(gcs_port)
+            b, b_port = _udp(gcs_port)
+            cfgs = [VehicleLinkConfig(vehicle_id=1, sysid=1, local_port=gcs_port,
+                                      remote_port=None, learn_remote=True),
+                    VehicleLinkConfig(vehicle_id=2, sysid=2, local_port=gcs_port,
+                                      remote_port=b_port)]
+            async with (VehicleProxy(cfgs[0], port=port, slot=0, tlog=tlog) as p1,
+                        VehicleProxy(cfgs[1], port=port, slot=1, tlog=tlog) as p2):
+                m1, m2 = _sender(1), _sender(2)
+                waiter = asyncio.create_task(p2.wait_message("LOCAL_POSITION_NED", 2.0))
+                await asyncio.sleep(0.01)
+                for k in range(5):
+                    a.send(_pack(m1, mavlink.MAVLink_local_position_ned_message(
+                        k, float(k), 0, 0, 0, 0, 0)))
+                    b.send(_pack(m2, mavlink.MAVLink_local_position_ned_message(
+                        k, 0, float(k), 0, 0, 0, 0)) + _pack(m2, mavlink.MAVLink_heartbeat_message(
+                            2, 12, 0, 0, 0, 3)))
+                    await asyncio.sleep(0.02)
+                got = await waiter
+                assert got.msg.get_type() == "LOCAL_POSITION_NED"
+                # vehicle 1: its first message took the slow way and taught its address
+                assert p1.remote == ("127.0.0.1", a_port)
+                assert p1.latest("LOCAL_POSITION_NED").msg.x == 4.0
+                assert table.count[0, LPN] == 4
+                assert p2.latest("LOCAL_POSITION_NED").msg.y == 4.0
+                assert table.count[1, LPN] == 5
+                assert p2.latest("HEARTBEAT") is not None  # the slow path still runs
+                s1, s2 = p1.stats(), p2.stats()
+                assert s1.proxy.messages_accepted == 5
+                assert s1.sequence.received == 5 and s1.sequence.lost == 0
+                assert s2.sequence.received == 10 and s2.sequence.lost == 0
+                assert s2.by_type["LOCAL_POSITION_NED"].count == 5
+                # a stranger with vehicle 1's sysid: neither the table nor the cache takes it
+                c, _ = _udp(gcs_port)
+                c.send(_pack(_sender(1), mavlink.MAVLink_local_position_ned_message(
+                    9, 99.0, 0, 0, 0, 0, 0)))
+                await asyncio.sleep(0.05)
+                assert p1.latest("LOCAL_POSITION_NED").msg.x == 4.0
+                assert p1.stats().proxy.stranger_address == 1
+                for s in (a, b, c):
+                    s.close()
