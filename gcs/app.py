@@ -87,6 +87,7 @@ from gcs.link import (
     CommandNotConfirmedError,
     CommandRejectedError,
     CommandTimeoutError,
+    HotTable,
     LinkClosedError,
     MavlinkPort,
     SetpointError,
@@ -94,9 +95,11 @@ from gcs.link import (
     VehicleLinkConfig,
     VehicleProxy,
     check_unique_sysids,
+    fastpath,
 )
 from gcs.link.config import shared_ports
 from gcs.link.enums import MSG_ID, MavCmd, MavModeFlag
+from gcs.link.proxy import send_team_rates_thrust
 from gcs.mission.autopilots import PROFILES, AutopilotProfile, ModeSpec, version_text
 from gcs.mission.cascade import AutopilotResponse, CascadeGains, laplacian_eigenvalues, verdict
 from gcs.mission.goto import GoToStartPlan
@@ -402,6 +405,7 @@ class Flight:
         ]
         check_unique_sysids(self.links)
         self.shared_ports = shared_ports(self.links)  # (host, port) -> the vehicles on it
+        self.hot = HotTable(len(self.links))  # the team's hot telemetry, a row per link
         self.proxies: list[VehicleProxy] = []
         self._proxy_by_id: dict[int, VehicleProxy] = {}
         self.builder = FlightLogBuilder(
@@ -449,6 +453,7 @@ class Flight:
             drop_stale_neighbours(scratch.graph, fresh, scratch.active_graph.weight)
             scratch.step(meas, ref, self.period_s)
         formation_error_m(meas.position_m, self._offsets_m)
+        fastpath.warm_up()
 
     # --- lifetime --------------------------------------------------------------------------------
 
@@ -462,13 +467,20 @@ class Flight:
             sync_stack.callback(self._remove_signal_handlers, loop)
             self._install_signal_handlers(loop)
             async with contextlib.AsyncExitStack() as stack:
-                ports = {where: await stack.enter_async_context(
-                    MavlinkPort(where[1], local_host=where[0], tlog=tlog))
-                    for where in self.shared_ports}
-                for cfg in self.links:
-                    port = ports.get((cfg.local_host, cfg.local_port))
+                # every link's port runs the hot path into the team's table (gcs.link.fastpath);
+                # vehicles with the same GCS port share it (told apart by sysid)
+                ports: dict[tuple[str, int], MavlinkPort] = {}
+                for slot, cfg in enumerate(self.links):
+                    where = (cfg.local_host, cfg.local_port)
+                    port = ports.get(where) if where in self.shared_ports else None
+                    if port is None:
+                        port = await stack.enter_async_context(MavlinkPort(
+                            cfg.local_port, local_host=cfg.local_host, tlog=tlog,
+                            table=self.hot, name=cfg.name if where not in self.shared_ports
+                            else None))
+                        ports[where] = port
                     proxy = await stack.enter_async_context(VehicleProxy(cfg, tlog=tlog,
-                                                                         port=port))
+                                                                         port=port, slot=slot))
                     self.proxies.append(proxy)
                     self._proxy_by_id[cfg.vehicle_id] = proxy
                 logger.info("%s", self.setup.stability)
@@ -708,14 +720,15 @@ class Flight:
             self._finished.set()
 
     def _tick(self, k: int, deadline_s: float, now_s: float) -> None:
-        sample = team_sample(self.proxies, now_s, self.last_sample, self._tie_arrays)
+        sample = team_sample(self.proxies, now_s, self.last_sample, self._tie_arrays, self.hot)
         self.last_sample = sample
         m = self.machine
         if k % self.machine_every == 0:
-            want_rates = m.phase in (Phase.CONNECT, Phase.PREFLIGHT)
+            want_rates = (tuple(self.setup.plan.rules.required_rates_hz)
+                          if m.phase in (Phase.CONNECT, Phase.PREFLIGHT) else ())
             judge = self.setup.delay_judge if m.phase is Phase.PREFLIGHT else None
             statuses = vehicle_statuses(self.proxies, self.ids, sample, want_rates, self.ties,
-                                        judge)
+                                        judge, self.hot)
             self._dispatch(m.on_tick(deadline_s, statuses, self.formation_error_m))
             self._log_notes()
             self._send_position_targets(sample)
@@ -730,9 +743,8 @@ class Flight:
             # level and still: zero rates or torque; in attitude mode, level at the heading
             level = (self.ties.rotations_to_local(level_rotations(sample.rotation))
                      if self.setup.mode == "attitude" else np.zeros((self.n, 3)))
-            for i, p in enumerate(self.proxies):
-                if self.ids[i] in streaming:
-                    self._send_one(i, p, level[i], self.prime_thrust_norm[i])
+            self._send_vectors(level, np.asarray(self.prime_thrust_norm, dtype=float),
+                               streaming)
 
     def _send_position_targets(self, sample: TeamSample) -> None:
         """Go to start: each vehicle the machine names gets SET_POSITION_TARGET_LOCAL_NED, its
@@ -809,8 +821,14 @@ class Flight:
 
     def _record_hover_thrust(self) -> None:
         """PRIME: the vehicles hold on their own; keep the thrust they report (from_hover)."""
+        hot = self.hot
         for i, (v, p) in enumerate(zip(self.team.vehicles, self.proxies, strict=True)):
-            if v.estimates.from_hover and (at := p.latest("ATTITUDE_TARGET")) is not None:
+            if not v.estimates.from_hover:
+                continue
+            if p.slot == i and hot.count[i, fastpath.ATTITUDE_TARGET] > 0:  # no decode per tick
+                self.hover.add(i, float(hot.rx_s[i, fastpath.ATTITUDE_TARGET]),
+                               float(hot.misc[i, fastpath.TARGET_THRUST]))
+            elif (at := p.latest("ATTITUDE_TARGET")) is not None:
                 self.hover.add(i, at.rx_time_s, float(at.msg.thrust))
 
     def _initial_mass_from_hover(self, sample: TeamSample, now_s: float) -> bool:
@@ -940,9 +958,20 @@ class Flight:
                                               self.max_yaw_rate_radps)
         if self.machine.phase is Phase.FORMATION:
             self.limited_ticks += limited
-        for i, p in enumerate(self.proxies):
-            if self.ids[i] in streaming:
-                self._send_one(i, p, vec[i], thrust[i])
+        self._send_vectors(vec, thrust, streaming)
+
+    def _send_vectors(self, vec: np.ndarray, thrust: np.ndarray,
+                      streaming: frozenset[int]) -> None:
+        """Row i of ``vec`` (rates, attitude or torque, as the mode sends) and ``thrust`` to
+        vehicle i if it is streaming; rates mode packs the team in one call."""
+        rows = [i for i in range(self.n) if self.ids[i] in streaming]
+        if self.setup.mode == "rates":  # the team at once (gcs.link.fastpath), bad rows one by one
+            good = np.isfinite(vec).all(axis=1) & np.isfinite(thrust)
+            batch = [i for i in rows if good[i] and self.proxies[i].batch_sendable]
+            send_team_rates_thrust([self.proxies[i] for i in batch], vec[batch], thrust[batch])
+            rows = [i for i in rows if not (good[i] and self.proxies[i].batch_sendable)]
+        for i in rows:
+            self._send_one(i, self.proxies[i], vec[i], thrust[i])
 
     def _send_one(self, i: int, p: VehicleProxy, vec: np.ndarray, thrust_norm: float) -> None:
         try:

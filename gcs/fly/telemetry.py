@@ -12,6 +12,7 @@ HEARTBEAT (armed, mode), EXTENDED_SYS_STATE (landed).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 
@@ -22,10 +23,22 @@ from gcs.control.gains import GRAVITY_MPS2
 from gcs.fly.delay import DelayJudge
 from gcs.fly.measure import TeamSample
 from gcs.fly.origins import WAITING, TeamTies
-from gcs.link import VehicleProxy
+from gcs.link import HotTable, VehicleProxy
 from gcs.link.enums import LandedState, MavModeFlag, mode_name
+from gcs.link.fastpath import (
+    ATTQ,
+    EXTENDED_SYS_STATE,
+    GLOBAL_POSITION_INT,
+    IMU,
+    LANDED_STATE,
+    LPN,
+    RELATIVE_ALT_M,
+    SENSORS_HEALTH,
+    SENSORS_PRESENT,
+    SYS_STATUS,
+)
 from gcs.mission.autopilots import profile_for
-from gcs.mission.safety import VehicleStatus, tilt_rad
+from gcs.mission.safety import VehicleStatus
 
 _IDENTITY_Q = (1.0, 0.0, 0.0, 0.0)
 #: The latest TIMESYNC round trips the preflight's delay judge reads (4 s at 2 Hz: not the
@@ -35,15 +48,20 @@ JUDGED_ROUND_TRIPS = 8
 PREARM_CHECK_BIT = 0x10000000
 _LANDED = {LandedState.ON_GROUND: True, LandedState.IN_AIR: False, LandedState.TAKEOFF: False,
            LandedState.LANDING: False}
+_LANDED_BY_VALUE = {int(k): v for k, v in _LANDED.items()}
+_LANDED_STATES = frozenset(int(s) for s in LandedState)
 
 
 def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
                 fallback: TeamSample | None = None,
-                ties: tuple[np.ndarray, np.ndarray] | None = None) -> TeamSample:
+                ties: tuple[np.ndarray, np.ndarray] | None = None,
+                table: HotTable | None = None) -> TeamSample:
     """The team's latest telemetry (ENU/FLU), ages at `now_s`; rows with nothing received yet
     take `fallback`'s row when given (else NaN, and finite[i] is False). `ties`: (offsets (n, 3),
     rotations (n, 3, 3)) of each vehicle's local frame in the team frame (gcs.fly.origins):
-    positions, velocities, attitudes and accelerations are then in the team frame."""
+    positions, velocities, attitudes and accelerations are then in the team frame. `table`: the
+    hot path's (proxy i in row i): read as arrays, the proxies' caches only for rows it has
+    nothing in yet (before a vehicle's address is learned, its messages take the slow path)."""
     n = len(proxies)
     pos = np.full((n, 3), np.nan)
     vel = np.full((n, 3), np.nan)
@@ -56,7 +74,10 @@ def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
     ataken = np.full(n, -math.inf)
     irx = np.full(n, -math.inf)
     have_q = np.zeros(n, dtype=bool)
-    for i, p in enumerate(proxies):
+    slow = _from_table(proxies, table, pos, vel, q, rates, force, prx, arx, ptaken, ataken, irx,
+                       have_q) if table is not None else range(n)
+    for i in slow:
+        p = proxies[i]
         lpn = p.latest("LOCAL_POSITION_NED")
         if lpn is not None:
             m = lpn.msg
@@ -111,6 +132,43 @@ def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
                       finite, delay, transit, ptaken, ataken)
 
 
+def _from_table(proxies: Sequence[VehicleProxy], table: HotTable, pos: np.ndarray,
+                vel: np.ndarray, q: np.ndarray, rates: np.ndarray, force: np.ndarray,
+                prx: np.ndarray, arx: np.ndarray, ptaken: np.ndarray, ataken: np.ndarray,
+                irx: np.ndarray, have_q: np.ndarray) -> list[int]:
+    """Fill the rows the hot table has every hot message of (in place); returns the others."""
+    have = (table.count[:, :3] > 0).all(axis=1)
+    for i, p in enumerate(proxies):
+        if p.slot != i:
+            have[i] = False
+    rows = np.flatnonzero(have)
+    lpn, attq, imu = table.lpn[rows], table.attq[rows], table.imu[rows]
+    pos[rows], vel[rows] = lpn[:, 1:4], lpn[:, 4:7]
+    quat = attq[:, 1:5]
+    good = np.isfinite(quat).all(axis=1) & ((quat * quat).sum(axis=1) > 1e-6)
+    q[rows[good]] = quat[good]
+    have_q[rows] = good
+    rates[rows] = attq[:, 5:8]
+    force[rows] = imu[:, 1:4]
+    prx[rows], arx[rows], irx[rows] = (table.rx_s[rows, LPN], table.rx_s[rows, ATTQ],
+                                       table.rx_s[rows, IMU])
+    line = np.array([proxies[i].clock.line() for i in rows.tolist()]).reshape(-1, 4)
+    a, b, t_ref, least = line.T
+    for taken, stamp, rx in ((ptaken, lpn[:, 0], prx[rows]), (ataken, attq[:, 0], arx[rows])):
+        with np.errstate(invalid="ignore"):
+            t = np.minimum(rx, stamp + a + b * (stamp - t_ref) - least)
+        taken[rows] = np.where(np.isfinite(a) & np.isfinite(stamp), t, rx)
+    return np.flatnonzero(~have).tolist()
+
+
+@functools.lru_cache(maxsize=256)
+def _mode_text(autopilot: int, custom_mode: int) -> str:
+    """The profile's name of a mode (ArduPilot BRAKE included: the names the mission compares)."""
+    profile = profile_for(autopilot)
+    return (profile.mode_name(custom_mode) if profile is not None
+            else mode_name(autopilot, custom_mode))
+
+
 def listen_label(p: VehicleProxy) -> str:
     """'udp 127.0.0.1:14540': where the ground station listens for the vehicle."""
     host, port = p.local_address
@@ -118,12 +176,22 @@ def listen_label(p: VehicleProxy) -> str:
 
 
 def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample: TeamSample,
-                     want_rates: bool, ties: TeamTies | None = None,
-                     judge: DelayJudge | None = None) -> list[VehicleStatus]:
+                     want_rates: Sequence[str], ties: TeamTies | None = None,
+                     judge: DelayJudge | None = None,
+                     table: HotTable | None = None) -> list[VehicleStatus]:
     """What the mission machine sees of each vehicle (see gcs.mission.safety.VehicleStatus);
+    `want_rates`: the message types whose receive rates it checks now (none: not measured);
     `ties`: the frame ties, whose problems the preflight reports; `judge`: the criterion at each
-    link's measured delay (preflight only: pass it while the machine is there)."""
+    link's measured delay (preflight only: pass it while the machine is there); `table`: the hot
+    path's (proxy i in row i), whose decoded fields stand for the lazy messages' decode."""
     out = []
+    # the team's arrays as Python floats at once (a conversion per vehicle costs more)
+    position, velocity = sample.position_m.tolist(), sample.velocity_mps.tolist()
+    age, transit = sample.age_s.tolist(), sample.transit_s.tolist()
+    with np.errstate(invalid="ignore"):
+        tilt = np.arccos(np.clip(sample.rotation[:, 2, 2], -1.0, 1.0)).tolist()
+    misc = table.misc.tolist() if table is not None else None
+    have = (table.count > 0).tolist() if table is not None else None
     for i, p in enumerate(proxies):
         hb = p.latest("HEARTBEAT")
         armed, mode, autopilot, vtype = False, "", 0, 0
@@ -131,33 +199,38 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
             m = hb.msg
             armed = bool(int(m.base_mode) & MavModeFlag.SAFETY_ARMED)
             autopilot, vtype = int(m.autopilot), int(m.type)
-            # the profile's names (ArduPilot BRAKE included) are the ones the mission compares
-            profile = profile_for(autopilot)
-            mode = (profile.mode_name(int(m.custom_mode)) if profile is not None
-                    else mode_name(autopilot, int(m.custom_mode)))
+            mode = _mode_text(autopilot, int(m.custom_mode))
+        hot = misc is not None and have is not None and p.slot == i
+        landed_raw: int | None = None
+        if hot and have[i][EXTENDED_SYS_STATE]:
+            landed_raw = int(misc[i][LANDED_STATE])
+        elif (ess := p.latest("EXTENDED_SYS_STATE")) is not None:
+            landed_raw = int(ess.msg.landed_state)
         landed, landed_state = None, 0
-        ess = p.latest("EXTENDED_SYS_STATE")
-        if ess is not None:
-            try:
-                landed_state = int(LandedState(int(ess.msg.landed_state)))
-                landed = _LANDED.get(LandedState(landed_state))
-            except ValueError:
-                landed = None
+        if landed_raw is not None:
+            landed_state = landed_raw if landed_raw in _LANDED_STATES else 0
+            landed = _LANDED_BY_VALUE.get(landed_raw)
+        sensors: tuple[int, int] | None = None
+        if hot and have[i][SYS_STATUS]:
+            sensors = (int(misc[i][SENSORS_PRESENT]), int(misc[i][SENSORS_HEALTH]))
+        elif (sys_status := p.latest("SYS_STATUS")) is not None:
+            sensors = (int(sys_status.msg.onboard_control_sensors_present),
+                       int(sys_status.msg.onboard_control_sensors_health))
         prearm_ok = None
-        sys_status = p.latest("SYS_STATUS")
-        if sys_status is not None and int(sys_status.msg.onboard_control_sensors_present) \
-                & PREARM_CHECK_BIT:
-            prearm_ok = bool(int(sys_status.msg.onboard_control_sensors_health) & PREARM_CHECK_BIT)
+        if sensors is not None and sensors[0] & PREARM_CHECK_BIT:
+            prearm_ok = bool(sensors[1] & PREARM_CHECK_BIT)
         text = p.statustexts.latest()
-        gpi = p.latest("GLOBAL_POSITION_INT")
-        height = float(gpi.msg.relative_alt) * 1e-3 if gpi is not None else math.nan
-        rates = {k: v.rate_hz for k, v in p.stats().by_type.items()} if want_rates else {}
+        height = math.nan
+        if hot and have[i][GLOBAL_POSITION_INT]:
+            height = misc[i][RELATIVE_ALT_M]
+        elif (gpi := p.latest("GLOBAL_POSITION_INT")) is not None:
+            height = float(gpi.msg.relative_alt) * 1e-3
+        rates = {k: p.rate_hz(k) for k in want_rates}
         out.append(VehicleStatus(
             vehicle_id=ids[i], sysid=p.config.sysid, link=p.link_state().value, armed=armed,
-            mode=mode, landed=landed, position_enu_m=tuple(sample.position_m[i].tolist()),
-            velocity_enu_mps=tuple(sample.velocity_mps[i].tolist()),
-            tilt_rad=tilt_rad(sample.rotation[i]), data_age_s=float(sample.age_s[i]),
-            delay_s=float(sample.transit_s[i]),
+            mode=mode, landed=landed, position_enu_m=tuple(position[i]),
+            velocity_enu_mps=tuple(velocity[i]), tilt_rad=tilt[i], data_age_s=age[i],
+            delay_s=transit[i],
             autopilot=autopilot, vehicle_type=vtype, sysid_mismatch=p.sysid_mismatch,
             rates_hz=rates, listen=listen_label(p), landed_state=landed_state,
             prearm_ok=prearm_ok, status_text=text.quoted() if text is not None else "",
