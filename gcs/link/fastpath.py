@@ -91,12 +91,12 @@ def _x25(buf: np.ndarray, start: int, end: int, extra: int) -> int:
 
 
 @njit(cache=True)
-def scan(buf, offsets, lengths, addr_codes, rx_s, wall_us,  # noqa: ANN001, PLR0913, PLR0915
+def scan(buf, offsets, lengths, addr_codes, rx_times, wall_us,  # noqa: ANN001, PLR0913, PLR0915
          slot_of_sysid, compid_of_slot, addr_of_slot, crc_extra, kinds,
          lpn, attq, imu, misc, rx, count, interval, raw, rawlen,
          seq_last, seq, last_any, accepted, touched, clock, tlog, slow):
-    """Walk datagrams ``buf[offsets[d]:offsets[d] + lengths[d]]`` received at ``rx_s`` (GCS clock,
-    one time for the batch) from address ``addr_codes[d]``; returns ``(n_slow, tlog_len,
+    """Walk datagrams ``buf[offsets[d]:offsets[d] + lengths[d]]`` received at ``rx_times[d]`` (GCS
+    clock) from address ``addr_codes[d]``; returns ``(n_slow, tlog_len,
     tlog_records)``.
 
     Accepted frames update the slot's sequence counters, ``last_any``, ``accepted``; hot ones
@@ -119,6 +119,7 @@ def scan(buf, offsets, lengths, addr_codes, rx_s, wall_us,  # noqa: ANN001, PLR0
     for d in range(offsets.shape[0]):
         pos = offsets[d]
         end = pos + lengths[d]
+        rx_s = rx_times[d]
         while pos < end:
             start = pos
             counted = 0
@@ -342,7 +343,8 @@ def warm_up() -> None:
     slot_of_sysid = np.full(256, -1, dtype=np.int64)
     frame = out[0, : lengths[0]]
     scan(frame, np.zeros(1, np.int64), np.array([frame.shape[0]], np.int64),
-         np.zeros(1, np.int64), 0.0, 0, slot_of_sysid, table.compid_of_slot, table.addr_of_slot,
+         np.zeros(1, np.int64), np.zeros(1), 0, slot_of_sysid, table.compid_of_slot,
+         table.addr_of_slot,
          crc_extra_table(), kind_table(), table.lpn, table.attq, table.imu, table.misc,
          table.rx_s, table.count, table.interval_s, table.raw, table.rawlen, table.seq_last,
          table.seq, table.last_any_rx_s, table.accepted, table.touched, table.clock,

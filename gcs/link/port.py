@@ -64,9 +64,11 @@ TIMESYNC_REMEMBERED = 128
 class PortClient(Protocol):
     """What a port needs of a vehicle's proxy."""
 
-    def _on_datagram(self, data: bytes, addr: Address, seq_counted: bool = False) -> None:
+    def _on_datagram(self, data: bytes, addr: Address, seq_counted: bool = False,
+                     rx_s: float | None = None) -> None:
         """Bytes (whole MAVLink frames) from this vehicle's sysid, received from ``addr``;
-        ``seq_counted``: the hot path accepted these frames and counted their sequence numbers."""
+        ``seq_counted``: the hot path accepted these frames and counted their sequence numbers;
+        ``rx_s``: when they were received (None: now)."""
 
     def _on_hot(self) -> None:
         """The hot path stored new messages of this vehicle in the port's table."""
@@ -288,10 +290,15 @@ class MavlinkPort:
         return (self._hot_batches, self._hot_frames)
 
     def _on_batch(self, buffer: bytearray, offsets: list[int], lengths: list[int],
-                  sources: list[Address]) -> None:
+                  sources: list[Address], stamps: list[float | None]) -> None:
         table = self._table
         assert table is not None
         now_s = self._now_s()
+        if self._now_s is time.monotonic:  # the kernel's receive times, on this clock
+            shift = time.time() - now_s
+            rx = np.array([now_s if t is None else min(now_s, t - shift) for t in stamps])
+        else:  # an injected clock (tests): when the batch is read
+            rx = np.full(len(offsets), now_s)
         codes = self._addr_codes
         addr_codes = np.fromiter((codes[a] if a in codes else self.address_code(a)
                                   for a in sources), dtype=np.int64, count=len(sources))
@@ -304,7 +311,7 @@ class MavlinkPort:
             self._slow = np.zeros((2 * (total // 12 + len(offsets)), 4), dtype=np.int64)
         data = np.frombuffer(buffer, dtype=np.uint8, count=total)
         n_slow, t_len, n_hot = scan(
-            data, offs, lens, addr_codes, now_s, int(time.time() * 1e6),
+            data, offs, lens, addr_codes, rx, int(time.time() * 1e6),
             self._slot_of_sysid, table.compid_of_slot, table.addr_of_slot, self._crc_extra,
             self._kinds,
             table.lpn, table.attq, table.imu, table.misc, table.rx_s, table.count, table.interval_s,
@@ -324,16 +331,18 @@ class MavlinkPort:
             table.clock[touched, 4] = 0.0
         view = memoryview(buffer)
         for d, start, end, counted in self._slow[:n_slow].tolist():
-            self._route(bytes(view[start:end]), sources[d], seq_counted=bool(counted))
+            self._route(bytes(view[start:end]), sources[d], seq_counted=bool(counted),
+                        rx_s=float(rx[d]))
 
-    def _route(self, data: bytes, addr: Address, seq_counted: bool = False) -> None:
+    def _route(self, data: bytes, addr: Address, seq_counted: bool = False,
+               rx_s: float | None = None) -> None:
         runs = frame_sysids(data)
         if len(runs) == 1:
             sysid = runs[0][2]
             client = self._clients.get(sysid) if sysid is not None else None
             if client is not None:
                 self._n["datagrams_routed"] += 1
-                client._on_datagram(data, addr, seq_counted)
+                client._on_datagram(data, addr, seq_counted, rx_s)
                 return
             if sysid is None:
                 self._n["unframed_datagrams"] += 1
@@ -344,7 +353,7 @@ class MavlinkPort:
             part = data[start:end]
             client = self._clients.get(sysid) if sysid is not None else None
             if client is not None:
-                client._on_datagram(part, addr, seq_counted)
+                client._on_datagram(part, addr, seq_counted, rx_s)
             else:
                 self._foreign(part, addr, sysid)
 

@@ -394,8 +394,9 @@ class VehicleProxy:
                     if got is not None:
                         self._wake_waiters(got.msg, got.rx_time_s)
 
-    def _on_datagram(self, data: bytes, addr: Address, seq_counted: bool = False) -> None:
-        now_s = self._clock.now_s()
+    def _on_datagram(self, data: bytes, addr: Address, seq_counted: bool = False,
+                     rx_s: float | None = None) -> None:
+        now_s = self._clock.now_s() if rx_s is None else rx_s
         cfg = self.config
         for msg in self._codec.feed(data):
             if self._tlog is not None:

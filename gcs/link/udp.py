@@ -6,6 +6,8 @@ import asyncio
 import contextlib
 import logging
 import socket
+import struct
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from types import TracebackType
@@ -14,10 +16,12 @@ logger = logging.getLogger(__name__)
 
 Address = tuple[str, int]
 DatagramCallback = Callable[[bytes, Address], None]
-#: ``on_batch(buffer, offsets, lengths, sources)``: datagram d is
-#: ``buffer[offsets[d]:offsets[d] + lengths[d]]``, from ``sources[d]``; the buffer is reused
-#: after the call returns.
-BatchCallback = Callable[[bytearray, list[int], list[int], list[Address]], None]
+#: ``on_batch(buffer, offsets, lengths, sources, stamps)``: datagram d is
+#: ``buffer[offsets[d]:offsets[d] + lengths[d]]``, from ``sources[d]``, received by the kernel at
+#: ``stamps[d]`` (Unix time in s; None where the kernel gave none); the buffer is reused after the
+#: call returns.
+BatchCallback = Callable[[bytearray, list[int], list[int], list[Address], list[float | None]],
+                         None]
 
 #: Bytes the transport may hold unsent before send() drops (a healthy UDP socket holds none).
 DEFAULT_MAX_WRITE_BUFFER_BYTES = 256 * 1024
@@ -29,6 +33,11 @@ BATCH_BUFFER_BYTES = 1 << 20
 MAX_DATAGRAM_BYTES = 65536
 #: Kernel receive buffer asked for in bulk mode (hundreds of vehicles' telemetry between wake-ups).
 BULK_RCVBUF_BYTES = 4 << 20
+#: Linux SO_TIMESTAMPNS / SCM_TIMESTAMPNS (not in Python's socket module): the kernel's receive
+#: time of each datagram as a struct timespec.
+_SO_TIMESTAMPNS = 35
+_TIMESPEC = struct.Struct("@qq")
+_ANCILLARY_BYTES = socket.CMSG_SPACE(_TIMESPEC.size)
 
 
 class LinkClosedError(RuntimeError):
@@ -73,8 +82,10 @@ class UdpEndpoint:
 
     ``on_batch`` (bulk mode, for ports serving many vehicles): the endpoint reads its socket itself
     (``loop.add_reader``) and, at each wake-up, drains up to MAX_BATCH_DATAGRAMS datagrams into one
-    buffer and hands them over in one call. Sends go straight to the non-blocking socket; a full
-    socket buffer drops the datagram (counted as ``send_dropped_backpressure``).
+    buffer and hands them over in one call, each with the kernel's receive time where the OS
+    gives it (Linux SO_TIMESTAMPNS): a stall of the event loop then does not read as delay.
+    Sends go straight to the non-blocking socket; a full socket buffer drops the datagram
+    (counted as ``send_dropped_backpressure``).
     """
 
     def __init__(
@@ -110,6 +121,7 @@ class UdpEndpoint:
         self._sock: socket.socket | None = None  # bulk mode: the socket, read and written directly
         self._loop: asyncio.AbstractEventLoop | None = None
         self._bound: Address | None = None  # local_address, once asked while open
+        self._kernel_stamps = False  # bulk mode: each datagram's kernel receive time (Linux)
         self._batch_buf = bytearray(BATCH_BUFFER_BYTES if on_batch is not None else 0)
         self._rx_queue: asyncio.Queue[tuple[bytes, Address]] = asyncio.Queue(rx_queue_size)
         self._max_write_buffer_bytes = max_write_buffer_bytes
@@ -135,6 +147,13 @@ class UdpEndpoint:
                 sock.close()
                 raise
             self._sock, self._loop = sock, loop
+            self._kernel_stamps = False
+            if sys.platform == "linux":
+                try:
+                    sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
+                    self._kernel_stamps = True
+                except OSError:
+                    logger.debug("%s: no kernel receive times; stamped when read", self.name)
             loop.add_reader(sock.fileno(), self._drain)
             logger.debug("%s: bound %s (bulk), remote %s", self.name, self.local_address,
                          self._remote)
@@ -267,10 +286,21 @@ class UdpEndpoint:
         offsets: list[int] = []
         lengths: list[int] = []
         sources: list[Address] = []
+        stamps: list[float | None] = []
         total = 0
+        kernel = self._kernel_stamps
         while len(offsets) < MAX_BATCH_DATAGRAMS and total <= limit:
+            stamp = None
             try:
-                nbytes, addr = sock.recvfrom_into(view[total:])
+                if kernel:
+                    nbytes, ancillary, _, addr = sock.recvmsg_into([view[total:]],
+                                                                   _ANCILLARY_BYTES)
+                    for level, kind, data in ancillary:
+                        if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS:
+                            sec, nsec = _TIMESPEC.unpack_from(data)
+                            stamp = sec + nsec * 1e-9
+                else:
+                    nbytes, addr = sock.recvfrom_into(view[total:])
             except (BlockingIOError, InterruptedError):
                 break
             except OSError as exc:  # an ICMP error queued on the socket: counted, read on
@@ -279,6 +309,7 @@ class UdpEndpoint:
             offsets.append(total)
             lengths.append(nbytes)
             sources.append((addr[0], addr[1]))
+            stamps.append(stamp)
             total += nbytes
         if not offsets:
             return
@@ -288,7 +319,7 @@ class UdpEndpoint:
         if self._remote is not None:
             counts["packets_in_foreign"] += sum(1 for a in sources if a != self._remote)
         try:
-            cb(self._batch_buf, offsets, lengths, sources)
+            cb(self._batch_buf, offsets, lengths, sources, stamps)
         except Exception:
             counts["callback_errors"] += 1
             logger.exception("%s: on_batch callback failed", self.name)

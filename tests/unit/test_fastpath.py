@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import socket
+import time
 
 import numpy as np
 import pytest
@@ -69,7 +70,8 @@ class _Scanner:
         slow = np.zeros((len(buf) // 12 + len(datagrams), 4), dtype=np.int64)
         t = self.t
         n_slow, t_len, _ = scan(
-            np.frombuffer(buf, dtype=np.uint8), offs, lens, addr, rx_s, 1_700_000_000_000_000,
+            np.frombuffer(buf, dtype=np.uint8), offs, lens, addr, np.full(len(datagrams), rx_s),
+            1_700_000_000_000_000,
             self.slot_of_sysid, t.compid_of_slot, t.addr_of_slot, self.crc, self.kinds, t.lpn,
             t.attq, t.imu, t.misc, t.rx_s, t.count, t.interval_s, t.raw, t.rawlen, t.seq_last,
             t.seq, t.last_any_rx_s, t.accepted, t.touched, t.clock, tlog, slow)
@@ -272,3 +274,30 @@ async def _shared_port(tmp_path) -> None:  # noqa: ANN001
                 assert p1.stats().proxy.stranger_address == 1
                 for s in (a, b, c):
                     s.close()
+
+
+def test_a_stalled_event_loop_does_not_read_as_link_delay() -> None:
+    """Receive times are the kernel's (Linux): a datagram that waited in the socket while the
+    ground station was busy is stamped when it arrived, on the hot and the slow path alike."""
+    asyncio.run(asyncio.wait_for(_stalled(), 20.0))
+
+
+async def _stalled() -> None:
+    table = HotTable(1)
+    async with MavlinkPort(0, table=table) as port:
+        gcs_port = port.local_address[1]
+        a, a_port = _udp(gcs_port)
+        cfg = VehicleLinkConfig(vehicle_id=1, sysid=1, local_port=gcs_port, remote_port=a_port)
+        async with VehicleProxy(cfg, port=port, slot=0) as p:
+            mav = _sender(1)
+            sent_s = time.monotonic()
+            a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(1, 1.0, 0, 0, 0, 0, 0))
+                   + _pack(mav, mavlink.MAVLink_heartbeat_message(2, 12, 0, 0, 0, 3)))
+            time.sleep(0.3)  # the event loop is blocked: nothing is read meanwhile
+            await asyncio.sleep(0.05)
+            lpn, hb = p.latest("LOCAL_POSITION_NED"), p.latest("HEARTBEAT")
+            assert lpn is not None and hb is not None
+            assert table.count[0, LPN] == 1
+            assert lpn.rx_time_s - sent_s < 0.1
+            assert hb.rx_time_s == lpn.rx_time_s
+            a.close()
