@@ -57,8 +57,9 @@ from gcs.link.udp import MAX_BATCH_DATAGRAMS, Address, UdpEndpoint, UdpStats
 
 logger = logging.getLogger(__name__)
 
-#: TIMESYNC requests remembered for their replies (at 2 Hz: the last minute or so).
-TIMESYNC_REMEMBERED = 128
+#: TIMESYNC requests remembered for their replies (one per vehicle address per 0.5 s: 240
+#: vehicles' last 8 s, one vehicle's last half hour).
+TIMESYNC_REMEMBERED = 4096
 
 
 class PortClient(Protocol):
