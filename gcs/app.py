@@ -99,7 +99,7 @@ from gcs.link import (
 )
 from gcs.link.config import shared_ports
 from gcs.link.enums import MSG_ID, MavCmd, MavModeFlag
-from gcs.link.proxy import send_team_rates_thrust
+from gcs.link.proxy import TeamSetpoints
 from gcs.mission.autopilots import PROFILES, AutopilotProfile, ModeSpec, version_text
 from gcs.mission.cascade import AutopilotResponse, CascadeGains, laplacian_eigenvalues, verdict
 from gcs.mission.goto import GoToStartPlan
@@ -406,6 +406,7 @@ class Flight:
         check_unique_sysids(self.links)
         self.shared_ports = shared_ports(self.links)  # (host, port) -> the vehicles on it
         self.hot = HotTable(len(self.links))  # the team's hot telemetry, a row per link
+        self._team_setpoints: TeamSetpoints | None = None  # once the proxies are open
         self.proxies: list[VehicleProxy] = []
         self._proxy_by_id: dict[int, VehicleProxy] = {}
         self.builder = FlightLogBuilder(
@@ -968,7 +969,9 @@ class Flight:
         if self.setup.mode == "rates":  # the team at once (gcs.link.fastpath), bad rows one by one
             good = np.isfinite(vec).all(axis=1) & np.isfinite(thrust)
             batch = [i for i in rows if good[i] and self.proxies[i].batch_sendable]
-            send_team_rates_thrust([self.proxies[i] for i in batch], vec[batch], thrust[batch])
+            if self._team_setpoints is None:
+                self._team_setpoints = TeamSetpoints(self.proxies)
+            self._team_setpoints.send_rates_thrust(batch, vec, thrust)
             rows = [i for i in rows if not (good[i] and self.proxies[i].batch_sendable)]
         for i in rows:
             self._send_one(i, self.proxies[i], vec[i], thrust[i])

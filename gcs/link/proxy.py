@@ -725,7 +725,7 @@ class VehicleProxy:
 
     @property
     def batch_sendable(self) -> bool:
-        """Setpoints may be packed for the team at once (:func:`send_team_rates_thrust`): an
+        """Setpoints may be packed for the team at once (`TeamSetpoints`): an
         unsigned link."""
         return not self._codec.signing_enabled
 
@@ -848,38 +848,48 @@ class VehicleProxy:
             await asyncio.sleep(period)
 
 
-def send_team_rates_thrust(proxies: Sequence[VehicleProxy], rates_flu_radps: np.ndarray,
-                           thrust_norm: np.ndarray) -> None:
-    """`VehicleProxy.send_rates_thrust` for many vehicles, packed in one call
-    (gcs.link.fastpath.encode_set_attitude_target); returns immediately. Row i goes to
-    ``proxies[i]``, which must be `batch_sendable`; rates (n, 3) FLU rad/s, thrust (n,) 0..1
-    (clamped and counted per vehicle). Rows with NaN/inf must not be passed (the caller sends
-    them one by one, which raises `SetpointError` for each)."""
-    n = len(proxies)
-    if n == 0:
-        return
-    rates_frd = frames.frd_from_flu(np.asarray(rates_flu_radps, dtype=np.float64))
-    thrust = np.asarray(thrust_norm, dtype=np.float64)
-    clamped = (thrust < 0.0) | (thrust > 1.0)
-    for i in np.flatnonzero(clamped).tolist():
-        proxies[i]._n["thrust_clamped"] += 1
-    thrust = np.clip(thrust, 0.0, 1.0)
-    seq = np.array([p._codec.take_seq() for p in proxies], dtype=np.uint8)
-    boot_ms = np.array([p._time_boot_ms() for p in proxies], dtype=np.int64)
-    target_sys = np.array([p.config.sysid for p in proxies], dtype=np.int64)
-    target_comp = np.array([p.config.compid for p in proxies], dtype=np.int64)
-    first = proxies[0]._codec
-    out = np.empty((n, 12 + SET_ATTITUDE_TARGET_LEN), dtype=np.uint8)
-    lengths = np.empty(n, dtype=np.int64)
-    encode_set_attitude_target(seq, first.src_system, first.src_component, boot_ms, target_sys,
-                               target_comp, TYPE_MASK_RATES_THRUST,
-                               np.tile(np.array(_IDENTITY_Q), (n, 1)), rates_frd, thrust, out,
-                               lengths)
-    for i, p in enumerate(proxies):
-        data = out[i, : lengths[i]].tobytes()
-        if p._tlog is not None:
-            p._tlog.write(data)
-        if p._remote is None:
-            p._n["send_no_remote"] += 1
-        p._port.send_to(data, p._remote)
-        p._n["setpoints_sent"] += 1
+class TeamSetpoints:
+    """`VehicleProxy.send_rates_thrust` for many vehicles at once: one encode call
+    (gcs.link.fastpath.encode_set_attitude_target) and one ``sendto`` each. What does not change
+    (ids, boot times, tlogs) is read once; every proxy must be `batch_sendable` (unsigned)."""
+
+    def __init__(self, proxies: Sequence[VehicleProxy]) -> None:
+        self.proxies = list(proxies)
+        n = len(self.proxies)
+        self._target_sys = np.array([p.config.sysid for p in self.proxies], dtype=np.int64)
+        self._target_comp = np.array([p.config.compid for p in self.proxies], dtype=np.int64)
+        self._q = np.tile(np.array(_IDENTITY_Q), (n, 1))
+        self._out = np.empty((n, 12 + SET_ATTITUDE_TARGET_LEN), dtype=np.uint8)
+        self._lengths = np.empty(n, dtype=np.int64)
+
+    def send_rates_thrust(self, rows: Sequence[int], rates_flu_radps: np.ndarray,
+                          thrust_norm: np.ndarray) -> None:
+        """Rows ``rows`` of rates (n, 3) FLU rad/s and thrust (n,) 0..1 (clamped and counted per
+        vehicle) to those vehicles; returns immediately. Rows with NaN/inf must not be passed
+        (send them one by one: `send_rates_thrust` raises `SetpointError` for each)."""
+        if not rows:
+            return
+        idx = np.asarray(rows, dtype=np.int64)
+        proxies = [self.proxies[i] for i in rows]
+        rates_frd = frames.frd_from_flu(np.asarray(rates_flu_radps, dtype=np.float64)[idx])
+        thrust = np.asarray(thrust_norm, dtype=np.float64)[idx]
+        for k in np.flatnonzero((thrust < 0.0) | (thrust > 1.0)).tolist():
+            proxies[k]._n["thrust_clamped"] += 1
+        thrust = np.clip(thrust, 0.0, 1.0)
+        seq = np.array([p._codec.take_seq() for p in proxies], dtype=np.uint8)
+        boot_ms = np.array([p._time_boot_ms() for p in proxies], dtype=np.int64)
+        first = proxies[0]._codec
+        m = len(rows)
+        out, lengths = self._out[:m], self._lengths[:m]
+        encode_set_attitude_target(seq, first.src_system, first.src_component, boot_ms,
+                                   self._target_sys[idx], self._target_comp[idx],
+                                   TYPE_MASK_RATES_THRUST, self._q[:m], rates_frd, thrust, out,
+                                   lengths)
+        for k, p in enumerate(proxies):
+            data = out[k, : lengths[k]].tobytes()
+            if p._tlog is not None:
+                p._tlog.write(data)
+            if p._remote is None:
+                p._n["send_no_remote"] += 1
+            p._port.send_to(data, p._remote)
+            p._n["setpoints_sent"] += 1

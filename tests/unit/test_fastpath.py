@@ -34,6 +34,7 @@ from gcs.link.fastpath import (
     kind_table,
     scan,
 )
+from gcs.link.proxy import TeamSetpoints
 from gcs.link.telemetry import SequenceTracker
 
 
@@ -301,3 +302,47 @@ async def _stalled() -> None:
             assert lpn.rx_time_s - sent_s < 0.1
             assert hb.rx_time_s == lpn.rx_time_s
             a.close()
+
+
+def test_team_setpoints_reach_each_vehicle_as_its_own_setpoint_would() -> None:
+    asyncio.run(asyncio.wait_for(_team_setpoints(), 20.0))
+
+
+async def _team_setpoints() -> None:
+    async with MavlinkPort(0, table=HotTable(2)) as port:
+        gcs_port = port.local_address[1]
+        socks = [_udp(gcs_port) for _ in range(2)]
+        for s, _ in socks:
+            s.setblocking(False)
+        cfgs = [VehicleLinkConfig(vehicle_id=k + 1, sysid=k + 1, local_port=gcs_port,
+                                  remote_port=socks[k][1]) for k in range(2)]
+        async with (VehicleProxy(cfgs[0], port=port, slot=0) as p1,
+                    VehicleProxy(cfgs[1], port=port, slot=1) as p2):
+            await asyncio.sleep(0.05)
+            for s, _ in socks:  # the proxies' first HEARTBEATs
+                while True:
+                    try:
+                        s.recv(512)
+                    except BlockingIOError:
+                        break
+            rates = np.array([[0.1, -0.2, 0.3], [0.0, 0.5, -0.5]])
+            thrust = np.array([0.4, 1.7])  # the second is clamped to 1 and counted
+            TeamSetpoints([p1, p2]).send_rates_thrust([0, 1], rates, thrust)
+            p1.send_rates_thrust(rates[0], thrust[0])
+            await asyncio.sleep(0.05)
+            parser = mavlink.MAVLink(None)
+            got = [[parser.decode(bytearray(s.recv(512))) for _ in range(n)]
+                   for (s, _), n in zip(socks, (2, 1), strict=True)]
+            team, one = got[0]
+            assert (team.target_system, team.type_mask) == (1, 128)
+            assert [team.body_roll_rate, team.body_pitch_rate, team.body_yaw_rate] == \
+                pytest.approx([0.1, 0.2, -0.3])  # FLU -> FRD
+            assert one.get_seq() == (team.get_seq() + 1) % 256
+            for field in ("body_roll_rate", "body_pitch_rate", "body_yaw_rate", "thrust", "q"):
+                assert getattr(one, field) == getattr(team, field)
+            second = got[1][0]
+            assert second.target_system == 2 and second.thrust == 1.0
+            assert p2.stats().proxy.thrust_clamped == 1
+            assert p1.stats().proxy.setpoints_sent == 2
+            for s, _ in socks:
+                s.close()
