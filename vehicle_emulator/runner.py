@@ -34,11 +34,12 @@ from vehicle_emulator.vehicle import VehicleNode
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Clock", "Emulator", "LinkPlan", "RealtimeClock", "RunStats"]
+__all__ = ["STREAM_MODES", "Clock", "Emulator", "LinkPlan", "RealtimeClock", "RunStats"]
 
 AUTOPILOT_RATE_HZ = 50.0
 MAX_CATCHUP_S = 0.1
 LOCKSTEP_TIMEOUT_S = 0.25
+STREAM_MODES = ("default", "requested")
 
 
 class Clock(Protocol):
@@ -129,9 +130,14 @@ class Emulator:
         seed: int = 0,
         param_overrides: dict[str, float] | None = None,
         message_intervals_ms: dict[int, float] | None = None,
+        streams: str = "default",
     ) -> None:
         """``message_intervals_ms``: ArduPilot's message-intervals file (msgid -> interval),
-        preloaded into every ardupilot vehicle's streams."""
+        preloaded into every ardupilot vehicle's streams. ``streams``: ``default`` (each
+        personality's streams from boot) or ``requested`` (HEARTBEAT only, every other stream
+        off until the ground station asks for it: Telemetry.requested_only)."""
+        if streams not in STREAM_MODES:
+            raise ValueError(f"streams: expected one of {', '.join(STREAM_MODES)}, got {streams!r}")
         sysids = [s.sysid for s in specs]
         if len(set(sysids)) != len(sysids):
             raise ValueError(f"duplicate sysids {sysids}: ground stations would merge them")
@@ -173,6 +179,8 @@ class Emulator:
                     if not self.telemetry.set_interval(i, msgid, ms * 1e3, 0.0):
                         raise ValueError(f"message intervals: message id {msgid} is not one "
                                          "the emulator streams")
+            if streams == "requested":
+                self.telemetry.requested_only(i)
             if spec.starts_in_air:
                 self.plant.hold_here(i)
             obs_spec = [f for f in faults if f.vehicle_id == spec.vehicle_id]

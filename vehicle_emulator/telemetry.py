@@ -198,6 +198,17 @@ class Telemetry:
             if math.isinf(interval) or name in delayed:
                 self.next_due_s[vehicle, k] = now_s + interval
 
+    def requested_only(self, vehicle: int) -> None:
+        """``--streams requested`` (PX4's MAVLink instance modes, a mode with no streams):
+        every stream of the vehicle off but HEARTBEAT, until a SET_MESSAGE_INTERVAL (or a
+        REQUEST_MESSAGE, once) asks for it; interval 0 ("default rate") then gives the
+        personality's rate."""
+        hb = self.index["HEARTBEAT"]
+        for k in range(len(self.names)):
+            if k != hb:
+                self.interval_s[vehicle, k] = math.inf
+                self.next_due_s[vehicle, k] = math.inf
+
     def set_interval(self, vehicle: int, msgid: int, interval_us: float, now_s: float) -> bool:
         """MAV_CMD_SET_MESSAGE_INTERVAL semantics: -1 off, 0 default, > 0 period in us.
         Returns False for a message the emulator does not stream."""
