@@ -22,12 +22,12 @@ from vehicle_emulator.ardupilot import ArduCopter
 from vehicle_emulator.ardupilot_node import DEFAULT_RATES_HZ as ARDUPILOT_RATES_HZ
 from vehicle_emulator.ardupilot_node import ArduPilotNode
 from vehicle_emulator.autopilot import Autopilot, Severity
-from vehicle_emulator.codec import GenericEncoder
+from vehicle_emulator.codec import GenericEncoder, HotDecoder
 from vehicle_emulator.faults import FaultSchedule, LinkImpairment
 from vehicle_emulator.params import ParamStore, param_table
 from vehicle_emulator.personality import personality_of
 from vehicle_emulator.plant import FleetPlant
-from vehicle_emulator.server import UdpLink
+from vehicle_emulator.server import LinkPoller, UdpLink
 from vehicle_emulator.team import FaultSpec, VehicleSpec
 from vehicle_emulator.telemetry import FleetStatus, Telemetry
 from vehicle_emulator.vehicle import VehicleNode
@@ -213,6 +213,7 @@ class Emulator:
             node.refresh_status(0.0)
             self.nodes.append(node)
         self.links: list[UdpLink] = []
+        self.poller: LinkPoller | None = None
         self._setpoint_event: asyncio.Event | None = None
         self._fault_nodes = [node for node in self.nodes if not node.faults.idle]
         self._ack_nodes: list[VehicleNode] = []  # nodes with a second COMMAND_ACK queued
@@ -224,6 +225,7 @@ class Emulator:
         for node in spare.nodes:
             node.links.append(_NullLink())
         spare.advance_to(0.05)
+        HotDecoder().decode([b""])  # the receive side's batch kernel
 
     @property
     def now_s(self) -> float:
@@ -283,7 +285,10 @@ class Emulator:
     # --- I/O -----------------------------------------------------------------------------------
 
     async def open_links(self, plans: Sequence[LinkPlan], clock: Clock) -> None:
-        """Bind every vehicle's UDP endpoints (OSError names the address on failure)."""
+        """Bind every vehicle's UDP endpoints (OSError names the address on failure); one
+        ``LinkPoller`` reads them all."""
+        if self.poller is None:
+            self.poller = LinkPoller()
         for node, plan in zip(self.nodes, plans, strict=True):
             pairs = [("api", plan.bind, plan.remote)]
             if plan.gcs_bind is not None and plan.gcs_remote is not None:
@@ -306,11 +311,14 @@ class Emulator:
                     link.name = f"vehicle {node.spec.vehicle_id} {kind} {host}:{port}"
                 for data in node.boot_banner():  # before any MAVLink (ArduPilot SITL)
                     link.send(data)
+                self.poller.attach(link)
                 node.links.append(link)
                 self.links.append(link)
 
     def close_links(self) -> None:
         """Close every socket."""
+        if self.poller is not None:
+            self.poller.close()
         for link in self.links:
             link.close()
 
