@@ -216,7 +216,9 @@ class Emulator:
         self.poller: LinkPoller | None = None
         self._setpoint_event: asyncio.Event | None = None
         self._fault_nodes = [node for node in self.nodes if not node.faults.idle]
-        self._ack_nodes: list[VehicleNode] = []  # nodes with a second COMMAND_ACK queued
+        # nodes with a second COMMAND_ACK queued, by index (a dataclass == on a node compares
+        # every field: a list's `in` cost a fleet's burst of DO_SET_MODEs seconds)
+        self._ack_nodes: dict[int, VehicleNode] = {}
 
     def warm_up(self) -> None:
         """Load/compile the JIT kernels on a throwaway copy, so the first real tick is not
@@ -265,8 +267,8 @@ class Emulator:
     def send_deferred_acks(self) -> None:
         """Second COMMAND_ACKs queued by the commands handled since the last tick (DO_SET_MODE
         with EMU_ACK_TWICE = 1): the next tick, a tick period after the first ACK at most."""
-        nodes, self._ack_nodes = self._ack_nodes, []
-        for node in nodes:
+        nodes, self._ack_nodes = self._ack_nodes, {}
+        for node in nodes.values():
             node.send_deferred_acks(self.now_s)
 
     def on_messages(self, node: VehicleNode, link: Any, msgs: list[Any], addr: Any) -> None:
@@ -274,8 +276,8 @@ class Emulator:
         now = self.now_s
         for msg in msgs:
             node.handle(now, msg, link, addr)
-        if node.deferred_acks and node not in self._ack_nodes:
-            self._ack_nodes.append(node)
+        if node.deferred_acks:
+            self._ack_nodes.setdefault(node.index, node)
         if self._setpoint_event is not None:
             self._setpoint_event.set()
         node.decode_rejected = sum(
