@@ -70,3 +70,35 @@ def test_set_message_interval_and_request_message_turn_streams_on():
 def test_unknown_streams_mode_is_refused():
     with pytest.raises(ValueError, match="streams: expected one of default, requested, got 'all'"):
         Emulator([default_vehicle(1)], streams="all")
+
+
+class _CountingLink(RecordingLink):
+    def __init__(self) -> None:
+        super().__init__()
+        self.datagrams = 0
+
+    def send(self, data: bytes, addr=None) -> None:
+        self.datagrams += 1
+        super().send(data, addr)
+
+
+def test_rates_set_one_command_at_a_time_keep_one_datagram_per_period():
+    # GIVEN a vehicle in requested mode whose ground station sets three 100 Hz streams one
+    # command at a time, each in a later tick (gcs fly awaits each ACK)
+    emu = Emulator([default_vehicle(1, on_ground=False)], streams="requested")
+    link = _CountingLink()
+    emu.nodes[0].links.append(link)
+    run_until(emu, 1.0)
+    for msgid in (31, 32, 105):
+        _command(emu, link, 511, msgid, 10_000)
+        run_until(emu, emu.now_s + 0.006)
+    # WHEN two seconds pass
+    link.datagrams = 0
+    before = link.types()
+    run_until(emu, emu.now_s + 2.0)
+    after = link.types()
+    # THEN each stream runs at 100 Hz, and the three leave together: one datagram per 10 ms
+    # (plus the HEARTBEATs' own ticks at most)
+    for name in ("ATTITUDE_QUATERNION", "LOCAL_POSITION_NED", "HIGHRES_IMU"):
+        assert after[name] - before[name] == pytest.approx(200, abs=1)
+    assert 200 <= link.datagrams <= 203
