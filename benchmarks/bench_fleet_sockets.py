@@ -7,7 +7,8 @@ One ``vehicle-emu --fleet`` process (checkout ``--root``, default this one) flie
 (a grid at 10 m, in the air) whose links all send to ONE ground-station port (team file
 ``link: {local_port: G, remote_port: B + i}``). This process plays the ground station, cheaply,
 on the other core: it asks every vehicle for the streams `gcs fly` asks for
-(MAV_CMD_SET_MESSAGE_INTERVAL, GCS_RATES_HZ), switches them to OFFBOARD and sends each one a
+(MAV_CMD_SET_MESSAGE_INTERVAL, GCS_RATES_HZ; one stream at a time, the next after every
+vehicle's ACK, as gcs fly awaits each), switches them to OFFBOARD and sends each one a
 SET_ATTITUDE_TARGET (body rates and thrust, type_mask 128) every 10 ms, as rates mode at 100 Hz
 does (one datagram per vehicle per tick, all from the one port), from a level-holding P law on
 the telemetry it reads (every datagram; only ATTITUDE_QUATERNION and LOCAL_POSITION_NED decoded). Over the
@@ -85,6 +86,7 @@ class Gcs:
         self.parser.robust_parsing = True
         self.addr = [("127.0.0.1", BIND_BASE + k) for k in range(n)]
         self.acks: dict[tuple[int, int], int] = {}
+        self.interval_acks: dict[int, int] = {}  # sysid -> SET_MESSAGE_INTERVAL ACKs so far
         self.hover = 0.5
         self.datagrams = 0
         self.bytes = 0
@@ -154,6 +156,9 @@ class Gcs:
                     if t == "COMMAND_ACK":
                         key = (m.get_srcSystem(), m.command)
                         self.acks[key] = m.result
+                        if m.command == 511:
+                            sysid = m.get_srcSystem()
+                            self.interval_acks[sysid] = self.interval_acks.get(sysid, 0) + 1
                     elif t == "PARAM_VALUE" and m.param_id.startswith("MPC_THR_HOVER"):
                         self.hover = m.param_value
 
@@ -204,15 +209,20 @@ def run(args: argparse.Namespace) -> dict:
             # set-up, parsing everything: hover thrust, streams, OFFBOARD
             gcs.sock.sendto(gcs.frame(mavlink.MAVLink_param_request_read_message(
                 1, 1, b"MPC_THR_HOVER", -1)), gcs.addr[0])
-            for _attempt in range(5):
-                for k in range(n):
-                    for mid, hz in GCS_RATES_HZ.items():
-                        gcs.command(k, 511, mid, 1e6 / hz if hz > 0 else -1.0)
-                    if k % 20 == 19:
-                        gcs.wait(time.monotonic() + 0.005, parse=True)
-                gcs.wait(time.monotonic() + 0.5, parse=True)
-                if all((k + 1, 511) in gcs.acks for k in range(n)):
-                    break
+            # one stream at a time, each round after every vehicle's ACK, as gcs fly's
+            # CONFIGURE awaits each set_message_interval (the commands reach a vehicle in
+            # different ticks)
+            for r, (mid, hz) in enumerate(GCS_RATES_HZ.items()):
+                for _attempt in range(3):
+                    for k in range(n):
+                        if gcs.interval_acks.get(k + 1, 0) <= r:
+                            gcs.command(k, 511, mid, 1e6 / hz if hz > 0 else -1.0)
+                    deadline = time.monotonic() + 1.0
+                    while (time.monotonic() < deadline
+                           and min(gcs.interval_acks.get(k + 1, 0) for k in range(n)) <= r):
+                        gcs.wait(time.monotonic() + 0.002, parse=True)
+                    if min(gcs.interval_acks.get(k + 1, 0) for k in range(n)) > r:
+                        break
             gcs.stream(1.0, parse=True)
             for k in range(n):
                 gcs.command(k, 176, 1 + 128, 6)
