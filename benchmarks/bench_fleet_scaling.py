@@ -89,9 +89,18 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--sizes", default="16,64,144,240")
     ap.add_argument("--seconds", type=float, default=15.0)
     ap.add_argument("--no-doc", action="store_true")
+    ap.add_argument("--rows", type=Path,
+                    help="write the section from the table rows of an earlier run's output")
+    ap.add_argument("--note", default="", help="a paragraph after the table (how it was run)")
     args = ap.parse_args(argv)
-    sizes = [int(x) for x in args.sizes.split(",")]
+    sizes = [] if args.rows else [int(x) for x in args.sizes.split(",")]
     rows = []
+    if args.rows:
+        seen = set()
+        for line in args.rows.read_text().splitlines():
+            if line.startswith("| ") and line[2].isdigit() and line not in seen:
+                seen.add(line)
+                rows.append(line)
     for n in sizes:
         if args.before is not None:
             r = measure(args.before.resolve(), n, args.seconds, requested=False)
@@ -101,13 +110,14 @@ def main(argv: list[str]) -> int:
         rows.append(row("after", n, r))
         print(rows[-1], flush=True)
     load = os.getloadavg()
+    load_text = "" if args.rows else f" (load average {load[0]:.1f} at the end)"
     text = f"""{HEADING}
 
-`python benchmarks/bench_fleet_scaling.py --before DIR` on {platform.machine()}, {os.cpu_count()} CPU(s), Python {platform.python_version()}: px4 personality, physics at 1 kHz (`sim.plant_rate_hz` 1000: one RK4 step per millisecond, stepped in whole steps to the clock every 2 ms tick), vehicles in the air on a grid, {args.seconds:g} s measured per run. **No sockets**: `bench_fleet_inprocess.py --gcs-streams` (simulation, autopilots, telemetry building; links discarded), CPU per simulated second and the real-time factor that CPU alone would allow. **Sockets**: `bench_fleet_sockets.py`: one `vehicle-emu --fleet` process whose vehicles all send to ONE ground-station port, driven by a stand-in for `gcs fly --mode rates` in another process (MAV_CMD_SET_MESSAGE_INTERVAL for what gcs/app.py asks: ATTITUDE_QUATERNION, LOCAL_POSITION_NED, HIGHRES_IMU 100 Hz, ATTITUDE_TARGET 10, EXTENDED_SYS_STATE, GLOBAL_POSITION_INT, HEARTBEAT 5, ATTITUDE and ODOMETRY off; OFFBOARD; a SET_ATTITUDE_TARGET with body rates and thrust to every vehicle every 10 ms); the fleet's CPU over the window from /proc (user + system), its real-time factor (simulated / wall seconds over its whole run), simulated time dropped, its tick lateness, the datagrams/s the ground station received, and the vehicles' mode at the end. "{args.before_label}": the checkout before this work with its default streams; "after": this one with `--streams requested`. The machine was shared with other engineers' jobs (load average {load[0]:.1f} at the end), which moves the socket figures by several points.
+`python benchmarks/bench_fleet_scaling.py --before DIR` on {platform.machine()}, {os.cpu_count()} CPU(s), Python {platform.python_version()}: px4 personality, physics at 1 kHz (`sim.plant_rate_hz` 1000: one RK4 step per millisecond, stepped in whole steps to the clock every 2 ms tick), vehicles in the air on a grid, {args.seconds:g} s measured per run. **No sockets**: `bench_fleet_inprocess.py --gcs-streams` (simulation, autopilots, telemetry building; links discarded), CPU per simulated second and the real-time factor that CPU alone would allow. **Sockets**: `bench_fleet_sockets.py`: one `vehicle-emu --fleet` process whose vehicles all send to ONE ground-station port, driven by a stand-in for `gcs fly --mode rates` in another process (MAV_CMD_SET_MESSAGE_INTERVAL for what gcs/app.py asks: ATTITUDE_QUATERNION, LOCAL_POSITION_NED, HIGHRES_IMU 100 Hz, ATTITUDE_TARGET 10, EXTENDED_SYS_STATE, GLOBAL_POSITION_INT, HEARTBEAT 5, ATTITUDE and ODOMETRY off; OFFBOARD; a SET_ATTITUDE_TARGET with body rates and thrust to every vehicle every 10 ms); the fleet's CPU over the window from /proc (user + system), its real-time factor (simulated / wall seconds over its whole run), simulated time dropped, its tick lateness, the datagrams/s the ground station received, and the vehicles' mode at the end. "{args.before_label}": the checkout before this work with its default streams; "after": this one with `--streams requested`. The machine was shared with other engineers' jobs, which moves the socket figures by several points{load_text}.
 
 | vehicles | version | no sockets: CPU of one core | no sockets: max real-time factor | sockets: CPU of one core (user + sys) | sockets: real-time factor | dropped | tick lateness mean / p99 | datagrams/s to the GCS | at the end |
 |---|---|---|---|---|---|---|---|---|---|
-""" + "\n".join(rows) + "\n" + ANALYSIS
+""" + "\n".join(rows) + "\n" + (f"\n{args.note}\n" if args.note else "") + ANALYSIS
     if not args.no_doc:
         write_section(ROOT / "docs" / "benchmarks.md", HEADING, text)
     print(text)

@@ -129,8 +129,10 @@ class Gcs:
         return [out[k, : ln[k]].tobytes() for k in range(self.n)]
 
     def drain(self, parse: bool) -> None:
+        """What has arrived, up to 1000 datagrams (parsing everything is slower than a large
+        fleet sends: an unbounded drain would stall the setpoints)."""
         sock, q, vz = self.sock, self.q, self.vz
-        while True:
+        for _ in range(1000):
             try:
                 data, addr = sock.recvfrom(4096)
             except BlockingIOError:
