@@ -28,7 +28,7 @@ from pathlib import Path
 
 from vehicle_emulator.jitcache import compiling
 from vehicle_emulator.personality import AUTOPILOT_NAMES, DEFAULT_AUTOPILOT, personality_of
-from vehicle_emulator.runner import Emulator, LinkPlan, RealtimeClock, RunStats
+from vehicle_emulator.runner import STREAM_MODES, Emulator, LinkPlan, RealtimeClock, RunStats
 from vehicle_emulator.team import TeamFileError, TeamSpec, VehicleSpec, default_vehicle, load_team
 from vehicle_emulator.vehicle import VehicleNode
 
@@ -113,6 +113,15 @@ def _parser() -> argparse.ArgumentParser:
         metavar="FILE",
         help="ardupilot: ArduPilot's message-intervals file (lines 'msgid interval_ms'), the "
         "streams its vehicles send from boot",
+    )
+    ap.add_argument(
+        "--streams",
+        choices=STREAM_MODES,
+        default="default",
+        help="default: each personality's streams from boot (px4: PX4's onboard set); "
+        "requested: HEARTBEAT only, every other stream off until a SET_MESSAGE_INTERVAL (or a "
+        "REQUEST_MESSAGE, once) asks for it, as a PX4 MAVLink instance in a mode without "
+        "streams (large fleets: only what the ground station reads is built and sent)",
     )
     pace = ap.add_mutually_exclusive_group()
     pace.add_argument(
@@ -216,6 +225,7 @@ async def _amain(args: argparse.Namespace) -> int:
         seed=args.seed,
         param_overrides=overrides,
         message_intervals_ms=intervals,
+        streams=args.streams,
     )
     warm_up(emu)
     clock = RealtimeClock(args.realtime_factor)

@@ -22,23 +22,24 @@ from vehicle_emulator.ardupilot import ArduCopter
 from vehicle_emulator.ardupilot_node import DEFAULT_RATES_HZ as ARDUPILOT_RATES_HZ
 from vehicle_emulator.ardupilot_node import ArduPilotNode
 from vehicle_emulator.autopilot import Autopilot, Severity
-from vehicle_emulator.codec import GenericEncoder
+from vehicle_emulator.codec import GenericEncoder, HotDecoder
 from vehicle_emulator.faults import FaultSchedule, LinkImpairment
 from vehicle_emulator.params import ParamStore, param_table
 from vehicle_emulator.personality import personality_of
 from vehicle_emulator.plant import FleetPlant
-from vehicle_emulator.server import UdpLink
+from vehicle_emulator.server import LinkPoller, UdpLink
 from vehicle_emulator.team import FaultSpec, VehicleSpec
 from vehicle_emulator.telemetry import FleetStatus, Telemetry
 from vehicle_emulator.vehicle import VehicleNode
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Clock", "Emulator", "LinkPlan", "RealtimeClock", "RunStats"]
+__all__ = ["STREAM_MODES", "Clock", "Emulator", "LinkPlan", "RealtimeClock", "RunStats"]
 
 AUTOPILOT_RATE_HZ = 50.0
 MAX_CATCHUP_S = 0.1
 LOCKSTEP_TIMEOUT_S = 0.25
+STREAM_MODES = ("default", "requested")
 
 
 class Clock(Protocol):
@@ -129,9 +130,14 @@ class Emulator:
         seed: int = 0,
         param_overrides: dict[str, float] | None = None,
         message_intervals_ms: dict[int, float] | None = None,
+        streams: str = "default",
     ) -> None:
         """``message_intervals_ms``: ArduPilot's message-intervals file (msgid -> interval),
-        preloaded into every ardupilot vehicle's streams."""
+        preloaded into every ardupilot vehicle's streams. ``streams``: ``default`` (each
+        personality's streams from boot) or ``requested`` (HEARTBEAT only, every other stream
+        off until the ground station asks for it: Telemetry.requested_only)."""
+        if streams not in STREAM_MODES:
+            raise ValueError(f"streams: expected one of {', '.join(STREAM_MODES)}, got {streams!r}")
         sysids = [s.sysid for s in specs]
         if len(set(sysids)) != len(sysids):
             raise ValueError(f"duplicate sysids {sysids}: ground stations would merge them")
@@ -173,6 +179,8 @@ class Emulator:
                     if not self.telemetry.set_interval(i, msgid, ms * 1e3, 0.0):
                         raise ValueError(f"message intervals: message id {msgid} is not one "
                                          "the emulator streams")
+            if streams == "requested":
+                self.telemetry.requested_only(i)
             if spec.starts_in_air:
                 self.plant.hold_here(i)
             obs_spec = [f for f in faults if f.vehicle_id == spec.vehicle_id]
@@ -205,9 +213,12 @@ class Emulator:
             node.refresh_status(0.0)
             self.nodes.append(node)
         self.links: list[UdpLink] = []
+        self.poller: LinkPoller | None = None
         self._setpoint_event: asyncio.Event | None = None
         self._fault_nodes = [node for node in self.nodes if not node.faults.idle]
-        self._ack_nodes: list[VehicleNode] = []  # nodes with a second COMMAND_ACK queued
+        # nodes with a second COMMAND_ACK queued, by index (a dataclass == on a node compares
+        # every field: a list's `in` cost a fleet's burst of DO_SET_MODEs seconds)
+        self._ack_nodes: dict[int, VehicleNode] = {}
 
     def warm_up(self) -> None:
         """Load/compile the JIT kernels on a throwaway copy, so the first real tick is not
@@ -216,6 +227,7 @@ class Emulator:
         for node in spare.nodes:
             node.links.append(_NullLink())
         spare.advance_to(0.05)
+        HotDecoder().decode([b""])  # the receive side's batch kernel
 
     @property
     def now_s(self) -> float:
@@ -255,8 +267,8 @@ class Emulator:
     def send_deferred_acks(self) -> None:
         """Second COMMAND_ACKs queued by the commands handled since the last tick (DO_SET_MODE
         with EMU_ACK_TWICE = 1): the next tick, a tick period after the first ACK at most."""
-        nodes, self._ack_nodes = self._ack_nodes, []
-        for node in nodes:
+        nodes, self._ack_nodes = self._ack_nodes, {}
+        for node in nodes.values():
             node.send_deferred_acks(self.now_s)
 
     def on_messages(self, node: VehicleNode, link: Any, msgs: list[Any], addr: Any) -> None:
@@ -264,8 +276,8 @@ class Emulator:
         now = self.now_s
         for msg in msgs:
             node.handle(now, msg, link, addr)
-        if node.deferred_acks and node not in self._ack_nodes:
-            self._ack_nodes.append(node)
+        if node.deferred_acks:
+            self._ack_nodes.setdefault(node.index, node)
         if self._setpoint_event is not None:
             self._setpoint_event.set()
         node.decode_rejected = sum(
@@ -275,7 +287,10 @@ class Emulator:
     # --- I/O -----------------------------------------------------------------------------------
 
     async def open_links(self, plans: Sequence[LinkPlan], clock: Clock) -> None:
-        """Bind every vehicle's UDP endpoints (OSError names the address on failure)."""
+        """Bind every vehicle's UDP endpoints (OSError names the address on failure); one
+        ``LinkPoller`` reads them all."""
+        if self.poller is None:
+            self.poller = LinkPoller()
         for node, plan in zip(self.nodes, plans, strict=True):
             pairs = [("api", plan.bind, plan.remote)]
             if plan.gcs_bind is not None and plan.gcs_remote is not None:
@@ -298,11 +313,14 @@ class Emulator:
                     link.name = f"vehicle {node.spec.vehicle_id} {kind} {host}:{port}"
                 for data in node.boot_banner():  # before any MAVLink (ArduPilot SITL)
                     link.send(data)
+                self.poller.attach(link)
                 node.links.append(link)
                 self.links.append(link)
 
     def close_links(self) -> None:
         """Close every socket."""
+        if self.poller is not None:
+            self.poller.close()
         for link in self.links:
             link.close()
 

@@ -7,21 +7,36 @@ given, sends only to its remote and receives only from it (a connected UDP socke
 impairments (loss window, seeded loss, latency, jitter, reordering: faults.py) apply to both
 directions. Bytes are decoded by a per-link ``PeerDecoder`` (one parser per peer address) and
 handed to a callback.
+
+``LinkPoller`` reads many endpoints in bulk (a fleet's hundreds of sockets): one asyncio reader
+(an epoll descriptor) for all of them; at each wake-up every ready socket is drained and the
+datagrams are decoded together (codec.HotDecoder: the setpoint streams without pymavlink's
+parser), then delivered in arrival order, exactly as one callback per datagram would. Sends go
+straight to the socket (asyncio's transport only when its buffer holds earlier data).
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
+import select
+import socket
 from collections.abc import Callable
 from typing import Any
 
-from vehicle_emulator.codec import PeerDecoder
+from vehicle_emulator.codec import HotDecoder, PeerDecoder
 from vehicle_emulator.faults import LinkImpairment
 
 log = logging.getLogger(__name__)
 
-__all__ = ["UdpLink"]
+__all__ = ["LinkPoller", "UdpLink"]
+
+MAX_DATAGRAM = 65536
+# datagrams read per wake-up, from one socket and in all: a backlog is worked off between ticks
+# (the epoll is level-triggered: what is left wakes the loop again), not in one long batch that
+# would hold the physics up
+MAX_PER_SOCKET = 8
+MAX_PER_WAKEUP = 512
 
 Address = tuple[str, int]
 
@@ -49,6 +64,7 @@ class UdpLink(asyncio.DatagramProtocol):
         self.sent_datagrams = 0
         self.send_errors = 0
         self.connected = False
+        self.sock: socket.socket | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
 
     @classmethod
@@ -65,13 +81,24 @@ class UdpLink(asyncio.DatagramProtocol):
         """Bind ``bind`` (port 0: an ephemeral one) and return the endpoint (OSError if the port
         is taken); ``connect``: a connected socket to ``remote`` (see the module docstring)."""
         loop = asyncio.get_running_loop()
-        _, proto = await loop.create_datagram_endpoint(
-            lambda: cls(name, remote, impairment, now_s, on_messages, follow_sender=not connect),
-            local_addr=bind,
-            remote_addr=remote if connect else None,
-        )
+        family, _, _, _, address = socket.getaddrinfo(bind[0], bind[1], type=socket.SOCK_DGRAM)[0]
+        sock = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            sock.bind(address)
+            if connect:
+                sock.connect(remote)
+            sock.setblocking(False)
+            _, proto = await loop.create_datagram_endpoint(
+                lambda: cls(name, remote, impairment, now_s, on_messages,
+                            follow_sender=not connect),
+                sock=sock,
+            )
+        except BaseException:
+            sock.close()
+            raise
         proto._loop = loop
         proto.connected = connect
+        proto.sock = sock
         return proto
 
     @property
@@ -99,7 +126,14 @@ class UdpLink(asyncio.DatagramProtocol):
         log.debug("%s: %s", self.name, exc)
 
     def _deliver(self, data: bytes, addr: Address) -> None:
-        msgs = self.decoder.feed(data, addr)
+        self._hand_over(self.decoder.feed(data, addr), addr)
+
+    def _deliver_decoded(self, data: bytes, addr: Address, msgs: list[Any]) -> None:
+        """A datagram ``LinkPoller`` decoded in batch (``msgs`` not empty)."""
+        self.decoder.count_decoded(data, addr, len(msgs))
+        self._hand_over(msgs, addr)
+
+    def _hand_over(self, msgs: list[Any], addr: Address) -> None:
         if not msgs:
             return
         if self.follow_sender and addr != self.remote:
@@ -126,6 +160,17 @@ class UdpLink(asyncio.DatagramProtocol):
         if self.transport is None or self.transport.is_closing():
             return
         try:
+            sock = self.sock
+            if sock is not None and not self.transport.get_write_buffer_size():
+                try:  # straight to the socket: asyncio's sendto costs as much again
+                    if self.connected:
+                        sock.send(data)
+                    else:
+                        sock.sendto(data, target)
+                    self.sent_datagrams += 1
+                    return
+                except (BlockingIOError, InterruptedError):
+                    pass  # the socket buffer is full: asyncio's transport queues it
             if self.connected:  # the connected peer only
                 self.transport.sendto(data)
             else:
@@ -139,3 +184,73 @@ class UdpLink(asyncio.DatagramProtocol):
         """Close the socket."""
         if self.transport is not None:
             self.transport.close()
+
+
+class LinkPoller:
+    """Bulk reader of many ``UdpLink``s (module docstring). ``attach`` each link after it
+    opened; ``close`` before closing the links. ``batches`` and ``datagrams`` count the
+    wake-ups and what they read."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop | None = None) -> None:
+        self._loop = loop or asyncio.get_running_loop()
+        self._epoll = select.epoll()
+        self._links: dict[int, UdpLink] = {}
+        self._hot = HotDecoder()
+        self.batches = 0
+        self.datagrams = 0
+        self._loop.add_reader(self._epoll.fileno(), self._ready)
+
+    def attach(self, link: UdpLink) -> None:
+        """Read ``link`` here instead of through its asyncio transport."""
+        if link.sock is None or link.transport is None:
+            raise ValueError(f"{link.name}: not open")
+        link.transport.pause_reading()
+        fd = link.sock.fileno()
+        self._links[fd] = link
+        self._epoll.register(fd, select.EPOLLIN)
+
+    def close(self) -> None:
+        """Stop reading (idempotent)."""
+        if self._epoll.closed:
+            return
+        self._loop.remove_reader(self._epoll.fileno())
+        self._epoll.close()
+
+    def _ready(self) -> None:
+        items: list[tuple[UdpLink, bytes, Address]] = []
+        for fd, _events in self._epoll.poll(0, MAX_PER_WAKEUP // MAX_PER_SOCKET):
+            link = self._links.get(fd)
+            if link is not None:
+                self._drain(link, items)
+        if not items:
+            return
+        self.batches += 1
+        self.datagrams += len(items)
+        decoded = self._hot.decode([data for _, data, _ in items])
+        for (link, data, addr), msgs in zip(items, decoded, strict=True):
+            if msgs is not None and link.decoder.idle(addr):
+                link._deliver_decoded(data, addr, msgs)
+            else:
+                link._deliver(data, addr)
+
+    @staticmethod
+    def _drain(link: UdpLink, items: list[tuple[UdpLink, bytes, Address]]) -> None:
+        """The datagrams waiting on ``link``'s socket (MAX_PER_SOCKET at most), through its
+        impairments."""
+        sock = link.sock
+        assert sock is not None
+        for _ in range(MAX_PER_SOCKET):
+            try:
+                data, addr = sock.recvfrom(MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as exc:  # e.g. ICMP port unreachable on a connected socket
+                link.error_received(exc)
+                continue
+            delay = link.impairment.admit(link.now_s())
+            if delay is None:
+                continue
+            if delay > 0.0 and link._loop is not None:
+                link._loop.call_later(delay, link._deliver, data, addr)
+            else:
+                items.append((link, data, addr))

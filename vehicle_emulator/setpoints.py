@@ -143,20 +143,19 @@ def from_attitude_target(
             clamped = clamped or c
             yaw_ff = -y  # FRD z (down) -> FLU z (up)
         return Decoded(AttitudeSetpoint(r_enu_flu, yaw_ff, t), None, clamped)
-    rates = [
-        float(body_rates_frd[0]),
-        float(body_rates_frd[1]),
-        0.0 if yaw_ignored else float(body_rates_frd[2]),
-    ]
-    if not all(math.isfinite(x) for x in rates):
+    # rates mode's hot path (one call per setpoint): written out, _clamp's rule per axis
+    r0 = float(body_rates_frd[0])
+    r1 = float(body_rates_frd[1])
+    r2 = 0.0 if yaw_ignored else float(body_rates_frd[2])
+    isfinite = math.isfinite
+    if not (isfinite(r0) and isfinite(r1) and isfinite(r2)):
         return Decoded(None, "body rate not finite")
-    out = []
-    for x in rates:
-        y, c = _clamp(x, -RATE_LIMIT_RADPS, RATE_LIMIT_RADPS)
-        clamped = clamped or c
-        out.append(y)
-    flu = (out[0], -out[1], -out[2])
-    return Decoded(RatesSetpoint(flu, t), None, clamped)
+    lim = RATE_LIMIT_RADPS
+    y0 = min(max(r0, -lim), lim)
+    y1 = min(max(r1, -lim), lim)
+    y2 = min(max(r2, -lim), lim)
+    clamped = clamped or y0 != r0 or y1 != r1 or y2 != r2
+    return Decoded(RatesSetpoint((y0, -y1, -y2), t), None, clamped)
 
 
 def from_actuator_control_target(group: int, controls: Sequence[float]) -> Decoded:

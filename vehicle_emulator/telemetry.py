@@ -160,7 +160,9 @@ class Telemetry:
         self.interval_s = self.default_interval_s.copy()
         # one random phase per vehicle: a vehicle's messages fall on the same ticks (fewer
         # datagrams), different vehicles' messages do not (an even load)
-        self.next_due_s = start_s + rng.random((n, 1)) * 0.01 + 0.0 * self.interval_s
+        phase = rng.random((n, 1)) * 0.01
+        self.phase_s = start_s + phase[:, 0]
+        self.next_due_s = start_s + phase + 0.0 * self.interval_s
         self.encoders = {nm: BatchEncoder(_msg_class(nm)) for nm in self.names}
         self.seq = np.zeros(n, dtype=np.uint8)
         self.sent = np.zeros(len(self.names), dtype=np.int64)
@@ -198,8 +200,22 @@ class Telemetry:
             if math.isinf(interval) or name in delayed:
                 self.next_due_s[vehicle, k] = now_s + interval
 
+    def requested_only(self, vehicle: int) -> None:
+        """``--streams requested`` (PX4's MAVLink instance modes, a mode with no streams):
+        every stream of the vehicle off but HEARTBEAT, until a SET_MESSAGE_INTERVAL (or a
+        REQUEST_MESSAGE, once) asks for it; interval 0 ("default rate") then gives the
+        personality's rate."""
+        hb = self.index["HEARTBEAT"]
+        for k in range(len(self.names)):
+            if k != hb:
+                self.interval_s[vehicle, k] = math.inf
+                self.next_due_s[vehicle, k] = math.inf
+
     def set_interval(self, vehicle: int, msgid: int, interval_us: float, now_s: float) -> bool:
-        """MAV_CMD_SET_MESSAGE_INTERVAL semantics: -1 off, 0 default, > 0 period in us.
+        """MAV_CMD_SET_MESSAGE_INTERVAL semantics: -1 off, 0 default, > 0 period in us. The
+        first message comes at the first point of the vehicle's phase grid (phase + j interval)
+        after ``now_s``, within one interval: a ground station setting its rates one command at
+        a time must not scatter a vehicle's messages over several ticks, each its own datagram.
         Returns False for a message the emulator does not stream."""
         k = self.msgids.get(int(msgid))
         if k is None:
@@ -210,7 +226,12 @@ class Telemetry:
             self.interval_s[vehicle, k] = self.default_interval_s[vehicle, k]
         else:
             self.interval_s[vehicle, k] = max(interval_us * 1e-6, 1e-3)
-        self.next_due_s[vehicle, k] = now_s + min(self.interval_s[vehicle, k], 1e9)
+        iv = self.interval_s[vehicle, k]
+        if math.isinf(iv):
+            self.next_due_s[vehicle, k] = now_s + 1e9
+        else:  # on the vehicle's phase grid: its messages keep sharing ticks (and datagrams)
+            phase = float(self.phase_s[vehicle])
+            self.next_due_s[vehicle, k] = phase + iv * (math.floor((now_s - phase) / iv) + 1.0)
         return True
 
     def interval_us(self, vehicle: int, msgid: int) -> int:

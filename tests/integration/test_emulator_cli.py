@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -15,7 +16,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from vehicle_emulator.geodesy import geodetic_to_enu
 from vehicle_emulator.telemetry import HOME_ALT_M, HOME_LAT_DEG, HOME_LON_DEG
-from vehicle_emulator.testing import clients_on_port_block, free_udp_port
+from vehicle_emulator.testing import clients_on_port_block, free_udp_port, free_udp_port_block
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 
@@ -158,3 +159,72 @@ def test_bad_team_file_names_the_key(tmp_path):
         timeout=60,
     )
     assert out.returncode != 0 and "no vehicle with id 9" in out.stderr
+
+
+def test_fleet_behind_one_gcs_port_with_requested_streams(tmp_path):
+    # GIVEN three vehicles whose links all send to ONE ground-station port (a 240-vehicle team's
+    # layout), each binding its own port, run with --streams requested
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    gcs.bind(("127.0.0.1", 0))
+    gcs.settimeout(0.5)
+    gcs_port = gcs.getsockname()[1]
+    bind_base = free_udp_port_block(3)
+    vehicles = [{"id": k + 1, "initial": {"position_enu_m": [3.0 * k, 0.0, 10.0]},
+                 "link": {"local_port": gcs_port, "remote_host": "127.0.0.1",
+                          "remote_port": bind_base + k}} for k in range(3)]
+    team = tmp_path / "team.yaml"
+    team.write_text(yaml.safe_dump({"vehicles": vehicles}))
+    proc = subprocess.Popen([*EMU, "--fleet", "--team", str(team), "--streams", "requested"],
+                            stdout=subprocess.DEVNULL, stderr=open(tmp_path / "fleet.log", "w"))  # noqa: SIM115
+    parser = mavlink.MAVLink(None)
+    mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+
+    def receive(seconds: float) -> list[tuple[int, object]]:
+        out, end = [], time.monotonic() + seconds
+        while time.monotonic() < end:
+            try:
+                data, addr = gcs.recvfrom(4096)
+            except TimeoutError:
+                continue
+            out += [(addr[1], m) for m in parser.parse_buffer(data) or []]
+        return out
+
+    try:
+        # THEN each vehicle's HEARTBEAT comes from its own port with its own sysid, and no
+        # other stream before one is asked for
+        got: list[tuple[int, object]] = []
+        deadline = time.monotonic() + 60
+        while len({m.get_srcSystem() for _, m in got if m.get_type() == "HEARTBEAT"}) < 3:
+            assert time.monotonic() < deadline, "not every vehicle heard"
+            got += receive(0.5)
+        got += receive(1.5)
+        for port, m in got:
+            assert port == bind_base + m.get_srcSystem() - 1
+        assert {m.get_type() for _, m in got} <= {"HEARTBEAT", "STATUSTEXT", "GPS_GLOBAL_ORIGIN"}
+        # WHEN the ground station asks each vehicle, from the shared port, for
+        # ATTITUDE_QUATERNION at 50 Hz and streams rates setpoints to it
+        for k in range(3):
+            cmd = mavlink.MAVLink_command_long_message(k + 1, 1, 511, 0, 31, 20_000, 0, 0, 0, 0, 0)
+            gcs.sendto(cmd.pack(mav), ("127.0.0.1", bind_base + k))
+        for _ in range(10):
+            for k in range(3):
+                sp = mavlink.MAVLink_set_attitude_target_message(
+                    0, k + 1, 1, 128, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0.5)
+                gcs.sendto(sp.pack(mav), ("127.0.0.1", bind_base + k))
+        got = receive(1.0)
+        # THEN every vehicle ACKs (to the shared port) and streams what was asked, and only that
+        acks = {m.get_srcSystem(): m.result for _, m in got if m.get_type() == "COMMAND_ACK"}
+        assert acks == {1: 0, 2: 0, 3: 0}
+        for k in range(3):
+            n = sum(1 for _, m in got
+                    if m.get_type() == "ATTITUDE_QUATERNION" and m.get_srcSystem() == k + 1)
+            assert 35 <= n <= 55, (k, n)
+        assert {m.get_type() for _, m in got} <= {"HEARTBEAT", "COMMAND_ACK",
+                                                   "ATTITUDE_QUATERNION", "STATUSTEXT"}
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        gcs.close()
+    assert "Traceback" not in (tmp_path / "fleet.log").read_text()

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from vehicle_emulator.codec import BatchEncoder, GenericEncoder, PeerDecoder
+from vehicle_emulator.codec import BatchEncoder, GenericEncoder, HotDecoder, PeerDecoder
 from vehicle_emulator.telemetry import DEFAULT_RATES_HZ
 
 
@@ -72,3 +72,69 @@ def test_decoder_counts_every_kind_of_junk_and_keeps_going():
     assert [m.get_type() for m in dec.feed(good[7:], "a")] == ["COMMAND_LONG"]
     st = dec.stats
     assert st.bad_crc >= 1 and st.messages == 2 and st.rejected >= 2
+
+
+# SET_ATTITUDE_TARGET from 255/190, seq 7: time_boot_ms 1000, q (1, 0, 0, 0), rates (0.5, -0.25, 0),
+# thrust 0.5, target 3/1, type_mask 128 (trailing zeros of the payload truncated)
+SAT_FRAME = bytes.fromhex(
+    "fd27000007ffbe520000e80300000000803f0000000000000000000000000000003f000080be0000000000"
+    "00003f030180a203"
+)
+HB_FRAME = bytes.fromhex("fd09000000ffbe0000000000000006080004033d48")
+
+
+def test_hot_decoder_reads_literal_frames_as_pymavlink_does():
+    # GIVEN a datagram with a SET_ATTITUDE_TARGET and one with it and a HEARTBEAT
+    # WHEN decoded in one batch
+    out = HotDecoder().decode([SAT_FRAME, SAT_FRAME + HB_FRAME])
+    # THEN the fields, the header and the types are pymavlink's
+    (sat,), (sat2, hb) = out
+    assert (sat.get_type(), sat.get_msgId(), sat.get_srcSystem(), sat.get_srcComponent(),
+            sat.get_seq()) == ("SET_ATTITUDE_TARGET", 82, 255, 190, 7)
+    assert sat.time_boot_ms == 1000 and sat.target_system == 3 and sat.target_component == 1
+    assert sat.type_mask == 128 and sat.q == [1.0, 0.0, 0.0, 0.0]
+    assert (sat.body_roll_rate, sat.body_pitch_rate, sat.body_yaw_rate, sat.thrust) == (
+        0.5, -0.25, 0.0, 0.5)
+    assert hb.get_type() == "HEARTBEAT" and (hb.type, hb.autopilot, hb.system_status) == (6, 8, 4)
+    for ours, datagram in ((sat, SAT_FRAME), (hb, HB_FRAME)):
+        (ref,) = PeerDecoder().feed(datagram)
+        assert ours.to_dict() == ref.to_dict()
+        for name in ref.get_fieldnames():
+            assert type(getattr(ours, name)) is type(getattr(ref, name)), name
+
+
+@pytest.mark.parametrize(
+    "datagram",
+    [
+        pytest.param(SAT_FRAME[:-1] + bytes([SAT_FRAME[-1] ^ 1]), id="bad CRC"),
+        pytest.param(SAT_FRAME[:-3], id="truncated"),
+        pytest.param(SAT_FRAME[:2] + b"\x01" + SAT_FRAME[3:], id="signed flag"),
+        pytest.param(SAT_FRAME + b"\x00", id="trailing byte"),
+        pytest.param(b"", id="empty"),
+        pytest.param(mavlink.MAVLink_command_long_message(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)
+                     .pack(mavlink.MAVLink(None, 255, 190)), id="not hot"),
+        pytest.param(SAT_FRAME + mavlink.MAVLink_command_long_message(
+            1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0).pack(mavlink.MAVLink(None, 255, 190)),
+            id="hot and not hot"),
+        pytest.param(mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3)
+                     .pack(mavlink.MAVLink(None, 255, 190), force_mavlink1=True), id="MAVLink 1"),
+    ],
+)
+def test_hot_decoder_leaves_everything_else_to_pymavlink(datagram):
+    # GIVEN a datagram that is not only whole, good, unsigned MAVLink 2 hot frames
+    # WHEN decoded in a batch beside a good one THEN it is left to the full parser (None)
+    assert HotDecoder().decode([datagram, SAT_FRAME])[0] is None
+    assert HotDecoder().decode([SAT_FRAME, datagram])[0] is not None
+
+
+def test_peer_decoder_is_not_idle_while_it_holds_a_partial_frame():
+    # GIVEN a parser that got half a frame from one peer
+    dec = PeerDecoder()
+    assert dec.idle("a")
+    assert dec.feed(SAT_FRAME[:20], "a") == []
+    # THEN that peer's next datagram must go to it (the fast path would lose the half frame)
+    assert not dec.idle("a") and dec.idle("b")
+    # AND a batch-decoded datagram is counted as feed counts one
+    dec.count_decoded(SAT_FRAME, "b", 1)
+    assert (dec.stats.datagrams, dec.stats.bytes, dec.stats.messages) == (
+        2, 20 + len(SAT_FRAME), 1)
