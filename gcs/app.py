@@ -122,8 +122,11 @@ logger = logging.getLogger(__name__)
 REPORT_NAME = "report.json"
 TIMESERIES_NAME = "timeseries.csv"
 TLOG_NAME = "flight.tlog"
-#: Streams that are not needed and cost CPU on both sides: switched off (0) or slowed down.
-OPTIONAL_RATES_HZ = {"ATTITUDE": 0.0, "ODOMETRY": 0.0, "GLOBAL_POSITION_INT": 5.0, "HEARTBEAT": 5.0}
+#: Streams that are not needed and cost CPU on both sides: switched off (0) or slowed down; and
+#: the few the checks read that a vehicle streaming only what is asked for (PX4's MAVLink modes
+#: without defaults, `vehicle-emu --streams requested`) would not send: SYS_STATUS (pre-arm).
+OPTIONAL_RATES_HZ = {"ATTITUDE": 0.0, "ODOMETRY": 0.0, "GLOBAL_POSITION_INT": 5.0, "HEARTBEAT": 5.0,
+                     "SYS_STATUS": 2.0}
 MAX_POSITION_RATE_HZ = 100.0
 #: EXTENDED_SYS_STATE (landed state: preflight, takeoff, stopping); ArduPilot sends it only when
 #: asked with SET_MESSAGE_INTERVAL (it is in none of its stream groups).
