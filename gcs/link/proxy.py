@@ -858,6 +858,7 @@ class TeamSetpoints:
         n = len(self.proxies)
         self._target_sys = np.array([p.config.sysid for p in self.proxies], dtype=np.int64)
         self._target_comp = np.array([p.config.compid for p in self.proxies], dtype=np.int64)
+        self._t0_s = np.array([p._t0_s for p in self.proxies])  # each link's boot, for time_boot_ms
         self._q = np.tile(np.array(_IDENTITY_Q), (n, 1))
         self._out = np.empty((n, 12 + SET_ATTITUDE_TARGET_LEN), dtype=np.uint8)
         self._lengths = np.empty(n, dtype=np.int64)
@@ -877,7 +878,8 @@ class TeamSetpoints:
             proxies[k]._n["thrust_clamped"] += 1
         thrust = np.clip(thrust, 0.0, 1.0)
         seq = np.array([p._codec.take_seq() for p in proxies], dtype=np.uint8)
-        boot_ms = np.array([p._time_boot_ms() for p in proxies], dtype=np.int64)
+        now_s = proxies[0]._clock.now_s()  # one clock for the team (the app's proxies share one)
+        boot_ms = ((now_s - self._t0_s[idx]) * 1000.0).astype(np.int64) & 0xFFFFFFFF
         first = proxies[0]._codec
         m = len(rows)
         out, lengths = self._out[:m], self._lengths[:m]
