@@ -253,9 +253,10 @@ def test_scenario_one_actuators_mode_at_250_hz(tmp_path):
 
 
 def test_actuators_mode_is_refused_in_preflight_against_px4_1_16(tmp_path):
-    # GIVEN the px4 personality (PX4 v1.16.0 ignores SET_ACTUATOR_CONTROL_TARGET, silently)
+    # GIVEN the px4 personality (PX4 v1.16.0 ignores SET_ACTUATOR_CONTROL_TARGET, silently),
+    # hovering 5 m lower than Scenario I's starts (3-7 m up: the abort action's landing is shorter)
     base = free_udp_port_block(4)
-    team = team_file(tmp_path, base, duration_s=10.0, autopilot="px4")
+    team = team_file(tmp_path, base, duration_s=10.0, autopilot="px4", z_shift=-5.0)
     with emulators(team, base, tmp_path):
         gcs = Gcs(team, tmp_path / "run", "--mode", "actuators")
         code, out = gcs.finish(120)
