@@ -13,7 +13,7 @@ address it sends to, so the team file's links learn their addresses (`learn_remo
 (EXTENDED_SYS_STATE included) with SET_MESSAGE_INTERVAL; no message-intervals file, no forced
 bind. The vehicles boot at once (EMU_BOOT_SCALE=0) to keep the flights short; `gcs fly` waits for
 a copter that is not ready yet (no position estimate, GUIDED not armable, ~41 s after a real
-boot): test_fly_confirmed.py flies that.
+boot): test_fly_confirmed_ardupilot.py flies that.
 
 The PARAM_REQUEST_READ retry test keeps a small scripted peer: it needs a vehicle that leaves the
 first request unanswered, which no autopilot does on purpose.
@@ -77,7 +77,8 @@ def team_file(tmp: Path, gcs_ports: list[int], remote_ports: list[int] | None = 
     data["graph"]["edges"] = [[1, 2]]
     data["controller"]["mode"] = "rates"
     # the links and the modes are tested here, from where the takeoff leaves the copters; the
-    # go-to-start in GUIDED is flown in test_fly_go_to_start.py and test_fly_confirmed.py
+    # go-to-start in GUIDED is flown in test_fly_go_to_start.py and
+    # test_fly_confirmed_ardupilot.py
     data["fly"]["go_to_start"] = {"enabled": False}
     for k, v in enumerate(data["vehicles"]):
         v["link"] = ({"local_port": gcs_ports[k], "learn_remote": True} if remote_ports is None

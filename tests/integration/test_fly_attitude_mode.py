@@ -117,6 +117,8 @@ def test_ardupilot_pair_attitude_mode_with_the_thrust_equivalent_hover_mass(tmp_
     for k, v in enumerate(data["vehicles"]):
         v["link"] = {"local_port": ports[k], "learn_remote": True}
         v["estimates"]["mhat"] = "from_hover"
+        # starts 5 m lower than Scenario I's (4 and 6 m up): a shorter climb and landing
+        v["initial"]["position_enu_m"][2] -= 5.0
     team = tmp_path / "team.yaml"
     team.write_text(yaml.safe_dump(data, sort_keys=False))
     with copters(tmp_path, ports, 8, 8):

@@ -13,6 +13,7 @@ import dataclasses
 import datetime as dt
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -189,12 +190,35 @@ def check_scenario_one(report: dict, code: int, out: str) -> None:
     np.testing.assert_allclose(est, truth, atol=0.02)
 
 
-def test_scenario_one_rates_mode_at_100_hz(tmp_path):
+#: each vehicle's EKF origin in the team frame [m]: up to 50 m apart, one 3 m below the others
+ORIGINS_ENU_M = ([25.0, 0.0, 0.0], [-25.0, 0.0, 0.0], [0.0, 40.0, -3.0], [10.0, -10.0, 0.0])
+
+
+def test_scenario_one_rates_mode_at_100_hz_with_origins_50_m_apart(tmp_path):
+    """Scenario I in rates mode, the vehicles booted at different places: each emulated
+    vehicle's LOCAL_POSITION_NED is relative to its own EKF origin (up to 50 m from the team
+    frame's origin), and `gcs fly` ties every local frame to the team frame through the
+    GPS_GLOBAL_ORIGIN it reads (docs/gcs.md, "One team frame"); the same Scenario I figures as
+    with one shared origin (the actuators-mode flight below keeps that)."""
     base = free_udp_port_block(4)
     team = team_file(tmp_path, base, duration_s=32.0)
+    data = yaml.safe_load(team.read_text())
+    data["emulator"]["origin"] = "own"
+    for v, origin in zip(data["vehicles"], ORIGINS_ENU_M, strict=True):
+        v["emulator"] = {"origin_enu_m": origin}
+    team.write_text(yaml.safe_dump(data, sort_keys=False))
     with emulators(team, base, tmp_path):
         gcs = Gcs(team, tmp_path / "run", "--mode", "rates", "--end-action", "hold")
         code, out = gcs.finish(180)
+    log = gcs.log_path.read_text()
+    # THEN each vehicle was tied through its own origin, printed with its team-frame offset
+    # (GPS_GLOBAL_ORIGIN's 1e-7 deg is about 1 cm)
+    for k, origin in enumerate(ORIGINS_ENU_M, start=1):
+        line = re.search(rf"vehicle {k} \(sysid {k}\): origin .* \(GPS_GLOBAL_ORIGIN\): at "
+                         r"\(([-\d.]+), ([-\d.]+), ([-\d.]+)\) m in the team frame", log)
+        assert line is not None, log[-3000:]
+        assert [float(g) for g in line.groups()] == pytest.approx(origin, abs=0.02)
+    # AND the formation is Scenario I's, as with a shared origin
     report = gcs.report()
     check_scenario_one(report, code, out)
     assert report["source"] == "fly" and report["tick"]["rate_hz"] == 100.0
@@ -229,9 +253,10 @@ def test_scenario_one_actuators_mode_at_250_hz(tmp_path):
 
 
 def test_actuators_mode_is_refused_in_preflight_against_px4_1_16(tmp_path):
-    # GIVEN the px4 personality (PX4 v1.16.0 ignores SET_ACTUATOR_CONTROL_TARGET, silently)
+    # GIVEN the px4 personality (PX4 v1.16.0 ignores SET_ACTUATOR_CONTROL_TARGET, silently),
+    # hovering 5 m lower than Scenario I's starts (3-7 m up: the abort action's landing is shorter)
     base = free_udp_port_block(4)
-    team = team_file(tmp_path, base, duration_s=10.0, autopilot="px4")
+    team = team_file(tmp_path, base, duration_s=10.0, autopilot="px4", z_shift=-5.0)
     with emulators(team, base, tmp_path):
         gcs = Gcs(team, tmp_path / "run", "--mode", "actuators")
         code, out = gcs.finish(120)

@@ -19,11 +19,12 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
 def test_a_half_second_delay_step_on_one_vehicle_stops_the_formation_naming_it(tmp_path):
     # GIVEN Scenario I in formation, vehicle 2's link both ways delayed by 0.5 s from t = 8 s
     # for 2 s (a radio link's queue filling up); link_lost_after_s 1 s as for a radio link, so
-    # the 0.5 s without packets at the step's onset is not a lost link
+    # the 0.5 s without packets at the step's onset is not a lost link; the starts 5 m lower than
+    # Scenario I's (3-7 m up: the abort action's landing is shorter)
     base = free_udp_port_block(4)
     step = [{"kind": "packet_loss", "vehicle": 2, "at_s": 8.0, "duration_s": 2.0,
              "latency_ms": 500.0}]
-    team = team_file(tmp_path, base, duration_s=30.0, faults=step)
+    team = team_file(tmp_path, base, duration_s=30.0, faults=step, z_shift=-5.0)
     data = yaml.safe_load(team.read_text())
     data["fly"]["link_lost_after_s"] = 1.0
     team.write_text(yaml.safe_dump(data, sort_keys=False))
@@ -54,13 +55,14 @@ def test_a_half_second_delay_step_on_one_vehicle_stops_the_formation_naming_it(t
 
 
 def delayed_team(tmp_path, base: int, latency_ms: float, *, probability: float = 0.0,
-                 duration_s: float = 10.0, fly: dict | None = None, at_s: float = 0.0) -> Path:
-    """Scenario I (test_fly_emulator.team_file) with `latency_ms` + 10 ms uniform jitter and
-    `probability` loss on every link, both directions, from `at_s` on the fault clock, and `fly`
-    settings over the file's."""
+                 duration_s: float = 10.0, fly: dict | None = None, at_s: float = 0.0,
+                 z_shift: float = 0.0) -> Path:
+    """Scenario I (test_fly_emulator.team_file, its starts ``z_shift`` m higher) with
+    `latency_ms` + 10 ms uniform jitter and `probability` loss on every link, both directions,
+    from `at_s` on the fault clock, and `fly` settings over the file's."""
     faults = [{"kind": "packet_loss", "vehicle": k, "at_s": at_s, "probability": probability,
                "latency_ms": latency_ms, "jitter_ms": 10.0} for k in (1, 2, 3, 4)]
-    team = team_file(tmp_path, base, duration_s=duration_s, faults=faults)
+    team = team_file(tmp_path, base, duration_s=duration_s, faults=faults, z_shift=z_shift)
     data = yaml.safe_load(team.read_text())
     for key, value in (fly or {}).items():
         if isinstance(value, dict):
@@ -73,9 +75,11 @@ def delayed_team(tmp_path, base: int, latency_ms: float, *, probability: float =
 
 def test_a_mode_unstable_at_the_measured_delay_is_refused_before_anything_is_commanded(tmp_path):
     # GIVEN links with 50 ms (+ 0-10 ms jitter) each way from the vehicles' boot, and a team file
-    # that declares 10 ms (fly.link_delay_s) with the paper's gains, stable only at that delay
+    # that declares 10 ms (fly.link_delay_s) with the paper's gains, stable only at that delay;
+    # the vehicles hover 5 m lower than Scenario I's starts (3-7 m up: the abort action's
+    # landing is shorter)
     base = free_udp_port_block(4)
-    team = delayed_team(tmp_path, base, 50.0)
+    team = delayed_team(tmp_path, base, 50.0, z_shift=-5.0)
     with emulators(team, base, tmp_path, args=("--param", "EMU_FLT_T0=1")):
         gcs = Gcs(team, tmp_path / "run", "--mode", "rates")
         code, out = gcs.finish(120)

@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[2]
 AUTOPILOTS = {1: "px4", 2: "ardupilot", 3: "px4", 4: "ardupilot"}
 
 
-def mixed_team(tmp: Path, duration_s: float) -> Path:
+def mixed_team(tmp: Path, duration_s: float, z_shift: float = 0.0) -> Path:
     gcs_base, bind_base = free_udp_port_block(4), free_udp_port_block(4)
     data = yaml.safe_load((ROOT / "configs" / "square4.yaml").read_text())
     data["name"] = "mixed4"
@@ -31,6 +31,7 @@ def mixed_team(tmp: Path, duration_s: float) -> Path:
     data["emulator"] = {"origin": "shared"}
     for k, v in enumerate(data["vehicles"]):
         autopilot = AUTOPILOTS[v["id"]]
+        v["initial"]["position_enu_m"][2] += z_shift
         x, y, _ = v["initial"]["position_enu_m"]
         v["emulator"] = {"autopilot": autopilot, "boot_position_enu_m": [x, y, 0.0]}
         v["link"] = ({"local_port": gcs_base + k, "remote_port": bind_base + k}
@@ -42,8 +43,9 @@ def mixed_team(tmp: Path, duration_s: float) -> Path:
 
 def test_mixed_px4_and_ardupilot_team_flies_from_the_ground_twice(tmp_path: Path) -> None:
     # GIVEN Scenario I with vehicles 1 and 3 on PX4, 2 and 4 on ArduPilot (GUID_OPTIONS 8, its
-    # boot on a quarter of the recorded timeline), all on the ground below their starts
-    team = mixed_team(tmp_path, duration_s=12.0)
+    # boot on a quarter of the recorded timeline), all on the ground below their starts, which
+    # are 5 m lower than Scenario I's (3-7 m up: a shorter climb and landing, the same sequence)
+    team = mixed_team(tmp_path, duration_s=3.0, z_shift=-5.0)
     fleet = subprocess.Popen(
         [sys.executable, "-m", "vehicle_emulator.cli", "--fleet", "--team", str(team),
          "--param", "GUID_OPTIONS=8", "--param", "EMU_BOOT_SCALE=0.25", "--log-level", "WARNING"],
