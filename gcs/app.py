@@ -410,6 +410,7 @@ class Flight:
         self.shared_ports = shared_ports(self.links)  # (host, port) -> the vehicles on it
         self.hot = HotTable(len(self.links))  # the team's hot telemetry, a row per link
         self._team_setpoints: TeamSetpoints | None = None  # once the proxies are open
+        self._batchable: list[bool] = []
         self.proxies: list[VehicleProxy] = []
         self._proxy_by_id: dict[int, VehicleProxy] = {}
         self.builder = FlightLogBuilder(
@@ -971,11 +972,12 @@ class Flight:
         rows = [i for i in range(self.n) if self.ids[i] in streaming]
         if self.setup.mode == "rates":  # the team at once (gcs.link.fastpath), bad rows one by one
             good = np.isfinite(vec).all(axis=1) & np.isfinite(thrust)
-            batch = [i for i in rows if good[i] and self.proxies[i].batch_sendable]
             if self._team_setpoints is None:
                 self._team_setpoints = TeamSetpoints(self.proxies)
+                self._batchable = [p.batch_sendable for p in self.proxies]  # fixed per link
+            batch = [i for i in rows if good[i] and self._batchable[i]]
             self._team_setpoints.send_rates_thrust(batch, vec, thrust)
-            rows = [i for i in rows if not (good[i] and self.proxies[i].batch_sendable)]
+            rows = [i for i in rows if not (good[i] and self._batchable[i])]
         for i in rows:
             self._send_one(i, self.proxies[i], vec[i], thrust[i])
 

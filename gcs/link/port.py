@@ -259,6 +259,11 @@ class MavlinkPort:
         """One datagram to ``addr``; returns immediately (see UdpEndpoint.send_to)."""
         return self._endpoint.send_to(data, addr)
 
+    def send_many(self, datagrams: list[bytes], addrs: list[Address | None]) -> int:
+        """Datagram k to ``addrs[k]``, in one call; returns how many were handed to the socket
+        (see UdpEndpoint.send_to for what is dropped and counted)."""
+        return self._endpoint.send_many(datagrams, addrs)
+
     def claim_timesync(self, addr: Address, now_s: float, period_s: float) -> int | None:
         """ts1 [ns] for a TIMESYNC request to ``addr`` now, or None if one went there less than
         ``period_s`` ago; the caller sends it. ts1 is ``now_s`` in ns (unique per port)."""

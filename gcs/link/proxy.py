@@ -6,6 +6,8 @@ import asyncio
 import contextlib
 import logging
 import math
+import struct
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
 from types import TracebackType
@@ -72,6 +74,7 @@ FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 forcing arm/disarm (PX4; Ardu
 MAX_STRANGERS_LOGGED = 8
 #: q of rate setpoints: ignored (type_mask 128), but ArduPilot drops a non-unit one, so unit.
 _IDENTITY_Q = (1.0, 0.0, 0.0, 0.0)
+_TLOG_STAMP = struct.Struct(">Q")  # a tlog record's Unix time [us] (gcs.link.tlog)
 #: Messages whose time_boot_ms stamps the sample they carry (the clock filter's input).
 STAMPED_TYPES = frozenset({"LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "ATTITUDE"})
 #: Round trips kept for the flight report (at 2 Hz: over five hours).
@@ -887,11 +890,24 @@ class TeamSetpoints:
                                    self._target_sys[idx], self._target_comp[idx],
                                    TYPE_MASK_RATES_THRUST, self._q[:m], rates_frd, thrust, out,
                                    lengths)
-        for k, p in enumerate(proxies):
-            data = out[k, : lengths[k]].tobytes()
-            if p._tlog is not None:
-                p._tlog.write(data)
+        datagrams = [out[k, : lengths[k]].tobytes() for k in range(m)]
+        tlog = proxies[0]._tlog
+        if tlog is not None and all(p._tlog is tlog for p in proxies):  # one block for the team
+            stamp = _TLOG_STAMP.pack(int(time.time() * 1e6))
+            tlog.write_records(b"".join(stamp + d for d in datagrams), m)
+        else:
+            for p, data in zip(proxies, datagrams, strict=True):
+                if p._tlog is not None:
+                    p._tlog.write(data)
+        by_port: dict[int, tuple[MavlinkPort, list[bytes], list[Address | None]]] = {}
+        for p, data in zip(proxies, datagrams, strict=True):
             if p._remote is None:
                 p._n["send_no_remote"] += 1
-            p._port.send_to(data, p._remote)
+            entry = by_port.get(id(p._port))
+            if entry is None:
+                entry = by_port[id(p._port)] = (p._port, [], [])
+            entry[1].append(data)
+            entry[2].append(p._remote)
             p._n["setpoints_sent"] += 1
+        for port, data_list, addrs in by_port.values():
+            port.send_many(data_list, addrs)

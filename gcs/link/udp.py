@@ -259,6 +259,31 @@ class UdpEndpoint:
         self._counts["bytes_out"] += len(data)
         return True
 
+    def send_many(self, datagrams: list[bytes], addrs: list[Address | None]) -> int:
+        """`send_to` for each pair (bulk mode: straight to the socket, counters once); returns
+        how many were handed to the socket."""
+        if self._sock is None:
+            return sum(self.send_to(d, a) for d, a in zip(datagrams, addrs, strict=True))
+        sendto, sent, nbytes = self._sock.sendto, 0, 0
+        counts = self._counts
+        for data, addr in zip(datagrams, addrs, strict=True):
+            if addr is None:
+                counts["send_no_remote"] += 1
+                continue
+            try:
+                sendto(data, addr)
+            except BlockingIOError:
+                counts["send_dropped_backpressure"] += 1
+                continue
+            except OSError as exc:
+                self._on_error(exc)
+                continue
+            sent += 1
+            nbytes += len(data)
+        counts["packets_out"] += sent
+        counts["bytes_out"] += nbytes
+        return sent
+
     def _send_direct(self, data: bytes, addr: Address | None) -> bool:
         if addr is None:
             self._counts["send_no_remote"] += 1

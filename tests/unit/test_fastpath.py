@@ -304,11 +304,17 @@ async def _stalled() -> None:
             a.close()
 
 
-def test_team_setpoints_reach_each_vehicle_as_its_own_setpoint_would() -> None:
-    asyncio.run(asyncio.wait_for(_team_setpoints(), 20.0))
+def test_team_setpoints_reach_each_vehicle_as_its_own_setpoint_would(tmp_path) -> None:  # noqa: ANN001
+    with TlogWriter(tmp_path / "t.tlog") as tlog:
+        asyncio.run(asyncio.wait_for(_team_setpoints(tlog), 20.0))
+    log = mavutil.mavlink_connection(str(tmp_path / "t.tlog"))
+    targets = []
+    while (m := log.recv_match(type="SET_ATTITUDE_TARGET")) is not None:
+        targets.append(m.target_system)
+    assert sorted(targets) == [1, 1, 2]  # the team's two in one block, then vehicle 1's own
 
 
-async def _team_setpoints() -> None:
+async def _team_setpoints(tlog: TlogWriter) -> None:
     async with MavlinkPort(0, table=HotTable(2)) as port:
         gcs_port = port.local_address[1]
         socks = [_udp(gcs_port) for _ in range(2)]
@@ -316,8 +322,8 @@ async def _team_setpoints() -> None:
             s.setblocking(False)
         cfgs = [VehicleLinkConfig(vehicle_id=k + 1, sysid=k + 1, local_port=gcs_port,
                                   remote_port=socks[k][1]) for k in range(2)]
-        async with (VehicleProxy(cfgs[0], port=port, slot=0) as p1,
-                    VehicleProxy(cfgs[1], port=port, slot=1) as p2):
+        async with (VehicleProxy(cfgs[0], port=port, slot=0, tlog=tlog) as p1,
+                    VehicleProxy(cfgs[1], port=port, slot=1, tlog=tlog) as p2):
             await asyncio.sleep(0.05)
             for s, _ in socks:  # the proxies' first HEARTBEATs
                 while True:
