@@ -105,7 +105,7 @@ class ArduPilotNode(VehicleNode):
         st.base_mode_flags[i] = ap.base_mode(now_s) & 0x7F  # SAFETY_ARMED added per HEARTBEAT
         st.landed_state[i] = ap.landed_state()
         st.system_status[i] = ap.system_status(now_s)
-        st.position_valid[i] = ap.position_ok(now_s)
+        st.position_from_ms[i] = math.ceil(ap.boot.at(ap.boot.POSITION_S) * 1e3)
         st.vtol_state[i] = 3  # MAV_VTOL_STATE_MC, as ArduCopter reports it
         home = ap.home_enu_m  # ArduPilot sets home where it arms
         st.home_ned_m[i] = (home[1], home[0], -home[2])

@@ -112,13 +112,19 @@ class UdpLink(asyncio.DatagramProtocol):
         self.transport = transport  # type: ignore[assignment]
 
     def datagram_received(self, data: bytes, addr: Address) -> None:
+        if self.admit_now(data, addr):
+            self._deliver(data, addr)
+
+    def admit_now(self, data: bytes, addr: Address) -> bool:
+        """The link's impairment on one received datagram: True to deliver it now; False when
+        it is lost or delayed (then delivered later by the event loop)."""
         delay = self.impairment.admit(self.now_s())
         if delay is None:
-            return
+            return False
         if delay > 0.0 and self._loop is not None:
             self._loop.call_later(delay, self._deliver, data, addr)
-        else:
-            self._deliver(data, addr)
+            return False
+        return True
 
     def error_received(self, exc: Exception) -> None:
         # ICMP port unreachable when nobody listens on the remote yet: normal for UDP
@@ -247,10 +253,5 @@ class LinkPoller:
             except OSError as exc:  # e.g. ICMP port unreachable on a connected socket
                 link.error_received(exc)
                 continue
-            delay = link.impairment.admit(link.now_s())
-            if delay is None:
-                continue
-            if delay > 0.0 and link._loop is not None:
-                link._loop.call_later(delay, link._deliver, data, addr)
-            else:
+            if link.admit_now(data, addr):
                 items.append((link, data, addr))

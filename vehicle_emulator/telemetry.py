@@ -2,8 +2,9 @@
 
 Rates are PX4's onboard-link defaults (spec/mavlink.md) unless a vehicle's personality sets its
 own (``set_defaults``: ArduPilot streams almost nothing until asked), per vehicle and message,
-changeable with MAV_CMD_SET_MESSAGE_INTERVAL. LOCAL_POSITION_NED is sent only for vehicles whose
-``FleetStatus.position_valid`` is set (ArduPilot: once its EKF has a position). Each
+changeable with MAV_CMD_SET_MESSAGE_INTERVAL. LOCAL_POSITION_NED is sent only with a position
+sample taken at or after the vehicle's ``FleetStatus.position_from_ms`` (ArduPilot: once its
+EKF has a position; 0 for the others). Each
 ``collect`` builds every due message type for all vehicles at once from the fleet arrays
 (NED/FRD via frames.py), frames them with ``BatchEncoder`` and returns one byte string per
 vehicle (PX4 also packs several messages into one UDP datagram). Nominal vehicles report the
@@ -75,7 +76,9 @@ class FleetStatus:
     origin_ned_m: np.ndarray  # (n, 3) EKF origin in the team frame (NED): LOCAL_POSITION_NED zero
     home_ned_m: np.ndarray  # (n, 3) home in the team frame (NED)
     noise: np.ndarray  # bool
-    position_valid: np.ndarray  # bool: the estimator has a position (LOCAL_POSITION_NED sent)
+    #: int64 time_boot_ms from which the estimator has a position: LOCAL_POSITION_NED is sent only
+    #: with samples taken then or later (a sample stamped before it has no estimate behind it)
+    position_from_ms: np.ndarray
     vtol_state: np.ndarray  # uint8 EXTENDED_SYS_STATE.vtol_state (ArduCopter: MC, 3)
     battery_remaining: np.ndarray  # 0..1
     battery_voltage_v: np.ndarray
@@ -98,7 +101,7 @@ class FleetStatus:
             origin_ned_m=np.zeros((n, 3)),
             home_ned_m=np.zeros((n, 3)),
             noise=np.zeros(n, dtype=bool),
-            position_valid=np.ones(n, dtype=bool),
+            position_from_ms=np.zeros(n, dtype=np.int64),
             vtol_state=np.zeros(n, dtype=np.uint8),
             battery_remaining=np.ones(n),
             battery_voltage_v=np.full(n, 16.8),
@@ -250,6 +253,7 @@ class Telemetry:
         if not due.any():
             return {}
         self._derive(plant, status)
+        t_pos_ms = self._d["t_pos_ms"] if self._d is not None else None
         chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         per_vehicle = np.zeros(self.n, dtype=np.int64)
         for k in np.flatnonzero(due.any(axis=0)):
@@ -259,7 +263,8 @@ class Telemetry:
             idx = idx[enabled[idx]]
             name = self.names[k]
             if name in _NEED_POSITION:
-                idx = idx[status.position_valid[idx]]
+                assert t_pos_ms is not None
+                idx = idx[t_pos_ms[idx] >= status.position_from_ms[idx]]
             if idx.size == 0:
                 continue
             enc = self.encoders[name]
