@@ -30,6 +30,8 @@ import numpy as np
 from numba import njit
 from pymavlink.dialects.v20 import common as mavlink
 
+from gcs.link.telemetry import RATE_EWMA_ALPHA  # the rate estimate: the cache's, per message
+
 #: The hot messages, decoded into the table's value arrays, in table order (columns of the
 #: rx/count/raw arrays).
 HOT_NAMES = ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "HIGHRES_IMU")
@@ -54,8 +56,6 @@ LPN_FIELDS, ATTQ_FIELDS, IMU_FIELDS = 7, 8, 4
 MAX_FRAME = 280  # MAVLink 2: 10 header + 255 payload + 2 CRC + 13 signature
 #: Per-slot sequence counters (SequenceStats order).
 SEQ_RECEIVED, SEQ_LOST, SEQ_DUPLICATES, SEQ_REORDERED = 0, 1, 2, 3
-#: Weight of the newest interval in the rate estimate (as gcs.link.telemetry.RATE_EWMA_ALPHA).
-RATE_EWMA_ALPHA = 0.1
 #: addr_of_slot values: any address is the vehicle's (a fixed remote), not learned yet (slow).
 ANY_ADDRESS, UNLEARNED = -2, -1
 _SET_ATTITUDE_TARGET = mavlink.MAVLink_set_attitude_target_message

@@ -159,8 +159,6 @@ class MavlinkPort:
             self._kinds = kind_table()
             self._slow = np.zeros((4 * MAX_BATCH_DATAGRAMS, 4), dtype=np.int64)
             self._tlog_buf = np.zeros(0, dtype=np.uint8)
-            self._hot_batches = 0
-            self._hot_frames = 0
         self._codec = MavlinkCodec()  # frames no attached vehicle claims (counted, ignored)
         self._tlog = tlog
         self._clients: dict[int, PortClient] = {}
@@ -289,12 +287,6 @@ class MavlinkPort:
             code = self._addr_codes[addr] = len(self._addr_codes)
         return code
 
-    def hot_counts(self) -> tuple[int, int]:
-        """(batches, frames) the hot path stored in the table (0, 0 without one)."""
-        if self._table is None:
-            return (0, 0)
-        return (self._hot_batches, self._hot_frames)
-
     def _on_batch(self, buffer: bytearray, offsets: list[int], lengths: list[int],
                   sources: list[Address], stamps: list[float | None]) -> None:
         table = self._table
@@ -324,8 +316,6 @@ class MavlinkPort:
             table.raw, table.rawlen, table.seq_last, table.seq, table.last_any_rx_s,
             table.accepted, table.touched, table.clock, self._tlog_buf, self._slow)
         if n_hot:
-            self._hot_batches += 1
-            self._hot_frames += n_hot
             if self._tlog is not None:
                 self._tlog.write_records(self._tlog_buf[:t_len].tobytes(), n_hot)
             touched = np.flatnonzero(table.touched)
