@@ -46,6 +46,7 @@ from gcs.control.gains import GRAVITY_MPS2, LawGains
 from gcs.control.law import SingularCommandError, TeamCommand, TeamLaw, TeamMeasurement
 from gcs.control.position import phi
 from gcs.flightlog import FlightLog, FlightLogBuilder, save_timeseries
+from gcs.fly.collector import PacedCollector
 from gcs.fly.delay import DelayJudge
 from gcs.fly.measure import (
     HOVER_MIN_SAMPLES,
@@ -57,7 +58,6 @@ from gcs.fly.measure import (
     command_heading_rad,
     desaturate_torque,
     drop_stale_neighbours,
-    formation_error_m,
     fresh_mask,
     level_rotations,
     limit_rate_command,
@@ -81,7 +81,7 @@ from gcs.fly.stats import (
     prediction_report,
     round_trip_report,
 )
-from gcs.fly.telemetry import team_sample, vehicle_statuses
+from gcs.fly.telemetry import StatusSlices, team_sample, vehicle_statuses
 from gcs.geodesy import Geodetic, TeamFrame
 from gcs.link import (
     CommandNotConfirmedError,
@@ -100,6 +100,7 @@ from gcs.link import (
 from gcs.link.config import shared_ports
 from gcs.link.enums import MSG_ID, MavCmd, MavModeFlag
 from gcs.link.proxy import TeamSetpoints
+from gcs.metrics import formation_error_m
 from gcs.mission.autopilots import PROFILES, AutopilotProfile, ModeSpec, version_text
 from gcs.mission.cascade import AutopilotResponse, CascadeGains, laplacian_eigenvalues, verdict
 from gcs.mission.goto import GoToStartPlan
@@ -425,6 +426,7 @@ class Flight:
         # delay compensation (gcs/fly/predict.py) and its measured error
         self.audit = PredictionAudit(self.n) if team.fly.predict else None
         self.machine_every = max(1, round(setup.tick_rate_hz / MACHINE_RATE_HZ))
+        self._status_slices = StatusSlices(team.n, self.machine_every)  # the mission's statuses
         self.last_sample: TeamSample | None = None
         self.last_command: TeamCommand | None = None
         self.formation_error_m = math.nan
@@ -697,30 +699,34 @@ class Flight:
         t_start = loop.time()
         k = 0
         try:
-            while not self.machine.done:
-                deadline = t_start + k * h
-                # asyncio's timers wake on a millisecond grid and after the I/O callbacks that
-                # are ready: wake `margin` early (telemetry handled meanwhile), then block for
-                # the sub-millisecond rest (time.sleep is precise and uses no CPU).
-                wait = deadline - loop.time() - margin
-                if wait > 0:
-                    await asyncio.sleep(wait)
-                else:
-                    await asyncio.sleep(0)  # let the telemetry callbacks run every tick
-                rest = deadline - loop.time()
-                if rest > 0:
-                    time.sleep(rest)
-                started = loop.time()
-                behind = int((started - deadline) / h)
-                if behind >= 1:  # missed whole periods: jump to the newest deadline
-                    if self.machine.phase is Phase.FORMATION:
-                        self.ticks.skipped += behind
-                    k += behind
+            # garbage collection between ticks, never in one (gcs/fly/collector.py)
+            with PacedCollector() as collector:
+                while not self.machine.done:
                     deadline = t_start + k * h
-                self._tick(k, deadline, started)
-                if self.machine.phase is Phase.FORMATION:  # the tick statistics of the report
-                    self.ticks.record(started - deadline, loop.time() - started)
-                k += 1
+                    # asyncio's timers wake on a millisecond grid and after the I/O callbacks that
+                    # are ready: wake `margin` early (telemetry handled meanwhile), then block for
+                    # the sub-millisecond rest (time.sleep is precise and uses no CPU).
+                    wait = deadline - loop.time() - margin
+                    if wait > 0:
+                        await asyncio.sleep(wait)
+                    else:
+                        await asyncio.sleep(0)  # let the telemetry callbacks run every tick
+                    rest = deadline - loop.time()
+                    if rest > 0:
+                        time.sleep(rest)
+                    started = loop.time()
+                    behind = int((started - deadline) / h)
+                    if behind >= 1:  # missed whole periods: jump to the newest deadline
+                        if self.machine.phase is Phase.FORMATION:
+                            self.ticks.skipped += behind
+                        k += behind
+                        deadline = t_start + k * h
+                    self._tick(k, deadline, started)
+                    if self.machine.phase is Phase.FORMATION:  # the tick statistics of the report
+                        self.ticks.record(started - deadline, loop.time() - started)
+                    k += 1
+                    collector.after_tick(t_start + k * h - loop.time(),
+                                         bool(self.machine.streaming))
         finally:
             self._finished.set()
 
@@ -728,13 +734,16 @@ class Flight:
         sample = team_sample(self.proxies, now_s, self.last_sample, self._tie_arrays, self.hot)
         self.last_sample = sample
         m = self.machine
-        if k % self.machine_every == 0:
+        rows = self._status_slices.rows(k)
+        if rows is None or rows:
             want_rates = (tuple(self.setup.plan.rules.required_rates_hz)
                           if m.phase in (Phase.CONNECT, Phase.PREFLIGHT) else ())
             judge = self.setup.delay_judge if m.phase is Phase.PREFLIGHT else None
-            statuses = vehicle_statuses(self.proxies, self.ids, sample, want_rates, self.ties,
-                                        judge, self.hot)
-            self._dispatch(m.on_tick(deadline_s, statuses, self.formation_error_m))
+            self._status_slices.store(rows, vehicle_statuses(
+                self.proxies, self.ids, sample, want_rates, self.ties, judge, self.hot, rows=rows))
+        if self._status_slices.due(k):
+            self._dispatch(m.on_tick(deadline_s, self._status_slices.latest(),
+                                     self.formation_error_m))
             self._log_notes()
             self._send_position_targets(sample)
         streaming = m.streaming

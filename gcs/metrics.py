@@ -14,6 +14,7 @@ import warnings
 from collections.abc import Callable
 
 import numpy as np
+from numba import njit
 
 
 def relative_offsets(
@@ -41,10 +42,44 @@ def formation_error(position_m: np.ndarray, offsets_m: np.ndarray) -> np.ndarray
     0 for a single vehicle.
     """
     p = np.asarray(position_m, dtype=np.float64)
-    if p.shape[-2:-1] == (1,):
-        _check_team(p, np.asarray(offsets_m))
-        return np.where(np.isnan(p).any(axis=(-2, -1)), np.nan, 0.0)
-    return np.linalg.norm(relative_offsets(p, offsets_m), axis=-1).max(axis=-1)
+    theta = np.ascontiguousarray(offsets_m, dtype=np.float64)
+    _check_team(p, theta)
+    flat = np.ascontiguousarray(p.reshape((-1,) + p.shape[-2:]))
+    return _formation_errors(flat, theta).reshape(p.shape[:-2])
+
+
+@njit(cache=True)
+def _formation_errors(position_m: np.ndarray, offsets_m: np.ndarray) -> np.ndarray:
+    """`formation_error_m` of each sample of (k, n, 3): a flight's whole series without a
+    (k, n^2 / 2, 3) array (240 vehicles, 3000 samples: 4 GB that way)."""
+    out = np.empty(position_m.shape[0])
+    for s in range(position_m.shape[0]):
+        out[s] = formation_error_m(position_m[s], offsets_m)
+    return out
+
+
+@njit(cache=True)
+def formation_error_m(position_m: np.ndarray, offsets_m: np.ndarray) -> float:
+    """The formation error of one sample: max over all pairs of |p_i - p_j - (theta_i -
+    theta_j)| [m] (gcs.metrics.formation_error), without an (n, n, 3) array. NaN if a position
+    is NaN; 0 for one vehicle. O(n^2) arithmetic, nothing allocated."""
+    n = position_m.shape[0]
+    worst = 0.0
+    for i in range(n):
+        for j in range(i + 1, n):
+            d2 = 0.0
+            for k in range(3):
+                d = (position_m[i, k] - position_m[j, k]) - (offsets_m[i, k] - offsets_m[j, k])
+                d2 += d * d
+            if not d2 <= worst:  # larger, or NaN
+                if d2 != d2:
+                    return math.nan
+                worst = d2
+    if n == 1:
+        for k in range(3):
+            if position_m[0, k] != position_m[0, k]:
+                return math.nan
+    return math.sqrt(worst)
 
 
 def velocity_error(velocity_mps: np.ndarray, reference_mps: np.ndarray) -> np.ndarray:

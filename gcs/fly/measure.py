@@ -92,30 +92,6 @@ def drop_stale_neighbours(graph: EdgeList, fresh: np.ndarray, weight_out: np.nda
     return stale
 
 
-@njit(cache=True)
-def formation_error_m(position_m: np.ndarray, offsets_m: np.ndarray) -> float:
-    """The formation error of one sample: max over all pairs of |p_i - p_j - (theta_i -
-    theta_j)| [m] (gcs.metrics.formation_error), without an (n, n, 3) array. NaN if a position
-    is NaN; 0 for one vehicle. O(n^2) arithmetic, nothing allocated."""
-    n = position_m.shape[0]
-    worst = 0.0
-    for i in range(n):
-        for j in range(i + 1, n):
-            d2 = 0.0
-            for k in range(3):
-                d = (position_m[i, k] - position_m[j, k]) - (offsets_m[i, k] - offsets_m[j, k])
-                d2 += d * d
-            if not d2 <= worst:  # larger, or NaN
-                if d2 != d2:
-                    return math.nan
-                worst = d2
-    if n == 1:
-        for k in range(3):
-            if position_m[0, k] != position_m[0, k]:
-                return math.nan
-    return math.sqrt(worst)
-
-
 def torque_max_nm(arm_length_m: np.ndarray, anti_torque_m: np.ndarray,
                   rotor_thrust_max_n: np.ndarray) -> np.ndarray:
     """Torque that a normalised actuator control of 1 asks for, (n, 3) body FLU [N m]:

@@ -24,7 +24,7 @@ from gcs.fly.delay import DelayJudge
 from gcs.fly.measure import TeamSample
 from gcs.fly.origins import WAITING, TeamTies
 from gcs.link import HotTable, VehicleProxy
-from gcs.link.enums import LandedState, MavModeFlag, mode_name
+from gcs.link.enums import LandedState, LinkState, MavModeFlag, mode_name
 from gcs.link.fastpath import (
     ATTQ,
     EXTENDED_SYS_STATE,
@@ -50,6 +50,8 @@ _LANDED = {LandedState.ON_GROUND: True, LandedState.IN_AIR: False, LandedState.T
            LandedState.LANDING: False}
 _LANDED_BY_VALUE = {int(k): v for k, v in _LANDED.items()}
 _LANDED_STATES = frozenset(int(s) for s in LandedState)
+_LINK_TEXT = {state: state.value for state in LinkState}  # Enum.value is a slow descriptor
+_ARMED_BIT = int(MavModeFlag.SAFETY_ARMED)  # a plain int: IntFlag arithmetic costs microseconds
 
 
 def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
@@ -152,8 +154,7 @@ def _from_table(proxies: Sequence[VehicleProxy], table: HotTable, pos: np.ndarra
     force[rows] = imu[:, 1:4]
     prx[rows], arx[rows], irx[rows] = (table.rx_s[rows, LPN], table.rx_s[rows, ATTQ],
                                        table.rx_s[rows, IMU])
-    line = np.array([proxies[i].clock.line() for i in rows.tolist()]).reshape(-1, 4)
-    a, b, t_ref, least = line.T
+    a, b, t_ref, least = table.clock_line[rows].T  # each filter keeps its row there
     for taken, stamp, rx in ((ptaken, lpn[:, 0], prx[rows]), (ataken, attq[:, 0], arx[rows])):
         with np.errstate(invalid="ignore"):
             t = np.minimum(rx, stamp + a + b * (stamp - t_ref) - least)
@@ -171,19 +172,25 @@ def _mode_text(autopilot: int, custom_mode: int) -> str:
 
 def listen_label(p: VehicleProxy) -> str:
     """'udp 127.0.0.1:14540': where the ground station listens for the vehicle."""
-    host, port = p.local_address
-    return f"udp {host}:{port}"
+    return _listen_text(p.local_address)
+
+
+@functools.lru_cache(maxsize=1024)
+def _listen_text(address: tuple[str, int]) -> str:
+    return f"udp {address[0]}:{address[1]}"
 
 
 def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample: TeamSample,
                      want_rates: Sequence[str], ties: TeamTies | None = None,
                      judge: DelayJudge | None = None,
-                     table: HotTable | None = None) -> list[VehicleStatus]:
+                     table: HotTable | None = None,
+                     rows: Sequence[int] | None = None) -> list[VehicleStatus]:
     """What the mission machine sees of each vehicle (see gcs.mission.safety.VehicleStatus);
     `want_rates`: the message types whose receive rates it checks now (none: not measured);
     `ties`: the frame ties, whose problems the preflight reports; `judge`: the criterion at each
     link's measured delay (preflight only: pass it while the machine is there); `table`: the hot
-    path's (proxy i in row i), whose decoded fields stand for the lazy messages' decode."""
+    path's (proxy i in row i), whose decoded fields stand for the lazy messages' decode;
+    `rows`: only these vehicles' (in that order; default all)."""
     out = []
     # the team's arrays as Python floats at once (a conversion per vehicle costs more)
     position, velocity = sample.position_m.tolist(), sample.velocity_mps.tolist()
@@ -192,18 +199,21 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
         tilt = np.arccos(np.clip(sample.rotation[:, 2, 2], -1.0, 1.0)).tolist()
     misc = table.misc.tolist() if table is not None else None
     have = (table.count > 0).tolist() if table is not None else None
-    for i, p in enumerate(proxies):
+    problems = ties.problems if ties is not None else None
+    for i in range(len(proxies)) if rows is None else rows:
+        p = proxies[i]
         hb = p.latest("HEARTBEAT")
         armed, mode, autopilot, vtype = False, "", 0, 0
         if hb is not None:
             m = hb.msg
-            armed = bool(int(m.base_mode) & MavModeFlag.SAFETY_ARMED)
+            armed = bool(int(m.base_mode) & _ARMED_BIT)
             autopilot, vtype = int(m.autopilot), int(m.type)
             mode = _mode_text(autopilot, int(m.custom_mode))
-        hot = misc is not None and have is not None and p.slot == i
+        fields, got = (misc[i], have[i]) if misc is not None and have is not None and \
+            p.slot == i else (None, None)
         landed_raw: int | None = None
-        if hot and have[i][EXTENDED_SYS_STATE]:
-            landed_raw = int(misc[i][LANDED_STATE])
+        if got is not None and got[EXTENDED_SYS_STATE]:
+            landed_raw = int(fields[LANDED_STATE])
         elif (ess := p.latest("EXTENDED_SYS_STATE")) is not None:
             landed_raw = int(ess.msg.landed_state)
         landed, landed_state = None, 0
@@ -211,8 +221,8 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
             landed_state = landed_raw if landed_raw in _LANDED_STATES else 0
             landed = _LANDED_BY_VALUE.get(landed_raw)
         sensors: tuple[int, int] | None = None
-        if hot and have[i][SYS_STATUS]:
-            sensors = (int(misc[i][SENSORS_PRESENT]), int(misc[i][SENSORS_HEALTH]))
+        if got is not None and got[SYS_STATUS]:
+            sensors = (int(fields[SENSORS_PRESENT]), int(fields[SENSORS_HEALTH]))
         elif (sys_status := p.latest("SYS_STATUS")) is not None:
             sensors = (int(sys_status.msg.onboard_control_sensors_present),
                        int(sys_status.msg.onboard_control_sensors_health))
@@ -221,23 +231,70 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
             prearm_ok = bool(sensors[1] & PREARM_CHECK_BIT)
         text = p.statustexts.latest()
         height = math.nan
-        if hot and have[i][GLOBAL_POSITION_INT]:
-            height = misc[i][RELATIVE_ALT_M]
+        if got is not None and got[GLOBAL_POSITION_INT]:
+            height = fields[RELATIVE_ALT_M]
         elif (gpi := p.latest("GLOBAL_POSITION_INT")) is not None:
             height = float(gpi.msg.relative_alt) * 1e-3
-        rates = {k: p.rate_hz(k) for k in want_rates}
+        problem = problems[i] if problems is not None else None
         out.append(VehicleStatus(
-            vehicle_id=ids[i], sysid=p.config.sysid, link=p.link_state().value, armed=armed,
-            mode=mode, landed=landed, position_enu_m=tuple(position[i]),
+            vehicle_id=ids[i], sysid=p.config.sysid, link=_LINK_TEXT[p.link_state()],
+            armed=armed, mode=mode, landed=landed, position_enu_m=tuple(position[i]),
             velocity_enu_mps=tuple(velocity[i]), tilt_rad=tilt[i], data_age_s=age[i],
-            delay_s=transit[i],
-            autopilot=autopilot, vehicle_type=vtype, sysid_mismatch=p.sysid_mismatch,
-            rates_hz=rates, listen=listen_label(p), landed_state=landed_state,
-            prearm_ok=prearm_ok, status_text=text.quoted() if text is not None else "",
-            height_above_home_m=height,
-            frame_problem=None if ties is None else ties.problems[i],
-            frame_pending=ties is not None and ties.problems[i] == WAITING,
+            delay_s=transit[i], autopilot=autopilot, vehicle_type=vtype,
+            sysid_mismatch=p.sysid_mismatch,
+            rates_hz={k: p.rate_hz(k) for k in want_rates} if want_rates else {},
+            listen=listen_label(p), landed_state=landed_state, prearm_ok=prearm_ok,
+            status_text=text.quoted() if text is not None else "", height_above_home_m=height,
+            frame_problem=problem, frame_pending=problem == WAITING,
             loop_problem=(judge.refusal(autopilot, p.clock.round_trips_s()[-JUDGED_ROUND_TRIPS:])
                           if judge is not None else None),
         ))
     return out
+
+
+#: Teams larger than this build the mission's statuses a slice per tick (a status costs ~8 us of
+#: Python per vehicle: at 240 vehicles, all at once is a 2-4 ms spike at every check).
+STATUS_SLICED_ABOVE = 32
+
+
+class StatusSlices:
+    """Which vehicles' statuses a tick builds, and the team's latest ones for the check.
+
+    The mission machine checks the team every ``every`` ticks. A team of at most
+    `STATUS_SLICED_ABOVE` vehicles is built whole at the check. A larger one is built a slice
+    per tick (vehicles j, j + every, ... at tick j mod every), so the check sees each vehicle as
+    of at most every - 1 ticks before it (40 ms at 100 Hz, checks at 20 Hz), and the cost is the
+    same at every tick instead of a spike; the first check builds everyone.
+    """
+
+    def __init__(self, n: int, every: int) -> None:
+        self.every = every
+        self._latest: list[VehicleStatus | None] = [None] * n
+        self._missing = n
+        self._slices = ([list(range(j, n, every)) for j in range(every)]
+                        if n > STATUS_SLICED_ABOVE and every > 1 else None)
+
+    def due(self, k: int) -> bool:
+        """Tick k is a check."""
+        return k % self.every == 0
+
+    def rows(self, k: int) -> list[int] | None:
+        """The vehicles tick k builds (None: all of them; []: none)."""
+        if self.due(k) and self._missing:
+            return None
+        if self._slices is None:
+            return None if self.due(k) else []
+        return self._slices[k % self.every]
+
+    def store(self, rows: list[int] | None, built: Sequence[VehicleStatus]) -> None:
+        for i, status in zip(range(len(self._latest)) if rows is None else rows, built,
+                             strict=True):
+            if self._latest[i] is None:
+                self._missing -= 1
+            self._latest[i] = status
+
+    def latest(self) -> list[VehicleStatus]:
+        """Every vehicle's latest status (after the first check's build)."""
+        assert not self._missing, "a check before every vehicle's status was built"
+        return [s for s in self._latest if s is not None]
+

@@ -65,6 +65,7 @@ class VehicleClock:
     """Lower-envelope offset/drift filter on sample stamps, plus TIMESYNC round trips."""
 
     def __init__(self) -> None:
+        self._line_out: np.ndarray | None = None
         self._bins_t = np.empty(WINDOW_BINS)  # vehicle time of each bin's minimum (ring)
         self._bins_o = np.empty(WINDOW_BINS)  # that minimum of rx - t_vehicle
         self._nbins = 0
@@ -76,6 +77,17 @@ class VehicleClock:
         self._rtt_total = 0
         self._least_delay_s = 0.0
 
+    def bind_line(self, out: np.ndarray) -> None:
+        """Keep the line of :meth:`sample_time_s`, (a, b, t_ref, least delay) with a NaN while
+        not synced, written into ``out`` (a row of 4 of a team's array): a caller mapping many
+        vehicles' stamps reads them all at once."""
+        self._line_out = out
+        self._publish()
+
+    def _publish(self) -> None:
+        if self._line_out is not None:
+            self._line_out[:] = (self._a, self._b, self._t_ref, self._least_delay_s)
+
     def _reset_state(self) -> None:
         self._nbins = 0
         self._head = 0
@@ -86,6 +98,7 @@ class VehicleClock:
         self._last_t = -math.inf
         self._a = math.nan  # envelope = a + b (t - t_ref)
         self._b = 0.0
+        self._publish()
 
     # --- input ----------------------------------------------------------------------------------
 
@@ -99,6 +112,7 @@ class VehicleClock:
         if self._t_ref != self._t_ref:
             self._t_ref = t_vehicle_s
             self._bin_end = t_vehicle_s + BIN_S
+            self._publish()
         self._last_t = max(self._last_t, t_vehicle_s)
         o = rx_s - t_vehicle_s
         if t_vehicle_s >= self._bin_end:
@@ -108,7 +122,9 @@ class VehicleClock:
             self._cur_o, self._cur_t = o, t_vehicle_s
         if self._nbins < MIN_FIT_BINS:  # before the fit: the least difference seen so far
             least = self._cur_o if self._nbins == 0 else min(self._cur_o, self._a)
-            self._a, self._b = least, 0.0
+            if least != self._a or self._b != 0.0:
+                self._a, self._b = least, 0.0
+                self._publish()
 
     def on_round_trip(self, rtt_s: float) -> None:
         """A TIMESYNC reply that came back ``rtt_s`` after its request."""
@@ -118,6 +134,7 @@ class VehicleClock:
         self._rtt_total += 1
         self._nrtt = min(self._nrtt + 1, RTT_WINDOW)
         self._least_delay_s = 0.5 * float(self._rtt[: self._nrtt].min())
+        self._publish()
 
     def _close_bin(self) -> None:
         if not math.isfinite(self._cur_o):
@@ -131,6 +148,7 @@ class VehicleClock:
             self._fit()
         else:
             self._a = float(self._bins_o[: self._nbins].min())
+        self._publish()
 
     def _fit(self) -> None:
         t, o = self._bins_t[: self._nbins], self._bins_o[: self._nbins]
@@ -164,11 +182,6 @@ class VehicleClock:
             return rx_s
         env = self._a + self._b * (t_vehicle_s - self._t_ref)
         return min(rx_s, t_vehicle_s + env - self._least_delay_s)
-
-    def line(self) -> tuple[float, float, float, float]:
-        """(a, b, t_ref, least_delay) of :meth:`sample_time_s` (a NaN: not synced), for callers
-        that map a whole team's stamps at once."""
-        return (self._a, self._b, self._t_ref, self._least_delay_s)
 
     def estimate(self) -> ClockEstimate:
         offset = (self._a + self._b * (self._last_t - self._t_ref) - self._least_delay_s

@@ -9,6 +9,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 
+import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
 logger = logging.getLogger(__name__)
@@ -34,6 +35,23 @@ GCS_COMPID = 190  # MAV_COMP_ID_MISSIONPLANNER, the usual GCS component id
 def signing_timestamp_10us(unix_time_s: float) -> int:
     """MAVLink signing timestamp (10 us units since 2015-01-01) of a Unix time in seconds."""
     return max(0, int((unix_time_s - SIGNING_EPOCH_UNIX_S) * 100_000))
+
+
+class SeqBlock:
+    """The outgoing sequence numbers and sent-message counts of several codecs, a row each, in
+    two arrays: frames packed for many links at once (gcs.link.fastpath) take theirs in one
+    numpy call. A codec made without one has a block of its own."""
+
+    def __init__(self, n: int) -> None:
+        self.seq = np.zeros(n, dtype=np.int64)
+        self.sent = np.zeros(n, dtype=np.int64)
+
+    def take(self, rows: np.ndarray) -> np.ndarray:
+        """The next sequence number of each row (rows distinct), counted as sent."""
+        seq = self.seq[rows]
+        self.seq[rows] = (seq + 1) & 0xFF
+        self.sent[rows] += 1
+        return seq
 
 
 @dataclass(frozen=True, slots=True)
@@ -112,13 +130,18 @@ class MavlinkCodec:
         *,
         datagram_mode: bool = True,
         wall_clock_s: Callable[[], float] = time.time,
+        seqs: SeqBlock | None = None,
+        seq_row: int = 0,
     ) -> None:
         self._mav = _ParserMAVLink(src_system, src_component)
+        self._seqs = seqs if seqs is not None else SeqBlock(1)
+        self._seq_row = seq_row if seqs is not None else 0
         self._datagram_mode = datagram_mode
         self._wall_clock_s = wall_clock_s
         self._buf = bytearray()
         self._allow_unsigned = False
-        self._counts: dict[str, int] = {f.name: 0 for f in fields(CodecStats)}
+        self._counts: dict[str, int] = {f.name: 0 for f in fields(CodecStats)
+                                        if f.name != "messages_out"}  # that one: the SeqBlock
 
     # --- properties ------------------------------------------------------------------------------
 
@@ -139,9 +162,14 @@ class MavlinkCodec:
     def signing_enabled(self) -> bool:
         return self._mav.signing.secret_key is not None
 
+    @property
+    def seq_block(self) -> tuple[SeqBlock, int]:
+        """Where this codec's outgoing sequence number lives: (block, row)."""
+        return self._seqs, self._seq_row
+
     def stats(self) -> CodecStats:
         """A snapshot of the counters."""
-        return CodecStats(**self._counts)
+        return CodecStats(**self._counts, messages_out=int(self._seqs.sent[self._seq_row]))
 
     # --- signing ---------------------------------------------------------------------------------
 
@@ -190,9 +218,11 @@ class MavlinkCodec:
         signing = self._mav.signing
         if signing.sign_outgoing:
             signing.timestamp = max(signing.timestamp, signing_timestamp_10us(self._wall_clock_s()))
+        seqs, row = self._seqs, self._seq_row
+        self._mav.seq = int(seqs.seq[row])
         data = msg.pack(self._mav)
-        self._mav.seq = (self._mav.seq + 1) % 256
-        self._counts["messages_out"] += 1
+        seqs.seq[row] = (self._mav.seq + 1) & 0xFF
+        seqs.sent[row] += 1
         return data
 
     def take_seq(self) -> int:
@@ -200,10 +230,7 @@ class MavlinkCodec:
         codec's ids; counted as sent. Unsigned links only: ValueError when signing is on."""
         if self._mav.signing.sign_outgoing:
             raise ValueError("take_seq: this link signs its frames; encode() them instead")
-        seq = self._mav.seq
-        self._mav.seq = (seq + 1) % 256
-        self._counts["messages_out"] += 1
-        return seq
+        return int(self._seqs.take(self._seq_row))
 
     # --- decode ----------------------------------------------------------------------------------
 

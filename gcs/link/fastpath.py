@@ -30,6 +30,7 @@ import numpy as np
 from numba import njit
 from pymavlink.dialects.v20 import common as mavlink
 
+from gcs.link.codec import SeqBlock
 from gcs.link.telemetry import RATE_EWMA_ALPHA  # the rate estimate: the cache's, per message
 
 #: The hot messages, decoded into the table's value arrays, in table order (columns of the
@@ -279,6 +280,11 @@ class HotTable:
         #: code on its port (ANY_ADDRESS for a fixed remote, UNLEARNED until learned)
         self.compid_of_slot = np.full(n, -1, dtype=np.int64)
         self.addr_of_slot = np.full(n, UNLEARNED, dtype=np.int64)
+        #: the outgoing sequence numbers of the slots' links (their codecs keep theirs here)
+        self.out = SeqBlock(n)
+        #: each slot's clock filter's line (a, b, t_ref, least delay: gcs.link.clock), kept here
+        #: by the filter so the team's stamps are mapped at once
+        self.clock_line = np.full((n, 4), np.nan)
 
     def frame(self, slot: int, kind: int) -> bytes | None:
         """The latest frame of message ``kind`` (column) from ``slot`` (None: none yet)."""

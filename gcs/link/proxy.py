@@ -17,7 +17,14 @@ from numpy.typing import ArrayLike
 
 from gcs import frames
 from gcs.link.clock import VehicleClock
-from gcs.link.codec import CodecStats, MavlinkCodec, MAVLinkMessage, mavlink, message_name
+from gcs.link.codec import (
+    CodecStats,
+    MavlinkCodec,
+    MAVLinkMessage,
+    SeqBlock,
+    mavlink,
+    message_name,
+)
 from gcs.link.commands import (
     AckLog,
     CommandChannel,
@@ -70,6 +77,8 @@ TYPE_MASK_POSITION_VELOCITY_YAW = 64 | 128 | 256 | 2048
 MAV_FRAME_LOCAL_NED = 1
 AUTOPILOT_VERSION_ID = 148  # REQUEST_MESSAGE param1
 FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 forcing arm/disarm (PX4; ArduPilot disarm)
+#: The golden ratio's fraction: slot k's periodic tasks run at phase k x this (mod 1).
+_GOLDEN = 0.6180339887498949
 #: Stranger addresses logged per vehicle (all are counted); a flood does not flood the log.
 MAX_STRANGERS_LOGGED = 8
 #: q of rate setpoints: ignored (type_mask 128), but ArduPilot drops a non-unit one, so unit.
@@ -148,13 +157,17 @@ class VehicleProxy:
         self.name = config.name
         self._clock: Clock = clock if clock is not None else MonotonicClock()
         self._tlog = tlog
-        self._codec = MavlinkCodec(config.gcs_sysid, config.gcs_compid)
-        if config.signing_key is not None:
-            self._codec.setup_signing(config.signing_key, link_id=config.signing_link_id,
-                                      allow_unsigned=config.allow_unsigned)
         self._owns_port = port is None
         self._port = port if port is not None else MavlinkPort(
             config.local_port, local_host=config.local_host, tlog=tlog, name=self.name)
+        table = self._port.table
+        self._codec = MavlinkCodec(  # a slot's sequence numbers live in its port's table
+            config.gcs_sysid, config.gcs_compid,
+            seqs=table.out if table is not None and slot is not None else None,
+            seq_row=slot if slot is not None else 0)
+        if config.signing_key is not None:
+            self._codec.setup_signing(config.signing_key, link_id=config.signing_link_id,
+                                      allow_unsigned=config.allow_unsigned)
         self._remote: Address | None = config.remote
         self._remote_learned = False
         self._strangers: set[Address] = set()
@@ -172,7 +185,6 @@ class VehicleProxy:
         self.clock = VehicleClock()  # the vehicle's clock: true sample times (gcs.link.clock)
         self._round_trips: list[float] = []
         # the hot path (gcs.link.fastpath): this vehicle's row in its port's table, if it has one
-        table = self._port.table
         self._slot = slot if table is not None else None
         self._hot_decoded: dict[int, tuple[int, Received]] = {}
         self._hot_parser = mavlink.MAVLink(None)
@@ -180,6 +192,7 @@ class VehicleProxy:
             signed = config.signing_key is not None  # the codec checks signatures: no hot path
             table.compid_of_slot[slot] = -1 if signed else config.compid
             table.addr_of_slot[slot] = UNLEARNED if config.learn_remote else ANY_ADDRESS
+            self.clock.bind_line(table.clock_line[slot])
 
     # --- lifetime --------------------------------------------------------------------------------
 
@@ -379,6 +392,11 @@ class VehicleProxy:
         return hb if hb is not None else await self.wait_message("HEARTBEAT", timeout_s)
 
     # --- receive path ----------------------------------------------------------------------------
+
+    @property
+    def hot_waiting(self) -> bool:
+        """A command waits for a message of this vehicle (the port tells at every batch)."""
+        return bool(self._waiters)
 
     def _on_hot(self) -> None:
         """The port's hot path stored new messages of this vehicle: feed the clock filter the
@@ -805,10 +823,17 @@ class VehicleProxy:
             self._n["send_no_remote"] += 1
         return self._port.send_to(data, self._remote)
 
+    @property
+    def _phase(self) -> float:
+        """Where in its periods this vehicle's periodic tasks run (0..1): spread by slot (golden
+        ratio steps, even for any team size), so a team's hundreds of proxies do not all send
+        and check in the same event-loop pass and stall the tick for milliseconds."""
+        return ((self._slot or 0) * _GOLDEN) % 1.0
+
     async def _heartbeat_loop(self) -> None:
         loop = asyncio.get_running_loop()
         period = self.config.heartbeat_period_s
-        next_s = loop.time()
+        next_s = loop.time() + (self._phase - 1.0) * period  # the first went out on opening
         while True:
             next_s = max(next_s + period, loop.time())
             await asyncio.sleep(next_s - loop.time())
@@ -816,6 +841,7 @@ class VehicleProxy:
 
     async def _timesync_loop(self) -> None:
         period = self.config.timesync_period_s
+        await asyncio.sleep(self._phase * period)
         while True:
             if self._remote is not None:
                 ts1 = self._port.claim_timesync(self._remote, self._clock.now_s(), period)
@@ -831,6 +857,7 @@ class VehicleProxy:
     async def _monitor_loop(self) -> None:
         period = min(self.config.link_timeout_s, self.config.heartbeat_timeout_s) / 4.0
         stale = False
+        await asyncio.sleep(self._phase * period)
         while True:
             state = self.link_state()
             if state != self._link_state:
@@ -851,10 +878,25 @@ class VehicleProxy:
             await asyncio.sleep(period)
 
 
+@dataclass(slots=True)
+class _SendPlan:
+    """What `TeamSetpoints` works out once per set of rows."""
+
+    rows: list[int]
+    idx: np.ndarray
+    proxies: list[VehicleProxy]
+    block: SeqBlock | None  # the links' shared sequence numbers (None: each its own)
+    seq_rows: np.ndarray  # the links' rows in it
+    tlog: TlogWriter | None  # the one tlog all of them write (None: each its own, or none)
+    ports: list[tuple[MavlinkPort, list[int], list[VehicleProxy]]]  # positions in rows, proxies
+
+
 class TeamSetpoints:
     """`VehicleProxy.send_rates_thrust` for many vehicles at once: one encode call
-    (gcs.link.fastpath.encode_set_attitude_target) and one ``sendto`` each. What does not change
-    (ids, boot times, tlogs) is read once; every proxy must be `batch_sendable` (unsigned)."""
+    (gcs.link.fastpath.encode_set_attitude_target), the sequence numbers in one numpy call when
+    the links keep theirs in one block (the app's: its HotTable's), one ``sendto`` each. What does
+    not change from tick to tick (ids, boot times, tlogs, who is sent what on which port) is
+    worked out once per set of rows; every proxy must be `batch_sendable` (unsigned)."""
 
     def __init__(self, proxies: Sequence[VehicleProxy]) -> None:
         self.proxies = list(proxies)
@@ -865,6 +907,30 @@ class TeamSetpoints:
         self._q = np.tile(np.array(_IDENTITY_Q), (n, 1))
         self._out = np.empty((n, 12 + SET_ATTITUDE_TARGET_LEN), dtype=np.uint8)
         self._lengths = np.empty(n, dtype=np.int64)
+        self._plan: _SendPlan | None = None
+
+    def _plan_for(self, rows: Sequence[int]) -> _SendPlan:
+        plan = self._plan
+        if plan is not None and plan.rows == rows:
+            return plan
+        rows = list(rows)
+        if len(set(rows)) != len(rows):
+            raise ValueError(f"TeamSetpoints: a row twice in {rows}")
+        proxies = [self.proxies[i] for i in rows]
+        blocks = [p._codec.seq_block for p in proxies]
+        block = blocks[0][0]
+        shared = all(b is block for b, _ in blocks)
+        tlog = proxies[0]._tlog
+        by_port: dict[int, tuple[MavlinkPort, list[int]]] = {}
+        for k, p in enumerate(proxies):
+            by_port.setdefault(id(p._port), (p._port, []))[1].append(k)
+        self._plan = plan = _SendPlan(
+            rows, np.asarray(rows, dtype=np.int64), proxies,
+            block if shared else None,
+            np.array([r for _, r in blocks], dtype=np.int64),
+            tlog if tlog is not None and all(p._tlog is tlog for p in proxies) else None,
+            [(port, ks, [proxies[k] for k in ks]) for port, ks in by_port.values()])
+        return plan
 
     def send_rates_thrust(self, rows: Sequence[int], rates_flu_radps: np.ndarray,
                           thrust_norm: np.ndarray) -> None:
@@ -873,41 +939,38 @@ class TeamSetpoints:
         (send them one by one: `send_rates_thrust` raises `SetpointError` for each)."""
         if not rows:
             return
-        idx = np.asarray(rows, dtype=np.int64)
-        proxies = [self.proxies[i] for i in rows]
+        plan = self._plan_for(rows)
+        idx, proxies = plan.idx, plan.proxies
         rates_frd = frames.frd_from_flu(np.asarray(rates_flu_radps, dtype=np.float64)[idx])
         thrust = np.asarray(thrust_norm, dtype=np.float64)[idx]
         for k in np.flatnonzero((thrust < 0.0) | (thrust > 1.0)).tolist():
             proxies[k]._n["thrust_clamped"] += 1
         thrust = np.clip(thrust, 0.0, 1.0)
-        seq = np.array([p._codec.take_seq() for p in proxies], dtype=np.uint8)
+        if plan.block is not None:
+            seq = plan.block.take(plan.seq_rows).astype(np.uint8)
+        else:
+            seq = np.array([p._codec.take_seq() for p in proxies], dtype=np.uint8)
         now_s = proxies[0]._clock.now_s()  # one clock for the team (the app's proxies share one)
         boot_ms = ((now_s - self._t0_s[idx]) * 1000.0).astype(np.int64) & 0xFFFFFFFF
         first = proxies[0]._codec
-        m = len(rows)
+        m = len(idx)
         out, lengths = self._out[:m], self._lengths[:m]
         encode_set_attitude_target(seq, first.src_system, first.src_component, boot_ms,
                                    self._target_sys[idx], self._target_comp[idx],
                                    TYPE_MASK_RATES_THRUST, self._q[:m], rates_frd, thrust, out,
                                    lengths)
-        datagrams = [out[k, : lengths[k]].tobytes() for k in range(m)]
-        tlog = proxies[0]._tlog
-        if tlog is not None and all(p._tlog is tlog for p in proxies):  # one block for the team
+        datagrams = [out[k, :size].tobytes() for k, size in enumerate(lengths.tolist())]
+        if plan.tlog is not None:  # one block for the team
             stamp = _TLOG_STAMP.pack(int(time.time() * 1e6))
-            tlog.write_records(b"".join(stamp + d for d in datagrams), m)
+            plan.tlog.write_records(b"".join(stamp + d for d in datagrams), m)
         else:
             for p, data in zip(proxies, datagrams, strict=True):
                 if p._tlog is not None:
                     p._tlog.write(data)
-        by_port: dict[int, tuple[MavlinkPort, list[bytes], list[Address | None]]] = {}
-        for p, data in zip(proxies, datagrams, strict=True):
-            if p._remote is None:
-                p._n["send_no_remote"] += 1
-            entry = by_port.get(id(p._port))
-            if entry is None:
-                entry = by_port[id(p._port)] = (p._port, [], [])
-            entry[1].append(data)
-            entry[2].append(p._remote)
-            p._n["setpoints_sent"] += 1
-        for port, data_list, addrs in by_port.values():
-            port.send_many(data_list, addrs)
+        for port, ks, members in plan.ports:
+            addrs = [p._remote for p in members]  # learned addresses may change
+            for p, addr in zip(members, addrs, strict=True):
+                p._n["setpoints_sent"] += 1
+                if addr is None:
+                    p._n["send_no_remote"] += 1
+            port.send_many([datagrams[k] for k in ks], addrs)

@@ -10,7 +10,8 @@ from gcs.control.derivatives import force_derivatives
 from gcs.control.formation import edge_list
 from gcs.control.gains import PAPER_GAINS
 from gcs.control.law import TeamLaw, TeamMeasurement, position_stage
-from gcs.fly.measure import drop_stale_neighbours, formation_error_m
+from gcs.fly.measure import drop_stale_neighbours
+from gcs.metrics import formation_error_m
 
 G = PAPER_GAINS
 E3 = np.array([0.0, 0.0, 1.0])

@@ -34,6 +34,7 @@ from gcs.link.fastpath import (
     kind_table,
     scan,
 )
+from gcs.link.port import HOT_NOTICE_S
 from gcs.link.proxy import TeamSetpoints
 from gcs.link.telemetry import SequenceTracker
 
@@ -311,7 +312,7 @@ def test_team_setpoints_reach_each_vehicle_as_its_own_setpoint_would(tmp_path) -
     targets = []
     while (m := log.recv_match(type="SET_ATTITUDE_TARGET")) is not None:
         targets.append(m.target_system)
-    assert sorted(targets) == [1, 1, 2]  # the team's two in one block, then vehicle 1's own
+    assert sorted(targets) == [1, 1, 2, 2]  # the team's two in one block, vehicle 1's own, 2 again
 
 
 async def _team_setpoints(tlog: TlogWriter) -> None:
@@ -350,5 +351,60 @@ async def _team_setpoints(tlog: TlogWriter) -> None:
             assert second.target_system == 2 and second.thrust == 1.0
             assert p2.stats().proxy.thrust_clamped == 1
             assert p1.stats().proxy.setpoints_sent == 2
+            # fewer rows: the plan is rebuilt; vehicle 2's sequence goes on from its own
+            team_setpoints = TeamSetpoints([p1, p2])
+            team_setpoints.send_rates_thrust([1], rates, np.array([0.4, 0.2]))
+            await asyncio.sleep(0.05)
+            again = parser.decode(bytearray(socks[1][0].recv(512)))
+            assert again.get_seq() == (second.get_seq() + 1) % 256 and again.thrust == \
+                pytest.approx(0.2)
+            assert p2.stats().proxy.setpoints_sent == 2
+            with pytest.raises(ValueError, match="a row twice"):
+                team_setpoints.send_rates_thrust([1, 1], rates, thrust)
             for s, _ in socks:
                 s.close()
+
+
+def test_a_proxy_hears_of_its_hot_messages_every_notice_period_not_every_batch() -> None:
+    """Between notices the table keeps the batches' least-delayed stamp: the clock filter still
+    gets it, and a waiting command is woken at the batch that brings its message."""
+    asyncio.run(asyncio.wait_for(_notices(), 20.0))
+
+
+async def _notices() -> None:
+    table = HotTable(1)
+    async with MavlinkPort(0, table=table) as port:
+        gcs_port = port.local_address[1]
+        a, a_port = _udp(gcs_port)
+        cfg = VehicleLinkConfig(vehicle_id=1, sysid=1, local_port=gcs_port, remote_port=a_port,
+                                timesync_period_s=0.0)
+        async with VehicleProxy(cfg, port=port, slot=0) as p:
+            calls = []
+            on_hot = p._on_hot
+            p._on_hot = lambda: (calls.append(time.monotonic()), on_hot())  # type: ignore[method-assign]
+            mav = _sender(1)
+            t0 = time.monotonic()
+            for k in range(20):  # one datagram every 5 ms, stamped as if 0-19 ms in transit
+                stamp_ms = int((time.monotonic() - t0) * 1e3) + 1000 - (0 if k == 7 else 19)
+                a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(
+                    stamp_ms, float(k), 0, 0, 0, 0, 0)))
+                await asyncio.sleep(0.005)
+            await asyncio.sleep(HOT_NOTICE_S + 0.01)
+            a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(
+                int((time.monotonic() - t0) * 1e3) + 1000 - 19, 20.0, 0, 0, 0, 0, 0)))
+            await asyncio.sleep(0.01)
+            assert table.count[0, LPN] == 21
+            elapsed = calls[-1] - calls[0]
+            assert 2 <= len(calls) <= 2 + elapsed / HOT_NOTICE_S  # not 21
+            # the least-delayed sample (k = 7) set the envelope, though no notice came with it
+            offset_7 = p.clock.estimate().offset_s
+            assert offset_7 < t0 - 1.0 + 0.010  # k = 7's rx - stamp; the others' are 19 ms more
+            waiter = asyncio.create_task(p.wait_message("LOCAL_POSITION_NED", 1.0))
+            await asyncio.sleep(0.005)
+            sent_s = time.monotonic()
+            a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(
+                int((sent_s - t0) * 1e3) + 1000 - 19, 21.0, 0, 0, 0, 0, 0)))
+            got = await waiter
+            assert got.msg.x == 21.0 and time.monotonic() - sent_s < HOT_NOTICE_S
+            assert offset_7 == p.clock.estimate().offset_s
+        a.close()

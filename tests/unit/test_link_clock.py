@@ -94,3 +94,28 @@ def test_before_any_sample_and_for_bad_stamps_the_receive_time_stands():
     clock.on_round_trip(float("nan"))
     clock.on_round_trip(-0.1)
     assert clock.estimate().rtt_samples == 0
+
+
+def test_a_bound_line_always_holds_what_sample_time_uses():
+    # GIVEN a clock writing its line into a team array's row, fed through every kind of change:
+    # the first samples, bin closes and fits, a delay spike, round trips, a reboot
+    team = np.full((3, 4), np.nan)
+    clock = VehicleClock()
+    clock.bind_line(team[1])
+    rng = np.random.default_rng(7)
+    t_vehicle = 0.0
+    for k in range(3000):
+        t_vehicle += 0.01
+        if k == 1500:
+            t_vehicle = 0.5  # reboot
+        delay = 0.004 + 0.002 * rng.random() + (0.05 if 700 < k < 720 else 0.0)
+        clock.on_sample(t_vehicle, 100.0 + 1.0001 * t_vehicle + delay)
+        if k % 50 == 0:
+            clock.on_round_trip(0.006 + 0.002 * rng.random())
+        # THEN the row mapped by hand gives the filter's own sample time, at every step
+        a, b, t_ref, least = team[1]
+        rx = 100.0 + 1.0001 * t_vehicle + 0.01
+        by_row = rx if a != a else min(rx, t_vehicle + a + b * (t_vehicle - t_ref) - least)
+        assert by_row == pytest.approx(clock.sample_time_s(t_vehicle, rx), abs=1e-12)
+    assert clock.resets == 1
+    assert np.isnan(team[[0, 2]]).all()  # the other rows untouched

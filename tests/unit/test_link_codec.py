@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink
 
-from gcs.link.codec import CodecStats, MavlinkCodec, signing_timestamp_10us
+from gcs.link.codec import CodecStats, MavlinkCodec, SeqBlock, signing_timestamp_10us
 
 # HEARTBEAT from sysid 1 / compid 1, seq 0: QUADROTOR, PX4, base_mode 129 (armed + custom),
 # custom_mode 393216 (PX4 OFFBOARD), MAV_STATE_ACTIVE, MAVLink 2 (pymavlink-independent literal).
@@ -56,6 +57,21 @@ def test_encode_produces_the_literal_bytes_and_advances_seq() -> None:
     second = codec.encode(hb)
     assert second[4] == 1
     assert codec.stats().messages_out == 2
+
+
+def test_codecs_sharing_a_seq_block_keep_their_own_sequences() -> None:
+    block = SeqBlock(2)
+    a, b = MavlinkCodec(seqs=block, seq_row=0), MavlinkCodec(seqs=block, seq_row=1)
+    reader = mavlink.MAVLink(None)
+    hb = mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3)
+    seqs_a = [reader.decode(bytearray(a.encode(hb))).get_seq() for _ in range(3)]
+    assert seqs_a == [0, 1, 2]
+    assert a.take_seq() == 3  # a frame packed elsewhere takes the next one
+    assert list(block.take(np.array([1, 0]))) == [0, 4]  # the team's take, row by row
+    assert reader.decode(bytearray(b.encode(hb))).get_seq() == 1
+    assert (a.stats().messages_out, b.stats().messages_out) == (5, 2)
+    block.seq[0] = 255
+    assert a.take_seq() == 255 and a.take_seq() == 0  # wraps like pymavlink's own
 
 
 def test_gcs_defaults_are_sysid_255_compid_190() -> None:

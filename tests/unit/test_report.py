@@ -112,6 +112,24 @@ def test_formation_error_is_the_max_over_all_pairs_not_only_neighbours() -> None
     assert metrics.formation_error(p[:1], OFFSETS[:1]) == 0.0  # one vehicle: no pair
 
 
+def test_formation_error_of_a_series_is_each_sample_s_dense_pair_maximum() -> None:
+    # GIVEN a (2, 3, n, 3) batch of samples of 7 vehicles, one sample with an unknown position
+    rng = np.random.default_rng(3)
+    p = rng.normal(0.0, 2.0, (2, 3, 7, 3))
+    theta = rng.normal(0.0, 2.0, (7, 3))
+    p[1, 2, 4, 0] = np.nan
+    # WHEN the series' error is taken
+    got = metrics.formation_error(p, theta)
+    # THEN it has the batch's shape and is, per sample, the largest |p_i - p_j - theta_ij|
+    q = p - theta
+    dense = np.linalg.norm(q[..., :, None, :] - q[..., None, :, :], axis=-1).max(axis=(-2, -1))
+    assert got.shape == (2, 3)
+    np.testing.assert_allclose(got[~np.isnan(dense)], dense[~np.isnan(dense)], rtol=1e-14)
+    assert np.isnan(got[1, 2]) and np.isnan(got).sum() == 1
+    with pytest.raises(ValueError, match="offsets"):
+        metrics.formation_error(p, theta[:6])
+
+
 coords = st.floats(min_value=-1e3, max_value=1e3, allow_nan=False)
 
 
