@@ -10,11 +10,10 @@ the busiest ticks past their period. So, for the length of a flight:
   which no collection walks again;
 * automatic collection is off; `after_tick` runs the collections the thresholds would have run,
   in the time between a tick's end and the next deadline, never inside a tick;
-* while the tick streams setpoints (priming, the formation, the hand-over), whatever survives a
-  middle-generation collection is frozen instead of waiting for a full collection, so none runs
-  while the law flies the vehicles. Objects that become garbage later are still freed at once by
-  reference counting; only garbage *cycles* that lived through two young collections wait,
-  until the next full collection after the streaming phases or the end of the flight;
+* while the tick streams setpoints (priming, the formation, the hand-over) no full collection
+  runs: what survives the middle generation waits in the oldest one. Objects that become
+  garbage are still freed at once by reference counting; only garbage *cycles* that old wait
+  for the first full collection after the streaming phases;
 * in the other phases (connecting, preflight, takeoff, go to start: the autopilots fly
   themselves) full collections run as Python's thresholds call for, over what the flight has
   allocated since it started;
@@ -39,7 +38,7 @@ MAX_DEFER = 20
 
 
 class PacedCollector:
-    """Young collections in the tick's slack, survivors frozen; a context for one flight."""
+    """Collections in the tick's slack, none in a tick; a context for one flight."""
 
     def __init__(self) -> None:
         self._was_enabled = False
@@ -62,7 +61,7 @@ class PacedCollector:
     def after_tick(self, slack_s: float, streaming: bool) -> None:
         """Run the collection the thresholds call for if ``slack_s`` (time to the next
         deadline) allows, or if it has been put off too long; ``streaming``: the tick sends
-        setpoints (no full collection: survivors are frozen)."""
+        setpoints (no full collection then)."""
         young, middle, old = gc.get_count()
         if young < YOUNG_THRESHOLD:
             return
@@ -73,7 +72,6 @@ class PacedCollector:
             self.young += 1
         elif streaming:
             gc.collect(1)
-            gc.freeze()
             self.middle += 1
         elif old + 1 >= OLD_EVERY:
             gc.collect(2)
