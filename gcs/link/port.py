@@ -298,26 +298,25 @@ class MavlinkPort:
             code = self._addr_codes[addr] = len(self._addr_codes)
         return code
 
-    def _on_batch(self, buffer: bytearray, offsets: list[int], lengths: list[int],
-                  sources: list[Address], stamps: list[float | None]) -> None:
+    def _on_batch(self, buffer: bytearray, offs: np.ndarray, lens: np.ndarray,
+                  sources: list[Address], stamps: np.ndarray) -> None:
         table = self._table
         assert table is not None
         now_s = self._now_s()
         if self._now_s is time.monotonic:  # the kernel's receive times, on this clock
             shift = time.time() - now_s
-            rx = np.array([now_s if t is None else min(now_s, t - shift) for t in stamps])
+            rx = np.where(np.isnan(stamps), now_s, np.minimum(now_s, stamps - shift))
         else:  # an injected clock (tests): when the batch is read
-            rx = np.full(len(offsets), now_s)
+            rx = np.full(len(offs), now_s)
         codes = self._addr_codes
-        addr_codes = np.fromiter((codes[a] if a in codes else self.address_code(a)
-                                  for a in sources), dtype=np.int64, count=len(sources))
-        offs = np.asarray(offsets, dtype=np.int64)
-        lens = np.asarray(lengths, dtype=np.int64)
+        addr_codes = np.array([codes[a] if a in codes else self.address_code(a)
+                               for a in sources], dtype=np.int64)
         total = int(offs[-1] + lens[-1])
-        if self._tlog_buf.shape[0] < 2 * total + 64:  # a record: 8 bytes + a frame of >= 12
-            self._tlog_buf = np.zeros(4 * total + 64, dtype=np.uint8)
-        if self._slow.shape[0] < total // 12 + len(offsets):  # a row per frame at most
-            self._slow = np.zeros((2 * (total // 12 + len(offsets)), 4), dtype=np.int64)
+        size = int(lens.sum())  # the datagrams' bytes (they may lie apart in the buffer)
+        if self._tlog_buf.shape[0] < 2 * size + 64:  # a record: 8 bytes + a frame of >= 12
+            self._tlog_buf = np.zeros(4 * size + 64, dtype=np.uint8)
+        if self._slow.shape[0] < size // 12 + len(offs):  # a row per frame at most
+            self._slow = np.zeros((2 * (size // 12 + len(offs)), 4), dtype=np.int64)
         data = np.frombuffer(buffer, dtype=np.uint8, count=total)
         n_slow, t_len, n_hot = scan(
             data, offs, lens, addr_codes, rx, int(time.time() * 1e6),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 import socket
 import struct
 import sys
@@ -12,16 +13,21 @@ from collections.abc import Callable
 from dataclasses import dataclass, fields
 from types import TracebackType
 
+import numpy as np
+
+from gcs.link.mmsg import SLOT_BYTES as MULTI_SLOT_BYTES
+from gcs.link.mmsg import MultiReceiver
+from gcs.link.mmsg import available as mmsg_available
+
 logger = logging.getLogger(__name__)
 
 Address = tuple[str, int]
 DatagramCallback = Callable[[bytes, Address], None]
 #: ``on_batch(buffer, offsets, lengths, sources, stamps)``: datagram d is
-#: ``buffer[offsets[d]:offsets[d] + lengths[d]]``, from ``sources[d]``, received by the kernel at
-#: ``stamps[d]`` (Unix time in s; None where the kernel gave none); the buffer is reused after the
-#: call returns.
-BatchCallback = Callable[[bytearray, list[int], list[int], list[Address], list[float | None]],
-                         None]
+#: ``buffer[offsets[d]:offsets[d] + lengths[d]]`` (int64 arrays), from ``sources[d]``, received
+#: by the kernel at ``stamps[d]`` (float array, Unix time in s; NaN where the kernel gave none);
+#: the buffer is reused after the call returns.
+BatchCallback = Callable[[bytearray, np.ndarray, np.ndarray, list[Address], np.ndarray], None]
 
 #: Bytes the transport may hold unsent before send() drops (a healthy UDP socket holds none).
 DEFAULT_MAX_WRITE_BUFFER_BYTES = 256 * 1024
@@ -58,6 +64,7 @@ class UdpStats:
     send_dropped_backpressure: int  # send() while the transport's buffer was over its limit
     send_errors: int  # errors reported by the socket (e.g. ICMP port unreachable)
     callback_errors: int  # exceptions raised by on_datagram (logged with traceback)
+    rx_truncated: int  # bulk mode: datagrams longer than a read slot, cut (gcs.link.mmsg)
 
 
 class _Protocol(asyncio.DatagramProtocol):
@@ -123,6 +130,7 @@ class UdpEndpoint:
         self._bound: Address | None = None  # local_address, once asked while open
         self._kernel_stamps = False  # bulk mode: each datagram's kernel receive time (Linux)
         self._batch_buf = bytearray(BATCH_BUFFER_BYTES if on_batch is not None else 0)
+        self._multi: MultiReceiver | None = None  # bulk mode on Linux: recvmmsg (gcs.link.mmsg)
         self._rx_queue: asyncio.Queue[tuple[bytes, Address]] = asyncio.Queue(rx_queue_size)
         self._max_write_buffer_bytes = max_write_buffer_bytes
         self._transport: asyncio.DatagramTransport | None = None
@@ -154,6 +162,7 @@ class UdpEndpoint:
                     self._kernel_stamps = True
                 except OSError:
                     logger.debug("%s: no kernel receive times; stamped when read", self.name)
+            self._multi = MultiReceiver(sock) if mmsg_available(sock) else None
             loop.add_reader(sock.fileno(), self._drain)
             logger.debug("%s: bound %s (bulk), remote %s", self.name, self.local_address,
                          self._remote)
@@ -306,16 +315,19 @@ class UdpEndpoint:
         sock, cb = self._sock, self._on_batch_cb
         if sock is None or cb is None:
             return
+        if self._multi is not None:
+            self._drain_multi(self._multi, cb)
+            return
         view = memoryview(self._batch_buf)
         limit = len(self._batch_buf) - MAX_DATAGRAM_BYTES
         offsets: list[int] = []
         lengths: list[int] = []
         sources: list[Address] = []
-        stamps: list[float | None] = []
+        stamps: list[float] = []
         total = 0
         kernel = self._kernel_stamps
         while len(offsets) < MAX_BATCH_DATAGRAMS and total <= limit:
-            stamp = None
+            stamp = math.nan
             try:
                 if kernel:
                     nbytes, ancillary, _, addr = sock.recvmsg_into([view[total:]],
@@ -338,13 +350,39 @@ class UdpEndpoint:
             total += nbytes
         if not offsets:
             return
+        self._hand_over(cb, self._batch_buf, np.asarray(offsets, dtype=np.int64),
+                        np.asarray(lengths, dtype=np.int64), sources,
+                        np.asarray(stamps, dtype=np.float64))
+
+    def _drain_multi(self, multi: MultiReceiver, cb: BatchCallback) -> None:
+        for _ in range(2):  # an error the socket reports (ICMP) is read first, then the data
+            try:
+                n = multi.receive()
+                break
+            except OSError as exc:
+                self._on_error(exc)
+        else:
+            return
+        if n == 0:
+            return
+        lengths = multi.lengths(n)
+        truncated = int(multi.truncated(n).sum())
+        if truncated:
+            self._counts["rx_truncated"] += truncated
+            logger.warning("%s: %d datagram(s) longer than %d bytes, cut", self.name, truncated,
+                           MULTI_SLOT_BYTES)
+        stamps = multi.stamps(n) if self._kernel_stamps else np.full(n, np.nan)
+        self._hand_over(cb, multi.buffer, multi.offsets[:n], lengths, multi.sources(n), stamps)
+
+    def _hand_over(self, cb: BatchCallback, buffer: bytearray, offsets: np.ndarray,
+                   lengths: np.ndarray, sources: list[Address], stamps: np.ndarray) -> None:
         counts = self._counts
         counts["packets_in"] += len(offsets)
-        counts["bytes_in"] += total
+        counts["bytes_in"] += int(lengths.sum())
         if self._remote is not None:
             counts["packets_in_foreign"] += sum(1 for a in sources if a != self._remote)
         try:
-            cb(self._batch_buf, offsets, lengths, sources, stamps)
+            cb(buffer, offsets, lengths, sources, stamps)
         except Exception:
             counts["callback_errors"] += 1
             logger.exception("%s: on_batch callback failed", self.name)
