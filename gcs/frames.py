@@ -83,16 +83,31 @@ def flu_from_frd(v_frd: ArrayLike) -> FloatArray:
 # --- rotation matrices ---------------------------------------------------------------------------
 
 
+def _signed_permutation(m: FloatArray) -> tuple[NDArray[np.intp], FloatArray]:
+    """(idx, sign) of a signed permutation matrix: (m @ x)[i] = sign[i] * x[idx[i]]."""
+    idx = np.abs(m).argmax(axis=1)
+    return idx, m[np.arange(m.shape[0]), idx]
+
+
+# P R F for a stack of R, as row and column picks with signs (P and F are signed permutations):
+# (P R F)[i, j] = P_sign[i] F_sign[j] R[P_rows[i], F_cols[j]]; a stacked matmul costs ~5x more
+_P_ROWS, _P_SIGN = _signed_permutation(P_NED_ENU)
+_F_COLS, _F_SIGN = _signed_permutation(F_FRD_FLU.T)
+_PF_SIGN = _P_SIGN[:, None] * _F_SIGN[None, :]
+
+
+def _p_r_f(r: FloatArray) -> FloatArray:
+    return r[..., _P_ROWS, :][..., _F_COLS] * _PF_SIGN
+
+
 def rotation_ned_frd_from_enu_flu(rotation_enu_flu: ArrayLike) -> FloatArray:
     """Attitude(s) R_enu_flu (body FLU -> ENU) -> R_ned_frd (body FRD -> NED) = P R F."""
-    r = _matrices(rotation_enu_flu, "rotation_enu_flu")
-    return P_NED_ENU @ r @ F_FRD_FLU
+    return _p_r_f(_matrices(rotation_enu_flu, "rotation_enu_flu"))
 
 
 def rotation_enu_flu_from_ned_frd(rotation_ned_frd: ArrayLike) -> FloatArray:
     """Attitude(s) R_ned_frd (body FRD -> NED) -> R_enu_flu (body FLU -> ENU) = P R F."""
-    r = _matrices(rotation_ned_frd, "rotation_ned_frd")
-    return P_NED_ENU @ r @ F_FRD_FLU
+    return _p_r_f(_matrices(rotation_ned_frd, "rotation_ned_frd"))
 
 
 def is_rotation(rotation: ArrayLike, tol: float = 1e-6) -> NDArray[np.bool_]:

@@ -31,6 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from gcs.control.law import TeamMeasurement
 
@@ -88,6 +89,29 @@ def rotation_angle_rad(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     (accurate near 0, where the trace's arccos is not)."""
     d = np.sqrt(((a - b) ** 2).sum(axis=(-2, -1)))
     return 2.0 * np.arcsin(np.clip(d / (2.0 * np.sqrt(2.0)), 0.0, 1.0))
+
+
+@njit(cache=True)
+def _reached(pending: np.ndarray, act_s: np.ndarray, taken_s: np.ndarray, within_s: float
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`PredictionAudit._reached` in one pass over the (slots, n) pending predictions (no
+    temporaries of that size: it runs every tick): clears the reached ones, returns those
+    resolved as (slot, vehicle, back) in slot-major order."""
+    slots, n = pending.shape
+    out_slot = np.empty(slots * n, dtype=np.int64)
+    out_veh = np.empty(slots * n, dtype=np.int64)
+    out_back = np.empty(slots * n)
+    m = 0
+    for k in range(slots):
+        for i in range(n):
+            if pending[k, i]:
+                back = taken_s[i] - act_s[k, i]
+                if back >= 0.0:  # NaN compares false: not reached
+                    pending[k, i] = False
+                    if back <= within_s:
+                        out_slot[m], out_veh[m], out_back[m] = k, i, back
+                        m += 1
+    return out_slot[:m], out_veh[:m], out_back[:m]
 
 
 @dataclass(frozen=True, slots=True)
@@ -157,11 +181,8 @@ class PredictionAudit:
         """The pending predictions (slot, vehicle) whose act time a sample taken at `taken_s`
         has reached, no longer pending, and of those the ones it resolves (taken at most
         RESOLVE_WITHIN_S later), with how much later (back, >= 0)."""
-        back = taken_s[None, :] - self._t  # (slots, n), >= 0 once reached
-        hit = pending & (back >= 0.0)
-        pending &= ~hit
-        slot, veh = np.nonzero(hit & (back <= RESOLVE_WITHIN_S))
-        return slot, veh, back[slot, veh]
+        return _reached(pending, self._t, np.ascontiguousarray(taken_s, dtype=np.float64),
+                        RESOLVE_WITHIN_S)
 
     def _keep(self, kind: int, vehicles: np.ndarray, errors: np.ndarray) -> None:
         self._vehicles[kind].append(vehicles)

@@ -168,3 +168,16 @@ def test_batched_equals_one_by_one(qs: list[np.ndarray]) -> None:
                                    atol=1e-12)
     np.testing.assert_allclose(frames.rotation_ned_frd_from_enu_flu(
         frames.rotation_enu_flu_from_ned_frd(r)), r, atol=1e-15)
+
+
+def test_attitude_conversions_are_the_matrix_products_p_r_f_for_any_stack():
+    # GIVEN rotations stacked (2, 5) deep, and a single one
+    rng = np.random.default_rng(11)
+    stack = frames.rotation_from_quat_wxyz(rng.normal(size=(2, 5, 4)))
+    for r in (stack, stack[1, 3]):
+        # THEN both directions are exactly P R F (the row/column picks are only faster)
+        want = frames.P_NED_ENU @ r @ frames.F_FRD_FLU
+        assert np.array_equal(frames.rotation_enu_flu_from_ned_frd(r), want)
+        assert np.array_equal(frames.rotation_ned_frd_from_enu_flu(r), want)
+        assert np.array_equal(frames.rotation_ned_frd_from_enu_flu(
+            frames.rotation_enu_flu_from_ned_frd(r)), r)
