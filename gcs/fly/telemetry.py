@@ -41,6 +41,7 @@ from gcs.mission.autopilots import profile_for
 from gcs.mission.safety import VehicleStatus
 
 _IDENTITY_Q = (1.0, 0.0, 0.0, 0.0)
+_EYE = np.eye(3)
 #: The latest TIMESYNC round trips the preflight's delay judge reads (4 s at 2 Hz: not the
 #: replies a vehicle sent late while it was still starting up).
 JUDGED_ROUND_TRIPS = 8
@@ -111,7 +112,9 @@ def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
     acc = np.einsum("nij,nj->ni", rot, f_flu)
     acc[:, 2] -= GRAVITY_MPS2
     acc[~np.isfinite(acc).all(axis=1)] = 0.0  # no IMU yet: assume v' = 0 rather than NaN
-    if ties is not None:  # local ENU -> team ENU: p = o + R p_local, and R for every vector
+    if ties is not None and (ties[0].any() or (ties[1] != _EYE).any()):
+        # local ENU -> team ENU: p = o + R p_local, and R for every vector (skipped while every
+        # tie is the identity: one origin for all, the usual emulator setup)
         offsets, turn = ties
         p_enu = offsets + np.einsum("nij,nj->ni", turn, p_enu)
         v_enu = np.einsum("nij,nj->ni", turn, v_enu)
