@@ -42,7 +42,7 @@ class PacedCollector:
 
     def __init__(self) -> None:
         self._was_enabled = False
-        self.young = 0  # collections run (for tests and the report's curious reader)
+        self.young = 0  # collections run, by kind (what the tests read)
         self.middle = 0
         self.full = 0
 

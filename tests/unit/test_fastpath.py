@@ -5,6 +5,7 @@ packed byte for byte as pymavlink packs them; then a shared port over real UDP s
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import socket
 import time
 
@@ -284,25 +285,36 @@ def test_a_stalled_event_loop_does_not_read_as_link_delay() -> None:
     asyncio.run(asyncio.wait_for(_stalled(), 20.0))
 
 
-async def _stalled() -> None:
+@contextlib.asynccontextmanager
+async def _one_vehicle(**link: float):  # noqa: ANN202
+    """A port with a hot table of one, its vehicle's proxy (sysid 1, `link` settings) and the
+    vehicle's socket: (table, socket, proxy)."""
     table = HotTable(1)
     async with MavlinkPort(0, table=table) as port:
         gcs_port = port.local_address[1]
         a, a_port = _udp(gcs_port)
-        cfg = VehicleLinkConfig(vehicle_id=1, sysid=1, local_port=gcs_port, remote_port=a_port)
-        async with VehicleProxy(cfg, port=port, slot=0) as p:
-            mav = _sender(1)
-            sent_s = time.monotonic()
-            a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(1, 1.0, 0, 0, 0, 0, 0))
-                   + _pack(mav, mavlink.MAVLink_heartbeat_message(2, 12, 0, 0, 0, 3)))
-            time.sleep(0.3)  # the event loop is blocked: nothing is read meanwhile
-            await asyncio.sleep(0.05)
-            lpn, hb = p.latest("LOCAL_POSITION_NED"), p.latest("HEARTBEAT")
-            assert lpn is not None and hb is not None
-            assert table.count[0, LPN] == 1
-            assert lpn.rx_time_s - sent_s < 0.1
-            assert hb.rx_time_s == lpn.rx_time_s
+        cfg = VehicleLinkConfig(vehicle_id=1, sysid=1, local_port=gcs_port, remote_port=a_port,
+                                **link)
+        try:
+            async with VehicleProxy(cfg, port=port, slot=0) as p:
+                yield table, a, p
+        finally:
             a.close()
+
+
+async def _stalled() -> None:
+    async with _one_vehicle() as (table, a, p):
+        mav = _sender(1)
+        sent_s = time.monotonic()
+        a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(1, 1.0, 0, 0, 0, 0, 0))
+               + _pack(mav, mavlink.MAVLink_heartbeat_message(2, 12, 0, 0, 0, 3)))
+        time.sleep(0.3)  # the event loop is blocked: nothing is read meanwhile
+        await asyncio.sleep(0.05)
+        lpn, hb = p.latest("LOCAL_POSITION_NED"), p.latest("HEARTBEAT")
+        assert lpn is not None and hb is not None
+        assert table.count[0, LPN] == 1
+        assert lpn.rx_time_s - sent_s < 0.1
+        assert hb.rx_time_s == lpn.rx_time_s
 
 
 def test_team_setpoints_reach_each_vehicle_as_its_own_setpoint_would(tmp_path) -> None:  # noqa: ANN001
@@ -372,39 +384,32 @@ def test_a_proxy_hears_of_its_hot_messages_every_notice_period_not_every_batch()
 
 
 async def _notices() -> None:
-    table = HotTable(1)
-    async with MavlinkPort(0, table=table) as port:
-        gcs_port = port.local_address[1]
-        a, a_port = _udp(gcs_port)
-        cfg = VehicleLinkConfig(vehicle_id=1, sysid=1, local_port=gcs_port, remote_port=a_port,
-                                timesync_period_s=0.0)
-        async with VehicleProxy(cfg, port=port, slot=0) as p:
-            calls = []
-            on_hot = p._on_hot
-            p._on_hot = lambda: (calls.append(time.monotonic()), on_hot())  # type: ignore[method-assign]
-            mav = _sender(1)
-            t0 = time.monotonic()
-            for k in range(20):  # one datagram every 5 ms, stamped as if 0-19 ms in transit
-                stamp_ms = int((time.monotonic() - t0) * 1e3) + 1000 - (0 if k == 7 else 19)
-                a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(
-                    stamp_ms, float(k), 0, 0, 0, 0, 0)))
-                await asyncio.sleep(0.005)
-            await asyncio.sleep(HOT_NOTICE_S + 0.01)
+    async with _one_vehicle(timesync_period_s=0.0) as (table, a, p):
+        calls = []
+        on_hot = p._on_hot
+        p._on_hot = lambda: (calls.append(time.monotonic()), on_hot())  # type: ignore[method-assign]
+        mav = _sender(1)
+        t0 = time.monotonic()
+        for k in range(20):  # one datagram every 5 ms, stamped as if 0-19 ms in transit
+            stamp_ms = int((time.monotonic() - t0) * 1e3) + 1000 - (0 if k == 7 else 19)
             a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(
-                int((time.monotonic() - t0) * 1e3) + 1000 - 19, 20.0, 0, 0, 0, 0, 0)))
-            await asyncio.sleep(0.01)
-            assert table.count[0, LPN] == 21
-            elapsed = calls[-1] - calls[0]
-            assert 2 <= len(calls) <= 2 + elapsed / HOT_NOTICE_S  # not 21
-            # the least-delayed sample (k = 7) set the envelope, though no notice came with it
-            offset_7 = p.clock.estimate().offset_s
-            assert offset_7 < t0 - 1.0 + 0.010  # k = 7's rx - stamp; the others' are 19 ms more
-            waiter = asyncio.create_task(p.wait_message("LOCAL_POSITION_NED", 1.0))
+                stamp_ms, float(k), 0, 0, 0, 0, 0)))
             await asyncio.sleep(0.005)
-            sent_s = time.monotonic()
-            a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(
-                int((sent_s - t0) * 1e3) + 1000 - 19, 21.0, 0, 0, 0, 0, 0)))
-            got = await waiter
-            assert got.msg.x == 21.0 and time.monotonic() - sent_s < HOT_NOTICE_S
-            assert offset_7 == p.clock.estimate().offset_s
-        a.close()
+        await asyncio.sleep(HOT_NOTICE_S + 0.01)
+        a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(
+            int((time.monotonic() - t0) * 1e3) + 1000 - 19, 20.0, 0, 0, 0, 0, 0)))
+        await asyncio.sleep(0.01)
+        assert table.count[0, LPN] == 21
+        elapsed = calls[-1] - calls[0]
+        assert 2 <= len(calls) <= 2 + elapsed / HOT_NOTICE_S  # not 21
+        # the least-delayed sample (k = 7) set the envelope, though no notice came with it
+        offset_7 = p.clock.estimate().offset_s
+        assert offset_7 < t0 - 1.0 + 0.010  # k = 7's rx - stamp; the others' are 19 ms more
+        waiter = asyncio.create_task(p.wait_message("LOCAL_POSITION_NED", 1.0))
+        await asyncio.sleep(0.005)
+        sent_s = time.monotonic()
+        a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(
+            int((sent_s - t0) * 1e3) + 1000 - 19, 21.0, 0, 0, 0, 0, 0)))
+        got = await waiter
+        assert got.msg.x == 21.0 and time.monotonic() - sent_s < HOT_NOTICE_S
+        assert offset_7 == p.clock.estimate().offset_s
