@@ -22,7 +22,7 @@ test: install
 
 # The main job: start the emulator fleet, fly the team over MAVLink, stop the emulators.
 demo: install
-	$(BIN)/gcs fly --team $(TEAM) --mode rates --out $(OUT) --emulators
+	$(BIN)/gcs fly --team $(TEAM) --out $(OUT) --emulators
 
 # The paper's scenarios in-process (no MAVLink).
 sim: install

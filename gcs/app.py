@@ -40,7 +40,15 @@ from typing import Any
 import numpy as np
 
 from gcs import frames
-from gcs.config import FLY_ACTIONS, MODES, ConfigError, TeamConfig, check_go_to_start
+from gcs.config import (
+    AUTO_MODES,
+    FLY_ACTIONS,
+    FLY_MODES,
+    MODES,
+    ConfigError,
+    TeamConfig,
+    check_go_to_start,
+)
 from gcs.control.formation import reference_velocity
 from gcs.control.gains import GRAVITY_MPS2, LawGains
 from gcs.control.law import SingularCommandError, TeamCommand, TeamLaw, TeamMeasurement
@@ -102,7 +110,14 @@ from gcs.link.enums import MSG_ID, MavCmd, MavModeFlag
 from gcs.link.proxy import TeamSetpoints
 from gcs.metrics import formation_error_m
 from gcs.mission.autopilots import PROFILES, AutopilotProfile, ModeSpec, version_text
-from gcs.mission.cascade import AutopilotResponse, CascadeGains, laplacian_eigenvalues, verdict
+from gcs.mission.cascade import (
+    AutopilotResponse,
+    CascadeGains,
+    cascade_margins,
+    laplacian_eigenvalues,
+    passes,
+    verdict,
+)
 from gcs.mission.goto import GoToStartPlan
 from gcs.mission.machine import (
     EXIT_ABORTED,
@@ -173,6 +188,7 @@ class FlightSetup:
     stability: str  # the discrete-time criterion, evaluated (for the log and the report)
     # rates/attitude: the criterion again at each link's measured delay, in preflight
     delay_judge: DelayJudge | None = None
+    mode_choice: str = ""  # which mode is flown and why (resolve_mode)
 
 
 @dataclass(frozen=True, slots=True)
@@ -217,6 +233,62 @@ def cascade_check(team: TeamConfig, mode: str, gains: LawGains,
     return "\n".join(lines), refusals, judge
 
 
+def _mode_gains(team: TeamConfig, mode: str) -> LawGains:
+    """The law's gains as flown in `mode`: fly.<mode>'s over controller.gains."""
+    mode_cfg, g = team.fly.mode(mode), team.controller.gains
+    flown = {name: getattr(mode_cfg, name) for name in ("k_eps", "k_eps_yaw", "alpha_p", "c_p")
+             if getattr(mode_cfg, name) is not None}
+    return g._replace(
+        alpha_eps=mode_cfg.alpha_eps if mode == "actuators" and mode_cfg.alpha_eps else g.alpha_eps,
+        alpha_omega=(mode_cfg.alpha_omega if mode == "actuators" and mode_cfg.alpha_omega
+                     else g.alpha_omega),
+        **flown,
+    )
+
+
+def resolve_mode(team: TeamConfig, requested: str | None,
+                 tick_rate_hz: float | None = None) -> tuple[str, str]:
+    """(the control mode to fly, one line saying why) for `--mode` (None: the file's fly.mode).
+
+    `auto` flies the first of AUTO_MODES (rates, then attitude) whose loops pass the cascade
+    criterion with the file's gains for that mode at fly.link_delay_s on every autopilot gcs fly
+    flies (fly.response: on that response alone); rates comes first because where both pass it
+    admits the stiffer position loop (docs/gcs.md, "Control modes"). actuators is never chosen:
+    PX4 from 1.14 and ArduPilot ignore actuator setpoints, and the torque loop would run across
+    the link. When neither passes, auto flies rates and preflight refuses the vehicles whose
+    autopilot it fails on, naming gains that pass.
+    """
+    fly = team.fly
+    mode = requested or fly.control_mode
+    if mode != "auto":
+        source = "--mode" if requested else "fly.mode"
+        return mode, f"mode {mode} ({source})"
+    eigenvalues = laplacian_eigenvalues(team.laplacian())
+    responses = ([("every vehicle", AutopilotResponse(**dataclasses.asdict(fly.response),
+                                                      source="the team file's fly.response"))]
+                 if fly.response is not None else
+                 [(p.name, p.response) for p in PROFILES.values()])
+    failed: dict[str, list[str]] = {}
+    for mode in AUTO_MODES:
+        g = _mode_gains(team, mode)
+        rate = tick_rate_hz or fly.mode(mode).tick_rate_hz
+        cg = CascadeGains(g.alpha_p, g.c_p, g.k_eps, g.k_eps_yaw)
+        failed[mode] = [name for name, response in responses
+                        if not passes(cascade_margins(mode, cg, response, eigenvalues, rate,
+                                                      fly.link_delay_s, fly.predict))]
+        if not failed[mode]:
+            names = " and ".join(name for name, _ in responses)
+            skipped = "".join(f"; {m} fails on {', '.join(failed[m])}" for m in AUTO_MODES
+                              if failed.get(m))
+            return mode, (f"mode {mode} (auto: the first of {', '.join(AUTO_MODES)} whose loops "
+                          f"pass on {names} with fly.{mode}'s gains at link delay "
+                          f"{1e3 * fly.link_delay_s:.0f} ms{skipped})")
+    fails = "; ".join(f"{m} fails on {', '.join(failed[m])}" for m in AUTO_MODES)
+    return AUTO_MODES[0], (f"mode {AUTO_MODES[0]} (auto: no mode passes on every autopilot "
+                           f"with the file's gains at link delay {1e3 * fly.link_delay_s:.0f} ms: "
+                           f"{fails}; preflight refuses the vehicles it fails on)")
+
+
 def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
     """Resolve mode, law, rate and gains; check the discrete-time criterion (stability.py).
 
@@ -224,7 +296,9 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
     stable at the rate it would run at.
     """
     fly = team.fly
-    mode = options.mode or team.controller.mode
+    if options.mode is not None and options.mode not in FLY_MODES:
+        raise FlightSetupError(f"mode {options.mode!r}: expected one of {FLY_MODES}")
+    mode, mode_choice = resolve_mode(team, options.mode, options.tick_rate_hz)
     law = options.law or team.controller.law
     if fly.initial_mass == "from_hover" and law == "adaptive":
         try:
@@ -246,15 +320,7 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
     if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-9 * ratio:
         raise FlightSetupError(
             f"tick rate {rate:g} Hz must be a multiple of fly.log_rate_hz {fly.log_rate_hz:g}")
-    g = team.controller.gains
-    flown = {name: getattr(mode_cfg, name) for name in ("k_eps", "k_eps_yaw", "alpha_p", "c_p")
-             if getattr(mode_cfg, name) is not None}  # fly.<mode> gains over controller.gains
-    gains = g._replace(
-        alpha_eps=mode_cfg.alpha_eps if mode == "actuators" and mode_cfg.alpha_eps else g.alpha_eps,
-        alpha_omega=(mode_cfg.alpha_omega if mode == "actuators" and mode_cfg.alpha_omega
-                     else g.alpha_omega),
-        **flown,
-    )
+    gains = _mode_gains(team, mode)
     loop_refusals: dict[int, str] = {}
     judge = None
     if mode == "actuators":
@@ -322,7 +388,7 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
         **({"prime_s": HOVER_WINDOW_S + 0.5} if from_hover else {}),
     )
     return FlightSetup(team, mode, law, rate, gains, plan, required,
-                       round(rate / fly.log_rate_hz), stability, judge)
+                       round(rate / fly.log_rate_hz), stability, judge, mode_choice)
 
 
 def go_to_start_plan(team: TeamConfig) -> GoToStartPlan | None:
@@ -417,9 +483,9 @@ class Flight:
         self.builder = FlightLogBuilder(
             vehicle_ids=self.ids, sysids=team.sysids(), offsets_enu_m=team.offsets_enu_m(),
             source="fly", controller=setup.law, team=team.source_path, name=team.name,
-            extra={"mode": setup.mode, "tick_rate_hz": setup.tick_rate_hz,
-                   "derivative": d.method, "gains": setup.gains._asdict(),
-                   "stability": setup.stability},
+            extra={"mode": setup.mode, "mode_choice": setup.mode_choice,
+                   "tick_rate_hz": setup.tick_rate_hz, "derivative": d.method,
+                   "gains": setup.gains._asdict(), "stability": setup.stability},
         )
         self.ticks = TickStats(setup.tick_rate_hz)
         self.ages = AgeStats(self.n)

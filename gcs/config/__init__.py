@@ -16,9 +16,11 @@ from gcs.config.reader import (
     team_to_yaml,
 )
 from gcs.config.schema import (
+    AUTO_MODES,
     DERIVATIVE_METHODS,
     FAULT_KINDS,
     FLY_ACTIONS,
+    FLY_MODES,
     FLY_STARTS,
     GAIN_NAMES,
     GRAVITY_MPS2,
@@ -60,9 +62,11 @@ from gcs.config.schema import (
 )
 
 __all__ = [
+    "AUTO_MODES",
     "DERIVATIVE_METHODS",
     "FAULT_KINDS",
     "FLY_ACTIONS",
+    "FLY_MODES",
     "FLY_STARTS",
     "GAIN_NAMES",
     "GRAVITY_MPS2",

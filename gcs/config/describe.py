@@ -99,7 +99,9 @@ def describe(team: TeamConfig) -> str:
         else "no geofence"
     )
     out += [
-        f"fly: {mode_line('rates', fly.rates)} (body-rate limit "
+        f"fly: mode {fly.control_mode} (controller.mode is gcs sim's; auto: rates, or attitude "
+        "where rates fails the cascade criterion at fly.link_delay_s)",
+        f"     {mode_line('rates', fly.rates)} (body-rate limit "
         f"{fly.rates.max_rate_radps:g} rad/s); {mode_line('actuators', fly.actuators)}",
         f"     start {fly.start}, end {fly.end_action}, abort {fly.abort_action}, link loss "
         f"{fly.link_loss_action}; stale after {fly.stale_after_s:g} s, lost after "

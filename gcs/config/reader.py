@@ -22,6 +22,7 @@ from gcs.config.schema import (
     FLY_ACTIONS,
     FLY_HEADINGS,
     FLY_INITIAL_MASSES,
+    FLY_MODES,
     FLY_SCHEDULING,
     FLY_STARTS,
     FRAME_VEHICLES,
@@ -705,7 +706,7 @@ def _fly(node: _Node) -> FlyConfig:
         return d
     node.keys(
         "",
-        "rates actuators attitude heading start takeoff_altitude_m end_action abort_action "
+        "mode rates actuators attitude heading start takeoff_altitude_m end_action abort_action "
         "link_loss_action stale_after_s link_lost_after_s link_timeout_s max_tilt_rad geofence "
         "log_rate_hz connect_timeout_s takeoff_timeout_s land_timeout_s takeoff_tolerance_m "
         "arm_timeout_s arm_retry_s mode_timeout_s formation_check response link_delay_s "
@@ -723,6 +724,7 @@ def _fly(node: _Node) -> FlyConfig:
                     f"{geofence.min_enu_m[k]!r} >= max {geofence.max_enu_m[k]!r}"
                 )
     fly = FlyConfig(
+        control_mode=node.child("mode").string(d.control_mode, FLY_MODES),
         rates=_fly_mode(node.child("rates"), d.rates),
         actuators=_fly_mode(node.child("actuators"), d.actuators),
         attitude=_fly_mode(node.child("attitude"), d.attitude),
@@ -947,6 +949,8 @@ def team_to_dict(team: TeamConfig) -> dict[str, Any]:
 
     data = plain(team)
     del data["source_path"]
+    fly = data["fly"]
+    data["fly"] = {"mode": fly.pop("control_mode")} | fly  # the field's YAML key
     return data
 
 

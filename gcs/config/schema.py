@@ -20,6 +20,8 @@ GRAVITY_MPS2 = 9.81
 THRUST_MARGIN = 1.2  # max collective thrust must be >= THRUST_MARGIN * m g when a plant is given
 LAWS = ("adaptive", "baseline")
 MODES = ("rates", "actuators", "attitude")  # attitude: gcs fly only (the autopilot's loop)
+FLY_MODES = ("auto", *MODES)  # fly.mode / gcs fly --mode
+AUTO_MODES = ("rates", "attitude")  # what fly.mode auto chooses from, in order (gcs/app.py)
 SIM_MODES = ("rates", "actuators")
 DERIVATIVE_METHODS = ("model", "levant")
 FAULT_KINDS = ("mass_drop", "link_loss", "packet_loss", "motor_efficiency")
@@ -421,6 +423,9 @@ RESPONSE_KEYS = tuple(ResponseConfig.__dataclass_fields__)
 class FlyConfig:
     """The `fly:` section: flight sequence, safety rules and link timing of `gcs fly`."""
 
+    # fly.mode: the control mode gcs fly flies (controller.mode is gcs sim's); "auto": rates, or
+    # attitude where rates' loops fail the cascade criterion at link_delay_s (gcs/app.py)
+    control_mode: str = "auto"
     rates: FlyModeConfig = FlyModeConfig(100.0)
     actuators: FlyModeConfig = FlyModeConfig(250.0)
     attitude: FlyModeConfig = FlyModeConfig(100.0)

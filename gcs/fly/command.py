@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TextIO
 
 from gcs.app import Flight, FlightSetupError, FlyOptions, prepare
-from gcs.config import TeamConfig, load_team
+from gcs.config import FLY_MODES, TeamConfig, load_team
 from gcs.fly.sched import SchedulingError, apply_scheduling
 from gcs.precompile import compile_law
 from gcs.report import summary_table
@@ -31,9 +31,10 @@ EXIT_INTERRUPTED = 130
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("fly", help="fly the team in formation over MAVLink and write records")
     p.add_argument("--team", required=True, type=Path, help="team config (YAML)")
-    p.add_argument("--mode", choices=("rates", "actuators", "attitude"), default=None,
+    p.add_argument("--mode", choices=FLY_MODES, default=None,
                    help="setpoints sent to the vehicles: thrust + body rates, thrust + torque, "
-                        "or thrust + attitude (default: the file's)")
+                        "thrust + attitude, or auto: rates, or attitude where the link's delay "
+                        "needs it (default: the file's fly.mode, auto)")
     p.add_argument("--controller", choices=("adaptive", "baseline"), default=None,
                    help="law (default: the file's)")
     p.add_argument("--tick-rate-hz", type=float, default=None,
@@ -169,6 +170,7 @@ def run_fly(args: argparse.Namespace) -> int:
 
     try:
         setup = prepare(team, options)
+        print(f"gcs fly: {setup.mode_choice}", file=sys.stderr, flush=True)
         with emulator_fleet(args.team, args.emulators) as fleet:
             # the law compiles (first run only) while the fleet boots and compiles beside it
             compile_law(force=False)

@@ -6,6 +6,7 @@ cache is emptied by pointing NUMBA_CACHE_DIR at a new folder, exactly what a fre
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import socket
@@ -34,10 +35,11 @@ def empty_cache(tmp_path, monkeypatch) -> Path:
 
 def test_manual_path_on_an_empty_cache_fleet_and_gcs_started_together(tmp_path, empty_cache):
     # GIVEN nothing compiled, WHEN `vehicle-emu --fleet` and `gcs fly` start at the same moment
+    # (no --mode: the file's fly.mode, auto, while its controller.mode is gcs sim's actuators)
     base = free_udp_port_block(4)
     team = team_file(tmp_path, base, duration_s=3.0)
     with emulators(team, base, tmp_path) as procs:
-        gcs = Gcs(team, tmp_path / "run", "--mode", "rates", "--end-action", "hold")
+        gcs = Gcs(team, tmp_path / "run", "--end-action", "hold")
         code, out = gcs.finish(240)
         assert procs[0].poll() is None, "the fleet died"
     err = gcs.log_path.read_text()
@@ -45,6 +47,10 @@ def test_manual_path_on_an_empty_cache_fleet_and_gcs_started_together(tmp_path, 
     # THEN both say they compile (first run only), and the flight waits for it and succeeds
     assert code == 0, err[-3000:]
     assert "gcs fly: done: formation complete (exit 0)" in out
+    # auto chose rates on the vehicles' declared response, and said so before connecting
+    assert ("gcs fly: mode rates (auto: the first of rates, attitude whose loops pass on every "
+            "vehicle with fly.rates's gains at link delay 10 ms)") in err
+    assert json.loads((tmp_path / "run" / "report.json").read_text())["extra"]["mode"] == "rates"
     assert "gcs: compiling the control law (first run" in err
     assert "vehicle-emu: compiling the emulator physics (first run" in emu
     assert "vehicle-emu: compiled the emulator physics in" in emu

@@ -529,7 +529,7 @@ ERRORS = [
         r"faults\[0\]\.x: unknown key; allowed keys: kind, vehicle, at_s, fraction",
     ),
     ("faults", {"kind": "mass_drop"}, r"faults: expected a list of faults, got a mapping"),
-    ("fly", [1], r"^<dict>: fly: expected a mapping with keys rates, actuators, attitude, heading, start, "),
+    ("fly", [1], r"^<dict>: fly: expected a mapping with keys mode, rates, actuators, attitude, heading, start, "),
     ("fly.rates.tick_hz", 100, r"fly\.rates\.tick_hz: unknown key; did you mean 'tick_rate_hz'"),
     ("fly.rates.tick_rate_hz", 0, r"fly\.rates\.tick_rate_hz: expected a value in \(0, 1000\], "
      r"got 0\.0$"),
@@ -562,6 +562,8 @@ ERRORS = [
     ("fly.predict", "yes", r"fly\.predict: expected true or false, got string 'yes'"),
     ("fly.scheduling", "fast", r"fly\.scheduling: expected one of 'auto', 'realtime', 'raised', "
      r"'normal', got string 'fast'"),
+    ("fly.mode", "torque", r"fly\.mode: expected one of 'auto', 'rates', 'actuators', 'attitude', "
+     r"got string 'torque'"),
 ]
 
 
@@ -581,6 +583,8 @@ def test_fly_section_is_optional_and_defaults_are_documented():
     assert fly.link_timeout_s == 3.0  # tolerates a 1 Hz HEARTBEAT-only vehicle
     assert fly.predict is True  # delay compensation on (gcs/fly/predict.py)
     assert fly.scheduling == "auto"  # the best the OS permits (gcs/fly/sched.py)
+    assert fly.control_mode == "auto"  # gcs fly picks rates or attitude (gcs/app.py)
+    assert team_from_dict(edit(base(), "fly.mode", "attitude")).fly.control_mode == "attitude"
     assert team_from_dict(edit(base(), "fly.predict", False)).fly.predict is False
     # AND the shipped file flies the criterion's torque gains
     shipped = load_team(SQUARE4).fly
@@ -936,6 +940,9 @@ def test_fly_heading_and_the_attitude_mode_load_and_round_trip(heading):
     team = team_from_dict(data)
     assert team.fly.heading == heading and team.fly.mode("attitude").tick_rate_hz == 50.0
     assert team_from_yaml(team_to_yaml(team), "<rt>").fly == team.fly
+    chosen = team_from_dict(edit(data, "fly.mode", "attitude"))
+    assert "\nfly:\n  mode: attitude\n" in team_to_yaml(chosen)  # the key the file uses
+    assert team_from_yaml(team_to_yaml(chosen), "<rt>").fly.control_mode == "attitude"
     # the defaults: hold the heading, yaw rate limited on its own to 0.5 rad/s
     default = team_from_dict(base()).fly
     assert default.heading == "hold" and default.rates.max_yaw_rate_radps == 0.5

@@ -26,6 +26,8 @@ from gcs.fly.measure import (
     yaw_rad,
 )
 from gcs.fly.stats import AgeStats, TickStats, late_threshold_s, link_report, round_trip_report
+from gcs.mission.autopilots import PROFILES
+from gcs.mission.cascade import CascadeGains, laplacian_eigenvalues, verdict
 from gcs.sim.runner import law_gains
 from vehicle_emulator.physics import rotors_from_wrench, wrench_from_rotors
 
@@ -92,7 +94,7 @@ def test_initial_mass_from_hover_applies_to_every_vehicle_in_flight_only():
 
 def test_actuators_setup_flies_the_criterion_gains_at_250_hz():
     team = load_team(CONFIGS / "square4.yaml")
-    setup = prepare(team, FlyOptions(out_dir=OUT))
+    setup = prepare(team, FlyOptions(out_dir=OUT, mode="actuators"))
     assert setup.mode == "actuators" and setup.tick_rate_hz == 250.0
     assert (setup.gains.alpha_eps, setup.gains.alpha_omega) == (24.0, 3.0)
     assert setup.requested_rates_hz["ATTITUDE_QUATERNION"] == 250.0
@@ -106,7 +108,62 @@ def test_paper_torque_gains_at_250_hz_are_refused_before_any_link_opens():
     team = dataclasses.replace(team, fly=fly)
     with pytest.raises(FlightSetupError, match=r"^actuators mode at 250 Hz is not stable with "
                        r"alpha_eps 32, alpha_omega 32: vehicle 3 axis [xy] \(J 0.0256 kg m\^2\)"):
-        prepare(team, FlyOptions(out_dir=OUT))
+        prepare(team, FlyOptions(out_dir=OUT, mode="actuators"))
+
+
+def _with_fly(team, **changes):
+    return dataclasses.replace(team, fly=dataclasses.replace(team.fly, **changes))
+
+
+def _passes_everywhere(team, mode: str) -> bool:
+    """The cascade criterion of `mode` with the file's gains for it, on every autopilot profile
+    (evaluated here through `verdict`, the preflight's own per-autopilot judgement)."""
+    m = team.fly.mode(mode)
+    g = team.controller.gains
+    gains = CascadeGains(m.alpha_p or g.alpha_p, m.c_p or g.c_p, m.k_eps or g.k_eps,
+                         m.k_eps_yaw or g.k_eps_yaw)
+    eig = laplacian_eigenvalues(team.laplacian())
+    return all(verdict(mode, gains, p.response, eig, m.tick_rate_hz, team.fly.link_delay_s,
+                       p.name, team.fly.predict)[0] for p in PROFILES.values())
+
+
+def test_fly_mode_auto_is_the_default_and_flies_rates_where_its_loops_pass():
+    team = load_team(CONFIGS / "square4.yaml")
+    assert team.controller.mode == "actuators"  # gcs sim's: the paper's torque law
+    assert team.fly.control_mode == "auto"
+    assert _passes_everywhere(team, "rates")
+    setup = prepare(team, FlyOptions(out_dir=OUT))
+    assert setup.mode == "rates" and setup.tick_rate_hz == 100.0
+    assert setup.gains.k_eps == team.fly.rates.k_eps
+    assert setup.mode_choice.startswith("mode rates (auto: ")
+    assert "PX4 and ArduPilot Copter with fly.rates's gains at link delay 10 ms" in (
+        setup.mode_choice)
+    # --mode and fly.mode choose outright, actuators included
+    assert prepare(team, FlyOptions(out_dir=OUT, mode="actuators")).mode == "actuators"
+    chosen = prepare(_with_fly(team, control_mode="attitude"), FlyOptions(out_dir=OUT))
+    assert (chosen.mode, chosen.mode_choice) == ("attitude", "mode attitude (fly.mode)")
+    with pytest.raises(FlightSetupError, match=r"mode 'torque': expected one of \('auto', "):
+        prepare(team, FlyOptions(out_dir=OUT, mode="torque"))
+
+
+def test_fly_mode_auto_takes_attitude_where_the_declared_delay_fails_rates_on_one_autopilot():
+    team = _with_fly(load_team(CONFIGS / "grid16.yaml"), link_delay_s=0.05)
+    assert not _passes_everywhere(team, "rates") and _passes_everywhere(team, "attitude")
+    setup = prepare(team, FlyOptions(out_dir=OUT))
+    assert setup.mode == "attitude" and setup.gains.c_p == team.fly.attitude.c_p
+    assert setup.mode_choice.endswith("at link delay 50 ms; rates fails on PX4)")
+    assert setup.plan.rules.loop_refusals == {}
+
+
+def test_fly_mode_auto_flies_rates_and_lets_preflight_refuse_when_no_mode_passes():
+    team = _with_fly(load_team(CONFIGS / "square4.yaml"), link_delay_s=0.2)
+    assert not _passes_everywhere(team, "rates") and not _passes_everywhere(team, "attitude")
+    setup = prepare(team, FlyOptions(out_dir=OUT))
+    assert setup.mode == "rates"
+    assert "no mode passes on every autopilot with the file's gains at link delay 200 ms: " in (
+        setup.mode_choice)
+    assert "attitude fails on PX4" in setup.mode_choice
+    assert set(setup.plan.rules.loop_refusals) == {12, 3}  # both autopilots' vehicles refused
 
 
 def test_tick_rate_must_be_a_multiple_of_the_log_rate():
