@@ -197,19 +197,26 @@ def px4_rate_control(
     yaw_alpha: np.ndarray,
     accel_per_unit: np.ndarray,
     inertia: np.ndarray,
+    limited: np.ndarray,
     landed: bool,
     dt: float,
     torque_out: np.ndarray,
 ) -> None:
     """PX4's RateControl::update on the filtered gyro ``rate_meas[i]`` (FLU; PX4 runs it in FRD,
     which flips the signs of both sides alike): normalised torque ``P e + I - D dgyro``, the I term
-    fading with |e| (i_factor) and clamped, frozen while landed; yaw through the
+    fading with |e| (i_factor) and clamped, frozen while landed and, on an axis the mixer
+    saturated (``limited[i]``: +1 short of the demand, -1 beyond it), never integrating further
+    into that saturation (PX4's control-allocator saturation flags); yaw through the
     MC_YAW_TQ_CUTOFF first-order low pass; each axis clipped to +-1, then scaled to N m by
     ``accel_per_unit`` times the vehicle's inertia into ``torque_out[i]``."""
     for k in range(3):
         e = rate_sp[i, k] - rate_meas[i, k]
         u = gain_p[i, k] * e + rate_int[i, k] - gain_d[i, k] * dgyro[i, k]
         if not landed:
+            if limited[i, k] > 0.0:
+                e = min(e, 0.0)
+            elif limited[i, k] < 0.0:
+                e = max(e, 0.0)
             f = e / PX4_I_FACTOR_RADPS
             f = max(0.0, 1.0 - f * f)
             v = rate_int[i, k] + f * gain_i[i, k] * e * dt
@@ -242,6 +249,7 @@ def reference_rate_control(
     delay_buf: np.ndarray,
     delay_idx: np.ndarray,
     inertia: np.ndarray,
+    limited: np.ndarray,
     landed: bool,
     dt: float,
     torque_out: np.ndarray,
@@ -255,7 +263,9 @@ def reference_rate_control(
     ``delay_idx[i]``), stepped exactly (``ref_phi`` (2x2 row-major), ``ref_gamma``); the body
     follows it
     through a stiff loop on the raw gyro with the reference acceleration fed forward, plus the
-    gyroscopic term: torque = J (rate' + kp e + ki int e) + w x J w into ``torque_out[i]``."""
+    gyroscopic term: torque = J (rate' + kp e + ki int e) + w x J w into ``torque_out[i]``. On an
+    axis the mixer saturated (``limited[i, k]`` nonzero) the integral may only shrink
+    (ArduPilot's AC_PID with the motors' limit flags)."""
     kp, ki = track[i, 0], track[i, 1]
     for k in range(3):
         step = accel_max[i, k] * dt
@@ -278,7 +288,7 @@ def reference_rate_control(
         ref[i, k, 0] = p[0] * x1 + p[1] * x2 + ref_gamma[i, k, 0] * u
         ref[i, k, 1] = p[2] * x1 + p[3] * x2 + ref_gamma[i, k, 1] * u
         e = ref[i, k, 0] - gyro_raw[i, k]
-        if not landed:
+        if not landed and (limited[i, k] == 0.0 or track_int[i, k] * e < 0.0):
             track_int[i, k] = min(max(track_int[i, k] + ki * e * dt, -20.0), 20.0)
         torque_out[i, k] = inertia[i, k] * (ref[i, k, 1] + kp * e + track_int[i, k])
     delay_idx[i] = (delay_idx[i] + 1) % delay_buf.shape[2]

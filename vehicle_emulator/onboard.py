@@ -150,6 +150,9 @@ class Onboard:
         self.reference = np.zeros((n, 3, 2))
         self.angle_error = np.zeros((n, 3))
         self.track_integral = np.zeros((n, 3))
+        # per torque axis, whether the mixer delivered less (+1) or more (-1) than asked at the
+        # last physics step (physics.rotors_from_wrench_into): the rate loops stop winding up
+        self.torque_limited = np.zeros((n, 3))
         self.torque_next_nm = np.zeros((n, 3))
         self.thrust_next_norm = np.zeros(n)
         self._torque_new = np.zeros((n, 3))
@@ -274,6 +277,7 @@ class Onboard:
             self.integration_error,
             self.gyro_bias,
             self.disturbance_state,
+            self.torque_limited,  # last: the fleet kernel's mixer writes it (plant.py)
         )
 
 
@@ -326,7 +330,7 @@ def onboard_step(
         gyro_imu, accel_imu, yaw_lpf, shaped, ref, angle_err, track_int, torque_next,
         thrust_next, torque_new, rot_est, pos_est, vel_est, pos_prev, vel_prev, att_step,
         pos_step, pos_prev_step, delay_buf, delay_idx, att_err, vel_err, pos_err, integ_err,
-        gyro_bias, dist_state,
+        gyro_bias, dist_state, limited,
     ) = cal_st
     for i in range(loop.shape[0]):
         if loop[i] == 0 or step % ctrl_div[i] != 0:
@@ -406,13 +410,13 @@ def onboard_step(
         if loop[i] == 1:
             px4_rate_control(
                 i, rate_sp, rate_meas, dgyro, rate_int, yaw_lpf, gain_p, gain_i, gain_d, int_limit,
-                yaw_alpha, accel_per_unit, inertia, landed, dt_c, torque_new,
+                yaw_alpha, accel_per_unit, inertia, limited, landed, dt_c, torque_new,
             )
         else:
             reference_rate_control(
                 i, rate_sp, rate_meas, gyro_raw, omega, shaped, ref, angle_err, track_int,
                 accel_max, ref_gain, ref_phi, ref_gamma, angle_p, track, ref_delay, delay_buf,
-                delay_idx, inertia, landed, dt_c, torque_new,
+                delay_idx, inertia, limited, landed, dt_c, torque_new,
             )
         if noise_on[i] and m != 0 and (disturbance[i, 0] != 0.0 or disturbance[i, 1] != 0.0
                                        or disturbance[i, 2] != 0.0):  # process noise

@@ -340,9 +340,13 @@ def rotors_from_wrench_into(
     rotor_thrust_max_n: FloatArray,
     out_rotor_thrust_n: FloatArray,
     airmode: FloatArray,
+    out_limited: FloatArray,
 ) -> int:
     """Invert (51) into out (n, 4) with every rotor in [0, f_max]; returns how many vehicles'
-    wrenches could not be met exactly.
+    wrenches could not be met exactly. ``out_limited`` (n, 3) gets, per torque axis (FLU), +1
+    where the torque made is below the demand, -1 where above, 0 where it is the demand: the
+    saturation the autopilots' rate loops read to stop their integrators winding up (PX4's
+    control-allocator saturation flags, ArduPilot's motor limit flags).
 
     `airmode` (n,) selects what gives way when the torque does not fit at a LOW collective
     thrust, like PX4's MC_AIRMODE: 0 (PX4's default) keeps the thrust and shrinks the torque
@@ -399,6 +403,14 @@ def rotors_from_wrench_into(
         out_rotor_thrust_n[i, 1] = min(max(c_new + q - y_new, 0.0), f_max)
         out_rotor_thrust_n[i, 2] = min(max(c_new - p + y_new, 0.0), f_max)
         out_rotor_thrust_n[i, 3] = min(max(c_new - q - y_new, 0.0), f_max)
+        # what each axis got against what it asked for (tau_x = -2 d q, tau_y = 2 d p, tau_z =
+        # 4 C y); a relative tolerance so that rounding is not saturation
+        d2 = 2.0 * arm_length_m[i]
+        made = (-d2 * q, d2 * p, 4.0 * anti_torque_m[i] * y_new)
+        for k in range(3):
+            gap = torque_nm[i, k] - made[k]
+            tol = 1e-9 * (abs(torque_nm[i, k]) + 1e-12)
+            out_limited[i, k] = 1.0 if gap > tol else (-1.0 if gap < -tol else 0.0)
     return modified
 
 
@@ -414,6 +426,7 @@ def rotors_from_wrench(
     out = np.empty((thrust_n.shape[0], 4))
     airmode = np.ones(thrust_n.shape[0])
     rotors_from_wrench_into(
-        thrust_n, torque_nm, arm_length_m, anti_torque_m, rotor_thrust_max_n, out, airmode
+        thrust_n, torque_nm, arm_length_m, anti_torque_m, rotor_thrust_max_n, out, airmode,
+        np.empty((thrust_n.shape[0], 3)),
     )
     return out

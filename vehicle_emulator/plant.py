@@ -182,7 +182,9 @@ def _step_kernel(
                     i, rate_sp, omega, omega_prev, rate_int, inertia, landed, dt, torque_sp
                 )
             t_sp_n[i] = thrust_sp[i] * t_max
-        rotors_from_wrench_into(t_sp_n, torque_sp, arm, anti, fmax, rotor_cmd, airmode)
+        # the axes the mixer could not deliver: the calibrated rate loops' anti-windup
+        rotors_from_wrench_into(t_sp_n, torque_sp, arm, anti, fmax, rotor_cmd, airmode,
+                                cal_st[-1])
         for i in range(n):
             tau = motor_tau[i]
             a = 1.0 if tau <= 0.0 else 1.0 - math.exp(-dt / tau)

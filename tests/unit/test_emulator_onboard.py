@@ -82,6 +82,9 @@ def test_second_order_step_is_the_exact_zero_order_hold_discretisation(wn, zeta,
         second_order_step(wn, 0.0, dt)
 
 
+NO_LIMIT = np.zeros((1, 3))  # the mixer made every axis's torque (physics.rotors_from_wrench_into)
+
+
 def _px4_arrays(n=1):
     d = PERSONALITIES["px4"].dynamics
     return dict(
@@ -99,7 +102,7 @@ def test_px4_rate_control_is_pids_normalised_torque_times_authority():
     inertia = np.array([[0.025, 0.025, 0.030]])
     px4_rate_control(0, sp, meas, np.zeros((1, 3)), integ, yaw, g["gain_p"], g["gain_i"],
                      g["gain_d"], g["int_limit"], np.ones(1), g["accel_per_unit"], inertia,
-                     False, 0.004, out)
+                     NO_LIMIT, False, 0.004, out)
     # THEN torque = J * accel_per_unit * P e (the integral only counts from the next call)
     np.testing.assert_allclose(out[0], inertia[0] * g["accel_per_unit"][0] * g["gain_p"][0]
                                * sp[0])
@@ -110,14 +113,14 @@ def test_px4_rate_control_is_pids_normalised_torque_times_authority():
     integ[:] = 0.29
     px4_rate_control(0, np.array([[50.0, 50.0, 50.0]]), meas, np.zeros((1, 3)), integ, yaw,
                      g["gain_p"], g["gain_i"], g["gain_d"], g["int_limit"], np.ones(1),
-                     g["accel_per_unit"], inertia, False, 1.0, out)
+                     g["accel_per_unit"], inertia, NO_LIMIT, False, 1.0, out)
     np.testing.assert_allclose(out[0], inertia[0] * g["accel_per_unit"][0])
     assert np.all(integ[0] <= g["int_limit"][0] + 1e-12)
     # and landed, the integral does not move
     before = integ.copy()
     px4_rate_control(0, sp, meas, np.zeros((1, 3)), integ, yaw, g["gain_p"], g["gain_i"],
                      g["gain_d"], g["int_limit"], np.ones(1), g["accel_per_unit"], inertia,
-                     True, 0.004, out)
+                     NO_LIMIT, True, 0.004, out)
     np.testing.assert_array_equal(integ, before)
 
 
@@ -131,12 +134,56 @@ def test_px4_yaw_torque_goes_through_a_first_order_low_pass():
     for _ in range(50):
         px4_rate_control(0, np.array([[0.0, 0.0, 1.0]]), np.zeros((1, 3)), np.zeros((1, 3)),
                          np.zeros((1, 3)), yaw, g["gain_p"], g["gain_i"], g["gain_d"],
-                         g["int_limit"], np.array([alpha]), g["accel_per_unit"], inertia, False,
-                         0.004, out)
+                         g["int_limit"], np.array([alpha]), g["accel_per_unit"], inertia,
+                         NO_LIMIT, False, 0.004, out)
         seen.append(out[0, 2])
     full = inertia[0, 2] * g["accel_per_unit"][0, 2] * g["gain_p"][0, 2]
     k = np.arange(1, 51)
     np.testing.assert_allclose(seen, full * (1 - (1 - alpha) ** k), rtol=1e-12)
+
+
+def test_px4_integral_never_winds_further_into_a_saturation_the_mixer_reports():
+    # GIVEN rate errors of +0.5 on every axis, roll saturated positive (the mixer made less
+    # than asked), pitch negative, yaw free
+    g = _px4_arrays()
+    inertia = np.array([[0.025, 0.025, 0.030]])
+    limited = np.array([[1.0, -1.0, 0.0]])
+    integ, out = np.full((1, 3), 0.05), np.zeros((1, 3))
+    for sp in ([[0.5, 0.5, 0.5]], [[-0.5, -0.5, -0.5]]):
+        before = integ.copy()
+        px4_rate_control(0, np.array(sp), np.zeros((1, 3)), np.zeros((1, 3)), integ, np.zeros(1),
+                         g["gain_p"], g["gain_i"], g["gain_d"], g["int_limit"], np.ones(1),
+                         g["accel_per_unit"], inertia, limited, False, 0.004, out)
+        step = integ[0] - before[0]
+        # THEN the roll integral does not grow positive, nor pitch negative; yaw integrates
+        if sp[0][0] > 0:
+            assert step[0] == 0.0 and step[1] > 0.0 and step[2] > 0.0
+        else:
+            assert step[0] < 0.0 and step[1] == 0.0 and step[2] < 0.0
+
+
+def test_reference_model_integral_only_shrinks_on_a_saturated_axis():
+    # GIVEN ArduPilot's tracking loop with a positive integral on every axis and the body not
+    # turning, so the tracking error keeps the sign of the command
+    arr = _reference_arrays()
+    z = np.zeros((1, 3))
+    for cmd, shrinks in (((0.5, 0.5, 0.5), False), ((-0.5, -0.5, -0.5), True)):
+        st_int = np.full((1, 3), 1.0)
+        ref = np.zeros((1, 3, 2))
+        ref[0, :, 0] = cmd  # the reference already at the command: error = cmd - 0
+        reference_rate_control(0, np.array([cmd]), z, z, z, np.array([cmd], dtype=float), ref,
+                               np.zeros((1, 3)), st_int, arr["accel_max"], arr["ref_gain"],
+                               arr["ref_phi"], arr["ref_gamma"], arr["angle_p"], arr["track"],
+                               arr["delay_n"], arr["delay_buf"], arr["delay_idx"],
+                               np.array([[0.023, 0.023, 0.046]]), np.array([[0.0, 1.0, -1.0]]),
+                               False, 0.002, np.zeros((1, 3)))
+        # THEN the free axis integrates either way; a limited one (either sign: ArduPilot's
+        # flags are per axis) only when that shrinks the integral
+        assert bool(st_int[0, 0] > 1.0) is (not shrinks) and bool(st_int[0, 0] < 1.0) is shrinks
+        if shrinks:
+            assert st_int[0, 1] < 1.0 and st_int[0, 2] < 1.0
+        else:
+            assert st_int[0, 1] == 1.0 and st_int[0, 2] == 1.0
 
 
 def _reference_arrays(accel=(19.2, 19.2, 4.7), delay=(0, 0, 0), wn=300.0, zeta=1.0, dt=0.002):
@@ -159,7 +206,7 @@ def _reference_run(arr, cmd, steps, dt=0.002):
                                st["angle_err"], st["track_int"], arr["accel_max"],
                                arr["ref_gain"], arr["ref_phi"], arr["ref_gamma"], arr["angle_p"],
                                arr["track"], arr["delay_n"], arr["delay_buf"], arr["delay_idx"],
-                               np.array([[0.023, 0.023, 0.046]]), False, dt, out)
+                               np.array([[0.023, 0.023, 0.046]]), NO_LIMIT, False, dt, out)
         shaped.append(st["shaped"][0].copy())
         ref.append(st["ref"][0, :, 0].copy())
     return np.array(shaped), np.array(ref)

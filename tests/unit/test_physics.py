@@ -352,10 +352,12 @@ def test_rotors_from_wrench_inverts_feasible_wrenches_exactly() -> None:
     d, c, f_max = _airframes(rng, n)
     f = rng.uniform(0, 1, (n, 4)) * f_max[:, None]
     thrust, torque = ph.wrench_from_rotors(f, d, c)
-    out = np.empty((n, 4))
+    out, limited = np.empty((n, 4)), np.full((n, 3), 7.0)
     # WHEN allocated back  THEN the rotor thrusts are recovered and nothing is reported modified
-    assert ph.rotors_from_wrench_into(thrust, torque, d, c, f_max, out, np.ones(len(thrust))) == 0
+    assert ph.rotors_from_wrench_into(thrust, torque, d, c, f_max, out, np.ones(len(thrust)),
+                                      limited) == 0
     np.testing.assert_allclose(out, f, rtol=0, atol=1e-12)
+    assert not limited.any()  # and no axis saturated
     np.testing.assert_array_equal(ph.rotors_from_wrench(thrust, torque, d, c, f_max), out)
 
 
@@ -366,10 +368,16 @@ def test_rotor_limits_hold_and_priorities_are_kept_for_infeasible_wrenches() -> 
     d, c, f_max = _airframes(rng, n)
     thrust = rng.uniform(-1, 6, n) * f_max
     torque = rng.normal(size=(n, 3)) * np.column_stack([d, d, c]) * f_max[:, None]
-    out = np.empty((n, 4))
+    out, limited = np.empty((n, 4)), np.empty((n, 3))
     # WHEN allocated
-    modified = ph.rotors_from_wrench_into(thrust, torque, d, c, f_max, out, np.ones(len(thrust)))
+    modified = ph.rotors_from_wrench_into(thrust, torque, d, c, f_max, out, np.ones(len(thrust)),
+                                          limited)
     t_out, tau_out = ph.wrench_from_rotors(out, d, c)
+    # THEN each axis's saturation flag is the sign of what it asked beyond what the rotors make
+    gap = torque - tau_out
+    short = np.abs(gap) > 1e-7 * (np.abs(torque) + 1e-6)
+    np.testing.assert_array_equal(limited[short], np.sign(gap[short]))
+    assert np.all(limited[np.abs(gap) < 1e-12] == 0.0)
     # THEN every rotor is in [0, f_max]
     assert np.all(out >= 0.0) and np.all(out <= f_max[:, None])
     exact = np.all(
@@ -477,14 +485,16 @@ def test_airmode_off_keeps_low_thrust_and_shrinks_the_torque():
     thrust = np.array([2.0, 2.0])
     torque = np.array([[0.0, 0.6, 0.05], [0.0, 0.6, 0.05]])
     arm, anti, fmax = np.full(2, 0.25), np.full(2, 0.016), np.full(2, 6.0)
-    out = np.empty((2, 4))
+    out, limited = np.empty((2, 4)), np.empty((2, 3))
     # WHEN mixed with MC_AIRMODE 0 (vehicle 0) and 1 (vehicle 1)
-    modified = ph.rotors_from_wrench_into(thrust, torque, arm, anti, fmax, out, np.array([0.0, 1.0]))
+    modified = ph.rotors_from_wrench_into(thrust, torque, arm, anti, fmax, out,
+                                          np.array([0.0, 1.0]), limited)
     t_out, tau_out = ph.wrench_from_rotors(out, arm, anti)
     # THEN both report the wrench as modified and keep every rotor within limits
     assert modified == 2 and (out >= 0.0).all() and (out <= 6.0).all()
     # AND airmode 0 keeps the commanded thrust, shrinking the pitch torque in the same direction
     assert t_out[0] == pytest.approx(2.0)
     assert 0.0 < tau_out[0, 1] < 0.6
+    assert limited[0, 1] == 1.0  # pitch short of its demand: saturated positive
     # AND airmode 1 raises the thrust to deliver the full pitch torque
     assert t_out[1] > 2.0 and tau_out[1, 1] == pytest.approx(0.6)
