@@ -1,0 +1,231 @@
+"""Scenario I from the ground, twice, against the px4 and ardupilot personalities and a mixed team.
+
+What a user does with real vehicles, measured against the emulator's calibrated personalities:
+one `vehicle-emu --fleet` of configs/square4.yaml's team booted on the ground at places up to
+50 m apart (each vehicle's EKF origin below where it booted, as on real vehicles; the
+ArduPilot ones on their ephemeral source port, learned), then `gcs fly --team FILE` exactly as
+shipped (`fly.mode: auto`, go to start, 60 s of formation, land, disarm), and the same again
+without restarting the vehicles. Per flight, from the flight's own records:
+
+- exit status;
+- formation error (report.json) mean and max for t >= 30 s;
+- mass estimate error at t = 20 s, max over vehicles, in % of the truth (ArduPilot vehicles: of
+  the thrust-equivalent mass m / thrust_scale, what its reported hover thrust gives);
+- share of setpoints after t = 10 s with the roll/pitch body-rate limit active (|p, q| at
+  fly.rates.max_rate_radps; from the SET_ATTITUDE_TARGET in the tlog), rates mode only;
+- heading error after t = 10 s, max over vehicles and samples: ATTITUDE_QUATERNION's yaw
+  against the yaw at the formation start (fly.heading: hold), from the tlog. The formation
+  start is the first SET_ATTITUDE_TARGET to the vehicle after its last position setpoint.
+
+    python benchmarks/bench_from_ground.py [--team px4 --team mixed] [--duration-s 60] [--no-write]
+
+Writes the "## From the ground, twice" section of docs/benchmarks.md (about 12 min).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+DOC = ROOT / "docs" / "benchmarks.md"
+HEADING = "## From the ground, twice"
+TEAMS = {"px4": ("px4",) * 4, "ardupilot": ("ardupilot",) * 4,
+         "mixed": ("px4", "ardupilot", "px4", "ardupilot")}
+# where each vehicle boots (team frame ENU, on the ground): a 50 m diamond around the formation
+BOOT_XY_M = ((25.0, 0.0), (0.0, -25.0), (-25.0, 0.0), (0.0, 25.0))
+FLIGHTS = ("first", "second")
+
+sys.path.insert(0, str(ROOT))
+from benchmarks.docsection import write_section  # noqa: E402
+from vehicle_emulator.personality import ARDUPILOT_DYNAMICS  # noqa: E402
+from vehicle_emulator.testing import free_udp_port_block  # noqa: E402
+
+
+def team_file(kind: str, work: Path, duration_s: float) -> Path:
+    """configs/square4.yaml as shipped, on free ports, each vehicle of its autopilot booting on
+    the ground at BOOT_XY_M with its own EKF origin below it."""
+    data = yaml.safe_load((ROOT / "configs" / "square4.yaml").read_text())
+    data["name"] = f"square4-{kind}"
+    data["mission"]["duration_s"] = duration_s
+    data["faults"] = []
+    data["emulator"] = {"origin": "own"}
+    gcs_base, bind_base = free_udp_port_block(4), free_udp_port_block(4)
+    for k, (v, autopilot) in enumerate(zip(data["vehicles"], TEAMS[kind], strict=True)):
+        v["emulator"] = {"autopilot": autopilot, "boot_position_enu_m": [*BOOT_XY_M[k], 0.0]}
+        v["link"] = ({"local_port": gcs_base + k, "remote_port": bind_base + k}
+                     if autopilot == "px4" else {"local_port": gcs_base + k, "learn_remote": True})
+    path = work / f"{kind}.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def tlog_figures(tlog: Path, sysids: list[int], max_rate: float) -> dict:
+    """Heading error after t = 10 s [deg] and the rate-limit share after t = 10 s, per vehicle,
+    from what was sent and reported (pymavlink reads the tlog)."""
+    from pymavlink import mavutil
+
+    conn = mavutil.mavlink_connection(str(tlog))
+    last_pos = {k: -math.inf for k in sysids}
+    setpoints: dict[int, list[tuple[float, float]]] = {k: [] for k in sysids}
+    yaws: dict[int, list[tuple[float, float]]] = {k: [] for k in sysids}
+    types = ["SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET", "ATTITUDE_QUATERNION"]
+    while (msg := conn.recv_match(type=types)) is not None:
+        t = msg._timestamp
+        kind = msg.get_type()
+        if kind == "ATTITUDE_QUATERNION":
+            k = msg.get_srcSystem()
+            if k in yaws:
+                q1, q2, q3, q4 = msg.q1, msg.q2, msg.q3, msg.q4
+                yaws[k].append((t, math.atan2(2 * (q1 * q4 + q2 * q3), 1 - 2 * (q3 * q3 + q4 * q4))))
+        elif msg.target_system in sysids:
+            k = msg.target_system
+            if kind == "SET_POSITION_TARGET_LOCAL_NED":
+                last_pos[k] = t
+            else:
+                setpoints[k].append((t, math.hypot(msg.body_roll_rate, msg.body_pitch_rate)))
+    heading, limited = {}, {}
+    for k in sysids:
+        sp = np.array([s for s in setpoints[k] if s[0] > last_pos[k]])
+        yw = np.array(yaws[k])
+        if len(sp) == 0 or len(yw) == 0:
+            heading[k] = limited[k] = math.nan
+            continue
+        t0 = sp[0, 0]
+        after = sp[sp[:, 0] >= t0 + 10.0]
+        limited[k] = 100.0 * float(np.mean(after[:, 1] >= max_rate - 1e-4)) if len(after) else 0.0
+        start = yw[np.searchsorted(yw[:, 0], t0), 1]
+        late = yw[(yw[:, 0] >= t0 + 10.0) & (yw[:, 0] <= sp[-1, 0])]
+        err = np.angle(np.exp(1j * (late[:, 1] - start)))
+        heading[k] = float(np.degrees(np.abs(err).max())) if len(err) else math.nan
+    return {"heading_deg": heading, "limited_pct": limited}
+
+
+def figures(out: Path, kind: str, max_rate: float) -> dict:
+    report = json.loads((out / "report.json").read_text())
+    t = np.asarray(report["t_s"], dtype=float)
+    fe = np.asarray(report["formation_error_m"], dtype=float)
+    late = t >= 30.0
+    k20 = int(np.argmin(np.abs(t - 20.0)))
+    mhat = np.asarray(report["mass_estimate_kg"][k20], dtype=float)
+    truth = np.asarray(report["mass_true_kg"][k20], dtype=float)
+    scale = np.array([ARDUPILOT_DYNAMICS.thrust_scale if a == "ardupilot" else 1.0
+                      for a in TEAMS[kind]])
+    mass_pct = 100.0 * np.abs(mhat - truth / scale) / (truth / scale)
+    tl = tlog_figures(out / "flight.tlog", [1, 2, 3, 4], max_rate)  # square4's sysids
+    mode = report["extra"]["mode"]
+    return {
+        "mode": mode,
+        "t_end": float(t[-1]) if len(t) else 0.0,
+        "fe_mean_30": float(np.nanmean(fe[late])) if late.any() else math.nan,
+        "fe_max_30": float(np.nanmax(fe[late])) if late.any() else math.nan,
+        "mass_pct_20": float(np.nanmax(mass_pct)),
+        "limited_pct": (float(np.nanmax(list(tl["limited_pct"].values())))
+                        if mode == "rates" else math.nan),
+        "heading_deg": float(np.nanmax(list(tl["heading_deg"].values()))),
+        "late_pct": float(report["tick"]["late_pct"]),
+        "outcome": report["extra"]["outcome"]["reason"].splitlines()[0],
+    }
+
+
+def fly_team(kind: str, work: Path, duration_s: float) -> list[dict]:
+    team = team_file(kind, work, duration_s)
+    max_rate = float(yaml.safe_load(team.read_text())["fly"]["rates"].get("max_rate_radps", 1.0))
+    log = open(work / f"{kind}-fleet.log", "w")  # noqa: SIM115
+    guided = ["--param", "GUID_OPTIONS=8"] if "ardupilot" in TEAMS[kind] else []
+    fleet = subprocess.Popen(
+        [sys.executable, "-m", "vehicle_emulator.cli", "--fleet", "--team", str(team), *guided,
+         "--log-level", "WARNING"],
+        stdout=subprocess.PIPE, stderr=log, text=True)
+    rows = []
+    try:
+        ready = fleet.stdout.readline() if fleet.stdout else ""
+        if not ready.startswith("vehicle-emu: ready"):
+            raise SystemExit(f"vehicle-emu did not start ({ready!r}): see {log.name}")
+        for flight in FLIGHTS:
+            out = work / f"{kind}-{flight}"
+            began = time.monotonic()
+            proc = subprocess.run(
+                [sys.executable, "-m", "gcs.cli", "fly", "--team", str(team), "--out", str(out),
+                 "--no-figures", "--status", "off"],
+                capture_output=True, text=True, timeout=900, check=False)
+            row = {"team": kind, "flight": flight, "exit": proc.returncode,
+                   "wall_s": time.monotonic() - began}
+            if (out / "report.json").exists():
+                row |= figures(out, kind, max_rate)
+            else:
+                row["outcome"] = (proc.stderr.strip().splitlines() or ["no report"])[-1]
+            print(json.dumps(row), flush=True)
+            rows.append(row)
+    finally:
+        fleet.terminate()
+        fleet.wait(timeout=20)
+        log.close()
+    return rows
+
+
+def _cell(x: float, fmt: str) -> str:
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, fmt)
+
+
+def section(rows: list[dict], duration_s: float) -> str:
+    lines = [
+        HEADING, "",
+        f"`python benchmarks/bench_from_ground.py` on {platform.machine()}, Python "
+        f"{platform.python_version()}: configs/square4.yaml (Scenario I) as shipped, flown by "
+        "`gcs fly --team FILE` with no other option (`fly.mode: auto`), against one "
+        "`vehicle-emu --fleet` whose vehicles boot on the ground on a 50 m diamond, each with "
+        "its own EKF origin below it (so the team frame is tied through four origins up to "
+        "50 m apart), ArduPilot vehicles on their own source port (learned). Each flight: go "
+        f"to start, {duration_s:g} s of formation, land, disarm; then the same vehicles fly "
+        "again. Formation error: the largest over the pairs (report.json), t >= 30 s. Mass: "
+        "max over vehicles of |mhat - m| / m at 20 s (ArduPilot: m / 1.069, the "
+        "thrust-equivalent mass). Rate limit: share of setpoints after 10 s with the roll/pitch "
+        "rate command at its limit, worst vehicle. Heading: largest |yaw - yaw at the "
+        "formation start| after 10 s, from ATTITUDE_QUATERNION.",
+        "",
+        "| team | flight | exit | mode | formation error mean / max, t >= 30 s [m] | mass error "
+        "at 20 s | rate limit active after 10 s | heading error after 10 s | late ticks |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        if "fe_max_30" not in r:
+            lines.append(f"| {r['team']} | {r['flight']} | {r['exit']} | | {r['outcome']} | | | "
+                         "| |")
+            continue
+        lines.append(
+            f"| {r['team']} | {r['flight']} | {r['exit']} | {r['mode']} | "
+            f"{_cell(r['fe_mean_30'], '.3f')} / {_cell(r['fe_max_30'], '.3f')} | "
+            f"{_cell(r['mass_pct_20'], '.1f')} % | {_cell(r['limited_pct'], '.2f')} % | "
+            f"{_cell(r['heading_deg'], '.1f')} deg | {r['late_pct']:.2f} % |")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--team", choices=sorted(TEAMS), action="append")
+    ap.add_argument("--duration-s", type=float, default=60.0)
+    ap.add_argument("--no-write", action="store_true")
+    args = ap.parse_args()
+    rows: list[dict] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for kind in args.team or list(TEAMS):
+            rows += fly_team(kind, Path(tmp), args.duration_s)
+    text = section(rows, args.duration_s)
+    print(text)
+    if not args.no_write:
+        write_section(DOC, HEADING, text)
+
+
+if __name__ == "__main__":
+    main()
