@@ -29,10 +29,11 @@ Lifetime: ``async with MavlinkPort(port) as p:``; the proxies ``attach`` to it (
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import math
 import time
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from types import TracebackType
@@ -65,6 +66,11 @@ HOT_NOTICE_S = 0.05
 #: TIMESYNC requests remembered for their replies (one per vehicle address per 0.5 s: 240
 #: vehicles' last 8 s, one vehicle's last half hour).
 TIMESYNC_REMEMBERED = 4096
+#: The slow path's share of one event-loop callback [s]: frames the hot path hands back
+#: (HEARTBEAT, COMMAND_ACK, STATUSTEXT, TIMESYNC replies) are decoded by pymavlink, tens of
+#: microseconds each; past this budget the rest waits for the loop's next pass, so a burst
+#: (240 vehicles' HEARTBEATs in one batch: ~10 ms) never holds the control tick back.
+SLOW_BUDGET_S = 0.5e-3
 
 
 class PortClient(Protocol):
@@ -97,6 +103,7 @@ class PortStats:
     unknown_sysid_frames: int  # frames from a sysid no vehicle on the port has (ignored)
     unframed_datagrams: int  # no MAVLink start marker at all (e.g. a plain-text banner)
     after_detach: int  # datagrams (or parts) of a vehicle whose proxy has closed (dropped)
+    slow_deferred: int  # times the slow path's budget ran out and the rest waited a loop pass
 
 
 def frame_sysids(data: bytes | bytearray) -> list[tuple[int, int, int | None]]:
@@ -170,6 +177,9 @@ class MavlinkPort:
             self._kinds = kind_table()
             self._slow = np.zeros((4 * MAX_BATCH_DATAGRAMS, 4), dtype=np.int64)
             self._tlog_buf = np.zeros(0, dtype=np.uint8)
+            # slow frames not routed yet (data, source, seq counted, receive time), in order
+            self._slow_queue: deque[tuple[bytes, Address, bool, float]] = deque()
+            self._slow_pending = False  # a pass of _route_slow is scheduled
         self._codec = MavlinkCodec()  # frames no attached vehicle claims (counted, ignored)
         self._tlog = tlog
         self._clients: dict[int, PortClient] = {}
@@ -189,6 +199,8 @@ class MavlinkPort:
     def close(self) -> None:
         """Close the socket; returns immediately. Idempotent."""
         self._endpoint.close()
+        if self._table is not None:
+            self._slow_queue.clear()  # nobody to hand them to
 
     async def __aenter__(self) -> MavlinkPort:
         await self.open()
@@ -343,10 +355,37 @@ class MavlinkPort:
                     told.append(slot)
             table.touched[told] = 0
             table.clock[told, 4] = 0.0
-        view = memoryview(buffer)
-        for d, start, end, counted in self._slow[:n_slow].tolist():
-            self._route(bytes(view[start:end]), sources[d], seq_counted=bool(counted),
-                        rx_s=float(rx[d]))
+        if n_slow:
+            view = memoryview(buffer)
+            queue = self._slow_queue
+            for d, start, end, counted in self._slow[:n_slow].tolist():
+                queue.append((bytes(view[start:end]), sources[d], bool(counted), float(rx[d])))
+            self._route_slow()
+
+    def _route_slow(self, scheduled: bool = False) -> None:
+        """Route queued slow frames, oldest first, for at most SLOW_BUDGET_S; what is left goes
+        on at the loop's next pass, after the I/O and the timers that came due meanwhile. Each
+        frame keeps its kernel receive time, so waiting here is not counted as link delay."""
+        if scheduled:
+            self._slow_pending = False
+        queue = self._slow_queue
+        stop = time.perf_counter() + SLOW_BUDGET_S
+        while queue:
+            data, addr, counted, rx_s = queue.popleft()
+            self._route(data, addr, seq_counted=counted, rx_s=rx_s)
+            if queue and time.perf_counter() >= stop:
+                break
+        if queue and not self._slow_pending:
+            try:
+                loop = asyncio.get_running_loop()
+            except RuntimeError:  # no loop (a direct call): finish now
+                self._route_slow()
+                return
+            self._slow_pending = True
+            self._n["slow_deferred"] += 1
+            # as a timer due now, not call_soon: timers that came due first (the tick's wake-up)
+            # run before it, where a call_soon would run ahead of them
+            loop.call_at(loop.time(), self._route_slow, True)
 
     def _route(self, data: bytes, addr: Address, seq_counted: bool = False,
                rx_s: float | None = None) -> None:

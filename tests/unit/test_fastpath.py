@@ -413,3 +413,38 @@ async def _notices() -> None:
         got = await waiter
         assert got.msg.x == 21.0 and time.monotonic() - sent_s < HOT_NOTICE_S
         assert offset_7 == p.clock.estimate().offset_s
+
+
+def test_a_burst_of_slow_frames_is_routed_in_budgeted_passes_that_timers_interleave() -> None:
+    asyncio.run(asyncio.wait_for(_slow_burst(), 20.0))
+
+
+async def _slow_burst() -> None:
+    # GIVEN 120 HEARTBEATs (a slow-path message: pymavlink decodes it) waiting in the socket at
+    # once, as a fleet's in-phase heartbeats arrive, and a timer due 0.5 ms after the loop
+    # resumes (the control tick's wake-up, say)
+    async with _one_vehicle() as (_, a, p):
+        mav = _sender(1)
+        for _ in range(120):
+            a.send(_pack(mav, mavlink.MAVLink_heartbeat_message(2, 12, 0, 0, 0, 3)))
+        time.sleep(0.05)  # every datagram is queued before the loop reads any
+
+        def heartbeats() -> int:
+            seen = p.stats().by_type.get("HEARTBEAT")
+            return 0 if seen is None else seen.count
+
+        at_timer: list[int] = []
+        asyncio.get_running_loop().call_later(5e-4, lambda: at_timer.append(heartbeats()))
+        # WHEN the loop runs until every one is routed
+        for _ in range(2000):
+            await asyncio.sleep(0)
+            if heartbeats() == 120:
+                break
+        # THEN the timer ran while part of the burst still waited: the slow path gave the loop
+        # back after its budget instead of routing the burst in one callback
+        assert len(at_timer) == 1 and 0 < at_timer[0] < 120, at_timer
+        assert p._port.stats().slow_deferred >= 1
+        # AND nothing was lost or reordered on the way
+        assert heartbeats() == 120
+        seq = p.stats().sequence
+        assert seq.received == 120 and seq.lost == 0 and seq.reordered == 0
