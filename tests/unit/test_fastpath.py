@@ -448,3 +448,62 @@ async def _slow_burst() -> None:
         assert heartbeats() == 120
         seq = p.stats().sequence
         assert seq.received == 120 and seq.lost == 0 and seq.reordered == 0
+
+
+def test_a_teams_hot_notices_spread_over_the_batches_at_each_proxys_own_phase() -> None:
+    asyncio.run(asyncio.wait_for(_spread_notices(), 20.0))
+
+
+async def _spread_notices() -> None:
+    # GIVEN 16 vehicles on one port, each sending LOCAL_POSITION_NED every 5 ms for 0.4 s
+    n = 16
+    table = HotTable(n)
+    async with MavlinkPort(0, table=table) as port, contextlib.AsyncExitStack() as stack:
+        gcs_port = port.local_address[1]
+        a, a_port = _udp(gcs_port)
+        stack.callback(a.close)
+        proxies = [await stack.enter_async_context(VehicleProxy(
+            VehicleLinkConfig(vehicle_id=k + 1, sysid=k + 1, local_port=gcs_port,
+                              remote_port=a_port, timesync_period_s=0.0), port=port, slot=k))
+            for k in range(n)]
+        batch = [0]
+        handle = port._endpoint._on_batch_cb
+        assert handle is not None
+
+        def counted(*args) -> None:  # noqa: ANN002
+            batch[0] += 1
+            handle(*args)
+
+        port._endpoint._on_batch_cb = counted
+        notices: list[tuple[int, int]] = []  # (batch, slot)
+        for k, p in enumerate(proxies):
+            on_hot = p._on_hot
+            p._on_hot = (lambda k=k, on_hot=on_hot:  # type: ignore[method-assign]
+                         (notices.append((batch[0], k)), on_hot()))
+        senders = [_sender(k + 1) for k in range(n)]
+        base = time.monotonic()
+
+        async def stream(seconds: float) -> None:
+            start = time.monotonic()
+            while time.monotonic() - start < seconds:
+                stamp_ms = int((time.monotonic() - base) * 1e3) + 1  # each sample newer
+                for mav in senders:
+                    a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(
+                        stamp_ms, 1.0, 0, 0, 0, 0, 0)))
+                await asyncio.sleep(0.005)
+
+        # (the first batch loads the hot path's compiled code: a stall after which every slot
+        # is due at once; a few periods later the notices are back at their phases)
+        await stream(0.15)
+        notices.clear()
+        t0 = time.monotonic()
+        await stream(0.4)
+        await asyncio.sleep(0.02)
+        elapsed = time.monotonic() - t0
+    # THEN each proxy was told about every HOT_NOTICE_S (not at every batch) ...
+    per_slot = np.bincount([k for _, k in notices], minlength=n)
+    periods = elapsed / HOT_NOTICE_S
+    assert np.all(per_slot >= periods - 2) and np.all(per_slot <= periods + 2), per_slot
+    # ... and no batch carried the whole team's notices: they came at the slots' own phases
+    per_batch = np.bincount([b for b, _ in notices])
+    assert per_batch.max() <= n // 2, per_batch
