@@ -70,9 +70,9 @@ NOTICE_PHASES = 8
 #: vehicles' last 8 s, one vehicle's last half hour).
 TIMESYNC_REMEMBERED = 4096
 #: The slow path's share of one event-loop callback [s]: frames the hot path hands back
-#: (HEARTBEAT, COMMAND_ACK, STATUSTEXT, TIMESYNC replies) are decoded by pymavlink, tens of
-#: microseconds each; past this budget the rest waits for the loop's next pass, so a burst
-#: (240 vehicles' HEARTBEATs in one batch: ~10 ms) never holds the control tick back.
+#: (HEARTBEAT, COMMAND_ACK, STATUSTEXT, TIMESYNC replies) are decoded by pymavlink, ~10 us
+#: each; past this budget the rest waits for the loop's next pass, so a burst
+#: (240 vehicles' HEARTBEATs in one batch: ~2.5 ms) never holds the control tick back.
 SLOW_BUDGET_S = 0.5e-3
 
 
