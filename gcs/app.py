@@ -212,9 +212,7 @@ def cascade_check(team: TeamConfig, mode: str, gains: LawGains,
     fly = team.fly
     eigenvalues = laplacian_eigenvalues(team.laplacian())
     cascade_gains = CascadeGains(gains.alpha_p, gains.c_p, gains.k_eps, gains.k_eps_yaw)
-    explicit = (AutopilotResponse(**dataclasses.asdict(fly.response),
-                                  source="the team file's fly.response")
-                if fly.response is not None else None)
+    explicit = _declared_response(team)
     lines, refusals = [], {}
     for profile in PROFILES.values():
         ok, line = verdict(mode, cascade_gains, explicit or profile.response, eigenvalues,
@@ -231,6 +229,13 @@ def cascade_check(team: TeamConfig, mode: str, gains: LawGains,
     judge = DelayJudge(mode, cascade_gains, eigenvalues, rate_hz, fly.link_delay_s, explicit,
                        fly.predict)
     return "\n".join(lines), refusals, judge
+
+
+def _declared_response(team: TeamConfig) -> AutopilotResponse | None:
+    """The vehicles' loops as the team file declares them (fly.response), else None."""
+    r = team.fly.response
+    return (None if r is None else
+            AutopilotResponse(**dataclasses.asdict(r), source="the team file's fly.response"))
 
 
 def _mode_gains(team: TeamConfig, mode: str) -> LawGains:
@@ -264,9 +269,8 @@ def resolve_mode(team: TeamConfig, requested: str | None,
         source = "--mode" if requested else "fly.mode"
         return mode, f"mode {mode} ({source})"
     eigenvalues = laplacian_eigenvalues(team.laplacian())
-    responses = ([("every vehicle", AutopilotResponse(**dataclasses.asdict(fly.response),
-                                                      source="the team file's fly.response"))]
-                 if fly.response is not None else
+    declared = _declared_response(team)
+    responses = ([("every vehicle", declared)] if declared is not None else
                  [(p.name, p.response) for p in PROFILES.values()])
     failed: dict[str, list[str]] = {}
     for mode in AUTO_MODES:
