@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 import socket
 import time
 
@@ -14,6 +15,7 @@ import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
+from gcs.fly.telemetry import team_sample
 from gcs.link import HotTable, MavlinkPort, TlogWriter, VehicleLinkConfig, VehicleProxy
 from gcs.link.fastpath import (
     ANY_ADDRESS,
@@ -507,3 +509,36 @@ async def _spread_notices() -> None:
     # ... and no batch carried the whole team's notices: they came at the slots' own phases
     per_batch = np.bincount([b for b, _ in notices])
     assert per_batch.max() <= n // 2, per_batch
+
+
+def test_the_team_sample_reads_each_message_the_table_has_even_while_another_is_missing() -> None:
+    asyncio.run(asyncio.wait_for(_sample_before_the_imu(), 20.0))
+
+
+async def _sample_before_the_imu() -> None:
+    # GIVEN a vehicle whose position and attitude streams are on, but not yet its IMU (the
+    # preflight asks for the streams one by one)
+    async with _one_vehicle() as (table, a, p):
+        mav = _sender(1)
+        a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(
+            1000, 1.0, 2.0, -3.0, 0.5, 0, 0)))
+        a.send(_pack(mav, mavlink.MAVLink_attitude_quaternion_message(
+            1000, 1.0, 0, 0, 0, 0.1, 0, 0)))
+        for _ in range(100):
+            await asyncio.sleep(0.005)
+            if table.count[0, LPN] and table.count[0, ATTQ]:
+                break
+        assert table.count[0, IMU] == 0
+        asked: list[str] = []
+        latest = p.latest
+        p.latest = lambda kind: (asked.append(kind), latest(kind))[1]  # type: ignore[method-assign]
+        # WHEN the tick takes the team's sample
+        s = team_sample([p], time.monotonic(), table=table)
+        # THEN position and attitude come from the table's arrays (ENU/FLU), and only the
+        # missing IMU is looked for in the proxy's cache, not all three decoded by pymavlink
+        assert asked == ["HIGHRES_IMU"]
+        assert s.position_m[0].tolist() == [2.0, 1.0, 3.0]
+        assert s.velocity_mps[0].tolist() == [0.0, 0.5, 0.0]
+        assert s.finite[0] and s.omega_radps[0].tolist() == pytest.approx([0.1, 0.0, 0.0])
+        assert s.acceleration_mps2[0].tolist() == [0.0, 0.0, 0.0]  # no IMU yet: none assumed
+        assert math.isinf(s.imu_age_s[0])
