@@ -86,6 +86,7 @@ from gcs.fly.stats import (
     TickStats,
     clock_report,
     link_report,
+    log_due,
     prediction_report,
     round_trip_report,
 )
@@ -502,6 +503,7 @@ class Flight:
         self.formation_error_m = math.nan
         self.formation_t_s: float | None = None
         self._k0: int | None = None
+        self._next_log_k = 0  # the tick the flight log's next sample is due at (log_due)
         self._last_law_k: int | None = None
         self._tg: asyncio.TaskGroup | None = None
         self._finished = asyncio.Event()
@@ -961,7 +963,7 @@ class Flight:
 
     def _run_law(self, k: int, sample: TeamSample, now_s: float) -> TeamCommand | None:
         if self._k0 is None:
-            self._k0 = k
+            self._k0 = self._next_log_k = k
             fly = self.team.fly
             self.law.heading_rad = command_heading_rad(fly.heading, sample.rotation)
             for vid, r in self.machine.goto_results.items():
@@ -993,9 +995,10 @@ class Flight:
             return self.last_command
         self.last_command = command
         self.formation_t_s = t
+        log, self._next_log_k = log_due(k, self._k0, self.setup.log_every, self._next_log_k)
         if self.machine.phase is Phase.FORMATION:
             self.ages.record(sample.delay_s, sample.age_s, fresh, stale_neighbours)
-            if (k - self._k0) % self.setup.log_every == 0:
+            if log:
                 self._log(t, sample, ref, command)
         return command
 

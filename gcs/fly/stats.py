@@ -28,6 +28,18 @@ def late_threshold_s(period_s: float) -> float:
     return max(MIN_LATE_THRESHOLD_S, 0.2 * period_s)
 
 
+def log_due(k: int, k0: int, every: int, next_k: int) -> tuple[bool, int]:
+    """Whether tick ``k`` (formation ticks counted from ``k0``) takes the flight log's sample,
+    and the tick the next one is due at. A sample is due at every ``every``-th tick; one whose
+    tick was skipped (a late loop jumps to the newest deadline) is taken at the first tick after
+    it, at its own time (a stall shorter than half the log period leaves no hole in the
+    report's grid; a longer one shows as the gap it was).
+    ``next_k``: what the previous call returned (``k0`` at first)."""
+    if k < next_k:
+        return False, next_k
+    return True, k0 + every * ((k - k0) // every + 1)
+
+
 class _Grow:
     """Append-only float array of fixed row width."""
 

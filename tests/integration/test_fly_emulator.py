@@ -184,8 +184,12 @@ def check_scenario_one(report: dict, code: int, out: str) -> None:
     assert code == 0, out
     t, fe = series(report, "formation_error_m")
     assert np.nanmax(fe[t >= 30.0]) <= 0.05
-    k20 = int(np.argmin(np.abs(t - 20.0)))
-    est = np.array(report["mass_estimate_kg"][k20])
+    # the record nearest 20 s (a tick skipped on a loaded machine may leave a row empty)
+    est_all = np.array(report["mass_estimate_kg"], dtype=float)
+    rows = np.flatnonzero(np.isfinite(est_all).all(axis=1))
+    k20 = int(rows[np.argmin(np.abs(t[rows] - 20.0))])
+    assert abs(t[k20] - 20.0) <= 0.5
+    est = est_all[k20]
     truth = np.array(report["mass_true_kg"][k20])
     np.testing.assert_allclose(est, truth, atol=0.02)
 

@@ -25,7 +25,14 @@ from gcs.fly.measure import (
     torque_max_nm,
     yaw_rad,
 )
-from gcs.fly.stats import AgeStats, TickStats, late_threshold_s, link_report, round_trip_report
+from gcs.fly.stats import (
+    AgeStats,
+    TickStats,
+    late_threshold_s,
+    link_report,
+    log_due,
+    round_trip_report,
+)
 from gcs.mission.autopilots import PROFILES
 from gcs.mission.cascade import CascadeGains, laplacian_eigenvalues, verdict
 from gcs.sim.runner import law_gains
@@ -265,6 +272,20 @@ def test_tick_stats_count_late_ticks_against_a_fifth_of_the_period():
         stats.record(late, 0.001)
     r = stats.report()
     assert r["rate_hz"] == 100.0 and r["late_pct"] == pytest.approx(2.0) and r["ticks"] == 100
+
+
+def test_a_log_sample_whose_tick_was_skipped_is_taken_at_the_next_tick_run():
+    # GIVEN a log sample every 10th tick from k0 = 7, and a loop that ran these ticks (a stall
+    # jumped over 27, 28 and 37..45: the log samples of ticks 27 and 37 were never run)
+    ran = [*range(7, 27), 29, *range(30, 37), 46, *range(47, 60)]
+    taken, next_k = [], 7
+    for k in ran:
+        due, next_k = log_due(k, 7, 10, next_k)
+        if due:
+            taken.append(k)
+    # THEN every sample is in the record, the skipped ones at the first tick after theirs, and
+    # the grid picks up again on time (no sample twice, none moved later than it had to)
+    assert taken == [7, 17, 29, 46, 47, 57]
 
 
 def test_link_report_has_the_spec_fields():
