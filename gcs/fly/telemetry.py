@@ -63,8 +63,9 @@ def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
     take `fallback`'s row when given (else NaN, and finite[i] is False). `ties`: (offsets (n, 3),
     rotations (n, 3, 3)) of each vehicle's local frame in the team frame (gcs.fly.origins):
     positions, velocities, attitudes and accelerations are then in the team frame. `table`: the
-    hot path's (proxy i in row i): read as arrays, the proxies' caches only for rows it has
-    nothing in yet (before a vehicle's address is learned, its messages take the slow path)."""
+    hot path's (proxy i in row i): read as arrays, message by message, the proxies' caches only
+    for the messages it has nothing of yet (before a vehicle's address is learned, its messages
+    take the slow path)."""
     n = len(proxies)
     pos = np.full((n, 3), np.nan)
     vel = np.full((n, 3), np.nan)
