@@ -1102,6 +1102,7 @@ class Flight:
                     "heartbeat_stale_events": s.proxy.heartbeat_stale_events,
                     "stranger_address": s.proxy.stranger_address,
                     "unknown_sysid_frames": s.port.unknown_sysid_frames,
+                    "gcs_socket_dropped": s.udp.rx_dropped_kernel,
                     "command_retries": getattr(s.commands, "retries", None),
                     "lost": self.ids[i] in self.machine.lost,
                     "round_trip": round_trip_report(self.proxies[i].round_trips_s()),

@@ -4,7 +4,8 @@ A shared GCS port of 240 vehicles receives about 24,000 datagrams a second. Read
 (`socket.recvmsg_into` and its ancillary data), each costs ~5 us of system call and Python: a
 tenth of a core. `MultiReceiver.receive` reads up to `VLEN` datagrams per call into fixed slots
 of one buffer, and returns their lengths, sources and kernel receive times (SO_TIMESTAMPNS) as
-arrays, with no Python per datagram.
+arrays, with no Python per datagram, and the socket's count of datagrams the kernel dropped
+because its receive buffer was full (SO_RXQ_OVFL, when the caller enabled it).
 
 A datagram longer than a slot (`SLOT_BYTES`, several times the largest any MAVLink stack
 sends) is cut by the kernel; it is flagged (`truncated`) so the caller counts it. The structures
@@ -28,8 +29,10 @@ SLOT_BYTES = 8192
 _MSG_DONTWAIT = 0x40
 _MSG_TRUNC = 0x20
 _SOCKADDR_IN_BYTES = 16
-_CMSG_BYTES = 32  # CMSG_SPACE(sizeof(struct timespec)) on LP64
+_STAMP_CMSG_BYTES = 32  # CMSG_SPACE(sizeof(struct timespec)) on LP64
+_CMSG_BYTES = 64  # the stamp, then SO_RXQ_OVFL's CMSG_SPACE(sizeof(uint32)) = 24, rounded up
 _SO_TIMESTAMPNS = 35  # also its SCM_ type
+SO_RXQ_OVFL = 40  # the socket's drop count with each datagram (only once it is not 0)
 
 #: struct mmsghdr on LP64: struct msghdr (name, namelen, iov, iovlen, control, controllen,
 #: flags) then msg_len, 64 bytes
@@ -96,6 +99,7 @@ class MultiReceiver:
         OSError for an error the socket reports (e.g. an ICMP error queued on it)."""
         self._hdrs[:] = self._template
         self._control[:, :16] = 0
+        self._control[:, _STAMP_CMSG_BYTES:_STAMP_CMSG_BYTES + 16] = 0
         assert _RECVMMSG is not None
         got = _RECVMMSG(self._fd, self._hdrs.ctypes.data, VLEN, _MSG_DONTWAIT, None)
         if got < 0:
@@ -118,9 +122,21 @@ class MultiReceiver:
         level = c[:, 8:12].copy().view("<i4").ravel()
         kind = c[:, 12:16].copy().view("<i4").ravel()
         spec = c[:, 16:32].copy().view("<i8")
-        ok = ((self._hdrs["controllen"][:n] >= _CMSG_BYTES) & (level == socket.SOL_SOCKET)
+        ok = ((self._hdrs["controllen"][:n] >= _STAMP_CMSG_BYTES) & (level == socket.SOL_SOCKET)
               & (kind == _SO_TIMESTAMPNS))
         return np.where(ok, spec[:, 0] + spec[:, 1] * 1e-9, np.nan)
+
+    def drops(self, n: int) -> int:
+        """The socket's count of datagrams dropped (receive buffer full) as the newest of these
+        datagrams carried it (SO_RXQ_OVFL after the stamp; -1: none carried one, the count
+        being 0 or the option off). Cumulative since the socket opened."""
+        c = self._control[:n, _STAMP_CMSG_BYTES:_STAMP_CMSG_BYTES + 20]
+        level = c[:, 8:12].copy().view("<i4").ravel()
+        kind = c[:, 12:16].copy().view("<i4").ravel()
+        count = c[:, 16:20].copy().view("<u4").ravel()
+        ok = ((self._hdrs["controllen"][:n] >= _STAMP_CMSG_BYTES + 20)
+              & (level == socket.SOL_SOCKET) & (kind == SO_RXQ_OVFL))
+        return int(count[ok].max()) if ok.any() else -1
 
     def sources(self, n: int) -> list[tuple[str, int]]:
         """Each datagram's source address, as the socket module gives it."""

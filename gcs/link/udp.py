@@ -9,6 +9,7 @@ import math
 import socket
 import struct
 import sys
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from types import TracebackType
@@ -16,7 +17,7 @@ from types import TracebackType
 import numpy as np
 
 from gcs.link.mmsg import SLOT_BYTES as MULTI_SLOT_BYTES
-from gcs.link.mmsg import MultiReceiver
+from gcs.link.mmsg import SO_RXQ_OVFL, MultiReceiver
 from gcs.link.mmsg import available as mmsg_available
 
 logger = logging.getLogger(__name__)
@@ -43,7 +44,10 @@ BULK_RCVBUF_BYTES = 4 << 20
 #: time of each datagram as a struct timespec.
 _SO_TIMESTAMPNS = 35
 _TIMESPEC = struct.Struct("@qq")
-_ANCILLARY_BYTES = socket.CMSG_SPACE(_TIMESPEC.size)
+_DROPS = struct.Struct("@I")
+_ANCILLARY_BYTES = socket.CMSG_SPACE(_TIMESPEC.size) + socket.CMSG_SPACE(_DROPS.size)
+#: At most one warning per this many seconds about datagrams the kernel dropped.
+DROP_WARNING_S = 5.0
 
 
 class LinkClosedError(RuntimeError):
@@ -65,6 +69,9 @@ class UdpStats:
     send_errors: int  # errors reported by the socket (e.g. ICMP port unreachable)
     callback_errors: int  # exceptions raised by on_datagram (logged with traceback)
     rx_truncated: int  # bulk mode: datagrams longer than a read slot, cut (gcs.link.mmsg)
+    # bulk mode (Linux): datagrams the kernel dropped because the socket's receive buffer was
+    # full: the ground station did not read them in time (SO_RXQ_OVFL)
+    rx_dropped_kernel: int
 
 
 class _Protocol(asyncio.DatagramProtocol):
@@ -136,6 +143,8 @@ class UdpEndpoint:
         self._transport: asyncio.DatagramTransport | None = None
         self._counts: dict[str, int] = {f.name: 0 for f in fields(UdpStats)}
         self._last_error: Exception | None = None
+        self._drops_warned = 0  # rx_dropped_kernel when the last warning went out
+        self._drop_warning_s = -math.inf
 
     # --- lifetime --------------------------------------------------------------------------------
 
@@ -162,6 +171,8 @@ class UdpEndpoint:
                     self._kernel_stamps = True
                 except OSError:
                     logger.debug("%s: no kernel receive times; stamped when read", self.name)
+                with contextlib.suppress(OSError):
+                    sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
             self._multi = MultiReceiver(sock) if mmsg_available(sock) else None
             loop.add_reader(sock.fileno(), self._drain)
             logger.debug("%s: bound %s (bulk), remote %s", self.name, self.local_address,
@@ -326,6 +337,7 @@ class UdpEndpoint:
         stamps: list[float] = []
         total = 0
         kernel = self._kernel_stamps
+        drops = -1
         while len(offsets) < MAX_BATCH_DATAGRAMS and total <= limit:
             stamp = math.nan
             try:
@@ -336,6 +348,8 @@ class UdpEndpoint:
                         if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS:
                             sec, nsec = _TIMESPEC.unpack_from(data)
                             stamp = sec + nsec * 1e-9
+                        elif level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL:
+                            drops = max(drops, _DROPS.unpack_from(data)[0])
                 else:
                     nbytes, addr = sock.recvfrom_into(view[total:])
             except (BlockingIOError, InterruptedError):
@@ -348,6 +362,7 @@ class UdpEndpoint:
             sources.append((addr[0], addr[1]))
             stamps.append(stamp)
             total += nbytes
+        self._count_drops(drops)
         if not offsets:
             return
         self._hand_over(cb, self._batch_buf, np.asarray(offsets, dtype=np.int64),
@@ -365,6 +380,7 @@ class UdpEndpoint:
             return
         if n == 0:
             return
+        self._count_drops(multi.drops(n))
         lengths = multi.lengths(n)
         truncated = int(multi.truncated(n).sum())
         if truncated:
@@ -373,6 +389,22 @@ class UdpEndpoint:
                            MULTI_SLOT_BYTES)
         stamps = multi.stamps(n) if self._kernel_stamps else np.full(n, np.nan)
         self._hand_over(cb, multi.buffer, multi.offsets[:n], lengths, multi.sources(n), stamps)
+
+    def _count_drops(self, drops: int) -> None:
+        """The socket's drop count as the datagrams just read carried it (-1: none did): kept,
+        and told (at most every DROP_WARNING_S) when it grew. Those datagrams were sent and
+        arrived; the vehicles' sequence numbers count them as lost, this says why."""
+        counts = self._counts
+        if drops <= counts["rx_dropped_kernel"]:
+            return
+        counts["rx_dropped_kernel"] = drops
+        now_s = time.monotonic()
+        if now_s - self._drop_warning_s >= DROP_WARNING_S:
+            logger.warning("%s: the kernel dropped %d datagrams (%d in all) that arrived faster "
+                           "than this ground station read them: it is short of CPU, and the "
+                           "vehicles' telemetry has gaps", self.name, drops - self._drops_warned,
+                           drops)
+            self._drops_warned, self._drop_warning_s = drops, now_s
 
     def _hand_over(self, cb: BatchCallback, buffer: bytearray, offsets: np.ndarray,
                    lengths: np.ndarray, sources: list[Address], stamps: np.ndarray) -> None:

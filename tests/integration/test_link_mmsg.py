@@ -94,3 +94,47 @@ async def _bulk() -> None:
         stats = ep.stats()
         assert (stats.rx_truncated, stats.packets_in) == (1, 2)
         tx.close()
+
+
+@pytest.mark.parametrize("bulk_read", ["recvmmsg", "one at a time"])
+def test_datagrams_the_kernel_dropped_while_the_ground_station_was_busy_are_counted_and_told(
+        bulk_read: str, caplog: pytest.LogCaptureFixture) -> None:
+    asyncio.run(asyncio.wait_for(_overflow(bulk_read, caplog), 20.0))
+
+
+async def _overflow(bulk_read: str, caplog: pytest.LogCaptureFixture) -> None:
+    got = [0]
+
+    def on_batch(buffer, offsets, lengths, sources, stamps) -> None:  # noqa: ANN001
+        got[0] += len(offsets)
+
+    async with UdpEndpoint(0, None, learn_remote=True, on_batch=on_batch, name="gcs port") as ep:
+        if bulk_read == "one at a time":
+            ep._multi = None  # the path of a platform without recvmmsg
+        tx = _socket()
+        # GIVEN a ground station that reads nothing for a while (the loop is blocked) as a
+        # fleet's telemetry keeps coming: more datagrams than its socket's buffer holds
+        sent = 0
+        for _ in range(40_000):
+            try:
+                tx.sendto(b"x" * 40, ep.local_address)
+                sent += 1
+            except BlockingIOError:
+                time.sleep(1e-3)
+        # WHEN it reads again, and the stream goes on (the kernel tells a socket's drop count
+        # with the datagrams queued after the drops)
+        for _ in range(500):
+            await asyncio.sleep(0.002)
+            if ep.stats().packets_in + ep.stats().rx_dropped_kernel >= sent:
+                break
+            tx.sendto(b"y" * 40, ep.local_address)
+            sent += 1
+        # THEN every datagram is either read or counted as dropped by the kernel, and the
+        # operator is told why the telemetry has gaps
+        stats = ep.stats()
+        assert stats.rx_dropped_kernel > 0
+        assert stats.packets_in == got[0]
+        assert stats.packets_in + stats.rx_dropped_kernel == sent
+        assert any("gcs port: the kernel dropped" in r.getMessage() and "short of CPU" in
+                   r.getMessage() for r in caplog.records)
+        tx.close()
