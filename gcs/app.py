@@ -481,8 +481,12 @@ class Flight:
         check_unique_sysids(self.links)
         self.shared_ports = shared_ports(self.links)  # (host, port) -> the vehicles on it
         self.hot = HotTable(len(self.links))  # the team's hot telemetry, a row per link
+        self._clocks_in_table = False  # every proxy's clock filter writes its line into hot
         self._team_setpoints: TeamSetpoints | None = None  # once the proxies are open
-        self._batchable: list[bool] = []
+        self._batchable = np.zeros(0, dtype=bool)  # per link: rates go in the team's batch
+        # the rows of the last streaming set (the set, as a list, as an array)
+        self._streaming_rows: tuple[frozenset[int] | None, list[int], np.ndarray] = (
+            None, [], np.zeros(0, dtype=np.intp))
         self.proxies: list[VehicleProxy] = []
         self._proxy_by_id: dict[int, VehicleProxy] = {}
         self.builder = FlightLogBuilder(
@@ -562,6 +566,7 @@ class Flight:
                                                                          port=port, slot=slot))
                     self.proxies.append(proxy)
                     self._proxy_by_id[cfg.vehicle_id] = proxy
+                self._clocks_in_table = all(p.slot == i for i, p in enumerate(self.proxies))
                 logger.info("%s", self.setup.stability)
                 try:
                     async with asyncio.TaskGroup() as tg:
@@ -1009,7 +1014,10 @@ class Flight:
         held = sample.measurement()
         if self.audit is None:
             return held
-        act = now_s + uplink_delay_s(np.array([p.clock.least_delay_s for p in self.proxies]))
+        # each link's least one-way delay: the table's copy of the clock filters' (a column)
+        least = (self.hot.clock_line[:, 3] if self._clocks_in_table
+                 else np.array([p.clock.least_delay_s for p in self.proxies]))
+        act = now_s + uplink_delay_s(least)
         h_pos = horizons_s(act, sample.position_taken_s)
         predicted = predict(held, h_pos, horizons_s(act, sample.attitude_taken_s))
         if self.machine.phase is Phase.FORMATION:
@@ -1051,15 +1059,17 @@ class Flight:
                       streaming: frozenset[int]) -> None:
         """Row i of ``vec`` (rates, attitude or torque, as the mode sends) and ``thrust`` to
         vehicle i if it is streaming; rates mode packs the team in one call."""
-        rows = [i for i in range(self.n) if self.ids[i] in streaming]
+        if streaming is not self._streaming_rows[0]:  # a new set: its rows, once
+            picked = [i for i in range(self.n) if self.ids[i] in streaming]
+            self._streaming_rows = (streaming, picked, np.asarray(picked, dtype=np.intp))
+        _, rows, at = self._streaming_rows
         if self.setup.mode == "rates":  # the team at once (gcs.link.fastpath), bad rows one by one
-            good = np.isfinite(vec).all(axis=1) & np.isfinite(thrust)
             if self._team_setpoints is None:
                 self._team_setpoints = TeamSetpoints(self.proxies)
-                self._batchable = [p.batch_sendable for p in self.proxies]  # fixed per link
-            batch = [i for i in rows if good[i] and self._batchable[i]]
-            self._team_setpoints.send_rates_thrust(batch, vec, thrust)
-            rows = [i for i in rows if not (good[i] and self._batchable[i])]
+                self._batchable = np.array([p.batch_sendable for p in self.proxies], dtype=bool)
+            ok = (np.isfinite(vec).all(axis=1) & np.isfinite(thrust) & self._batchable)[at]
+            self._team_setpoints.send_rates_thrust(at[ok].tolist(), vec, thrust)
+            rows = at[~ok].tolist()
         for i in rows:
             self._send_one(i, self.proxies[i], vec[i], thrust[i])
 
