@@ -1059,7 +1059,7 @@ class Flight:
                       streaming: frozenset[int]) -> None:
         """Row i of ``vec`` (rates, attitude or torque, as the mode sends) and ``thrust`` to
         vehicle i if it is streaming; rates mode packs the team in one call."""
-        if streaming is not self._streaming_rows[0]:  # a new set: its rows, once
+        if streaming != self._streaming_rows[0]:  # a new set: its rows, once
             picked = [i for i in range(self.n) if self.ids[i] in streaming]
             self._streaming_rows = (streaming, picked, np.asarray(picked, dtype=np.intp))
         _, rows, at = self._streaming_rows
