@@ -9,7 +9,7 @@ directions. Bytes are decoded by a per-link ``PeerDecoder`` (one parser per peer
 handed to a callback.
 
 ``LinkPoller`` reads many endpoints in bulk (a fleet's hundreds of sockets): one asyncio reader
-(an epoll descriptor) for all of them; at each wake-up every ready socket is read and the
+(an epoll descriptor) for all of them; at each wake-up every ready socket is drained and the
 datagrams are decoded together (codec.HotDecoder: the setpoint streams without pymavlink's
 parser), then delivered in arrival order, exactly as one callback per datagram would. Sends go
 straight to the socket (asyncio's transport only when its buffer holds earlier data).
@@ -34,11 +34,10 @@ __all__ = ["LinkPoller", "UdpLink"]
 MAX_DATAGRAM = 65536
 # datagrams read per wake-up, from one socket and in all: a backlog is worked off between ticks
 # (the epoll is level-triggered: what is left wakes the loop again), not in one long batch that
-# would hold the physics up. One per socket: a vehicle's setpoints come one per GCS tick, so a
-# second read almost always fails (a system call and an exception, ~2 us, per setpoint: 5 % of
-# a core at 240 vehicles), and what a socket still holds is read at the next wake-up, the
-# others' first datagrams in between.
-MAX_PER_SOCKET = 1
+# would hold the physics up. Not one a socket: a second read per socket mostly fails (~2 us a
+# setpoint in-process), but under load a socket's backlog then drains one datagram per loop pass
+# and stays (240 vehicles: setpoints and telemetry 60-170 ms late, the formation diverged)
+MAX_PER_SOCKET = 8
 MAX_PER_WAKEUP = 512
 
 Address = tuple[str, int]
