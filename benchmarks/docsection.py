@@ -14,5 +14,6 @@ def write_section(doc_path: Path, heading: str, text: str) -> None:
         doc = doc.rstrip("\n") + "\n\n" + text
     else:
         end = doc.find("\n## ", start + len(heading))
-        doc = doc[:start] + text + ("" if end < 0 else doc[end + 1:])
+        rest = "" if end < 0 else "\n" + doc[end + 1:]  # a blank line before the next one
+        doc = doc[:start] + text.rstrip("\n") + "\n" + rest
     doc_path.write_text(doc)
