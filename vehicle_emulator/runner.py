@@ -280,9 +280,6 @@ class Emulator:
             self._ack_nodes.setdefault(node.index, node)
         if self._setpoint_event is not None:
             self._setpoint_event.set()
-        node.decode_rejected = sum(
-            lk.decoder.stats.rejected for lk in node.links if isinstance(lk, UdpLink)
-        )
 
     # --- I/O -----------------------------------------------------------------------------------
 

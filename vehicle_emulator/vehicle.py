@@ -143,7 +143,6 @@ class VehicleNode:
     encoder: GenericEncoder
     links: list[Link] = field(default_factory=list)
     counters: InputCounters = field(default_factory=InputCounters)
-    decode_rejected: int = 0
     setpoints_taken: int = 0
     applied_version: int = -1
     deferred_acks: list[DeferredAck] = field(default_factory=list)
@@ -159,6 +158,17 @@ class VehicleNode:
     def sysid(self) -> int:
         """MAVLink system id."""
         return self.spec.sysid
+
+    @property
+    def decode_rejected(self) -> int:
+        """Datagram content the links' parsers could not use (bad CRC, unknown ids, junk),
+        counted when read: the status at the autopilot's rate, not per message."""
+        total = 0
+        for link in self.links:
+            decoder = getattr(link, "decoder", None)
+            if decoder is not None:
+                total += decoder.stats.rejected
+        return total
 
     @property
     def local_origin_enu_m(self) -> tuple[float, float, float]:
