@@ -274,6 +274,17 @@ def test_tick_stats_count_late_ticks_against_a_fifth_of_the_period():
     assert r["rate_hz"] == 100.0 and r["late_pct"] == pytest.approx(2.0) and r["ticks"] == 100
 
 
+def test_a_skipped_tick_counts_as_late_among_all_deadlines():
+    # GIVEN 98 ticks run on time, 1 late, and a stall that jumped over one deadline
+    stats = TickStats(100.0)
+    for late in [0.0005] * 98 + [0.003]:
+        stats.record(late, 0.001)
+    stats.skipped += 1
+    # THEN 2 of the 100 deadlines were not met on time
+    r = stats.report()
+    assert r["late_pct"] == pytest.approx(2.0) and r["ticks"] == 99 and r["skipped_ticks"] == 1
+
+
 def test_a_log_sample_whose_tick_was_skipped_is_taken_at_the_next_tick_run():
     # GIVEN a log sample every 10th tick from k0 = 7, and a loop that ran these ticks (a stall
     # jumped over 27, 28 and 37..45: the log samples of ticks 27 and 37 were never run)
