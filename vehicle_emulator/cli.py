@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import dataclasses
+import gc
 import json
 import logging
 import resource
@@ -254,6 +255,12 @@ async def _amain(args: argparse.Namespace) -> int:
     if args.duration is not None:
         loop.call_later(args.duration / args.realtime_factor, stop.set)
     stats = RunStats()
+    # what start-up built (the fleet, the imported libraries, the compiled kernels: ~130,000
+    # objects at 240 vehicles) is never garbage: out of the collector's sight, a full collection
+    # walks only what the run allocates, instead of pausing every vehicle for 20-90 ms
+    gc.collect()
+    gc.freeze()
+    collections0 = [g["collections"] for g in gc.get_stats()]
     cpu0, wall0 = time.process_time(), time.monotonic()
     try:
         if args.lockstep:
@@ -282,6 +289,9 @@ async def _amain(args: argparse.Namespace) -> int:
             zip(emu.telemetry.names, emu.telemetry.sent.tolist(), strict=True)
         ),
         "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "gc_frozen_objects": gc.get_freeze_count(),
+        "gc_collections": [g["collections"] - c0
+                           for g, c0 in zip(gc.get_stats(), collections0, strict=True)],
         "by_vehicle": [_vehicle_summary(node) for node in emu.nodes],
     }
     if args.stats_json:

@@ -86,7 +86,9 @@ class TickStats:
         loop jumped over is a tick not run on time, not one to leave out)."""
         late = self._late.data[:, 0]
         deadlines = late.size + self.skipped
-        return float((late > self.threshold_s).sum() + self.skipped) / deadlines if deadlines else 0.0
+        if not deadlines:
+            return 0.0
+        return float((late > self.threshold_s).sum() + self.skipped) / deadlines
 
     def report(self) -> dict[str, Any]:
         late = self._late.data[:, 0]

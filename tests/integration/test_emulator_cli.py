@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 import signal
 import socket
@@ -228,3 +229,19 @@ def test_fleet_behind_one_gcs_port_with_requested_streams(tmp_path):
             proc.kill()
         gcs.close()
     assert "Traceback" not in (tmp_path / "fleet.log").read_text()
+
+
+def test_what_start_up_built_is_out_of_the_collectors_sight_for_the_run(tmp_path):
+    # GIVEN a fleet run for 2 simulated seconds with its figures written
+    stats = tmp_path / "stats.json"
+    out = subprocess.run(
+        [*EMU, "--fleet", "--team", str(ROOT / "configs/square4.yaml"), "--duration", "2",
+         "--bind-base", str(free_udp_port_block(4)), "--stats-json", str(stats)],
+        capture_output=True, text=True, timeout=90)
+    assert out.returncode == 0, out.stderr
+    # THEN the fleet, the libraries and the kernels were frozen before the run (a full
+    # collection walks only what the run allocated), and the run's collections are counted
+    figures = json.loads(stats.read_text())
+    assert figures["gc_frozen_objects"] > 20_000
+    assert len(figures["gc_collections"]) == 3
+    assert all(isinstance(n, int) and n >= 0 for n in figures["gc_collections"])

@@ -417,6 +417,45 @@ async def _notices() -> None:
         assert offset_7 == p.clock.estimate().offset_s
 
 
+def test_a_wait_for_a_slow_path_message_does_not_make_every_batch_tell_the_proxy() -> None:
+    """A mode confirmation waits for a HEARTBEAT: no hot message will answer it, so the hot
+    stream keeps its notice period (240 vehicles confirming at once made every batch tell every
+    vehicle: tens of milliseconds at the formation's start), and the HEARTBEAT still wakes it."""
+    asyncio.run(asyncio.wait_for(_slow_wait(), 20.0))
+
+
+async def _slow_wait() -> None:
+    async with _one_vehicle(timesync_period_s=0.0) as (table, a, p):
+        calls = []
+        on_hot = p._on_hot
+        p._on_hot = lambda: (calls.append(time.monotonic()), on_hot())  # type: ignore[method-assign]
+        mav = _sender(1)
+        # GIVEN a command waiting for the vehicle's HEARTBEAT
+        waiter = asyncio.create_task(p.wait_message("HEARTBEAT", 2.0))
+        await asyncio.sleep(0.005)
+        assert not p.hot_waiting
+        # WHEN 20 LOCAL_POSITION_NED datagrams arrive 5 ms apart
+        t0 = time.monotonic()
+        for k in range(20):
+            a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(
+                int((time.monotonic() - t0) * 1e3) + 1000, float(k), 0, 0, 0, 0, 0)))
+            await asyncio.sleep(0.005)
+        # THEN the proxy heard of them at its notice period, not at each batch
+        assert table.count[0, LPN] == 20
+        assert 1 <= len(calls) <= 2 + (calls[-1] - calls[0]) / HOT_NOTICE_S
+        # and the HEARTBEAT, when it comes, ends the wait
+        a.send(_pack(mav, mavlink.MAVLink_heartbeat_message(2, 12, 0, 0, 0, 3)))
+        got = await waiter
+        assert got.msg.get_type() == "HEARTBEAT" and not p.hot_waiting
+        # while a wait for a hot message makes the proxy hear of every batch until it is met
+        hot = asyncio.create_task(p.wait_message("LOCAL_POSITION_NED", 1.0))
+        await asyncio.sleep(0.005)
+        assert p.hot_waiting
+        a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(
+            int((time.monotonic() - t0) * 1e3) + 1000, 99.0, 0, 0, 0, 0, 0)))
+        assert (await hot).msg.x == 99.0 and not p.hot_waiting
+
+
 def test_a_burst_of_slow_frames_is_routed_in_budgeted_passes_that_timers_interleave() -> None:
     asyncio.run(asyncio.wait_for(_slow_burst(), 20.0))
 
