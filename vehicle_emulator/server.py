@@ -11,8 +11,9 @@ handed to a callback.
 ``LinkPoller`` reads many endpoints in bulk (a fleet's hundreds of sockets): one asyncio reader
 (an epoll descriptor) for all of them; at each wake-up every ready socket is drained and the
 datagrams are decoded together (codec.HotDecoder: the setpoint streams without pymavlink's
-parser), then delivered in arrival order, exactly as one callback per datagram would. Sends go
-straight to the socket (asyncio's transport only when its buffer holds earlier data).
+parser), then delivered in arrival order, exactly as one callback per datagram would; before
+each, ``between`` lets a periodic tick that fell due run first. Sends go straight to the socket
+(asyncio's transport only when its buffer holds earlier data).
 """
 
 from __future__ import annotations
@@ -208,6 +209,9 @@ class LinkPoller:
         self._hot = HotDecoder()
         self.batches = 0
         self.datagrams = 0
+        #: called before each datagram of a batch is delivered (the fleet's real-time tick,
+        #: which runs there when it is due: Emulator.run)
+        self.between: Callable[[], None] | None = None
         self._loop.add_reader(self._epoll.fileno(), self._ready)
 
     def attach(self, link: UdpLink) -> None:
@@ -245,7 +249,10 @@ class LinkPoller:
         self.batches += 1
         self.datagrams += len(items)
         decoded = self._hot.decode([data for _, data, _ in items])
+        between = self.between
         for (link, data, addr), msgs in zip(items, decoded, strict=True):
+            if between is not None:
+                between()
             if msgs is not None and link.decoder.idle(addr):
                 link._deliver_decoded(data, addr, msgs)
             else:

@@ -77,3 +77,73 @@ def test_poller_delivers_hot_and_other_datagrams_in_order_and_joins_split_frames
                 link.close()
 
     run_bounded(scenario(), 20.0)
+
+
+def test_a_tick_that_falls_due_during_a_batch_runs_before_the_rest_of_it():
+    """The fleet's tick comes first: a burst of datagrams (a 240-vehicle setpoint burst is ~3 ms
+    of work) is delivered with the ticks that fall due meanwhile run between its datagrams, not
+    after the whole batch with the telemetry that late."""
+    from vehicle_emulator.runner import Emulator, LinkPlan, RunStats, _Pace
+    from vehicle_emulator.team import parse_team
+
+    class SteppedClock:  # simulated time: 1 ms passes for every message the vehicle handles
+        t_s = 0.0
+
+        def now_s(self) -> float:
+            return self.t_s
+
+        async def sleep_until(self, t_s: float) -> None:
+            self.t_s = max(self.t_s, t_s)
+
+    async def scenario(tick_first: bool) -> tuple[list[int], int]:
+        team = parse_team({"vehicles": [{"id": 1, "initial": {"position_enu_m": [0, 0, 10]}}]})
+        emu = Emulator(list(team.vehicles), tick_s=0.002)
+        clock = SteppedClock()
+        await emu.open_links([LinkPlan(("127.0.0.1", 0), ("127.0.0.1", 9), None, None)], clock)
+        handled = [0]
+        ticks_at: list[int] = []  # messages handled before each tick
+        on_messages, advance_to = emu.on_messages, emu.advance_to
+
+        def handle(node, link, msgs, addr):
+            on_messages(node, link, msgs, addr)
+            handled[0] += len(msgs)
+            clock.t_s += 1e-3 * len(msgs)
+
+        def tick(t_s):
+            ticks_at.append(handled[0])
+            return advance_to(t_s)
+
+        emu.on_messages, emu.advance_to = handle, tick  # type: ignore[method-assign]
+        pace = _Pace(emu, clock, RunStats())
+        assert emu.poller is not None
+        emu.poller.between = pace.tick_if_due if tick_first else None
+        gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            port = emu.links[0].local_address[1]
+            pace.tick_if_due()  # the tick at t = 0
+            # GIVEN 40 setpoints waiting in the vehicle's socket
+            for _ in range(40):
+                gcs.sendto(_frame(mavlink.MAVLink_set_attitude_target_message(
+                    0, 1, 1, 128, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0.5)),
+                    ("127.0.0.1", port))
+            await asyncio.sleep(0.05)
+            # WHEN the poller reads and delivers them (a few wake-ups: at most MAX_PER_SOCKET
+            # datagrams of one socket per wake-up)
+            for _ in range(40):
+                if handled[0] >= 40:
+                    break
+                emu.poller._ready()
+            pace.tick_if_due()  # and the loop's own tick comes after
+            return ticks_at, handled[0]
+        finally:
+            gcs.close()
+            emu.close_links()
+
+    ticks_at, handled = run_bounded(scenario(True), 20.0)
+    # THEN all 40 were handled, and a tick ran every 2 ms of it, between the datagrams
+    assert handled == 40
+    assert ticks_at[0] == 0 and len(ticks_at) == 21
+    assert all(b - a == 2 for a, b in zip(ticks_at[1:], ticks_at[2:], strict=False))
+    # while without the hook no tick ran until the poller had delivered everything
+    ticks_at, handled = run_bounded(scenario(False), 20.0)
+    assert handled == 40 and ticks_at == [0, 40]
