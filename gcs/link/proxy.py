@@ -178,7 +178,6 @@ class VehicleProxy:
         self.statustexts = StatusTextLog(self.name)  # every STATUSTEXT of the vehicle
         self._waiters: list[tuple[str, Callable[[MAVLinkMessage], bool], asyncio.Future[Received]]]
         self._waiters = []
-        self._table_waiters = 0  # of them, those for a message the hot table holds
         self._tasks: list[asyncio.Task[None]] = []
         self._t0_s = self._clock.now_s()
         self._link_state = LinkState.WAITING
@@ -226,7 +225,6 @@ class VehicleProxy:
             if not fut.done():
                 fut.set_exception(LinkClosedError(f"{self.name}: link closed while waiting"))
         self._waiters.clear()
-        self._table_waiters = 0
         self._port.detach(self.config.sysid)
         if self._owns_port:
             self._port.close()
@@ -378,14 +376,15 @@ class VehicleProxy:
         it arrives, raises TimeoutError naming the vehicle after ``timeout_s``."""
         fut: asyncio.Future[Received] = asyncio.get_running_loop().create_future()
         entry = (kind, predicate or (lambda _m: True), fut)
-        self._add_waiter(entry)
+        self._waiters.append(entry)
         try:
             async with asyncio.timeout(timeout_s):
                 return await fut
         except TimeoutError:
             raise TimeoutError(f"{self.name}: no {kind} within {timeout_s} s") from None
         finally:
-            self._drop_waiter(entry)
+            if entry in self._waiters:
+                self._waiters.remove(entry)
 
     async def wait_heartbeat(self, timeout_s: float) -> Received:
         """Latest HEARTBEAT if any, else wait for one (TimeoutError after timeout_s)."""
@@ -400,20 +399,7 @@ class VehicleProxy:
         batch). A wait for another message (a HEARTBEAT with the new mode, a PARAM_VALUE) comes
         through the slow path: 240 vehicles confirming their mode made every batch tell every
         vehicle, a burst of tens of milliseconds at the formation's start."""
-        return self._table_waiters > 0
-
-    def _add_waiter(self, entry: tuple[str, Callable[[MAVLinkMessage], bool],
-                                       asyncio.Future[Received]]) -> None:
-        self._waiters.append(entry)
-        if entry[0] in TABLE_NAMES:
-            self._table_waiters += 1
-
-    def _drop_waiter(self, entry: tuple[str, Callable[[MAVLinkMessage], bool],
-                                        asyncio.Future[Received]]) -> None:
-        if entry in self._waiters:
-            self._waiters.remove(entry)
-            if entry[0] in TABLE_NAMES:
-                self._table_waiters -= 1
+        return any(w[0] in TABLE_NAMES for w in self._waiters)
 
     def _on_hot(self) -> None:
         """The port's hot path stored new messages of this vehicle: feed the clock filter the
@@ -425,12 +411,12 @@ class VehicleProxy:
             if least_t < newest_t:
                 self.clock.on_sample(least_t, least_t + least_o)
             self.clock.on_sample(newest_t, newest_rx)
-        if self._table_waiters:
-            for k in sorted({TABLE_NAMES.index(w[0]) for w in self._waiters
-                             if w[0] in TABLE_NAMES}):
-                got = self._hot_latest(k)
-                if got is not None:
-                    self._wake_waiters(got.msg, got.rx_time_s)
+        if self._waiters:
+            for k, kind in enumerate(TABLE_NAMES):
+                if any(w[0] == kind for w in self._waiters):
+                    got = self._hot_latest(k)
+                    if got is not None:
+                        self._wake_waiters(got.msg, got.rx_time_s)
 
     def _on_datagram(self, data: bytes, addr: Address, seq_counted: bool = False,
                      rx_s: float | None = None) -> None:
@@ -520,7 +506,7 @@ class VehicleProxy:
             want, pred, fut = entry
             if want == kind and not fut.done() and pred(msg):
                 fut.set_result(Received(msg, now_s))
-                self._drop_waiter(entry)
+                self._waiters.remove(entry)
 
     # --- commands --------------------------------------------------------------------------------
 
@@ -686,7 +672,7 @@ class VehicleProxy:
                              f"got {retries}, {timeout_s}")
         fut: asyncio.Future[Received] = asyncio.get_running_loop().create_future()
         entry = ("PARAM_VALUE", lambda m: str(m.param_id) == name, fut)
-        self._add_waiter(entry)
+        self._waiters.append(entry)
         try:
             for _ in range(retries + 1):
                 self._send(self._codec.mav.param_request_read_encode(
@@ -698,7 +684,8 @@ class VehicleProxy:
                 except TimeoutError:
                     logger.debug("%s: PARAM_REQUEST_READ %s timed out", self.name, name)
         finally:
-            self._drop_waiter(entry)
+            if entry in self._waiters:
+                self._waiters.remove(entry)
             if not fut.done():
                 fut.cancel()
         raise ParamTimeoutError(f"{self.name}: PARAM_REQUEST_READ {name} got no PARAM_VALUE in "
@@ -711,7 +698,7 @@ class VehicleProxy:
         if no AUTOPILOT_VERSION arrives."""
         fut: asyncio.Future[Received] = asyncio.get_running_loop().create_future()
         entry = ("AUTOPILOT_VERSION", lambda _m: True, fut)
-        self._add_waiter(entry)
+        self._waiters.append(entry)
         try:
             await self._checked(MavCmd.REQUEST_MESSAGE, (AUTOPILOT_VERSION_ID,), True, timeout_s,
                                 retries)
@@ -722,7 +709,8 @@ class VehicleProxy:
             raise TimeoutError(f"{self.name}: no AUTOPILOT_VERSION within {timeout_s} s of an "
                                "accepted REQUEST_MESSAGE") from None
         finally:
-            self._drop_waiter(entry)
+            if entry in self._waiters:
+                self._waiters.remove(entry)
             if not fut.done():
                 fut.cancel()
 

@@ -379,6 +379,14 @@ async def _team_setpoints(tlog: TlogWriter) -> None:
                 s.close()
 
 
+def _count_notices(p) -> list[float]:
+    """The times at which the port tells proxy ``p`` of its hot messages, from now on."""
+    calls: list[float] = []
+    on_hot = p._on_hot
+    p._on_hot = lambda: (calls.append(time.monotonic()), on_hot())
+    return calls
+
+
 def test_a_proxy_hears_of_its_hot_messages_every_notice_period_not_every_batch() -> None:
     """Between notices the table keeps the batches' least-delayed stamp: the clock filter still
     gets it, and a waiting command is woken at the batch that brings its message."""
@@ -387,9 +395,7 @@ def test_a_proxy_hears_of_its_hot_messages_every_notice_period_not_every_batch()
 
 async def _notices() -> None:
     async with _one_vehicle(timesync_period_s=0.0) as (table, a, p):
-        calls = []
-        on_hot = p._on_hot
-        p._on_hot = lambda: (calls.append(time.monotonic()), on_hot())  # type: ignore[method-assign]
+        calls = _count_notices(p)
         mav = _sender(1)
         t0 = time.monotonic()
         for k in range(20):  # one datagram every 5 ms, stamped as if 0-19 ms in transit
@@ -426,9 +432,7 @@ def test_a_wait_for_a_slow_path_message_does_not_make_every_batch_tell_the_proxy
 
 async def _slow_wait() -> None:
     async with _one_vehicle(timesync_period_s=0.0) as (table, a, p):
-        calls = []
-        on_hot = p._on_hot
-        p._on_hot = lambda: (calls.append(time.monotonic()), on_hot())  # type: ignore[method-assign]
+        calls = _count_notices(p)
         mav = _sender(1)
         # GIVEN a command waiting for the vehicle's HEARTBEAT
         waiter = asyncio.create_task(p.wait_message("HEARTBEAT", 2.0))
@@ -440,9 +444,10 @@ async def _slow_wait() -> None:
             a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(
                 int((time.monotonic() - t0) * 1e3) + 1000, float(k), 0, 0, 0, 0, 0)))
             await asyncio.sleep(0.005)
-        # THEN the proxy heard of them at its notice period, not at each batch
+        # THEN the proxy heard of them a few times (the notice period is 50 ms; in a new
+        # process the first batches come at once), not at each of the 20 batches
         assert table.count[0, LPN] == 20
-        assert 1 <= len(calls) <= 2 + (calls[-1] - calls[0]) / HOT_NOTICE_S
+        assert 1 <= len(calls) <= 6
         # and the HEARTBEAT, when it comes, ends the wait
         a.send(_pack(mav, mavlink.MAVLink_heartbeat_message(2, 12, 0, 0, 0, 3)))
         got = await waiter
