@@ -215,6 +215,7 @@ LEASH_Z_M = 1.0
 TAKEOFF_SPOOL_S = 2.5  # NAV_TAKEOFF -> liftoff (recorded 48.70 -> 51.20 s)
 LAND_DETECT_S = 1.6  # touchdown -> land complete (recorded 108.08 -> 109.67 s)
 LAND_DISARM_S = 0.5  # land complete -> "Disarming motors" in LAND (recorded 109.67 -> 110.16 s)
+MAX_TICK_DT_S = 0.1  # the longest step the vertical loop integrates at one tick
 STOPPED_MPS = 0.1  # a braking vehicle holds its position below this horizontal speed
 TAKEOFF_DONE_M = 0.1
 
@@ -239,6 +240,7 @@ class ArduCopter:
     auto_armed: bool = False
     angle_control: bool = False  # guided angle submode (GUIDED_NOGPS, or GUIDED after one)
     guided_timeouts: int = 0  # attitude targets that expired (GUID_TIMEOUT) while flown
+    deadline_s: float = math.inf  # when a guided target expires (``expire``); inf: none pending
     _setpoint_s: float = -math.inf
     _expiry_counted: bool = True
     _velocity_target_s: float | None = None  # GUIDED velocity target: its arrival
@@ -254,6 +256,7 @@ class ArduCopter:
     _texts_done: int = 0
     _origin_sent: bool = False
     _next_prearm_s: float = 0.0
+    _tick_s: float | None = None  # the previous tick's time
 
     # --- construction ---------------------------------------------------------------------------
 
@@ -436,7 +439,8 @@ class ArduCopter:
             self._z_ref_m = obs.position_enu_m[2]
         self._velocity_target_s = None
         self._taking_off = ""
-        self._fly_angle(now_s, obs)
+        self.deadline_s = now_s + self.params["GUID_TIMEOUT"]
+        self._fly_angle(now_s, obs, 0.0)
         return True
 
     def on_position_target(self, now_s: float, obs: Observation, target: PositionTarget | None,
@@ -452,6 +456,8 @@ class ArduCopter:
         self.angle_control = False
         self._taking_off = ""
         self._velocity_target_s = now_s if velocity_only else None
+        if velocity_only:
+            self.deadline_s = now_s + self.params["GUID_TIMEOUT"]
         if self._grounded():
             return True  # taken, but a landed vehicle waits for a takeoff (ArduPilot)
         self._braking = False
@@ -461,7 +467,10 @@ class ArduCopter:
     # --- the tick ------------------------------------------------------------------------------
 
     def tick(self, now_s: float, obs: Observation) -> None:
-        """Boot timeline, takeoff, land detector, auto-disarm, timeouts, the vertical loop."""
+        """Boot timeline, takeoff, land detector, auto-disarm, timeouts, the vertical loop (which
+        integrates over the time since the previous tick, at most MAX_TICK_DT_S)."""
+        dt_s = 0.0 if self._tick_s is None else min(max(now_s - self._tick_s, 0.0), MAX_TICK_DT_S)
+        self._tick_s = now_s
         self._boot_progress(now_s)
         self._land_detector(now_s, obs)
         if not self.armed:
@@ -470,16 +479,14 @@ class ArduCopter:
         if self._taking_off:
             self._takeoff_progress(now_s, obs)
         elif self.angle_control and self.mode in GUIDED_MODES:
-            self._fly_angle(now_s, obs)
-        elif self._velocity_target_s is not None and (
-            now_s - self._velocity_target_s > self.params["GUID_TIMEOUT"]
-        ):
+            self._fly_angle(now_s, obs, dt_s)
+        elif self._velocity_target_expired(now_s):
             self._stop_guided(obs)
         elif self._braking and math.hypot(*obs.velocity_enu_mps[:2]) < STOPPED_MPS:
             self._braking = False
             self._set(self._position_hold(obs))
         elif self.mode is Mode.ALT_HOLD and not self.land_complete:
-            self._set(self._level_climb(obs, -self._pilot_down_mps(), 0.02))
+            self._set(self._level_climb(obs, -self._pilot_down_mps(), dt_s))
         elif self.mode is Mode.LAND:
             self._land_speed_update(obs)
         if self.land_complete and not self._taking_off:
@@ -565,7 +572,7 @@ class ArduCopter:
         elif self.land_complete:
             self._set(Idle())
         elif mode is Mode.GUIDED_NOGPS:
-            self._fly_angle(now_s, obs)
+            self._fly_angle(now_s, obs, 0.0)
         elif mode is Mode.STABILIZE:
             self._set(Idle())  # throttle stick low: the motors idle in the air too
         elif mode is Mode.ALT_HOLD:
@@ -634,9 +641,32 @@ class ArduCopter:
         if v == 0.0 and abs(obs.position_enu_m[2] - self._takeoff_alt_m) < TAKEOFF_DONE_M:
             self._taking_off = ""
 
-    def _fly_angle(self, now_s: float, obs: Observation) -> None:
+    def expire(self, now_s: float, obs: Observation) -> None:
+        """A guided target's GUID_TIMEOUT, checked when it falls due (``deadline_s``) and not
+        only at the next tick: ArduCopter checks it on every main-loop pass (400 Hz), so an
+        expired attitude target is not flown, nor echoed in ATTITUDE_TARGET, a tick longer."""
+        self.deadline_s = math.inf
+        if not self.armed or self._taking_off:
+            return
+        if self.angle_control and self.mode in GUIDED_MODES:
+            if self._fresh(now_s):
+                self.deadline_s = self._setpoint_s + self.params["GUID_TIMEOUT"]
+            else:
+                self._fly_angle(now_s, obs, 0.0)
+        elif self._velocity_target_expired(now_s):
+            self._stop_guided(obs)
+        elif self._velocity_target_s is not None:
+            self.deadline_s = self._velocity_target_s + self.params["GUID_TIMEOUT"]
+
+    def _velocity_target_expired(self, now_s: float) -> bool:
+        return (self._velocity_target_s is not None
+                and now_s - self._velocity_target_s > self.params["GUID_TIMEOUT"])
+
+    def _fly_angle(self, now_s: float, obs: Observation, dt_s: float) -> None:
         """Guided angle control (ArduPilot's angle_control_run): the target while fresh, else
-        level + altitude hold; idle on the ground unless thrust or a climb is commanded."""
+        level + altitude hold; idle on the ground unless thrust or a climb is commanded. ``dt_s``:
+        the time the altitude target integrates a climb rate over (the tick period at a tick; 0
+        when a setpoint or an expiry only changes what is flown)."""
         sp = self.setpoint if self._fresh(now_s) else None
         if sp is None and not self._expiry_counted:
             self._expiry_counted = True
@@ -650,9 +680,9 @@ class ArduCopter:
                 self._set(sp.setpoint)
             return
         if sp is not None:
-            self._set(self._climb(obs, sp.setpoint, sp.climb_rate_mps))
+            self._set(self._climb(obs, sp.setpoint, sp.climb_rate_mps, dt_s))
         else:
-            self._set(self._level_climb(obs, 0.0, 0.02))
+            self._set(self._level_climb(obs, 0.0, dt_s))
 
     def _angle_idles(self, sp: AngleTarget | None) -> bool:
         """make_safe_ground_handling: disarmed, not auto-armed, or landed without thrust or a
@@ -670,7 +700,7 @@ class ArduCopter:
         return self._climb(obs, AttitudeSetpoint(level, 0.0, 0.0), climb_mps, dt_s)
 
     def _climb(self, obs: Observation, sp: RatesSetpoint | AttitudeSetpoint, climb_mps: float,
-               dt_s: float = 0.02) -> RatesSetpoint | AttitudeSetpoint:
+               dt_s: float) -> RatesSetpoint | AttitudeSetpoint:
         """``sp`` with the thrust of a climb rate (ArduPilot's set_pos_target_z_from_climb_rate:
         the altitude target integrates the rate, within a leash)."""
         z = obs.position_enu_m[2]

@@ -178,6 +178,7 @@ class Emulator:
         self.link_up = np.ones(len(specs), dtype=bool)
         self.nodes: list[VehicleNode] = []
         self._next_autopilot_s = 0.0
+        self._next_deadline_s = math.inf  # the earliest autopilot deadline_s, or earlier
         families = {personality_of(s.autopilot).protocol.family for s in specs}
         for name in param_overrides or {}:  # an unknown name is refused once, not per vehicle
             if not any(name in {p.name for p in param_table(f)} for f in families):
@@ -277,6 +278,8 @@ class Emulator:
         now = self.now_s
         for node in self._fault_nodes:
             node.apply_faults(now)
+        if now >= self._next_deadline_s:
+            self._expire(now)
         if now + 1e-9 >= self._next_autopilot_s:
             self._next_autopilot_s = now + 1.0 / AUTOPILOT_RATE_HZ
             for node in self.nodes:
@@ -293,6 +296,15 @@ class Emulator:
             self.nodes[i].send_all(data)
         return steps
 
+    def _expire(self, now_s: float) -> None:
+        """What fell due between autopilot ticks (a guided target's timeout), before this step's
+        telemetry reports it; then the next deadline."""
+        for node in self.nodes:
+            if node.autopilot.deadline_s <= now_s:
+                node.autopilot.expire(now_s, node.observe())
+                node.apply_demand()
+        self._next_deadline_s = min(node.autopilot.deadline_s for node in self.nodes)
+
     def send_deferred_acks(self) -> None:
         """Second COMMAND_ACKs queued by the commands handled since the last tick (DO_SET_MODE
         with EMU_ACK_TWICE = 1): the next tick, a tick period after the first ACK at most."""
@@ -305,6 +317,8 @@ class Emulator:
         now = self.now_s
         for msg in msgs:
             node.handle(now, msg, link, addr)
+        if node.autopilot.deadline_s < self._next_deadline_s:
+            self._next_deadline_s = node.autopilot.deadline_s
         if node.deferred_acks:
             self._ack_nodes.setdefault(node.index, node)
         if self._setpoint_event is not None:

@@ -13,6 +13,7 @@ import contextlib
 import math
 import re
 import socket
+import statistics
 import struct
 import time
 from collections.abc import Iterator
@@ -318,14 +319,20 @@ def test_thrust_is_a_climb_rate_without_guid_options_bit_3(tmp_path):
         assert (hb.custom_mode, hb.base_mode, hb.system_status) == (GUIDED, 217, 4)
         request(client, "LOCAL_POSITION_NED", 20)
         set_mode(client, GUIDED_NOGPS)
-        # WHEN thrust 0.75 THEN it climbs at 0.25 * 2 * WPNAV_SPEED_UP = 1.25 m/s
+        # WHEN thrust 0.75 THEN it climbs at 0.25 * 2 * WPNAV_SPEED_UP = 1.25 m/s, and settles
+        # at that rate (the altitude target moves at the climb rate, however often it is sent)
         with SetpointStreamer(client, lambda: rates_setpoint(1, 0.0, 0.0, 0.0, 0.75), 20):
             client.wait("LOCAL_POSITION_NED", 5, lambda m: abs(m.vz + 1.25) < 0.05)
-        # AND thrust 0.5 holds the altitude
+            client.collect(2.0, "LOCAL_POSITION_NED")
+            climbing = client.collect(1.0, "LOCAL_POSITION_NED")
+        assert climbing and abs(statistics.fmean(m.vz for m in climbing) + 1.25) < 0.03
+        # AND thrust 0.5 stops the climb, then holds the altitude (the vertical loop settles from
+        # its climb within 2 s)
         with SetpointStreamer(client, lambda: rates_setpoint(1, 0.0, 0.0, 0.0, 0.5), 20):
             client.wait("LOCAL_POSITION_NED", 5, lambda m: abs(m.vz) < 0.02)
+            client.collect(2.0, "LOCAL_POSITION_NED")
             held = client.collect(1.0, "LOCAL_POSITION_NED")
-        assert max(m.z for m in held) - min(m.z for m in held) < 0.05
+        assert held and max(m.z for m in held) - min(m.z for m in held) < 0.05
 
 
 def test_guided_position_and_velocity_targets_past_boot_with_a_forced_bind(tmp_path):

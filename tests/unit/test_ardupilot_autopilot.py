@@ -236,3 +236,32 @@ def test_guided_nogps_on_the_ground_idles_until_auto_armed():
     ap.tick(0.12, GROUND)
     assert isinstance(ap.demand, Idle)  # THEN thrust setpoints do not lift it
     assert math.isclose(ap.setpoint.setpoint.thrust_norm, 0.8)
+
+
+def test_an_attitude_target_expires_at_its_deadline_between_ticks():
+    ap = ArduCopter.start(1, params(), 0.0, AIR)
+    ap.set_mode(0.0, AIR, Mode.GUIDED_NOGPS)
+    sp = angle(0.4)
+    ap.tick(10.0, AIR)
+    ap.on_attitude_target(10.007, AIR, sp)
+    assert ap.deadline_s == pytest.approx(13.007)
+    ap.expire(13.007, AIR)  # not after the timeout yet (ArduCopter: strictly more than 3 s)
+    assert ap.demand is sp.setpoint and ap.deadline_s == pytest.approx(13.007)
+    ap.expire(13.0075, AIR)
+    assert ap.demand is not sp.setpoint and ap.demand.thrust_norm == pytest.approx(0.35, abs=0.01)
+    assert ap.deadline_s == math.inf and ap.guided_timeouts == 1
+
+
+def test_repeating_a_climb_target_between_ticks_does_not_change_what_is_flown():
+    # the altitude target integrates the climb rate over time (at the tick), not per setpoint
+    def flown(setpoints_per_tick: int) -> float:
+        ap = ArduCopter.start(1, params(), 0.0, AIR)
+        ap.set_mode(0.0, AIR, Mode.GUIDED_NOGPS)
+        for k in range(20):
+            for j in range(setpoints_per_tick):
+                ap.on_attitude_target(0.02 * k + 0.01 * j, AIR, angle(0.75, use_thrust=False))
+            ap.tick(0.02 * k + 0.015, AIR)
+        return ap.demand.thrust_norm
+
+    once = flown(1)
+    assert once > 0.35 and flown(2) == pytest.approx(once, rel=1e-12)

@@ -296,3 +296,26 @@ def test_pure_emulator_layers_do_no_io(module):
                 dep = node.module.split(".")[1]
                 assert dep in PURE + ["physics", "jitcache"], f"{module} imports {dep}"
     assert not roots & IMPURE
+
+
+def test_an_ardupilot_attitude_target_stops_being_flown_within_one_tick_of_guid_timeout():
+    # GIVEN an ArduPilot vehicle in GUIDED_NOGPS that takes thrust as thrust (GUID_OPTIONS 8)
+    spec = replace(default_vehicle(1, on_ground=False), autopilot="ardupilot")
+    emu = Emulator([spec], param_overrides={"EMU_NOISE": 0, "GUID_OPTIONS": 8})
+    link = FakeLink()
+    emu.nodes[0].links.append(link)
+    _run(emu, 1.0)
+    _send(emu, 0, mavlink.MAVLink_set_mode_message(1, 1, 20), link)
+    _run(emu, 1.006)  # off the 50 Hz autopilot grid
+    # WHEN one setpoint arrives THEN its thrust is commanded for GUID_TIMEOUT (3 s), and stops at
+    # the first emulator tick after it (ArduCopter checks at 400 Hz), not at the next 50 Hz tick
+    _send(emu, 0, mavlink.MAVLink_set_attitude_target_message(0, 1, 1, 7, [1, 0, 0, 0], 0, 0, 0,
+                                                              0.4321), link)
+    sent_s, flown = emu.now_s, []  # (time since the setpoint [s], its thrust commanded)
+    while emu.now_s < sent_s + 3.05:
+        emu.advance_to(emu.now_s + emu.tick_s)
+        flown.append((emu.now_s - sent_s, abs(emu.plant.thrust_cmd_norm[0] - 0.4321) < 1e-6))
+    last = max(t for t, used in flown if used)
+    first_not = min(t for t, used in flown if not used)
+    assert all(used for t, used in flown if t <= 3.0) and last <= 3.0 + 1e-9
+    assert 3.0 < first_not <= 3.0 + 2 * emu.tick_s
