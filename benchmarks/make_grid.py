@@ -8,7 +8,9 @@ these; configs/grid240.yaml is ``--rows 15 --cols 16 --shared-port 14550``.
 Links: vehicle i (sysid i) binds 14580 + i - 1 (PX4 SITL's numbering). With ``--shared-port P``
 every vehicle sends to the one GCS port P and the ground station tells them apart by sysid
 (one MAVLink network: sysids 1-254 for vehicles, so at most 254 on a port; the generator gives
-vehicle i sysid i, so at most 254 in any case); without it vehicle i has GCS port 14640 + i - 1. Initial positions: the grid point plus a deterministic perturbation
+vehicle i sysid i, so at most 254 in any case); without it vehicle i has GCS port G + i - 1,
+G = 14640 up to 60 vehicles, else the first port after the vehicles' (14580 + n), so that no GCS
+port is a vehicle's. Initial positions: the grid point plus a deterministic perturbation
 (seeded), 14-16 m up.
 """
 
@@ -23,6 +25,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 SPACING_M = 4.0
 MAX_SYSID = 254
+VEHICLE_PORT_BASE = 14580  # vehicle i binds 14580 + i - 1 (PX4 SITL's numbering)
+GCS_PORT_BASE = 14640
 #: The four airframes of the paper's Table I: mass, inertia, arm, max rotor thrust, and the
 #: initial mass estimate mhat (1/mass factor) as configs/grid16.yaml starts them.
 AIRFRAMES = (
@@ -112,6 +116,12 @@ def grid_edges(rows: int, cols: int) -> list[tuple[int, int]]:
     return edges
 
 
+def gcs_port_base(n: int) -> int:
+    """The GCS port of vehicle 1 without a shared port: 14640, or past the vehicles' own ports
+    (14580 .. 14580 + n - 1) when they reach it."""
+    return max(GCS_PORT_BASE, VEHICLE_PORT_BASE + n)
+
+
 def team_text(rows: int, cols: int, shared_port: int | None, seed: int = 1) -> str:
     n = rows * cols
     if n > MAX_SYSID:  # sysid i for vehicle i, and 255 is the ground station's
@@ -120,9 +130,10 @@ def team_text(rows: int, cols: int, shared_port: int | None, seed: int = 1) -> s
     edges = grid_edges(rows, cols)
     x0, y0 = -SPACING_M * (cols - 1) / 2.0, -SPACING_M * (rows - 1) / 2.0
     half = max(rows, cols) * SPACING_M / 2.0
+    gcs_base = gcs_port_base(n)
     links = (f"every vehicle sends to one GCS port, {shared_port} (sysids 1-{n}); vehicle i "
              f"binds 14580 + i - 1" if shared_port is not None else
-             "vehicle i binds 14580 + i - 1 and sends to GCS port 14640 + i - 1")
+             f"vehicle i binds 14580 + i - 1 and sends to GCS port {gcs_base} + i - 1")
     args = f"--rows {rows} --cols {cols}" + (f" --shared-port {shared_port}"
                                              if shared_port is not None else "")
     out = [HEADER.format(n=n, rows=rows, cols=cols, m=len(edges), args=args, links=links,
@@ -136,7 +147,7 @@ def team_text(rows: int, cols: int, shared_port: int | None, seed: int = 1) -> s
         out.append(VEHICLE.format(
             i=k + 1, ox=ox, oy=oy, px=ox + dx, py=oy + dy, pz=rng.uniform(14.0, 16.0),
             mhat=mhat, mass=mass, jx=jx, jy=jy, jz=jz, arm=arm, fmax=fmax,
-            local=shared_port if shared_port is not None else 14640 + k, remote=14580 + k))
+            local=shared_port if shared_port is not None else gcs_base + k, remote=VEHICLE_PORT_BASE + k))
     return "".join(out)
 
 

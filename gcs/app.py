@@ -557,10 +557,17 @@ class Flight:
                     where = (cfg.local_host, cfg.local_port)
                     port = ports.get(where) if where in self.shared_ports else None
                     if port is None:
-                        port = await stack.enter_async_context(MavlinkPort(
-                            cfg.local_port, local_host=cfg.local_host, tlog=tlog,
-                            table=self.hot, name=cfg.name if where not in self.shared_ports
-                            else None))
+                        try:
+                            port = await stack.enter_async_context(MavlinkPort(
+                                cfg.local_port, local_host=cfg.local_host, tlog=tlog,
+                                table=self.hot, name=cfg.name if where not in self.shared_ports
+                                else None))
+                        except OSError as exc:  # nothing was sent yet: a setup error
+                            raise FlightSetupError(
+                                f"{cfg.name}: cannot listen on udp {cfg.local_host}:"
+                                f"{cfg.local_port} (link.local_port): {exc.strerror or exc}; "
+                                "another program or another vehicle of the team holds it"
+                            ) from exc
                         ports[where] = port
                     proxy = await stack.enter_async_context(VehicleProxy(cfg, tlog=tlog,
                                                                          port=port, slot=slot))

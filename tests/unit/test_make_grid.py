@@ -33,3 +33,14 @@ def test_a_team_holds_at_most_254_vehicles() -> None:
     with pytest.raises(SystemExit, match="sysids 1-254"):
         team_text(16, 16, 14550)
     assert "sysid: 254" in team_text(2, 127, None)
+
+
+@pytest.mark.parametrize("rows, cols", [(4, 4), (6, 10), (8, 8), (15, 16)])
+def test_without_a_shared_port_no_gcs_port_is_a_vehicles_port(rows, cols, tmp_path) -> None:
+    path = tmp_path / "grid.yaml"
+    path.write_text(team_text(rows, cols, None))
+    team = load_team(path)
+    gcs = [v.link.local_port for v in team.vehicles]
+    vehicles = {v.link.remote_port for v in team.vehicles}
+    assert len(set(gcs)) == team.n and not set(gcs) & vehicles
+    assert min(gcs) == 14640 or min(gcs) == max(vehicles) + 1
