@@ -56,6 +56,11 @@ def time_grid(n: int, rows: int, cols: int, repeat_s: float) -> dict[str, float]
     from gcs.control.law import TeamLaw, TeamMeasurement
     from gcs.fly import measure as fm
 
+    try:
+        from gcs import metrics
+    except ImportError:  # an old checkout (--before)
+        metrics = None
+
     dense = hasattr(fm, "effective_adjacency")
     a = grid_adjacency(rows, cols)
     rng = np.random.default_rng(n)
@@ -82,7 +87,9 @@ def time_grid(n: int, rows: int, cols: int, repeat_s: float) -> dict[str, float]
         if dense:
             rel = p[:, None, :] - p[None, :, :] - pair_offsets
             return float(np.sqrt((rel * rel).sum(axis=2)).max())
-        return fm.formation_error_m(p, offsets)
+        # the compiled pairwise maximum: gcs.fly.measure then, gcs.metrics since it moved
+        where = fm if hasattr(fm, "formation_error_m") else metrics
+        return where.formation_error_m(p, offsets)
 
     def step() -> None:
         law.step(meas, ref, 0.01, adapt=False)  # the same state every tick
