@@ -292,6 +292,8 @@ async def _amain(args: argparse.Namespace) -> int:
         "gc_frozen_objects": gc.get_freeze_count(),
         "gc_collections": [g["collections"] - c0
                            for g, c0 in zip(gc.get_stats(), collections0, strict=True)],
+        # the most datagrams one socket held at a wake-up (a backlog: the fleet fell behind)
+        "deepest_backlog": emu.poller.deepest if emu.poller is not None else 0,
         "by_vehicle": [_vehicle_summary(node) for node in emu.nodes],
     }
     if args.stats_json:
@@ -315,6 +317,8 @@ def _vehicle_summary(node: VehicleNode) -> dict[str, object]:
         "mode": ap.mode_name,
         "armed": bool(ap.armed),
         "setpoints_taken": node.setpoints_taken,
+        # read with a newer one of the same stream and not handled (server.py, latest wins)
+        "setpoints_superseded": sum(getattr(link, "superseded", 0) for link in node.links),
         "setpoints_rejected": c.setpoints_rejected,
         "setpoints_ignored": c.setpoints_ignored,
         "setpoints_by_mode": dict(c.setpoints_by_mode),

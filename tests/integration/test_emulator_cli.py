@@ -245,3 +245,6 @@ def test_what_start_up_built_is_out_of_the_collectors_sight_for_the_run(tmp_path
     assert figures["gc_frozen_objects"] > 20_000
     assert len(figures["gc_collections"]) == 3
     assert all(isinstance(n, int) and n >= 0 for n in figures["gc_collections"])
+    # AND with nothing sent to it, no input backlog and no setpoint superseded (server.py)
+    assert figures["deepest_backlog"] == 0
+    assert [v["setpoints_superseded"] for v in figures["by_vehicle"]] == [0, 0, 0, 0]

@@ -121,14 +121,13 @@ def test_a_tick_that_falls_due_during_a_batch_runs_before_the_rest_of_it():
         try:
             port = emu.links[0].local_address[1]
             pace.tick_if_due()  # the tick at t = 0
-            # GIVEN 40 setpoints waiting in the vehicle's socket
+            # GIVEN 40 messages waiting in the vehicle's socket (HEARTBEATs: each is handled;
+            # a burst of setpoints would be one, the newest)
             for _ in range(40):
-                gcs.sendto(_frame(mavlink.MAVLink_set_attitude_target_message(
-                    0, 1, 1, 128, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0.5)),
-                    ("127.0.0.1", port))
+                gcs.sendto(_frame(mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3)),
+                           ("127.0.0.1", port))
             await asyncio.sleep(0.05)
-            # WHEN the poller reads and delivers them (a few wake-ups: at most MAX_PER_SOCKET
-            # datagrams of one socket per wake-up)
+            # WHEN the poller reads and delivers them
             for _ in range(40):
                 if handled[0] >= 40:
                     break
@@ -147,3 +146,66 @@ def test_a_tick_that_falls_due_during_a_batch_runs_before_the_rest_of_it():
     # while without the hook no tick ran until the poller had delivered everything
     ticks_at, handled = run_bounded(scenario(False), 20.0)
     assert handled == 40 and ticks_at == [0, 40]
+
+
+def test_a_backlog_of_setpoints_is_read_at_once_and_only_the_newest_handled():
+    """Latest wins: setpoints that queued up in a socket (a fleet that fell behind) are read in
+    one wake-up; each stream's newest is handled, the ones it replaces only counted, and every
+    other message is handled in order."""
+    async def scenario() -> None:
+        got: list[tuple[str, float]] = []
+
+        def on_messages(link, msgs, addr):
+            got.extend((m.get_type(), getattr(m, "thrust", getattr(m, "x", 0.0))) for m in msgs)
+
+        loop = asyncio.get_running_loop()
+        link = await UdpLink.open(("127.0.0.1", 0), ("127.0.0.1", 9),
+                                  LinkImpairment(np.random.default_rng(0)), loop.time,
+                                  on_messages, name="v1")
+        poller = LinkPoller()
+        poller.attach(link)
+        gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        gcs.bind(("127.0.0.1", 0))
+        try:
+            where = ("127.0.0.1", link.local_address[1])
+
+            def attitude(thrust, component=1):
+                return _frame(mavlink.MAVLink_set_attitude_target_message(
+                    0, 1, component, 128, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, thrust))
+
+            def position(x):
+                return _frame(mavlink.MAVLink_set_position_target_local_ned_message(
+                    0, 1, 1, 1, 0b110111111000, x, 0.0, -10.0, 0, 0, 0, 0, 0, 0, 0, 0))
+
+            hb = _frame(mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3))
+            # GIVEN 100 attitude setpoints (thrust 0.300 .. 0.399), a heartbeat among them,
+            # two position targets, and one attitude setpoint to another component, all
+            # waiting in the socket before the poller looks
+            for k in range(100):
+                gcs.sendto(attitude(0.3 + 0.001 * k), where)
+                if k == 50:
+                    gcs.sendto(hb, where)
+                    gcs.sendto(position(1.0), where)
+                    gcs.sendto(attitude(0.9, component=2), where)
+            gcs.sendto(position(2.0), where)
+            await asyncio.sleep(0.1)
+            # WHEN the poller wakes up once
+            poller._ready()
+            # THEN all 104 datagrams were read; the newest of each stream was handled, in
+            # arrival order, with the heartbeat and the other component's setpoint
+            assert poller.datagrams == 104 and poller.deepest == 104
+            assert [kind for kind, _ in got] == ["HEARTBEAT", "SET_ATTITUDE_TARGET",
+                                                "SET_ATTITUDE_TARGET",
+                                                "SET_POSITION_TARGET_LOCAL_NED"]
+            assert got[1][1] == pytest.approx(0.9)  # component 2's own
+            assert got[2][1] == pytest.approx(0.399)  # the newest to component 1
+            assert got[3][1] == pytest.approx(2.0)
+            # AND the replaced ones were counted, not lost: 99 + 1 setpoints superseded
+            assert link.superseded == 100
+            assert link.decoder.stats.datagrams == 104 and link.decoder.stats.rejected == 0
+        finally:
+            gcs.close()
+            poller.close()
+            link.close()
+
+    run_bounded(scenario(), 20.0)
