@@ -500,6 +500,7 @@ class Flight:
         self.ages = AgeStats(self.n)
         # delay compensation (gcs/fly/predict.py) and its measured error
         self.audit = PredictionAudit(self.n) if team.fly.predict else None
+        self._tlog: TlogWriter | None = None  # the flight's, while it runs
         self.machine_every = max(1, round(setup.tick_rate_hz / MACHINE_RATE_HZ))
         self._status_slices = StatusSlices(team.n, self.machine_every)  # the mission's statuses
         self.last_sample: TeamSample | None = None
@@ -547,6 +548,7 @@ class Flight:
         loop = asyncio.get_running_loop()
         with contextlib.ExitStack() as sync_stack:
             tlog = sync_stack.enter_context(TlogWriter(out / TLOG_NAME))
+            self._tlog = tlog
             sync_stack.callback(self._remove_signal_handlers, loop)
             self._install_signal_handlers(loop)
             async with contextlib.AsyncExitStack() as stack:
@@ -1134,6 +1136,9 @@ class Flight:
             "tick": {**tick, "scheduling": (self.scheduling.detail if self.scheduling is not None
                                             else "not set")},
             "outcome": {"exit_code": outcome.exit_code, "reason": outcome.reason},
+            # records the disk could not take in time (dropped, counted; gcs/link/tlog.py)
+            "tlog": ({"records": self._tlog.records, "dropped_records": self._tlog.dropped_records,
+                      "write_errors": self._tlog.write_errors} if self._tlog is not None else None),
             "hover_estimates": {str(vid): dataclasses.asdict(e)
                                 for vid, e in self.hover_estimates.items()},
             "go_to_start": {str(vid): {**dataclasses.asdict(r),

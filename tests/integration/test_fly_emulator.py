@@ -228,7 +228,9 @@ def test_scenario_one_rates_mode_at_100_hz_with_origins_50_m_apart(tmp_path):
     assert report["source"] == "fly" and report["tick"]["rate_hz"] == 100.0
     assert report["tick"]["late_pct"] < 10.0
     assert all(report["link"][str(i)]["setpoints_sent"] > 2500 for i in range(1, 5))
-    # the .tlog reads with pymavlink and holds both directions
+    # the .tlog reads with pymavlink and holds both directions, every record the flight made
+    tlog = report["extra"]["tlog"]
+    assert tlog["records"] > 20_000 and tlog["dropped_records"] == tlog["write_errors"] == 0
     conn = mavutil.mavlink_connection(str(tmp_path / "run" / "flight.tlog"))
     want, kinds = {"SET_ATTITUDE_TARGET", "ATTITUDE_QUATERNION", "COMMAND_ACK"}, set()
     while not want <= kinds and (msg := conn.recv_match()) is not None:

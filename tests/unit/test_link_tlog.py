@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import struct
+import threading
 from pathlib import Path
 
 import pytest
@@ -52,3 +54,59 @@ def test_write_after_close_raises(tmp_path: Path) -> None:
     tlog = TlogWriter(tmp_path / "b.tlog")
     with pytest.raises(RuntimeError, match=r"b\.tlog: write on a closed writer"):
         tlog.write(b"\xfd")
+
+
+def _stalled_disk(tmp_path: Path):
+    """A named pipe whose reader reads nothing until `go` is set: writes to it block once the
+    pipe's buffer (64 KiB) is full, as a stalled disk does."""
+    fifo = tmp_path / "stalled.tlog"
+    os.mkfifo(fifo)
+    go, got = threading.Event(), bytearray()
+
+    def reader() -> None:
+        with open(fifo, "rb") as f:
+            go.wait(30.0)
+            while chunk := f.read(65536):
+                got.extend(chunk)
+
+    thread = threading.Thread(target=reader, daemon=True)
+    thread.start()
+    return fifo, go, got, thread
+
+
+@pytest.mark.timeout(60)
+def test_a_stalled_disk_does_not_block_the_writer_and_nothing_is_lost(tmp_path: Path) -> None:
+    # GIVEN a tlog on a "disk" that takes nothing until released
+    fifo, go, got, reader = _stalled_disk(tmp_path)
+    record = struct.pack(">Q", 1) + bytes(range(200)) * 2  # 408 bytes
+    with TlogWriter(fifo) as tlog:
+        # WHEN 2 MB of records are written (the hot path's batches of 25)
+        for _ in range(200):
+            tlog.write_records(record * 25, 25)
+        # THEN every call returned while the disk had taken at most its pipe's worth
+        assert tlog.records == 5000 and not tlog.dropped_records
+        assert tlog.bytes_written < 2_000_000
+        go.set()  # the disk wakes up
+    reader.join(10.0)
+    # AND, closed, everything reached it, in order
+    assert tlog.bytes_written == len(got) == 5000 * len(record)
+    assert bytes(got) == record * 5000
+
+
+@pytest.mark.timeout(60)
+def test_what_a_stalled_disk_cannot_take_is_dropped_and_counted(tmp_path: Path) -> None:
+    fifo, go, got, reader = _stalled_disk(tmp_path)
+    record = struct.pack(">Q", 2) + b"\xfd" * 92  # 100 bytes
+    # GIVEN at most 200 kB may wait for the disk
+    with TlogWriter(fifo, buffer_bytes=10_000, max_pending_bytes=200_000) as tlog:
+        # WHEN 1 MB is written while the disk is stalled
+        for _ in range(10_000):
+            tlog.write(record[8:], unix_time_s=2e-6)
+        # THEN the records beyond what waits are dropped and counted, not queued without end
+        assert tlog.dropped_records > 0
+        assert tlog.records + tlog.dropped_records == 10_000
+        go.set()
+    reader.join(10.0)
+    # AND what was kept reached the disk whole
+    assert len(got) == tlog.records * 100 == tlog.bytes_written
+    assert bytes(got) == record * tlog.records
