@@ -76,6 +76,9 @@ class VehicleClock:
         self._nrtt = 0
         self._rtt_total = 0
         self._least_delay_s = 0.0
+        #: the newest TIMESYNC round trip [s] (NaN before the first): a request that waits
+        #: behind a backlog on its way out waits with the setpoints
+        self.last_round_trip_s = math.nan
 
     def bind_line(self, out: np.ndarray) -> None:
         """Keep the line of :meth:`sample_time_s`, (a, b, t_ref, least delay) with a NaN while
@@ -132,6 +135,7 @@ class VehicleClock:
             return
         self._rtt[self._rtt_total % RTT_WINDOW] = rtt_s
         self._rtt_total += 1
+        self.last_round_trip_s = rtt_s
         self._nrtt = min(self._nrtt + 1, RTT_WINDOW)
         self._least_delay_s = 0.5 * float(self._rtt[: self._nrtt].min())
         self._publish()

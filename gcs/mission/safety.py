@@ -67,6 +67,9 @@ class VehicleStatus:
     tilt_rad: float = math.nan
     data_age_s: float = math.inf
     delay_s: float = math.inf
+    #: the newest TIMESYNC round trip [s] (NaN: none yet): minus delay_s, how late what the
+    #: ground station sends reaches the vehicle (its setpoints included)
+    round_trip_s: float = math.nan
     autopilot: int = 0
     vehicle_type: int = 0
     sysid_mismatch: int | None = None
@@ -148,12 +151,25 @@ def link_problem(status: VehicleStatus, rules: SafetyRules) -> Problem | None:
 def delay_problem(status: VehicleStatus, rules: SafetyRules) -> Problem | None:
     """The vehicle's data arrives, but late: more than `max_data_age_s` after it was taken (from
     its own stamps). The law would act on where the vehicle was, not where it is. A vehicle that
-    falls silent is the link rule's (its last sample's delay does not grow)."""
+    falls silent is the link rule's (its last sample's delay does not grow). Or what is sent to
+    it arrives that late (its newest TIMESYNC round trip less its data's delay): the law's
+    setpoints would act on a vehicle that has moved on."""
     if status.delay_s > rules.max_data_age_s and math.isfinite(status.delay_s):
         return Problem(
             status.vehicle_id,
             f"{status.name}: link delay: its position/attitude arrive {status.delay_s:.2f} s "
             f"after they were taken (limit {rules.max_data_age_s:g} s, fly.max_data_age_s)",
+            "delay",
+        )
+    # the other way: its data is fresh, but what we send queues on the way (a radio's or the
+    # vehicle's input buffer): the law's setpoints act that much later than it assumes
+    uplink_s = status.round_trip_s - (status.delay_s if math.isfinite(status.delay_s) else 0.0)
+    if uplink_s > rules.max_data_age_s:
+        return Problem(
+            status.vehicle_id,
+            f"{status.name}: link delay: it answers TIMESYNC {status.round_trip_s:.2f} s after "
+            f"the request, so what it is sent (the setpoints) reaches it ~{uplink_s:.2f} s late "
+            f"(limit {rules.max_data_age_s:g} s, fly.max_data_age_s)",
             "delay",
         )
     return None

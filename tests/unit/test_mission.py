@@ -255,6 +255,32 @@ def test_a_delay_below_the_limit_is_flown():
     assert m.outcome.exit_code == 0
 
 
+def test_setpoints_that_queue_on_the_way_out_stop_the_formation():
+    # GIVEN a team in formation whose data is fresh and whose TIMESYNC answers take 40 ms
+    m = machine(duration_s=60.0, abort_action="land", link_loss_action="hold")
+    w = World(m)
+    for vid in IDS:
+        w.v[vid] = dataclasses.replace(w.v[vid], delay_s=0.02, round_trip_s=0.04)
+    while m.phase is not Phase.FORMATION:
+        w.tick()
+    # WHEN vehicle 3's answers come 0.25 s late (within the limit) THEN it flies on
+    w.v[3] = dataclasses.replace(w.v[3], round_trip_s=0.27)
+    w.run(1.0)
+    assert m.phase is Phase.FORMATION
+    # WHEN they come 0.65 s late while its data stays fresh (a backlog on the way to it)
+    w.v[3] = dataclasses.replace(w.v[3], round_trip_s=0.65)
+    w.tick()
+    # THEN the formation stops, naming the uplink, and every vehicle gets the abort action
+    assert m.phase in (Phase.STOPPING, Phase.DONE) and 3 not in m.lost
+    w.run(5.0)
+    assert m.outcome.exit_code == EXIT_ABORTED
+    assert ("vehicle 3 (sysid 3): link delay: it answers TIMESYNC 0.65 s after the request, so "
+            "what it is sent (the setpoints) reaches it ~0.63 s late (limit 0.3 s, "
+            "fly.max_data_age_s)") in m.outcome.reason
+    after = w.sent[[c for _, c in w.sent].index(Cmd.OFFBOARD):]
+    assert {(vid, Cmd.LAND) for vid in IDS} <= set(after)
+
+
 def test_no_link_at_start_fails_after_the_connect_timeout_commanding_nobody():
     m = machine(connect_timeout_s=2.0)
     w = World(m)
