@@ -268,19 +268,19 @@ class LinkPoller:
         self.datagrams += len(items)
         self.deepest = max(self.deepest, depth)
         decoded = self._hot.decode([data for _, data, _ in items])
-        stale = _superseded(items, decoded)
+        # one round reads at most one datagram per socket: nothing to supersede
+        stale = _superseded(items, decoded) if depth > 1 else None
         for k, ((link, data, addr), msgs) in enumerate(zip(items, decoded, strict=True)):
-            if msgs is not None and link.decoder.idle(addr):
-                if stale[k]:
-                    link.decoder.count_decoded(data, addr, len(msgs))
-                    link.superseded += 1
-                    continue
-                if between is not None:
-                    between()
+            hot = msgs is not None and link.decoder.idle(addr)
+            if hot and stale is not None and stale[k]:
+                link.decoder.count_decoded(data, addr, len(msgs))
+                link.superseded += 1
+                continue
+            if between is not None:
+                between()
+            if hot:
                 link._deliver_decoded(data, addr, msgs)
             else:
-                if between is not None:
-                    between()
                 link._deliver(data, addr)
 
     @staticmethod
