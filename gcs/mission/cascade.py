@@ -46,7 +46,8 @@ phase margin >= 29 deg whatever the number of crossings).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import functools
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,6 +55,7 @@ import numpy as np
 MIN_MODULUS_MARGIN = 0.4
 MAX_EIGENVALUES = 16  # distinct Laplacian eigenvalues checked (large teams: a spread of them)
 _FREQ_RADPS = np.logspace(-2, 3, 4000)
+_S = 1j * _FREQ_RADPS  # the grid every loop's frequency response is evaluated on
 
 
 @dataclass(frozen=True, slots=True)
@@ -139,10 +141,25 @@ def _pade(delay_s: float) -> tuple[np.ndarray, np.ndarray]:
     return c * np.array([-1.0, 1.0, -1.0, 1.0]), c
 
 
+def _pmul(a, b):
+    """Product of two polynomials (np.polymul without its poly1d round trip, which costs more
+    than the product itself; leading zeros are kept, `margin` trims them)."""
+    return np.convolve(a, b)
+
+
+def _padd(a, b):
+    """Sum of two polynomials (highest power first)."""
+    if len(a) < len(b):
+        a, b = b, a
+    out = np.array(a, dtype=float)
+    out[len(a) - len(b):] += b
+    return out
+
+
 def _mul(*parts):
     num, den = np.array([1.0]), np.array([1.0])
     for n, d in parts:
-        num, den = np.polymul(num, n), np.polymul(den, d)
+        num, den = _pmul(num, n), _pmul(den, d)
     return num, den
 
 
@@ -150,7 +167,22 @@ def _closed(forward, feedback):
     """forward / (1 + forward feedback) as a rational function."""
     fn, fd = forward
     bn, bd = feedback
-    return np.polymul(fn, bd), np.polyadd(np.polymul(fd, bd), np.polymul(fn, bn))
+    return _pmul(fn, bd), _padd(_pmul(fd, bd), _pmul(fn, bn))
+
+
+def _on_grid(f: Callable[[np.ndarray], np.ndarray]) -> Callable[[np.ndarray], np.ndarray]:
+    """f, its values on the frequency grid computed once: a large team's position loops (two
+    per eigenvalue) share the tilt, thrust, delay and lead responses."""
+    value: list[np.ndarray] = []
+
+    def at(s: np.ndarray) -> np.ndarray:
+        if s is not _S:
+            return f(s)
+        if not value:
+            value.append(f(s))
+        return value[0]
+
+    return at
 
 
 class _Loop:
@@ -162,11 +194,11 @@ class _Loop:
 
     def margin(self, name: str) -> LoopMargin:
         num, den = self.rational
-        char = np.polyadd(den, num)
+        char = _padd(den, num)
         char = np.trim_zeros(char, "f")
         roots = np.roots(char) if len(char) > 1 else np.array([])
         stable = bool(np.all(roots.real < -1e-9))
-        dist = np.abs(1.0 + self.response(1j * _FREQ_RADPS))
+        dist = np.abs(1.0 + self.response(_S))
         k = int(np.argmin(dist))
         return LoopMargin(name, stable, float(dist[k]), float(_FREQ_RADPS[k]))
 
@@ -185,15 +217,17 @@ def _yaw_loop(r: AutopilotResponse):
     return rational, lambda s: np.exp(-s * r.yaw_dead_time_s) / (r.yaw_time_constant_s * s + 1)
 
 
+@functools.lru_cache(maxsize=32)
 def _delay(t):
-    return _pade(t), lambda s: np.exp(-s * t)
+    return _pade(t), _on_grid(lambda s: np.exp(-s * t))
 
 
+@functools.lru_cache(maxsize=32)
 def _lead(tau: float, order: int):
     """The predictor's lead on a delayed signal: 1 + s tau (+ s^2 tau^2 / 2 for order 2)."""
     coeffs = [1.0, tau] if order == 1 else [1.0, tau, 0.5 * tau * tau]
     poly = np.array(coeffs[::-1])
-    return (poly, np.array([1.0])), lambda s: np.polyval(poly, s)
+    return (poly, np.array([1.0])), _on_grid(lambda s: np.polyval(poly, s))
 
 
 def _attitude_loop(k: float, plant, d_loop: float, tau: float = 0.0) -> _Loop:
@@ -210,15 +244,15 @@ def _tilt_rates(k: float, r: AutopilotResponse, d_up: float, d_down: float, tau:
     (gr, gf), (ur, uf), (lr, lf0) = _rate_loop(r), _delay(d_up), _delay(d_up + d_down)
     (pn, _), pf = _lead(tau, 1)
     (gn, gd), (un, ud), (ln, ld) = gr, ur, lr
-    ln = np.polymul(ln, pn)
+    ln = _pmul(ln, pn)
 
     def lf(s):
         return lf0(s) * pf(s)
 
     # T = G U (s + 2k) / (s + 2k G L) = gn un (s + 2k) ld / (ud (s gd ld + 2k gn ln))
-    num = np.polymul(np.polymul(gn, un), np.polymul(np.array([1.0, 2.0 * k]), ld))
-    den = np.polymul(ud, np.polyadd(np.polymul(np.array([1.0, 0.0]), np.polymul(gd, ld)),
-                                    2.0 * k * np.polymul(gn, ln)))
+    num = _pmul(_pmul(gn, un), _pmul(np.array([1.0, 2.0 * k]), ld))
+    den = _pmul(ud, _padd(_pmul(np.array([1.0, 0.0]), _pmul(gd, ld)),
+                                    2.0 * k * _pmul(gn, ln)))
     rational = (num, den)
 
     def f(s):
@@ -252,7 +286,7 @@ def _position_loop(g: CascadeGains, lam: float, tilt, d_down: float, tau: float 
     if lam == 0.0:  # the common mode: velocity feedback only, one integrator (s cancels)
         law = (2.0 * g.alpha_p * p1, np.array([1.0, 0.0]))
     else:
-        law = (g.alpha_p * np.polyadd(g.c_p * lam * p2, np.polymul([2.0, 0.0], p1)),
+        law = (g.alpha_p * _padd(g.c_p * lam * p2, _pmul(np.array([2.0, 0.0]), p1)),
                np.array([1.0, 0.0, 0.0]))
     rational = _mul(law, dr, tr)
     return _Loop(rational, lambda s: g.alpha_p * (g.c_p * lam * p2f(s) + 2.0 * s * p1f(s))
@@ -301,6 +335,7 @@ def cascade_margins(mode: str, gains: CascadeGains, response: AutopilotResponse,
         raise ValueError(f"no cascade criterion for mode {mode!r}")
     inner_ok = all(m.ok() for m in out)
     thrust = _thrust(response, d_up)
+    tilt, thrust = (tilt[0], _on_grid(tilt[1])), (thrust[0], _on_grid(thrust[1]))
     for lam in eigenvalues:
         label = "common velocity loop" if lam == 0.0 else f"formation mode lambda={lam:.3g}"
         if inner_ok:  # the tilt response is only meaningful on a stable attitude loop
