@@ -14,13 +14,16 @@ measured delay rounded up to `DELAY_STEP_S` (5 ms: on the safe side by less than
 and coarse enough that a team's links, whose delays differ by a few milliseconds, share one cached
 verdict).
 
-The judge runs on the tick (every status update of the preflight), so it splits its work: whether
-the mode passes at a delay costs one evaluation of the criterion (~2 ms) and is answered at once;
-the refusal line, which names the stiffest stable settings, costs a search over candidate gains
-(~0.2-0.3 s) and is built only when the preflight reads it, once per delay step (for a team
-whose links share a step, once). Built on every
-tick, that search stalled the event loop for seconds while the round trips were being measured,
-and the stall, counted in the round trips, raised the measured delay itself.
+The judge is asked only when a preflight decides (`VehicleStatus.loop_problem` defers it): the
+statuses are built on every tick, and a verdict there cost one evaluation of the criterion per
+vehicle whose delay fell in a new 5 ms step. While 240 vehicles were being configured, the ground
+station's own load spread their round trips over hundreds of steps, and the evaluations (~15 ms
+each with a large team's 16 eigenvalues, on a slow day) stalled the event loop, which lifted the
+round trips further: the vehicles' COMMAND_ACKs waited in the kernel until it dropped them, and
+the configure step failed. At the decision the machine is idle and the links settled, so a
+team's links share one or two steps. Whether a mode passes at a step is cached; the refusal line,
+which names the stiffest stable settings (a search over candidate gains, ~0.2-0.3 s), is built
+once per step, and only for a mode that fails there.
 Pure apart from its caches.
 """
 
@@ -29,6 +32,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable, Sequence
+from typing import Protocol
 
 import numpy as np
 
@@ -39,6 +43,15 @@ from gcs.mission.cascade import AutopilotResponse, CascadeGains, cascade_margins
 DELAY_STEP_S = 0.005
 #: A measured delay up to this much above the configured one is flown as configured [s].
 DELAY_TOLERANCE_S = 0.005
+#: The latest TIMESYNC round trips judged (4 s at 2 Hz: not the replies a vehicle sent late while
+#: it was still starting up).
+JUDGED_ROUND_TRIPS = 8
+
+
+class RoundTrips(Protocol):
+    """What the judge reads of a link (gcs.link.clock.VehicleClock)."""
+
+    def round_trips_s(self, since_s: float = ...) -> np.ndarray: ...
 
 
 def measured_delay_s(round_trips_s: np.ndarray) -> float:
@@ -59,11 +72,18 @@ class DelayJudge:
         self._passes: dict[tuple[int, float], bool] = {}
         self._lines: dict[tuple[int, float], str] = {}
 
-    def refusal(self, autopilot: int, round_trips_s: np.ndarray) -> Callable[[], str] | None:
+    def deferred(self, autopilot: int, clock: RoundTrips) -> Callable[[float], str | None]:
+        """`problem` for this vehicle, asked later (when a preflight decides, with the time
+        from which round trips count) with the round trips its clock holds then."""
+        return functools.partial(self._problem_of, autopilot, clock)
+
+    def _problem_of(self, autopilot: int, clock: RoundTrips, since_s: float) -> str | None:
+        return self.problem(autopilot, clock.round_trips_s(since_s)[-JUDGED_ROUND_TRIPS:])
+
+    def problem(self, autopilot: int, round_trips_s: np.ndarray) -> str | None:
         """None when the mode is stable at this link's measured delay, when the delay is within
-        the configured one (and its tolerance), or when nothing was measured; otherwise a
-        callable that builds the refusal line (one line, naming the stable settings: the costly
-        part, see the module docstring)."""
+        the configured one (and its tolerance), or when nothing was measured; otherwise the
+        refusal line (one line, naming the stable settings)."""
         delay = measured_delay_s(round_trips_s)
         if not delay > self.configured_delay_s + DELAY_TOLERANCE_S:
             return None
@@ -81,7 +101,7 @@ class DelayJudge:
                 self.predicted))
         if self._passes[key]:
             return None
-        return functools.partial(self._line, key, response, delay)
+        return self._line(key, response, delay)
 
     def _line(self, key: tuple[int, float], response: AutopilotResponse, delay: float) -> str:
         if key not in self._lines:

@@ -42,9 +42,6 @@ from gcs.mission.safety import VehicleStatus
 
 _IDENTITY_Q = (1.0, 0.0, 0.0, 0.0)
 _EYE = np.eye(3)
-#: The latest TIMESYNC round trips the preflight's delay judge reads (4 s at 2 Hz: not the
-#: replies a vehicle sent late while it was still starting up).
-JUDGED_ROUND_TRIPS = 8
 #: SYS_STATUS onboard_control_sensors_* bit of the pre-arm checks (MAV_SYS_STATUS_PREARM_CHECK)
 PREARM_CHECK_BIT = 0x10000000
 _LANDED = {LandedState.ON_GROUND: True, LandedState.IN_AIR: False, LandedState.TAKEOFF: False,
@@ -274,8 +271,7 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
             listen=listen_label(p), landed_state=landed_state, prearm_ok=prearm_ok,
             status_text=text.quoted() if text is not None else "", height_above_home_m=height,
             frame_problem=problem, frame_pending=problem == WAITING,
-            loop_problem=(judge.refusal(autopilot, p.clock.round_trips_s()[-JUDGED_ROUND_TRIPS:])
-                          if judge is not None else None),
+            loop_problem=judge.deferred(autopilot, p.clock) if judge is not None else None,
         ))
     return out
 

@@ -463,7 +463,7 @@ class VehicleProxy:
         if sent is None or now_s < sent:
             return
         self._n["timesync_replies"] += 1
-        self.clock.on_round_trip(now_s - sent)
+        self.clock.on_round_trip(now_s - sent, sent)
         if len(self._round_trips) < MAX_ROUND_TRIPS:
             self._round_trips.append(now_s - sent)
 

@@ -154,7 +154,9 @@ class MissionPlan:
     abort_action: str = "land"
     link_loss_action: str = "hold"
     connect_timeout_s: float = 60.0  # emulators compiling, autopilots booting (PX4 SITL 10-25 s)
-    settle_s: float = 1.0  # after CONFIGURE, before the rates are judged
+    # after CONFIGURE, before the rates and the link delay are judged (from what was measured
+    # since: not the ground station's own load while it configured the team)
+    settle_s: float = 1.0
     takeoff_timeout_s: float = 60.0
     takeoff_tolerance_m: float = 0.3  # height above the takeoff point vs takeoff_altitude_m
     arm_timeout_s: float = 60.0  # ARM phase: every ground vehicle armed and taking off
@@ -244,6 +246,7 @@ class MissionMachine:
     notes: list[str] = field(default_factory=list)  # human-readable events, newest last
     _v: dict[int, _Vehicle] = field(default_factory=dict)
     _phase_since_s: float | None = None
+    _configured_s: float | None = None  # PREFLIGHT: when the CONFIGURE commands had all ended
     _now_s: float = 0.0
     _abort: list[tuple[str, int]] = field(default_factory=list)
     _stop_reason: Outcome | None = None
@@ -492,7 +495,11 @@ class MissionMachine:
         return text
 
     def _preflight(self) -> list[Command]:
-        if not self._idle() or self._elapsed() < self.plan.settle_s:
+        if self._configured_s is None:
+            if not self._idle():
+                return []
+            self._configured_s = self._now_s
+        if not self._idle() or self._now_s - self._configured_s < self.plan.settle_s:
             return []
         team = self._statuses()
         reads = self._read_params(team)
@@ -501,7 +508,7 @@ class MissionMachine:
         if any(s.frame_pending for s in team if s.link == "alive") and \
                 self._elapsed() < self.plan.origin_timeout_s:
             return []  # the origins are asked for by the composition root; their answers wait
-        problems = preflight_problems(team, self.plan.rules)
+        problems = preflight_problems(team, self.plan.rules, self._configured_s)
         for s in team:
             profile = self._v[s.vehicle_id].profile
             if profile is not None:

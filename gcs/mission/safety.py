@@ -83,9 +83,10 @@ class VehicleStatus:
     # and whether the origin is still awaited
     frame_problem: str | None = None
     frame_pending: bool = False
-    # the control mode is not stable at this link's measured delay (gcs/fly/delay.py): builds
-    # the line saying why (costly: called only when a preflight decides)
-    loop_problem: Callable[[], str] | None = None
+    # the cascade criterion at this link's measured delay (gcs/fly/delay.py), asked only when a
+    # preflight decides (costly), with the time from which the link's round trips count: None,
+    # or the line saying why the control mode is not stable
+    loop_problem: Callable[[float], str | None] | None = None
 
     @property
     def name(self) -> str:
@@ -205,13 +206,16 @@ def flight_problems(team: Sequence[VehicleStatus], rules: SafetyRules,
     return out
 
 
-def preflight_problems(team: Sequence[VehicleStatus], rules: SafetyRules) -> list[Problem]:
+def preflight_problems(team: Sequence[VehicleStatus], rules: SafetyRules,
+                       measured_since_s: float = -math.inf) -> list[Problem]:
     """Everything that must hold before arming or switching to offboard.
 
     Per vehicle: link alive, no foreign vehicle on its link, a quadrotor with a supported autopilot
     (gcs.mission.autopilots; that autopilot's own requirements, e.g. ArduPilot's GUID_OPTIONS, are
     checked by the mission machine once read), telemetry at the required rates, a finite state,
-    tilt and speed within limits, inside the geofence if airborne.
+    tilt and speed within limits, inside the geofence if airborne; the control mode stable at
+    each link's delay, measured from the round trips since `measured_since_s` (those of the
+    vehicles' start-up, the ground station's own configure step included, do not count).
     """
     out: list[Problem] = []
     for s in team:
@@ -226,8 +230,9 @@ def preflight_problems(team: Sequence[VehicleStatus], rules: SafetyRules) -> lis
             out.append(Problem(s.vehicle_id, unsupported_text(n, s.autopilot)))
         elif s.autopilot in rules.loop_refusals:
             out.append(Problem(s.vehicle_id, f"{n}: {rules.loop_refusals[s.autopilot]}"))
-        elif s.loop_problem is not None:
-            out.append(Problem(s.vehicle_id, f"{n}: {s.loop_problem()}"))
+        elif s.loop_problem is not None and \
+                (why := s.loop_problem(measured_since_s)) is not None:
+            out.append(Problem(s.vehicle_id, f"{n}: {why}"))
         if s.vehicle_type != QUADROTOR_TYPE:
             out.append(Problem(s.vehicle_id, f"{n}: MAV_TYPE {s.vehicle_type} is not a quadrotor "
                                              f"({QUADROTOR_TYPE})"))

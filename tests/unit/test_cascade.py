@@ -130,51 +130,79 @@ def test_a_measured_delay_above_the_configured_one_is_judged_again_per_autopilot
     judge = DelayJudge("rates", g, [0.0, 2.0, 4.0], 100.0, 0.01)
     px4, ardupilot = 12, 3
     # within the configured delay, or nothing measured: nothing to say
-    assert judge.refusal(px4, np.array([0.004, 0.02, 0.019])) is None
+    assert judge.problem(px4, np.array([0.004, 0.02, 0.019])) is None
     # 12 ms each way: within the 5 ms tolerance of the configured 10 ms, flown as configured
-    assert judge.refusal(px4, np.array([0.024, 0.024])) is None
+    assert judge.problem(px4, np.array([0.024, 0.024])) is None
     # a busy machine delays a few replies: the lower quartile passes over them
-    assert judge.refusal(px4, np.array([0.001] * 15 + [0.040] * 5)) is None
-    assert judge.refusal(px4, np.array([])) is None
+    assert judge.problem(px4, np.array([0.001] * 15 + [0.040] * 5)) is None
+    assert judge.problem(px4, np.array([])) is None
     # a 110 ms round trip: 55 ms each way, where these gains fail (test_more_link_delay...)
     assert not verdict("rates", g, PX4_RESPONSE, [0.0, 2.0, 4.0], 100.0, 0.055, "PX4")[0]
-    refusal = judge.refusal(px4, np.array([0.110, 0.110, 0.110, 0.150]))
-    assert refusal is not None
-    line = refusal()
+    line = judge.problem(px4, np.array([0.110, 0.110, 0.110, 0.150]))
+    assert line is not None
     assert line.startswith("link delay measured 55 ms each way (TIMESYNC round trip lower "
                            "quartile 110 ms), more than fly.link_delay_s 10 ms: rates mode with")
     assert "link delay 55 ms, on PX4" in line and "stable: rates mode with" in line
-    assert "on ArduPilot Copter" in judge.refusal(ardupilot, np.array([0.11]))()
+    assert "on ArduPilot Copter" in judge.problem(ardupilot, np.array([0.11]))
     # a flight configured for no delay at all measures 10 ms each way: stable there, flown
     assert verdict("rates", g, PX4_RESPONSE, [0.0, 2.0, 4.0], 100.0, 0.010, "PX4")[0]
-    assert DelayJudge("rates", g, [0.0, 2.0, 4.0], 100.0, 0.0).refusal(
+    assert DelayJudge("rates", g, [0.0, 2.0, 4.0], 100.0, 0.0).problem(
         px4, np.array([0.0199, 0.0200, 0.0201])) is None
 
 
-def test_the_delay_judge_answers_pass_or_fail_at_once_and_builds_the_refusal_line_when_read(
+def test_the_delay_judge_is_asked_only_when_a_preflight_decides_and_from_the_settled_links(
         monkeypatch):
-    # the judge runs on every preflight tick: naming stable settings searches candidate gains
-    # (~0.2 s) and must not run there, or the stall would lift the round trips it measures
+    # the statuses are built on every tick: a verdict there cost a criterion evaluation per new
+    # 5 ms step, and a large team's round trips, lifted by its own configure step, spread over
+    # hundreds of steps; the stall lifted them further and COMMAND_ACKs were lost. Those round
+    # trips do not count either: only the ones since the configure step ended
     import gcs.fly.delay as delay
+    from gcs.link.clock import VehicleClock
+    from gcs.mission.safety import SafetyRules, VehicleStatus, preflight_problems
 
-    built = []
+    evaluated, built = [], []
+
+    def counting_margins(*args, **kwargs):
+        evaluated.append(args[5])
+        return cascade_margins(*args, **kwargs)
 
     def counting_verdict(*args, **kwargs):
         built.append(args[5])
         return verdict(*args, **kwargs)
 
+    monkeypatch.setattr(delay, "cascade_margins", counting_margins)
     monkeypatch.setattr(delay, "verdict", counting_verdict)
-    judge = delay.DelayJudge("rates", CascadeGains(1.0, 2.0, 1.5, 1.0), [0.0, 2.0, 4.0], 100.0,
+    # softer gains than the bundled ones: on PX4 they pass up to 55 ms each way, fail at 60
+    judge = delay.DelayJudge("rates", CascadeGains(1.0, 1.0, 1.0, 0.5), [0.0, 2.0, 4.0], 100.0,
                              0.01)
-    rtts = (0.110, 0.112, 0.114, 0.122)  # 55-61 ms each way
-    refusals = [judge.refusal(12, np.array([rtt])) for rtt in rtts]
-    assert all(r is not None for r in refusals) and built == []
-    # read: judged at the delay rounded up to 5 ms (55, 60, 60, 65 ms), the search run once per
-    # step; each line names its own measured delay
-    lines = [r() for r in refusals]
-    assert built == [0.055, 0.06, 0.065]
-    assert lines[1].startswith("link delay measured 56 ms") and "link delay 60 ms" in lines[1]
-    assert lines[2].split(": ", 1)[1] == lines[1].split(": ", 1)[1]
+    configured_s = 10.0
+    clocks = [VehicleClock() for _ in range(96)]
+    for i, c in enumerate(clocks):  # while the team was configured: 30-980 ms
+        for k in range(4):
+            c.on_round_trip(0.03 + 0.01 * i, sent_s=8.0 + 0.5 * k)
+    deferred = [judge.deferred(12, c) for c in clocks]
+    assert evaluated == [] and built == []
+    for i, c in enumerate(clocks):  # settled: 24-38 ms
+        for k in range(2):
+            c.on_round_trip(0.024 + 0.002 * (i % 8), sent_s=configured_s + 0.5 * k)
+    statuses = [VehicleStatus(vehicle_id=i + 1, sysid=i + 1, link="alive", armed=False,
+                              mode="", landed=True, position_enu_m=(0.0, 0.0, 0.0),
+                              velocity_enu_mps=(0.0, 0.0, 0.0), tilt_rad=0.0, data_age_s=0.0,
+                              autopilot=12, vehicle_type=2, loop_problem=d)
+                for i, d in enumerate(deferred)]
+    assert preflight_problems(statuses, SafetyRules(), configured_s) == []
+    # 12-19 ms each way: 15 ms (flown as configured, within the tolerance) and 20 ms, judged once
+    assert evaluated == [0.02] and built == []
+    # links whose delay stays at 55-61 ms: refused, the line built once per step
+    for c, rtts in zip(clocks[:2], ([0.110, 0.112, 0.114, 0.122] * 2, [0.122] * 8), strict=True):
+        for k, rtt in enumerate(rtts):
+            c.on_round_trip(rtt, sent_s=configured_s + 1.0 + 0.5 * k)
+    lines = [d(configured_s) for d in deferred[:2]]
+    assert built == [0.06, 0.065] and all(line is not None for line in lines)
+    assert lines[0].startswith("link delay measured 56 ms") and "link delay 60 ms" in lines[0]
+    assert deferred[0](configured_s) == lines[0] and built == [0.06, 0.065]
+    # had the configure step's round trips counted, most of the team would be refused
+    assert len(preflight_problems(statuses, SafetyRules())) > 48
 
 
 @pytest.mark.parametrize("k", [1.5, 2.0, 3.0, 4.0])

@@ -65,6 +65,22 @@ def test_timesync_round_trip_gives_the_least_one_way_delay():
     assert list(clock.round_trips_s()) == [0.104, 0.101, 0.100, 0.130]
 
 
+def test_round_trips_can_be_read_from_a_time_on_those_sent_since():
+    # the preflight judges the link delay from the round trips since the team was configured:
+    # not those the ground station's own start-up load lifted
+    clock = VehicleClock()
+    for k, rtt in enumerate((0.400, 0.250, 0.012, 0.010, 0.011)):
+        clock.on_round_trip(rtt, sent_s=0.5 * k)
+    assert list(clock.round_trips_s(1.0)) == [0.012, 0.010, 0.011]
+    assert list(clock.round_trips_s(5.0)) == []
+    assert list(clock.round_trips_s()) == [0.400, 0.250, 0.012, 0.010, 0.011]
+    clock.on_round_trip(0.013)  # sent when, unknown: only read without a start
+    assert list(clock.round_trips_s(1.0)) == [0.012, 0.010, 0.011]
+    for k in range(30):  # the ring wraps: the times stay with their round trips
+        clock.on_round_trip(0.001 * k, sent_s=10.0 + k)
+    assert list(clock.round_trips_s(37.0)) == [0.027, 0.028, 0.029]
+
+
 def test_a_sample_is_never_taken_after_it_arrived():
     clock = VehicleClock()
     stream(clock, 5.0, delay_s=lambda t: 0.010)

@@ -541,6 +541,53 @@ def test_preflight_waits_for_a_ground_vehicle_whose_position_is_not_there_yet():
     assert m.outcome.exit_code == EXIT_OK, m.outcome
 
 
+class SlowConfigure(World):
+    """World whose CONFIGURE answers come only at `answer_at_s` (a large team: the ground
+    station took that long to configure it)."""
+
+    def __init__(self, machine: MissionMachine, answer_at_s: float) -> None:
+        super().__init__(machine)
+        self.answer_at_s = answer_at_s
+        self.held: list = []
+
+    def apply(self, cmds) -> None:
+        rest = []
+        for c in cmds:
+            if c.cmd is Cmd.CONFIGURE and self.t < self.answer_at_s:
+                self.sent.append((c.vehicle_id, c.cmd))
+                self.held.append(c)
+            else:
+                rest.append(c)
+        super().apply(rest)
+
+    def tick(self, dt: float = 0.05) -> None:
+        if self.held and self.t >= self.answer_at_s:
+            held, self.held = self.held, []
+            for c in held:
+                self.apply(self.m.on_result(CommandResult(c.vehicle_id, c.cmd, True)))
+        super().tick(dt)
+
+
+def test_preflight_judges_the_team_on_what_was_measured_after_the_configure_step():
+    # GIVEN a team whose configure step took 3 s (240 vehicles: the ground station's own load
+    # lifted the TIMESYNC round trips meanwhile), each status asking the link-delay criterion
+    m = machine()
+    w = SlowConfigure(m, answer_at_s=3.0)
+    asked: list[tuple[int, float]] = []
+    for vid, s in w.v.items():
+        w.v[vid] = dataclasses.replace(
+            s, loop_problem=lambda since_s, vid=vid: asked.append((vid, since_s)))
+    # THEN the rates and the delay are judged settle_s after the step ended, not after it began
+    w.run(3.9)
+    assert asked == [] and m.phase is Phase.PREFLIGHT
+    w.run(0.3)
+    assert sorted(vid for vid, _ in asked) == list(IDS)
+    # on the round trips since the step ended
+    assert all(since == pytest.approx(3.05) for _, since in asked), asked
+    w.run(30.0)
+    assert m.outcome.exit_code == EXIT_OK, m.outcome
+
+
 def test_preflight_gives_up_on_a_vehicle_not_ready_after_arm_timeout():
     m = one_vehicle(arm_timeout_s=2.0)
     w = Answering(m, [], on_ground=True)
