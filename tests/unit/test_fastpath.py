@@ -304,9 +304,26 @@ async def _one_vehicle(**link: float):  # noqa: ANN202
             a.close()
 
 
+async def _kernel_stamping(a: socket.socket, p: VehicleProxy, mav) -> None:  # noqa: ANN001
+    """Wait until the kernel stamps datagrams as they arrive. Linux turns its receive stamps on
+    for the whole machine when the first socket asks (SO_TIMESTAMPNS), from a work queue: until
+    that has run, a datagram is stamped when it is read. Seen on a loaded machine (three test
+    workers on two cores), never in a flight: the first telemetry arrives after it has run."""
+    for _ in range(100):
+        a.send(_pack(mav, mavlink.MAVLink_heartbeat_message(2, 12, 0, 0, 0, 3)))
+        time.sleep(0.02)  # the loop is blocked: the probe waits in the socket
+        read_from_s = time.monotonic()
+        await asyncio.sleep(0.01)
+        hb = p.latest("HEARTBEAT")
+        if hb is not None and read_from_s - hb.rx_time_s > 0.015:
+            return
+    raise AssertionError("the kernel did not stamp datagrams on arrival within 3 s")
+
+
 async def _stalled() -> None:
     async with _one_vehicle() as (table, a, p):
         mav = _sender(1)
+        await _kernel_stamping(a, p, mav)
         sent_s = time.monotonic()
         a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(1, 1.0, 0, 0, 0, 0, 0))
                + _pack(mav, mavlink.MAVLink_heartbeat_message(2, 12, 0, 0, 0, 3)))
