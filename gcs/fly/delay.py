@@ -17,10 +17,11 @@ verdict).
 The judge is asked only when a preflight decides (`VehicleStatus.loop_problem` defers it): the
 statuses are built on every tick, and a verdict there cost one evaluation of the criterion per
 vehicle whose delay fell in a new 5 ms step. While 240 vehicles were being configured, the ground
-station's own load spread their round trips over hundreds of steps, and the evaluations (~15 ms
-each with a large team's 16 eigenvalues, on a slow day) stalled the event loop, which lifted the
-round trips further: the vehicles' COMMAND_ACKs waited in the kernel until it dropped them, and
-the configure step failed. At the decision the machine is idle and the links settled, so a
+station's own load spread their round trips over hundreds of steps, and the evaluations (36 ms
+each then, with a large team's 16 eigenvalues, on a slow day; 4-7 ms now) stalled the event loop,
+which lifted the round trips further: the vehicles' COMMAND_ACKs waited in the kernel until it
+dropped them, and the configure step failed. The round trips judged are those sent since the team
+was configured (the machine's `measured_since_s`); at the decision the links have settled, so a
 team's links share one or two steps. Whether a mode passes at a step is cached; the refusal line,
 which names the stiffest stable settings (a search over candidate gains, ~0.2-0.3 s), is built
 once per step, and only for a mode that fails there.
