@@ -31,6 +31,9 @@ from mavsdk.autopilot import Autopilot  # noqa: E402
 from mavsdk.plugins.offboard import AttitudeRate, OffboardError  # noqa: E402
 from mavsdk.plugins.telemetry import FlightMode  # noqa: E402
 
+#: MAVSDK's offboard plugin resends the latest setpoint at 20 Hz.
+MAVSDK_SETPOINT_PERIOD_S = 0.05
+
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 
 
@@ -57,11 +60,18 @@ async def _connect(mavsdk: Mavsdk, port: int, rates_hz: float | None = None):
 
 
 async def _start_offboard(telemetry: TelemetryAsync, offboard: OffboardAsync, thrust: float):
-    """MAVSDK's documented sequence, exactly: one setpoint, then ``start()`` at once (no sleep,
-    no retry). PX4 accepts it because its offboard check only asks for a setpoint younger than
-    COM_OF_LOSS_T. Returns the wall times [s] ``start()`` took (until its ACCEPTED ACK) and from
-    its return until telemetry reports OFFBOARD."""
+    """MAVSDK's documented sequence: one setpoint, then ``start()`` (no retry). PX4 accepts it
+    because its offboard check only asks for a setpoint younger than COM_OF_LOSS_T. Returns the
+    wall times [s] ``start()`` took (until its ACCEPTED ACK) and from its return until telemetry
+    reports OFFBOARD.
+
+    One MAVSDK send period (50 ms, its 20 Hz) passes between the two: MAVSDK sends the setpoint
+    from another thread than the mode command, and on a loaded machine (flights at real-time
+    priority beside this test) the command went out first, 0.3 ms ahead of the setpoint, in 1
+    of 5 runs; the emulator then answered TEMPORARILY_REJECTED, "Switching to Offboard is
+    currently not available", as PX4 does to a command with no setpoint before it."""
     await offboard.set_attitude_rate(AttitudeRate(0.0, 0.0, 0.0, thrust))
+    await asyncio.sleep(MAVSDK_SETPOINT_PERIOD_S)
     t0 = time.monotonic()
     try:
         await offboard.start()
