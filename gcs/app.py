@@ -109,7 +109,7 @@ from gcs.link import (
 from gcs.link.config import shared_ports
 from gcs.link.enums import MSG_ID, MavCmd, MavModeFlag
 from gcs.link.proxy import TeamSetpoints
-from gcs.metrics import formation_error_m
+from gcs.metrics import formation_error, formation_error_m
 from gcs.mission.autopilots import PROFILES, AutopilotProfile, ModeSpec, version_text
 from gcs.mission.cascade import (
     AutopilotResponse,
@@ -521,8 +521,11 @@ class Flight:
 
     def _warm_up(self, team: TeamConfig, setup: FlightSetup, rhohat: np.ndarray,
                  nominal: np.ndarray | None) -> None:
-        """Compile (or load from numba's cache) every kernel of the law on a throwaway copy, so
-        the first formation tick does not stall for seconds with the vehicles waiting."""
+        """Compile (or load from numba's cache) every kernel the flight runs, on throwaway
+        copies: the law's, the prediction audit's and the formation error's in the tick, the
+        error series' of the records at the end. Compiled in the first formation tick instead
+        (a new machine's first flight), the audit's stalled it for 0.5 s and more on a loaded
+        machine: every link then read as lost, and the formation stopped at its start."""
         scratch = copy.deepcopy(self.law)
         n = team.n
         rotation = np.tile(np.eye(3), (n, 1, 1))
@@ -537,6 +540,12 @@ class Flight:
             drop_stale_neighbours(scratch.graph, fresh, scratch.active_graph.weight)
             scratch.step(meas, ref, self.period_s)
         formation_error_m(meas.position_m, self._offsets_m)
+        formation_error(meas.position_m[None], self._offsets_m)  # the records' series
+        audit = PredictionAudit(n)
+        taken = np.zeros(n)
+        audit.record(0.0, meas, meas, taken)
+        audit.observe(meas.position_m, meas.velocity_mps, taken, meas.rotation, meas.omega_radps,
+                      taken)
         fastpath.warm_up()
 
     # --- lifetime --------------------------------------------------------------------------------

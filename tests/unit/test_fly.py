@@ -389,3 +389,46 @@ def test_attitude_mode_is_prepared_for_gcs_fly_and_refused_by_gcs_sim(tmp_path):
     assert (setup.gains.alpha_p, setup.gains.c_p) == (1.5, 0.6)
     with pytest.raises(ConfigError, match="controller mode 'attitude': the vehicle's autopilot"):
         simulate(team, SimOptions(mode="attitude", duration_s=0.1))
+
+
+_KERNELS_AFTER_SETUP = """
+import sys, tempfile
+from pathlib import Path
+import numpy as np
+from gcs.app import Flight, FlyOptions, prepare
+from gcs.config import load_team
+from gcs.fly import predict
+from gcs import metrics
+
+with tempfile.TemporaryDirectory() as tmp:
+    options = FlyOptions(out_dir=Path(tmp))
+    flight = Flight(prepare(load_team(sys.argv[1]), options), options)
+    kernels = (predict._reached, metrics.formation_error_m, metrics._formation_errors)
+    before = [len(k.signatures) for k in kernels]
+    # what a formation tick and the records at the end run, with the tick's own array types
+    n = flight.n
+    rng = np.random.default_rng(0)
+    p, v, t = rng.normal(size=(n, 3)), rng.normal(size=(n, 3)), rng.random(n)
+    r, w = np.tile(np.eye(3), (n, 1, 1)), np.zeros((n, 3))
+    audit = predict.PredictionAudit(n)
+    audit.observe(p, v, t, r, w, t)
+    metrics.formation_error_m(p, flight._offsets_m)
+    metrics.formation_error(rng.normal(size=(30, n, 3)), flight._offsets_m)
+    print(before, [len(k.signatures) for k in kernels])
+"""
+
+
+def test_the_flight_compiles_the_kernels_its_ticks_run_before_any_link_opens():
+    # a new machine's first flight compiled the prediction audit's kernel in its first formation
+    # tick: 0.5 s and more on a loaded machine, every link read as lost, the formation stopped.
+    # In a new process (numba's compiled signatures are per process): after the Flight is built,
+    # what the ticks and the records run compiles nothing more
+    import subprocess
+    import sys
+
+    team = Path(__file__).resolve().parents[2] / "configs" / "square4.yaml"
+    out = subprocess.run([sys.executable, "-c", _KERNELS_AFTER_SETUP, str(team)],
+                         capture_output=True, text=True, timeout=300, check=True).stdout
+    before, after = out.strip().splitlines()[-1].split("] [")
+    assert before.strip("[") == after.strip("]"), out
+    assert "0" not in before.strip("[").split(", "), out
