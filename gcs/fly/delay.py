@@ -21,7 +21,8 @@ station's own load spread their round trips over hundreds of steps, and the eval
 each then, with a large team's 16 eigenvalues, on a slow day; 4-7 ms now) stalled the event loop,
 which lifted the round trips further: the vehicles' COMMAND_ACKs waited in the kernel until it
 dropped them, and the configure step failed. The round trips judged are those sent since the team
-was configured (the machine's `measured_since_s`); at the decision the links have settled, so a
+was configured (the machine's `measured_since_s`; the latest 8 while fewer than 4 are that
+recent); at the decision the links have settled, so a
 team's links share one or two steps. Whether a mode passes at a step is cached; the refusal line,
 which names the stiffest stable settings (a search over candidate gains, ~0.2-0.3 s), is built
 once per step, and only for a mode that fails there.
