@@ -274,7 +274,7 @@ class Emulator:
         steps = int(math.floor(t_s / self.plant.dt_s + 1e-9)) - self.plant.steps_done
         if steps <= 0:
             return 0
-        self.plant.step(steps)
+        self._step_through_deadlines(steps)
         now = self.now_s
         for node in self._fault_nodes:
             node.apply_faults(now)
@@ -295,6 +295,24 @@ class Emulator:
         for i, data in out.items():
             self.nodes[i].send_all(data)
         return steps
+
+    def _step_through_deadlines(self, steps: int) -> None:
+        """``steps`` physics steps, stopping at each autopilot deadline that falls inside them
+        to expire what is due: a late wake-up that catches up 20 ms at once must not fly an
+        expired guided target for those 20 ms (ArduCopter drops it on the 400 Hz pass after
+        GUID_TIMEOUT, whatever its ground station's link does)."""
+        plant = self.plant
+        while True:
+            run = steps
+            if self._next_deadline_s < math.inf:
+                due = math.ceil((self._next_deadline_s - plant.time_s) / plant.dt_s - 1e-9)
+                run = min(steps, max(due, 1))
+            plant.step(run)
+            steps -= run
+            if steps == 0:
+                return
+            if plant.time_s >= self._next_deadline_s:
+                self._expire(plant.time_s)
 
     def _expire(self, now_s: float) -> None:
         """What fell due between autopilot ticks (a guided target's timeout), before this step's

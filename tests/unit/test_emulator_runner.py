@@ -319,3 +319,29 @@ def test_an_ardupilot_attitude_target_stops_being_flown_within_one_tick_of_guid_
     first_not = min(t for t, used in flown if not used)
     assert all(used for t, used in flown if t <= 3.0) and last <= 3.0 + 1e-9
     assert 3.0 < first_not <= 3.0 + 2 * emu.tick_s
+
+
+def test_a_late_wake_up_does_not_fly_an_expired_guided_target_through_its_catch_up():
+    # GIVEN an ArduPilot vehicle flying one attitude target's thrust in GUIDED_NOGPS, with
+    # ATTITUDE_TARGET streamed at 500 Hz (every emulator tick)
+    spec = replace(default_vehicle(1, on_ground=False), autopilot="ardupilot")
+    emu = Emulator([spec], param_overrides={"EMU_NOISE": 0, "GUID_OPTIONS": 8})
+    link = FakeLink()
+    emu.nodes[0].links.append(link)
+    _send(emu, 0, mavlink.MAVLink_command_long_message(1, 1, 511, 0, 83, 2000, 0, 0, 0, 0, 0), link)
+    _run(emu, 1.0)
+    _send(emu, 0, mavlink.MAVLink_set_mode_message(1, 1, 20), link)
+    _run(emu, 1.1)
+    _send(emu, 0, mavlink.MAVLink_set_attitude_target_message(0, 1, 1, 7, [1, 0, 0, 0], 0, 0, 0,
+                                                              0.4321), link)
+    sent_s = emu.now_s
+    _run(emu, sent_s + 2.99)
+    assert emu.plant.thrust_sp_norm[0] == pytest.approx(0.4321, abs=1e-6)
+    # WHEN the emulator wakes 30 ms late, across GUID_TIMEOUT (3 s), and catches up at once
+    link.msgs.clear()
+    emu.advance_to(sent_s + 3.02)
+    # THEN the target stopped at its deadline inside the catch-up: what the attitude loop flies
+    # and echoes at the end is the level hold, not the expired thrust
+    assert emu.plant.thrust_sp_norm[0] != pytest.approx(0.4321, abs=1e-6)
+    echoed = [m.thrust for m in link.msgs if m.get_type() == "ATTITUDE_TARGET"]
+    assert echoed and all(t != pytest.approx(0.4321, abs=1e-6) for t in echoed)
