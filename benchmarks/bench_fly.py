@@ -25,11 +25,14 @@ sys.path.insert(0, str(ROOT))
 from benchmarks.docsection import write_section  # noqa: E402
 
 
-def run(team: Path, duration_s: float, work: Path, mode: str = "rates") -> dict:
+def run(team: Path, duration_s: float, work: Path, mode: str = "rates",
+        emu_scheduling: str = "auto") -> dict:
+    """One flight of ``team`` against a fleet started with ``--scheduling emu_scheduling``."""
     emu_stats = work / "emu.json"
     emu = subprocess.Popen(
         [sys.executable, "-m", "vehicle_emulator.cli", "--fleet", "--team", str(team),
-         "--stats-json", str(emu_stats), "--log-level", "WARNING"],
+         "--stats-json", str(emu_stats), "--log-level", "WARNING",
+         "--scheduling", emu_scheduling],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         time.sleep(1.0)  # the emulator binds its ports; the GCS would wait for it anyway

@@ -3,10 +3,11 @@ under each scheduling policy (`fly.scheduling`, gcs/fly/sched.py).
 
 Each case flies a team (default: configs/grid16.yaml in rates mode at 100 Hz, and Scenario I,
 configs/square4.yaml, against the nominal personality in actuators mode at 250 Hz) against one
-`vehicle-emu --fleet` (normally scheduled, as a user starts it), while `os.cpu_count()` busy
-Python loops (normally scheduled, nice 0) share the machine from before the flight to its end.
-Figures per case: ticks on time, lateness p99, skipped ticks, telemetry age p99 (worst vehicle),
-formation error at the end, and the scheduling the ground station got. Writes the "## Ticks
+`vehicle-emu --fleet`, while `os.cpu_count()` busy Python loops (normally scheduled, nice 0)
+share the machine from before the flight to its end. The case's policy is both the ground
+station's `fly.scheduling` and the fleet's `--scheduling` (each asks for its own priority; the
+fleet one step below). Figures per case: ticks on time, lateness p99, skipped ticks, telemetry
+age p99 (worst vehicle), formation error at the end, and the scheduling each got. Writes the "## Ticks
 beside busy processes" section of docs/benchmarks.md.
 
     python benchmarks/bench_load.py [--duration-s 30] [--policies normal auto] [--no-write]
@@ -71,6 +72,7 @@ def figures(r: dict) -> dict:
         "age_p99": max(v["telemetry_age_p99_ms"] for v in link),
         "fe_end": rep["summary"]["final_formation_error_m"],
         "scheduling": tick.get("scheduling", "-"),
+        "emu_scheduling": r["emu"].get("scheduling", "-"),
         "gcs_cpu": 100 * r["gcs_cpu_s"] / r["gcs_wall_s"],
     }
 
@@ -80,23 +82,24 @@ def section(rows: list[dict], duration_s: float, busy: int) -> str:
         HEADING, "",
         f"`python benchmarks/bench_load.py` on {platform.machine()}, {os.cpu_count()} CPU(s), "
         f"Python {platform.python_version()}: {busy} busy Python loop(s) (one per core, nice 0) "
-        f"running beside `gcs fly` and one `vehicle-emu --fleet` (both started normally), "
-        f"{duration_s:g} s of formation per case. `fly.scheduling` is the ground station's "
-        "(gcs/fly/sched.py; docs/gcs.md, \"Scheduling\"); what it got is in the last column.",
+        f"running beside `gcs fly` and one `vehicle-emu --fleet`, {duration_s:g} s of formation "
+        "per case. The policy is the ground station's `fly.scheduling` (gcs/fly/sched.py; "
+        "docs/gcs.md, \"Scheduling\") and the fleet's `--scheduling` (docs/emulator.md, "
+        "\"Scheduling\"); what each got is in the last two columns.",
         "",
         "| team, mode | fly.scheduling | ticks on time | lateness p99 [ms] | skipped | telemetry "
-        "age p99 [ms] | formation error at the end [m] | GCS CPU | got |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "age p99 [ms] | formation error at the end [m] | GCS CPU | ground station got | fleet got |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         f = r.get("fig")
         head = f"| {r['team']}, {r['mode']} | {r['policy']} |"
         if f is None:
-            lines.append(f"{head} failed: {r['why'][:120]} | | | | | | |")
+            lines.append(f"{head} failed: {r['why'][:120]} | | | | | | | |")
             continue
         lines.append(f"{head} {f['on_time']:.2f} % of {f['ticks']} | {f['late_p99']:.2f} | "
                      f"{f['skipped']} | {f['age_p99']:.1f} | {f['fe_end']:.2e} | "
-                     f"{f['gcs_cpu']:.0f} % | {f['scheduling']} |")
+                     f"{f['gcs_cpu']:.0f} % | {f['scheduling']} | {f['emu_scheduling']} |")
     lines += ["", "A tick is on time when it starts within max(1.5 ms, a fifth of its period) "
               "of its absolute deadline (docs/architecture.md, \"The tick\").", ""]
     return "\n".join(lines)
@@ -121,7 +124,7 @@ def main() -> int:
                 with busy_processes(args.busy):
                     try:
                         row["fig"] = figures(run(case_team(work, name, mode, policy),
-                                                 args.duration_s, work, mode))
+                                                 args.duration_s, work, mode, policy))
                     except SystemExit as exc:  # gcs fly exited non-zero
                         row["why"] = str(exc).strip().splitlines()[-1]
                 print(row, flush=True)

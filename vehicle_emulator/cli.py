@@ -10,6 +10,12 @@ Ctrl-C / SIGTERM stop it cleanly (exit status 0).
 Start-up: the physics kernels are compiled (announced on stderr when the cache is cold, see
 jitcache), then the links open and one line ``vehicle-emu: ready: ...`` goes to stdout; a parent
 process (``gcs fly --emulators``) waits for that line. ``--compile-only`` compiles and exits.
+
+Scheduling (``--scheduling``): at start the process asks for the best priority the operating
+system permits, one step below the ground station's (sched.py: SCHED_FIFO `EMU_RT_PRIORITY`, else
+nice `EMU_RAISED_NICE`). The vehicles it stands in for each have a processor of their own: a
+stand-in that a busy machine preempts answers late, and a test flown against it measures the
+machine rather than the ground station.
 """
 
 from __future__ import annotations
@@ -30,6 +36,14 @@ from pathlib import Path
 from vehicle_emulator.jitcache import compiling
 from vehicle_emulator.personality import AUTOPILOT_NAMES, DEFAULT_AUTOPILOT, personality_of
 from vehicle_emulator.runner import STREAM_MODES, Emulator, LinkPlan, RealtimeClock, RunStats
+from vehicle_emulator.sched import (
+    EMU_RAISED_NICE,
+    EMU_RT_PRIORITY,
+    EMULATOR,
+    POLICIES,
+    SchedulingError,
+    apply_scheduling,
+)
 from vehicle_emulator.team import TeamFileError, TeamSpec, VehicleSpec, default_vehicle, load_team
 from vehicle_emulator.vehicle import VehicleNode
 
@@ -145,6 +159,14 @@ def _parser() -> argparse.ArgumentParser:
     )
     ap.add_argument("--seed", type=int, default=0, help="seed of noise and packet loss")
     ap.add_argument(
+        "--scheduling",
+        choices=POLICIES,
+        default="auto",
+        help="the operating system's priority for the vehicles (default auto: SCHED_FIFO "
+        f"priority {EMU_RT_PRIORITY}, else nice {EMU_RAISED_NICE}, else normal, one step below "
+        "gcs fly; realtime/raised: exit 2 if refused)",
+    )
+    ap.add_argument(
         "--param",
         action="append",
         default=[],
@@ -209,6 +231,11 @@ def warm_up(emu: Emulator) -> None:
 
 
 async def _amain(args: argparse.Namespace) -> int:
+    # first: a refusal is one line before anything is built (the compile then runs at this
+    # priority too, one core at most)
+    scheduling = apply_scheduling(args.scheduling, EMULATOR)
+    (log.warning if scheduling.policy == "normal" and args.scheduling == "auto" else log.info)(
+        "vehicle-emu: %s", scheduling.detail)
     specs, team = _team(args)
     overrides: dict[str, float] = {}
     for item in args.param:
@@ -246,12 +273,13 @@ async def _amain(args: argparse.Namespace) -> int:
     sysids = ", ".join(str(s.sysid) for s in specs)
     udpclient = (f"; ephemeral ports (ArduPilot SITL udpclient): {', '.join(ephemeral)}"
                  if ephemeral else "")
-    print(f"{READY_PREFIX} {len(specs)} vehicle{'s' if len(specs) != 1 else ''} (sysid {sysids})"
-          f"{udpclient}", flush=True)
+    # handlers first: a parent may stop the emulator the moment it reads the ready line
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
+    print(f"{READY_PREFIX} {len(specs)} vehicle{'s' if len(specs) != 1 else ''} (sysid {sysids})"
+          f"{udpclient}", flush=True)
     if args.duration is not None:
         loop.call_later(args.duration / args.realtime_factor, stop.set)
     stats = RunStats()
@@ -273,6 +301,7 @@ async def _amain(args: argparse.Namespace) -> int:
     cpu = time.process_time() - cpu0
     summary = {
         "vehicles": len(specs),
+        "scheduling": scheduling.detail,
         "wall_s": wall,
         "sim_s": emu.now_s,
         "cpu_s": cpu,
@@ -345,7 +374,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             warm_up(Emulator([default_vehicle(1, on_ground=True)]))
             return 0
         return asyncio.run(_amain(args))
-    except TeamFileError as exc:
+    except (TeamFileError, SchedulingError) as exc:
         print(f"vehicle-emu: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:

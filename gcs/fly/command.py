@@ -179,7 +179,7 @@ def run_fly(args: argparse.Namespace) -> int:
                 fleet.wait_ready(setup.plan.connect_timeout_s)
                 up = fleet.ready_line.removeprefix(READY_PREFIX).strip()
                 print(f"gcs fly: emulator fleet up: {up}", file=sys.stderr, flush=True)
-            # after the fleet started: the emulators keep the scheduling they were given
+            # after the fleet started: the emulators ask for their own (vehicle-emu --scheduling)
             flight.scheduling = apply_scheduling(team.fly.scheduling)
             fell_back = team.fly.scheduling == "auto" and flight.scheduling.policy == "normal"
             logger.log(logging.WARNING if fell_back else logging.INFO, "%s",

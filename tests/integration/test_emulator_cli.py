@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -16,6 +18,7 @@ import yaml
 from pymavlink.dialects.v20 import common as mavlink
 
 from vehicle_emulator.geodesy import geodetic_to_enu
+from vehicle_emulator.sched import EMU_RAISED_NICE, EMU_RT_PRIORITY
 from vehicle_emulator.telemetry import HOME_ALT_M, HOME_LAT_DEG, HOME_LON_DEG
 from vehicle_emulator.testing import clients_on_port_block, free_udp_port, free_udp_port_block
 
@@ -248,3 +251,63 @@ def test_what_start_up_built_is_out_of_the_collectors_sight_for_the_run(tmp_path
     # AND with nothing sent to it, no input backlog and no setpoint superseded (server.py)
     assert figures["deepest_backlog"] == 0
     assert [v["setpoints_superseded"] for v in figures["by_vehicle"]] == [0, 0, 0, 0]
+
+
+def test_the_vehicles_run_at_the_scheduling_they_asked_for(tmp_path):
+    # GIVEN one vehicle with the default --scheduling auto, its figures written at exit
+    stats = tmp_path / "stats.json"
+    proc = subprocess.Popen(
+        [*EMU, "--id", "1", "--bind", f"127.0.0.1:{free_udp_port()}", "--remote",
+         f"127.0.0.1:{free_udp_port()}", "--stats-json", str(stats)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        # WHEN it is ready (the priority is asked for before the links open)
+        assert proc.stdout is not None and proc.stdout.readline().startswith("vehicle-emu: ready:")
+        fifo = os.sched_getscheduler(proc.pid) & ~getattr(os, "SCHED_RESET_ON_FORK", 0)
+        priority = os.sched_getparam(proc.pid).sched_priority
+        nice = os.getpriority(os.PRIO_PROCESS, proc.pid)
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    detail = json.loads(stats.read_text())["scheduling"]
+    # THEN the process runs at what the figures and the log say it got
+    assert proc.stderr is not None and detail in proc.stderr.read()
+    if detail.startswith("real-time"):
+        assert fifo == os.SCHED_FIFO and priority == EMU_RT_PRIORITY
+    elif detail.startswith("raised"):
+        assert fifo != os.SCHED_FIFO and nice == EMU_RAISED_NICE
+    else:
+        assert detail.startswith("normal scheduling: ") and fifo != os.SCHED_FIFO
+    if os.geteuid() == 0:
+        assert detail == f"real-time scheduling: SCHED_FIFO priority {EMU_RT_PRIORITY}"
+
+
+@pytest.mark.skipif(not (os.geteuid() == 0 and shutil.which("setpriv")),
+                    reason="needs root to run the emulator as an unprivileged user")
+def test_a_refused_scheduling_asked_for_by_name_is_a_one_line_error_before_any_link():
+    # GIVEN a user the operating system refuses real-time scheduling (nobody: no capability, no
+    # rtprio limit), with a numba cache it may write (its modules' decorators need one; pytest's
+    # tmp_path is private to the user running the tests)
+    cache = Path(tempfile.mkdtemp(prefix="numba-nobody-"))
+    cache.chmod(0o777)
+    port = free_udp_port()
+    try:
+        out = subprocess.run(
+            ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", "--inh-caps=-all",
+             *EMU, "--id", "1", "--bind", f"127.0.0.1:{port}", "--remote",
+             f"127.0.0.1:{free_udp_port()}", "--scheduling", "realtime"],
+            capture_output=True, text=True, timeout=90,
+            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path),
+                 "NUMBA_CACHE_DIR": str(cache)})
+    finally:
+        shutil.rmtree(cache, ignore_errors=True)
+    # THEN it exits 2 with one line naming the option and how to grant it, before it is ready
+    assert out.returncode == 2, out.stderr
+    lines = [line for line in out.stderr.splitlines() if line.startswith("vehicle-emu: ")]
+    assert lines == [f"vehicle-emu: --scheduling realtime: SCHED_FIFO refused (Operation not "
+                     f"permitted); grant it with root, `sudo setcap cap_sys_nice+ep "
+                     f"\"$(readlink -f .venv/bin/python)\"`, or an rtprio limit of "
+                     f"{EMU_RT_PRIORITY} (docs/emulator.md, \"Scheduling\")"], out.stderr
+    assert "ready" not in out.stdout

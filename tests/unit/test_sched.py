@@ -1,6 +1,7 @@
-"""The ground station's scheduling (gcs/fly/sched.py), applied in a child process (never to the
-test runner), as the user running the tests and, where the tests run as root, as an unprivileged
-user (setpriv), for whom the operating system refuses both raises."""
+"""Process scheduling (vehicle_emulator/sched.py) as the ground station (gcs/fly/sched.py) and
+`vehicle-emu` (cli.py) ask for it, applied in a child process (never to the test runner), as the
+user running the tests and, where the tests run as root, as an unprivileged user (setpriv), for
+whom the operating system refuses both raises."""
 
 from __future__ import annotations
 
@@ -13,12 +14,17 @@ import sys
 import pytest
 
 from gcs.fly.sched import POLICIES, RAISED_NICE, RT_PRIORITY, apply_scheduling
+from vehicle_emulator.sched import EMU_RAISED_NICE, EMU_RT_PRIORITY
 
 PROBE = """
 import json, os, sys
 from gcs.fly.sched import SchedulingError, apply_scheduling
+from vehicle_emulator import sched
 try:
-    s = apply_scheduling(sys.argv[1])
+    if sys.argv[2] == "gcs":
+        s = apply_scheduling(sys.argv[1])
+    else:
+        s = sched.apply_scheduling(sys.argv[1], sched.EMULATOR)
     out = {"policy": s.policy, "detail": s.detail}
 except SchedulingError as exc:
     out = {"error": str(exc)}
@@ -30,8 +36,8 @@ print(json.dumps(out))
 ROOT = os.geteuid() == 0
 
 
-def probe(policy: str, *, unprivileged: bool = False) -> dict:
-    cmd = [sys.executable, "-c", PROBE, policy]
+def probe(policy: str, *, unprivileged: bool = False, program: str = "gcs") -> dict:
+    cmd = [sys.executable, "-c", PROBE, policy, program]
     if unprivileged:  # nobody, no capabilities, no rtprio limit
         cmd = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", "--inh-caps=-all",
                *cmd]
@@ -76,3 +82,33 @@ def test_an_unknown_policy_is_a_value_error():
     assert POLICIES == ("auto", "realtime", "raised", "normal")
     with pytest.raises(ValueError, match=r"fly.scheduling 'fast': expected one of auto, "):
         apply_scheduling("fast")
+
+
+def test_the_emulator_asks_one_step_below_the_ground_station():
+    # the ground station's tick preempts the vehicles' stand-in on a shared core, and the
+    # stand-in preempts (or outweighs) every normally scheduled process
+    assert 1 <= EMU_RT_PRIORITY < RT_PRIORITY
+    assert RAISED_NICE < EMU_RAISED_NICE < 0
+    out = probe("auto", program="emulator")
+    if ROOT:
+        assert out["policy"] == "realtime" and out["fifo"], out
+        assert out["priority"] == EMU_RT_PRIORITY
+        assert out["detail"] == f"real-time scheduling: SCHED_FIFO priority {EMU_RT_PRIORITY}"
+    raised = probe("raised", program="emulator")
+    if ROOT:
+        assert raised["policy"] == "raised" and raised["nice"] == EMU_RAISED_NICE, raised
+
+
+@pytest.mark.skipif(not (ROOT and shutil.which("setpriv")),
+                    reason="needs root to run a child as an unprivileged user")
+def test_the_emulators_refusals_name_its_option_and_how_to_grant_it():
+    out = probe("auto", unprivileged=True, program="emulator")
+    assert out["policy"] == "normal" and not out["fifo"]
+    assert out["detail"].startswith(
+        "normal scheduling: SCHED_FIFO refused (Operation not permitted); nice -5 refused "
+        "(Permission denied); a busy machine can make the vehicles' answers late: grant it with "
+        "root")
+    out = probe("realtime", unprivileged=True, program="emulator")
+    assert out["error"].startswith("--scheduling realtime: SCHED_FIFO refused (Operation not "
+                                   "permitted); grant it with root")
+    assert "an rtprio limit of 9 (docs/emulator.md" in out["error"]
