@@ -11,11 +11,11 @@ Start-up: the physics kernels are compiled (announced on stderr when the cache i
 jitcache), then the links open and one line ``vehicle-emu: ready: ...`` goes to stdout; a parent
 process (``gcs fly --emulators``) waits for that line. ``--compile-only`` compiles and exits.
 
-Scheduling (``--scheduling``): at start the process asks for the best priority the operating
-system permits, one step below the ground station's (sched.py: SCHED_FIFO `EMU_RT_PRIORITY`, else
-nice `EMU_RAISED_NICE`). The vehicles it stands in for each have a processor of their own: a
-stand-in that a busy machine preempts answers late, and a test flown against it measures the
-machine rather than the ground station.
+Scheduling (``--scheduling``): at start the process asks for a raised priority where the
+operating system permits it (sched.py: nice `EMU_RAISED_NICE`; SCHED_FIFO `EMU_RT_PRIORITY`, one
+below the ground station's, by name). The vehicles it stands in for each have a processor of
+their own: a stand-in that a busy machine preempts answers late, and a test flown against it
+measures the machine rather than the ground station.
 """
 
 from __future__ import annotations
@@ -162,9 +162,9 @@ def _parser() -> argparse.ArgumentParser:
         "--scheduling",
         choices=POLICIES,
         default="auto",
-        help="the operating system's priority for the vehicles (default auto: SCHED_FIFO "
-        f"priority {EMU_RT_PRIORITY}, else nice {EMU_RAISED_NICE}, else normal, one step below "
-        "gcs fly; realtime/raised: exit 2 if refused)",
+        help=f"the operating system's priority for the vehicles (default auto: nice "
+        f"{EMU_RAISED_NICE}, else normal; realtime: SCHED_FIFO priority {EMU_RT_PRIORITY}, one "
+        "below gcs fly; realtime/raised: exit 2 if refused)",
     )
     ap.add_argument(
         "--param",
