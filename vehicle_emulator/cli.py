@@ -231,8 +231,8 @@ def warm_up(emu: Emulator) -> None:
 
 
 async def _amain(args: argparse.Namespace) -> int:
-    # first: a refusal is one line before anything is built (the compile then runs at this
-    # priority too, one core at most)
+    # first: a refusal is one line before anything is built (the compile then runs at the
+    # priority granted)
     scheduling = apply_scheduling(args.scheduling, EMULATOR)
     (log.warning if scheduling.policy == "normal" and args.scheduling == "auto" else log.info)(
         "vehicle-emu: %s", scheduling.detail)

@@ -79,15 +79,21 @@ def commands_sent(tlog: Path, sysid: int) -> list[tuple[int, float, float]]:
 
 def test_px4_from_the_ground_flown_twice_without_restarting_the_vehicles(tmp_path: Path) -> None:
     # GIVEN Scenario I's team on the ground, px4 personality (PX4 v1.16.0: arming refused for
-    # ~3 s after boot, two ACKs per DO_SET_MODE, HEARTBEAT at 1 Hz); gcs fly starts with them.
-    # The starts 5 m lower (3-7 m up): a shorter climb and landing, the same sequence
+    # ~3 s after boot, two ACKs per DO_SET_MODE, HEARTBEAT at 1 Hz), booted once gcs fly waits
+    # for them (started the other way round, a slow ground-station start-up may come after the
+    # 3 s). The starts 5 m lower (3-7 m up): a shorter climb and landing, the same sequence
     team = px4_team(tmp_path, duration_s=3.0, z_shift=-5.0)
+    first = Gcs(team, tmp_path / "first", "--mode", "rates")
+    first.wait_for("INFO gcs.app: rates mode with", 120)
     with emulators(team, 0, tmp_path):
-        code1, out1, log1 = fly_once(team, tmp_path / "first")
-        # THEN the first flight waits for the pre-arm checks, flies, lands, disarms: exit 0
+        code1, out1 = first.finish(200)
+        log1 = first.log_path.read_text()
+        # THEN the first flight waits for every vehicle's pre-arm checks, flies, lands,
+        # disarms: exit 0
         assert code1 == 0, log1[-3000:]
         assert "gcs fly: done: formation complete (exit 0)" in out1
-        assert "vehicle 1 (sysid 1): waiting for its pre-arm checks (SYS_STATUS)" in log1
+        for k in range(1, 5):
+            assert f"vehicle {k} (sysid {k}): waiting for its pre-arm checks (SYS_STATUS)" in log1
         # AND every mode change and the arming were confirmed (no ACK left unread)
         for k in range(1, 5):
             assert f"vehicle {k}: arm ok" in log1 and f"vehicle {k}: offboard ok" in log1
