@@ -17,10 +17,13 @@ $(BIN)/activate: pyproject.toml
 install: $(BIN)/activate
 
 # Three workers on two cores: the integration tests fly in real time and mostly wait (the suite
-# keeps the cores ~65 % busy), so a third file in flight cuts the wall time by a quarter.
+# keeps the cores ~65 % busy), so a third file in flight cuts the wall time by a quarter. Tests
+# marked `alone` then run by themselves: flights whose figures the suite's own load would move
+# (pyproject.toml, the marker's text).
 test: install
 	$(BIN)/ruff check gcs vehicle_emulator tests benchmarks
-	$(BIN)/python -m pytest -n 3 --dist loadfile
+	$(BIN)/python -m pytest -n 3 --dist loadfile -m "not alone"
+	$(BIN)/python -m pytest -m alone
 
 # The main job: start the emulator fleet, fly the team over MAVLink, stop the emulators.
 demo: install

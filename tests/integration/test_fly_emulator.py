@@ -246,7 +246,14 @@ def test_scenario_one_rates_mode_at_100_hz_with_origins_50_m_apart(tmp_path):
     assert plot.returncode == 0 and ".png" in plot.stdout
 
 
+@pytest.mark.alone
 def test_scenario_one_actuators_mode_at_250_hz(tmp_path):
+    """Scenario I in actuators mode at 250 Hz. Run alone (make test): beside two other flights
+    on 2 cores, the links' round trips reached p99 73-127 ms (0.4-0.5 ms p50 and ~3 ms p99
+    alone), and UAV3, the lightest, had its torque limit (51) applied in 7,300-7,700 of ~8,000
+    formation ticks (~500 alone): a saturated roll limit cycle of 0.4-1.3 rad/s that breaks the
+    0.05 m bound in half the fresh-clone runs. The same flight beside two busy loops holds
+    (benchmarks/bench_load.py); the limit cycle under delay is an open point of issue 11."""
     base = free_udp_port_block(4)
     team = team_file(tmp_path, base, duration_s=32.0)
     with emulators(team, base, tmp_path):
