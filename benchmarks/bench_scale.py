@@ -9,7 +9,10 @@ gains. Writes the "## Scale" section of docs/benchmarks.md and docs/figures/benc
 Figures per size: ticks on time (started <= 2 ms after the deadline), tick lateness p99, the
 telemetry's true age p99 (largest over the vehicles), the CPU of the ground station and of the
 emulator per vehicle (% of one core, over the whole run), the formation error (largest over all
-pairs) at the end, and gcs sim's at the same time.
+pairs) at the end, and gcs sim's at the same time. How fast the machine was: the share of its
+CPU time the hypervisor took (steal, /proc/stat) during each flight, and, before and after the
+sweep, `benchmarks/bench_edges.py`'s 240-vehicle tick (median and best over 2 s), the figure the
+notes compare between days.
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ HEADING = "## Scale"
 SHARED_PORT = 14550
 
 sys.path.insert(0, str(ROOT))
+from benchmarks.bench_edges import time_grid  # noqa: E402
 from benchmarks.docsection import write_section  # noqa: E402
 from benchmarks.make_grid import team_text  # noqa: E402
 from gcs.control.position import phi  # noqa: E402
@@ -62,6 +66,32 @@ def team_files(n: int, duration_s: float, work: Path) -> tuple[Path, Path]:
     return fly_path, sim_path
 
 
+def cpu_times() -> list[int]:
+    """The machine's CPU times from /proc/stat (user nice system idle iowait irq softirq steal
+    ..., in clock ticks); empty where there is no /proc/stat."""
+    try:
+        with open("/proc/stat") as f:
+            return [int(x) for x in f.readline().split()[1:]]
+    except (OSError, ValueError):
+        return []
+
+
+def steal_pct(before: list[int], after: list[int]) -> float:
+    """% of all CPU time between two `cpu_times` that the hypervisor took (steal, field 8)."""
+    if len(before) < 8 or len(after) < 8:
+        return float("nan")
+    total = sum(after[:8]) - sum(before[:8])
+    return 100.0 * (after[7] - before[7]) / total if total > 0 else float("nan")
+
+
+def reference_tick() -> tuple[float, float]:
+    """`benchmarks/bench_edges.py`'s 240-vehicle tick on this machine now: (median, best) [us]
+    over 2 s of back-to-back ticks."""
+    rows, cols = GRIDS[240]
+    row = time_grid(240, rows, cols, 2.0)
+    return row["tick_median_us"], row["tick_best_us"]
+
+
 def fly(team: Path, work: Path) -> dict:
     emu_stats = work / "emu.json"
     emu = subprocess.Popen(
@@ -71,7 +101,7 @@ def fly(team: Path, work: Path) -> dict:
     out = work / "fly"
     try:
         time.sleep(2.0)  # the fleet binds its ports (gcs fly would wait for it anyway)
-        t0 = time.monotonic()
+        t0, cpu0 = time.monotonic(), cpu_times()
         # its output to a file, not a pipe read at the end: a flight that stops 240 vehicles
         # logs more than a pipe holds, and a writer blocked on a full pipe stops flying
         log_path = work / "gcs.log"
@@ -81,7 +111,7 @@ def fly(team: Path, work: Path) -> dict:
                  "--mode", "rates", "--end-action", "hold", "--no-figures", "--status", "off"],
                 stdout=log, stderr=subprocess.STDOUT)
             _, status, usage = os.wait4(gcs.pid, 0)
-        wall = time.monotonic() - t0
+        wall, steal = time.monotonic() - t0, steal_pct(cpu0, cpu_times())
         output = log_path.read_text()
     finally:
         emu.terminate()
@@ -92,7 +122,7 @@ def fly(team: Path, work: Path) -> dict:
     emu_figures = json.loads(emu_stats.read_text()) if emu_stats.exists() else {}
     last = (output.strip().splitlines() or [""])[-1]
     return {"exit": code, "why": last, "report": report, "emu": emu_figures,
-            "gcs_cpu_s": usage.ru_utime + usage.ru_stime, "gcs_wall_s": wall}
+            "gcs_cpu_s": usage.ru_utime + usage.ru_stime, "gcs_wall_s": wall, "steal": steal}
 
 
 def sim(team: Path, work: Path) -> dict | None:
@@ -112,7 +142,8 @@ def end_error(report: dict | None) -> float:
 
 def figures(n: int, r: dict, sim_report: dict | None) -> dict:
     rep = r["report"]
-    row: dict = {"n": n, "exit": r["exit"], "why": r["why"], "sim_end_m": end_error(sim_report)}
+    row: dict = {"n": n, "exit": r["exit"], "why": r["why"], "sim_end_m": end_error(sim_report),
+                 "steal_pct": r["steal"]}
     emu = r["emu"]
     emu_cpu = emu.get("cpu_s")
     emu_wall = emu.get("wall_s") or emu.get("simulated_s")
@@ -144,7 +175,7 @@ def _first_reason(why: str) -> str:
     return f"{head}; and {rest.count('; vehicle ') + 1} per-vehicle notes"
 
 
-def section(rows: list[dict], duration_s: float) -> str:
+def section(rows: list[dict], duration_s: float, ticks: list[tuple[float, float]]) -> str:
     lines = [
         HEADING, "",
         f"`python benchmarks/bench_scale.py` on {platform.machine()}, {os.cpu_count()} CPU(s), "
@@ -155,17 +186,21 @@ def section(rows: list[dict], duration_s: float) -> str:
         "after its deadline. Age: the telemetry's true age (from the vehicle's own stamps) p99, "
         "the largest over the vehicles. CPU: % of one core per vehicle over the whole run "
         "(start-up, preflight, formation). Error: the largest over all pairs at the end; `sim`: "
-        "`gcs sim` of the same team and gains (no link).", "",
+        "`gcs sim` of the same team and gains (no link). Steal: % of the machine's CPU time the "
+        "hypervisor took during the flight. The machine's speed: `benchmarks/bench_edges.py`'s "
+        "240-vehicle tick took " + " and ".join(
+            f"{median:.0f} us (best {best:.0f})" for median, best in ticks)
+        + " before and after the sweep.", "",
         "| vehicles | exit | ticks on time | lateness p99 [ms] | age p99 [ms] | GCS CPU / vehicle "
-        "| emulator CPU / vehicle | error at end [m] | sim [m] |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| emulator CPU / vehicle | error at end [m] | sim [m] | steal |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
             f"| {r['n']} | {r['exit']} | {_f(r['on_time'], '.2f')} % | {_f(r['late_p99'])} | "
             f"{_f(r['age_p99'])} | {_f(r['gcs_cpu_pct_per_vehicle'], '.2f')} % | "
             f"{_f(r['emu_cpu_pct_per_vehicle'], '.2f')} % | {_f(r['end_m'])} | "
-            f"{_f(r['sim_end_m'])} |")
+            f"{_f(r['sim_end_m'])} | {_f(r['steal_pct'], '.1f')} % |")
     failed = [r for r in rows if r["exit"] != 0]
     if failed:
         lines += ["", "Exits other than 0: " + "; ".join(
@@ -205,7 +240,7 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--no-sim", action="store_true")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
-    rows = []
+    rows, ticks = [], [reference_tick()]
     for n in (int(x) for x in args.sizes.split(",")):
         with tempfile.TemporaryDirectory() as tmp:
             work = Path(tmp)
@@ -215,7 +250,8 @@ def main(argv: list[str]) -> int:
             row = figures(n, r, sim_report)
         rows.append(row)
         print(json.dumps(row), flush=True)
-    text = section(rows, args.duration_s)
+    ticks.append(reference_tick())
+    text = section(rows, args.duration_s, ticks)
     print(text)
     if not args.no_write:
         plot(rows)
