@@ -93,18 +93,21 @@ class ArduPilotNode(VehicleNode):
 
     # --- state exchange ------------------------------------------------------------------------
 
-    def observe(self) -> CopterObservation:
-        o = super().observe()
-        tilt_cos = float(self.plant.rotation[self.index, 2, 2])
-        return CopterObservation(o.position_enu_m, o.velocity_enu_mps, o.yaw_enu_rad,
-                                 o.on_ground, o.battery_remaining, tilt_cos)
+    def observation(self, position: tuple[float, float, float],
+                    velocity: tuple[float, float, float], yaw: float, on_ground: bool,
+                    battery_remaining: float, tilt_cos: float) -> CopterObservation:
+        return CopterObservation(position, velocity, yaw, on_ground, battery_remaining, tilt_cos)
 
-    def refresh_status(self, now_s: float) -> None:
-        super().refresh_status(now_s)
+    def status_row(self, now_s: float) -> tuple:
+        row = list(super().status_row(now_s))
+        ap = self.autopilot
+        row[4] = ap.base_mode(now_s) & 0x7F  # SAFETY_ARMED added per HEARTBEAT
+        row[5] = ap.landed_state()
+        row[1] = ap.system_status(now_s)
+        return tuple(row)
+
+    def refresh_extra(self, now_s: float) -> None:
         i, ap, st = self.index, self.autopilot, self.status
-        st.base_mode_flags[i] = ap.base_mode(now_s) & 0x7F  # SAFETY_ARMED added per HEARTBEAT
-        st.landed_state[i] = ap.landed_state()
-        st.system_status[i] = ap.system_status(now_s)
         st.position_from_ms[i] = math.ceil(ap.boot.at(ap.boot.POSITION_S) * 1e3)
         st.vtol_state[i] = 3  # MAV_VTOL_STATE_MC, as ArduCopter reports it
         home = ap.home_enu_m  # ArduPilot sets home where it arms

@@ -246,6 +246,7 @@ class Emulator:
         self.poller: LinkPoller | None = None
         self._setpoint_event: asyncio.Event | None = None
         self._fault_nodes = [node for node in self.nodes if not node.faults.idle]
+        self._battery_capacity_c = np.array([node.battery_capacity_c for node in self.nodes])
         # nodes with a second COMMAND_ACK queued, by index (a dataclass == on a node compares
         # every field: a list's `in` cost a fleet's burst of DO_SET_MODEs seconds)
         self._ack_nodes: dict[int, VehicleNode] = {}
@@ -282,19 +283,46 @@ class Emulator:
             self._expire(now)
         if now + 1e-9 >= self._next_autopilot_s:
             self._next_autopilot_s = now + 1.0 / AUTOPILOT_RATE_HZ
-            for node in self.nodes:
-                node.autopilot.tick(now, node.observe())
+            rows = []
+            for node, seen in zip(self.nodes, self.observe_fleet(), strict=True):
+                node.autopilot.tick(now, seen)
                 node.apply_demand()
                 node.drain_events()
-                node.refresh_status(now)
+                rows.append(node.status_row(now))
+                node.refresh_extra(now)
+                node.tick_fault_clock(now)
                 node.report_input(now)
                 node.announce_origin(now)
                 self.link_up[node.index] = not node.impairment.is_down(now)
+            # each vehicle's status as its refresh_status would write it; nothing in the loop
+            # reads another vehicle's, nor its own again
+            self.status.write_rows(rows)
+            self.status.refresh_battery(self.plant.charge_used_c, self.plant.thrust_n,
+                                        self._battery_capacity_c)
             self._fault_nodes = [node for node in self.nodes if not node.faults.idle]
         out = self.telemetry.collect(now, self.plant, self.status, self.link_up)
         for i, data in out.items():
             self.nodes[i].send_all(data)
         return steps
+
+    def observe_fleet(self) -> list[Any]:
+        """Every vehicle's `VehicleNode.observe`, gathered from the fleet's arrays at once (the
+        same values: at 240 vehicles and 50 Hz, a node's own indexing of them cost 7 % of the
+        fleet's time). Exact as the tick uses it: a vehicle's tick changes no other's plant
+        state or battery."""
+        p, ob = self.plant, self.plant.onboard
+        est = ob.sensor_model.astype(bool)
+        pos = np.where(est[:, None], ob.position_est_enu_m, p.position_enu_m).tolist()
+        vel = np.where(est[:, None], ob.velocity_est_enu_mps, p.velocity_enu_mps).tolist()
+        rot = np.where(est[:, None, None], ob.rotation_est, p.rotation)
+        r10, r00 = rot[:, 1, 0].tolist(), rot[:, 0, 0].tolist()
+        ground, tilt = p.on_ground.tolist(), p.rotation[:, 2, 2].tolist()
+        battery = self.status.battery_remaining.tolist()
+        return [
+            node.observation(tuple(pos[i]), tuple(vel[i]), math.atan2(r10[i], r00[i]),
+                             bool(ground[i]), battery[i], tilt[i])
+            for i, node in ((node.index, node) for node in self.nodes)
+        ]
 
     def _step_through_deadlines(self, steps: int) -> None:
         """``steps`` physics steps, stopping at each autopilot deadline that falls inside them

@@ -85,6 +85,33 @@ class FleetStatus:
     battery_current_a: np.ndarray
     errors_comm: np.ndarray  # uint16: rejected input so far
 
+    #: The columns a vehicle refreshes at the autopilot's rate (`VehicleNode.status_row`), in
+    #: the row's order.
+    ROW_COLUMNS = ("armed", "system_status", "prearm_ok", "custom_mode", "base_mode_flags",
+                   "landed_state", "errors_comm")
+
+    def write_row(self, i: int, row: tuple) -> None:
+        """One vehicle's `ROW_COLUMNS` values."""
+        for name, value in zip(self.ROW_COLUMNS, row, strict=True):
+            getattr(self, name)[i] = value
+
+    def write_rows(self, rows: list[tuple]) -> None:
+        """Every vehicle's `ROW_COLUMNS` values (``rows[i]``: vehicle i's), a column at a time:
+        at 240 vehicles and 50 Hz, a numpy write per value was a tenth of the fleet's time."""
+        for name, column in zip(self.ROW_COLUMNS, zip(*rows, strict=True), strict=True):
+            getattr(self, name)[:] = column
+
+    def refresh_battery(self, charge_used_c: np.ndarray, thrust_n: np.ndarray,
+                        capacity_c: np.ndarray, which: slice = slice(None)) -> None:
+        """The battery model of the vehicles ``which`` (after their ``armed``): the charge used
+        of ``capacity_c`` [C], 13.2 V empty to 16.8 V full, 0.5 A + 0.8 A per newton of thrust
+        while armed."""
+        remaining = np.maximum(0.0, 1.0 - charge_used_c[which] / capacity_c)
+        self.battery_remaining[which] = remaining
+        self.battery_voltage_v[which] = 13.2 + 3.6 * remaining
+        self.battery_current_a[which] = np.where(self.armed[which], 0.5 + 0.8 * thrust_n[which],
+                                                 0.0)
+
     @classmethod
     def create(cls, sysids: list[int]) -> FleetStatus:
         """Defaults for ``len(sysids)`` vehicles."""

@@ -190,20 +190,29 @@ class VehicleNode:
         """This vehicle as its autopilot knows it: with a sensor model (the calibrated
         personalities), its own estimates (what PX4 and ArduPilot hold, take off from and fly
         their position loops on, and what LOCAL_POSITION_NED reports), else the plant's state;
-        the landed flag is the plant's."""
+        the landed flag is the plant's. (The runner's tick gathers the whole fleet's at once:
+        `observe_fleet`.)"""
         i, p = self.index, self.plant
         ob = p.onboard
         est = bool(ob.sensor_model[i])
         pos = ob.position_est_enu_m[i] if est else p.position_enu_m[i]
         vel = ob.velocity_est_enu_mps[i] if est else p.velocity_enu_mps[i]
         rot = ob.rotation_est[i] if est else p.rotation[i]
-        return Observation(
+        return self.observation(
             (float(pos[0]), float(pos[1]), float(pos[2])),
             (float(vel[0]), float(vel[1]), float(vel[2])),
             math.atan2(rot[1, 0], rot[0, 0]),
             bool(p.on_ground[i]),
             float(self.status.battery_remaining[i]),
+            float(p.rotation[i, 2, 2]),
         )
+
+    def observation(self, position: tuple[float, float, float],
+                    velocity: tuple[float, float, float], yaw: float, on_ground: bool,
+                    battery_remaining: float, tilt_cos: float) -> Observation:
+        """The autopilot's observation from these values (`tilt_cos`: the plant's R[2, 2], which
+        only some personalities read)."""
+        return Observation(position, velocity, yaw, on_ground, battery_remaining)
 
     def apply_demand(self) -> None:
         """Write the autopilot's demand into the plant arrays (if it changed)."""
@@ -214,29 +223,47 @@ class VehicleNode:
         write_demand(self.plant, self.index, ap.demand)
 
     def refresh_status(self, now_s: float) -> None:
-        """Status arrays for telemetry, the battery model and the fault clock parameter."""
-        i, ap, st = self.index, self.autopilot, self.status
-        st.armed[i] = ap.armed
-        st.system_status[i] = ap.system_status(now_s)
-        st.prearm_ok[i] = ap.prearm_ok(now_s)
-        st.custom_mode[i] = ap.custom_mode
-        st.base_mode_flags[i] = 1 | _BASE_FLAGS.get(ap.nav_state, 4 | 16 | 8)
-        on_ground = bool(self.plant.on_ground[i])
-        if on_ground:
-            st.landed_state[i] = 1
+        """Status arrays for telemetry, the battery model and the fault clock parameter. (The
+        runner's tick does the same for the whole fleet, writing `status_row`s by column.)"""
+        i = self.index
+        self.status.write_row(i, self.status_row(now_s))
+        self.status.refresh_battery(self.plant.charge_used_c, self.plant.thrust_n,
+                                    np.array([self.battery_capacity_c]), slice(i, i + 1))
+        self.refresh_extra(now_s)
+        self.tick_fault_clock(now_s)
+
+    @property
+    def battery_capacity_c(self) -> float:
+        """The battery's charge [C]: 3 Ah per kg of take-off mass (at least 3 Ah)."""
+        return max(1.0, 3.0 * self.spec.mass_kg) * 3600.0
+
+    def status_row(self, now_s: float) -> tuple:
+        """This vehicle's values of `FleetStatus.ROW_COLUMNS`, in that order."""
+        i, ap = self.index, self.autopilot
+        if self.plant.on_ground[i]:
+            landed = 1
         elif ap.nav_state is NavState.AUTO_TAKEOFF:
-            st.landed_state[i] = 3
+            landed = 3
         elif ap.nav_state is NavState.AUTO_LAND:
-            st.landed_state[i] = 4
+            landed = 4
         else:
-            st.landed_state[i] = 2
-        capacity_c = max(1.0, 3.0 * self.spec.mass_kg) * 3600.0  # 3 Ah per kg of take-off mass
-        remaining = max(0.0, 1.0 - self.plant.charge_used_c[i] / capacity_c)
-        st.battery_remaining[i] = remaining
-        st.battery_voltage_v[i] = 13.2 + 3.6 * remaining
-        st.battery_current_a[i] = (0.5 + 0.8 * self.plant.thrust_n[i]) if ap.armed else 0.0
-        st.errors_comm[i] = min(self.counters.total(self.decode_rejected), 65535)
-        clock = self.faults.clock_s(now_s, ap.first_offboard_s)
+            landed = 2
+        return (
+            ap.armed,
+            ap.system_status(now_s),
+            ap.prearm_ok(now_s),
+            ap.custom_mode,
+            1 | _BASE_FLAGS.get(ap.nav_state, 4 | 16 | 8),
+            landed,
+            min(self.counters.total(self.decode_rejected), 65535),
+        )
+
+    def refresh_extra(self, now_s: float) -> None:
+        """Status a personality keeps beyond `status_row`'s columns (none here)."""
+
+    def tick_fault_clock(self, now_s: float) -> None:
+        """The fault clock parameter, and its STATUSTEXT when it starts."""
+        clock = self.faults.clock_s(now_s, self.autopilot.first_offboard_s)
         self.params.set("EMU_FLT_CLK", -1.0 if clock is None else min(clock, 1e9), force=True)
         if clock is not None and not self._fault_clock_announced:
             self._fault_clock_announced = True

@@ -345,3 +345,35 @@ def test_a_late_wake_up_does_not_fly_an_expired_guided_target_through_its_catch_
     assert emu.plant.thrust_sp_norm[0] != pytest.approx(0.4321, abs=1e-6)
     echoed = [m.thrust for m in link.msgs if m.get_type() == "ATTITUDE_TARGET"]
     assert echoed and all(t != pytest.approx(0.4321, abs=1e-6) for t in echoed)
+
+
+def test_the_fleet_tick_observes_and_refreshes_every_vehicle_as_each_node_would_alone():
+    # GIVEN a fleet of every personality, in the air and on the ground, one of them armed and
+    # climbing through takeoff (its battery draining, its landed state changing) for 3 s
+    specs = [replace(default_vehicle(k + 1, on_ground=k % 2 == 0), autopilot=name)
+             for k, name in enumerate(["px4", "ardupilot", "nominal", "px4", "ardupilot",
+                                       "nominal"])]
+    emu = Emulator(specs)
+    for node in emu.nodes:
+        node.links.append(FakeLink())
+    _run(emu, 5.0)  # past the pre-arm checks
+    link = emu.nodes[0].links[0]
+    _send(emu, 0, mavlink.MAVLink_command_long_message(1, 1, 22, 0, 0, 0, 0, 0, 0, 0, 5.0), link)
+    _send(emu, 0, mavlink.MAVLink_command_long_message(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0), link)
+    _run(emu, 8.0)
+    emu.advance_to(emu._next_autopilot_s)  # ends on an autopilot tick: the rows were written now
+    assert emu.status.armed[0] and emu.status.battery_remaining[0] < 1.0
+    assert emu.status.landed_state[0] in (2, 3)  # in the air, or taking off
+    # WHEN the fleet's observations and status rows are set beside each node's own
+    gathered = emu.observe_fleet()
+    own = [node.observe() for node in emu.nodes]
+    columns = (*emu.status.ROW_COLUMNS, "battery_remaining", "battery_voltage_v",
+               "battery_current_a")
+    fleet_status = {name: getattr(emu.status, name).copy() for name in columns}
+    for node in emu.nodes:
+        node.refresh_status(emu.now_s)
+    # THEN they are the same, value for value (types included: a copter's has its tilt)
+    assert gathered == own
+    assert [type(o) for o in gathered] == [type(o) for o in own]
+    for name, values in fleet_status.items():
+        np.testing.assert_array_equal(values, getattr(emu.status, name), err_msg=name)
