@@ -10,6 +10,7 @@ such message").
 from __future__ import annotations
 
 import contextlib
+import itertools
 import math
 import re
 import socket
@@ -222,12 +223,16 @@ def test_default_streams_message_intervals_parameters_and_statustext(tmp_path):
         acks, _, timed = exchange(client, 510, MSG["ATTITUDE"], window_s=0.3)
         assert [m.interval_us for _, m in timed if m.get_type() == "MESSAGE_INTERVAL"] == [-1]
         # every stream the GCS asks for, at the rate asked (recorded exact), in the vehicle's
-        # own time (its stamps: a loaded host slows SITL's clock and the stream with it; a
-        # late loop still skips the odd message, as SITL's does: 96 Hz on a loaded run)
+        # own time (its stamps: a loaded host slows SITL's clock and the stream with it): the
+        # usual step is the interval asked for; a late loop skips the odd message, as SITL's
+        # does (96 Hz on a loaded run; 93.5 Hz in a CI run beside two flights), so the mean
+        # rate is bounded more loosely (50 or 200 Hz would fail both)
         request(client, "ATTITUDE_QUATERNION", 100)
         aq = client.collect(1.0, "ATTITUDE_QUATERNION")
-        span_s = (aq[-1].time_boot_ms - aq[0].time_boot_ms) * 1e-3
-        assert len(aq) >= 50 and 95.0 <= (len(aq) - 1) / span_s <= 102.0
+        stamps_ms = [m.time_boot_ms for m in aq]
+        assert len(aq) >= 50
+        assert statistics.median(b - a for a, b in itertools.pairwise(stamps_ms)) == 10
+        assert 85.0 <= (len(aq) - 1) / ((stamps_ms[-1] - stamps_ms[0]) * 1e-3) <= 102.0
         request(client, "EXTENDED_SYS_STATE", 5)
         ess = client.wait("EXTENDED_SYS_STATE", 1)
         assert (ess.vtol_state, ess.landed_state) == (3, 1)  # MC, on the ground
