@@ -318,11 +318,12 @@ class Emulator:
         r10, r00 = rot[:, 1, 0].tolist(), rot[:, 0, 0].tolist()
         ground, tilt = p.on_ground.tolist(), p.rotation[:, 2, 2].tolist()
         battery = self.status.battery_remaining.tolist()
-        return [
-            node.observation(tuple(pos[i]), tuple(vel[i]), math.atan2(r10[i], r00[i]),
-                             bool(ground[i]), battery[i], tilt[i])
-            for i, node in ((node.index, node) for node in self.nodes)
-        ]
+        seen = []
+        for node in self.nodes:
+            i = node.index
+            seen.append(node.observation(tuple(pos[i]), tuple(vel[i]), math.atan2(r10[i], r00[i]),
+                                         bool(ground[i]), battery[i], tilt[i]))
+        return seen
 
     def _step_through_deadlines(self, steps: int) -> None:
         """``steps`` physics steps, stopping at each autopilot deadline that falls inside them
