@@ -102,7 +102,7 @@ class FleetStatus:
             getattr(self, name)[:] = column
 
     def refresh_battery(self, charge_used_c: np.ndarray, thrust_n: np.ndarray,
-                        capacity_c: np.ndarray, which: slice = slice(None)) -> None:
+                        capacity_c: np.ndarray | float, which: slice = slice(None)) -> None:
         """The battery model of the vehicles ``which`` (after their ``armed``): the charge used
         of ``capacity_c`` [C], 13.2 V empty to 16.8 V full, 0.5 A + 0.8 A per newton of thrust
         while armed."""

@@ -228,7 +228,7 @@ class VehicleNode:
         i = self.index
         self.status.write_row(i, self.status_row(now_s))
         self.status.refresh_battery(self.plant.charge_used_c, self.plant.thrust_n,
-                                    np.array([self.battery_capacity_c]), slice(i, i + 1))
+                                    self.battery_capacity_c, slice(i, i + 1))
         self.refresh_extra(now_s)
         self.tick_fault_clock(now_s)
 
