@@ -17,9 +17,10 @@ from __future__ import annotations
 import asyncio
 import time
 
+import numpy as np
 import pytest
 
-from vehicle_emulator.personality import PERSONALITIES
+from vehicle_emulator.personality import DEFAULT_AUTOPILOT, PERSONALITIES
 from vehicle_emulator.testing import free_udp_port, hover_thrust, run_emulator
 
 mavsdk_asyncio = pytest.importorskip("mavsdk.asyncio")
@@ -83,12 +84,37 @@ async def _start_offboard(telemetry: TelemetryAsync, offboard: OffboardAsync, th
 
 
 async def _hold_altitudes(telemetry: TelemetryAsync, n: int = 100) -> list[float]:
-    alts = []
+    return [alt for _, alt in await _hold_track(telemetry, n)]
+
+
+async def _hold_track(telemetry: TelemetryAsync, n: int = 100) -> list[tuple[float, float]]:
+    """(receive time [s], relative altitude [m]) of the next ``n`` positions (2 s at 50 Hz)."""
+    track = []
     async for p in telemetry.subscribe_position():
-        alts.append(p.relative_altitude_m)
-        if len(alts) >= n:  # 2 s at 50 Hz
+        track.append((time.monotonic(), p.relative_altitude_m))
+        if len(track) >= n:
             break
-    return alts
+    return track
+
+
+def _net_vertical_accel(track: list[tuple[float, float]], drag_per_s: float) -> float:
+    """The vertical acceleration [m/s^2] left over at a thrust command, apart from the drag's.
+
+    With a constant thrust error a and the vehicle's linear drag c, dv/dt = a - c v, so from any
+    starting speed v0 the altitude follows h0 + v0 tau(t) + a (t - tau(t)) / c, with
+    tau(t) = (1 - exp(-c t)) / c (t^2 / 2 in place of (t - tau) / c without drag). A least-squares
+    fit of h0, v0 and a to the track gives a whatever speed the vehicle had when the command
+    changed: at the hover thrust a is ~0; a thrust error of 1 % of hover is 0.098 m/s^2."""
+    t = np.array([s for s, _ in track]) - track[0][0]
+    h = np.array([alt for _, alt in track])
+    if drag_per_s > 1e-9:
+        tau = -np.expm1(-drag_per_s * t) / drag_per_s
+        accel_basis = (t - tau) / drag_per_s
+    else:
+        tau, accel_basis = t, 0.5 * t * t
+    design = np.column_stack([np.ones_like(t), tau, accel_basis])
+    (_, _, accel), *_ = np.linalg.lstsq(design, h, rcond=None)
+    return float(accel)
 
 
 async def _fly(port: int, ardupilot: bool = False) -> dict:
@@ -128,7 +154,7 @@ async def _fly(port: int, ardupilot: bool = False) -> dict:
         await offboard.set_attitude_rate(AttitudeRate(0.0, 0.0, 0.0, hover - 0.08))
         await _first(telemetry.subscribe_velocity_ned(), 10, lambda v: v.down_m_s > -0.02)
         await offboard.set_attitude_rate(AttitudeRate(0.0, 0.0, 0.0, hover))
-        out["hold_alt_m"] = await _hold_altitudes(telemetry)
+        out["hold_track"] = await _hold_track(telemetry)
         out["mode"] = await _first(telemetry.subscribe_flight_mode(), 5)
         await offboard.stop()
     return out
@@ -164,12 +190,26 @@ ACK_WITHIN_S = 0.3
 MODE_SEEN_WITHIN_S = 1.0 + 0.3
 
 
-# The open-loop hold below checks the thrust normalisation: the brake ends when the REPORTED
-# vertical speed crosses zero, and px4's estimate carries SIH's 0.15 m/s vertical velocity
-# error (docs/emulator.md, "Calibration"), so with noise the true climb left at the switch to
-# hover thrust is anywhere within about +-0.15 m/s: the assertion is about the thrust, not the
-# estimator, so this flight is noise-free.
+# The open-loop hold below checks the thrust normalisation. The brake ends when MAVSDK reports
+# the climb has stopped, by when the vehicle is already sinking (a few cm/s for each 10 ms the
+# client takes to see it and answer), so the check is on the acceleration fitted from any start
+# speed (_net_vertical_accel), not on the altitude's spread. The fit needs a clean track, and
+# px4's estimate carries an EKF2-like wander (docs/emulator.md, "Calibration"): the assertion is
+# about the thrust, not the estimator, so this flight is noise-free.
+#: |net vertical acceleration| at hover thrust [m/s^2]: half a percent of the hover thrust (a
+#: 1 % error fits 0.096, the right thrust within 0.002, on this machine)
+HOVER_ACCEL_WITHIN = 0.05
 NOISE_FREE = ["--param", "EMU_NOISE=0"]
+
+
+def _assert_hover_thrust_holds(track, autopilot: str, above_m: float) -> None:
+    drag = PERSONALITIES[autopilot].dynamics.linear_drag_per_s
+    accel = _net_vertical_accel(track, drag)
+    alts = [alt for _, alt in track]
+    assert abs(accel) < HOVER_ACCEL_WITHIN, (
+        f"at hover thrust the vehicle accelerated {accel:+.3f} m/s^2 beyond its drag "
+        f"(altitude {alts[0]:.3f} -> {alts[-1]:.3f} m in {track[-1][0] - track[0][0]:.2f} s)")
+    assert min(alts) > above_m
 
 
 def test_mavsdk_discovers_arms_and_flies_offboard_with_attitude_rate(tmp_path):
@@ -183,9 +223,8 @@ def test_mavsdk_discovers_arms_and_flies_offboard_with_attitude_rate(tmp_path):
     assert ack_s < ACK_WITHIN_S and mode_s < MODE_SEEN_WITHIN_S
     assert out["climbed_to_m"] > 1.0
     assert out["mode"] == FlightMode.OFFBOARD
-    # at hover thrust the altitude holds (px4: SIH's linear drag damps the climb)
-    assert min(out["hold_alt_m"]) > 1.0
-    assert max(out["hold_alt_m"]) - min(out["hold_alt_m"]) < 0.15
+    # at hover thrust nothing but SIH's linear drag accelerates the vehicle
+    _assert_hover_thrust_holds(out["hold_track"], DEFAULT_AUTOPILOT, above_m=1.0)
 
 
 def test_mavsdk_takes_over_a_hovering_vehicle_with_one_setpoint_then_start(tmp_path):
@@ -219,7 +258,7 @@ def test_mavsdk_on_ardupilot_arms_takes_off_and_flies_attitude_rates_in_guided(t
     assert ack_s < ACK_WITHIN_S and mode_s < MODE_SEEN_WITHIN_S
     assert out["climbed_to_m"] > 1.0 + out["took_off_m"]
     assert out["mode"] == FlightMode.OFFBOARD  # MAVSDK's name of ArduPilot's GUIDED
-    assert max(out["hold_alt_m"]) - min(out["hold_alt_m"]) < 0.15
+    _assert_hover_thrust_holds(out["hold_track"], "ardupilot", above_m=1.0 + out["took_off_m"])
 
 
 def test_mavsdk_on_ardupilot_takes_over_a_hovering_vehicle(tmp_path):
