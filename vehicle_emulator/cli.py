@@ -323,6 +323,7 @@ async def _amain(args: argparse.Namespace) -> int:
                            for g, c0 in zip(gc.get_stats(), collections0, strict=True)],
         # the most datagrams one socket held at a wake-up (a backlog: the fleet fell behind)
         "deepest_backlog": emu.poller.deepest if emu.poller is not None else 0,
+        "read_budget_stops": emu.poller.budget_stops if emu.poller is not None else 0,
         "by_vehicle": [_vehicle_summary(node) for node in emu.nodes],
     }
     if args.stats_json:

@@ -9,11 +9,12 @@ directions. Bytes are decoded by a per-link ``PeerDecoder`` (one parser per peer
 handed to a callback.
 
 ``LinkPoller`` reads many endpoints in bulk (a fleet's hundreds of sockets): one asyncio reader
-(an epoll descriptor) for all of them; at each wake-up every ready socket is drained and the
-datagrams are decoded together (codec.HotDecoder: the setpoint streams without pymavlink's
-parser), then delivered in arrival order, exactly as one callback per datagram would; before
-each, ``between`` lets a periodic tick that fell due run first. Sends go straight to the socket
-(asyncio's transport only when its buffer holds earlier data).
+(an epoll descriptor) for all of them; at each wake-up the ready sockets are drained (for at
+most ``read_budget_s``, then the next wake-up reads on) and the datagrams are decoded together
+(codec.HotDecoder: the setpoint streams without pymavlink's parser), then delivered in arrival
+order, exactly as one callback per datagram would; before each, ``between`` lets a periodic tick
+that fell due run first. Sends go straight to the socket (asyncio's transport only when its
+buffer holds earlier data).
 
 Latest wins: a setpoint (SET_ATTITUDE_TARGET, SET_POSITION_TARGET_LOCAL_NED) read in the same
 wake-up as a newer one of the same type from the same peer to the same target is counted
@@ -31,6 +32,7 @@ import asyncio
 import logging
 import select
 import socket
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -44,12 +46,22 @@ __all__ = ["LinkPoller", "UdpLink"]
 MAX_DATAGRAM = 65536
 # A wake-up reads in rounds: one datagram from each socket the epoll reports ready, then asks
 # the epoll again (one system call for all sockets, where reading each socket until it fails
-# costs a failed call and an exception per setpoint, ~2 us), until no socket is ready: every
-# backlog is read at once and its superseded setpoints dropped (module docstring). The physics
-# tick runs between rounds and between deliveries (``between``). The caps only bound one
-# wake-up's memory: a fleet of 240 reads ~250 datagrams per 10 ms.
+# costs a failed call and an exception per setpoint, ~2 us), until no socket is ready or the
+# read budget is spent: a backlog is read at once and its superseded setpoints dropped (module
+# docstring). The physics tick runs between rounds and between deliveries (``between``). The
+# caps only bound one wake-up's memory: a fleet of 240 reads ~250 datagrams per 10 ms.
 MAX_PER_SOCKET = 512
 MAX_PER_WAKEUP = 16384
+#: A wake-up starts no new round after this long [s] (``LinkPoller.read_budget_s``): what it read
+#: is then delivered, and the next wake-up (at once: the epoll is level-triggered) reads on.
+#: Without it, a wake-up that found data at every round never ended while the ground station
+#: kept sending (240 vehicles: 24 setpoints a millisecond, the ticks between rounds taking half
+#: the time): it read for up to 0.25 s (5,000 datagrams) with everything it read, TIMESYNC
+#: requests among them, waiting, and the vehicles answered 0.3 s late while their telemetry
+#: went out on time. 20 ms is two setpoint periods at 100 Hz: a backlog read within it is still
+#: superseded at once (with 5 ms, a 240-vehicle fleet that fell behind handled more of its
+#: setpoints one by one, and its deepest socket backlog grew to 73 datagrams).
+READ_BUDGET_S = 0.02
 #: Message ids of the setpoint streams where the newest of a wake-up's reads wins.
 LATEST_WINS = frozenset({82, 84})  # SET_ATTITUDE_TARGET, SET_POSITION_TARGET_LOCAL_NED
 
@@ -225,6 +237,10 @@ class LinkPoller:
         #: called before each datagram of a batch is delivered (the fleet's real-time tick,
         #: which runs there when it is due: Emulator.run)
         self.between: Callable[[], None] | None = None
+        #: how long one wake-up reads before it delivers (READ_BUDGET_S)
+        self.read_budget_s = READ_BUDGET_S
+        #: wake-ups that stopped reading at the budget (the rest waits for the next)
+        self.budget_stops = 0
         self._loop.add_reader(self._epoll.fileno(), self._ready)
 
     def attach(self, link: UdpLink) -> None:
@@ -248,7 +264,11 @@ class LinkPoller:
         room = MAX_PER_WAKEUP
         between = self.between
         depth = 0
+        stop_s = time.monotonic() + self.read_budget_s
         for _ in range(MAX_PER_SOCKET):  # rounds of one datagram from each ready socket
+            if depth and time.monotonic() >= stop_s:
+                self.budget_stops += 1
+                break
             ready = self._epoll.poll(0, room)
             if not ready:
                 break

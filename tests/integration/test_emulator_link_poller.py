@@ -4,7 +4,10 @@ order, through the batch decoder or pymavlink's parser."""
 from __future__ import annotations
 
 import asyncio
+import math
 import socket
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -189,7 +192,8 @@ def test_a_backlog_of_setpoints_is_read_at_once_and_only_the_newest_handled():
                     gcs.sendto(attitude(0.9, component=2), where)
             gcs.sendto(position(2.0), where)
             await asyncio.sleep(0.1)
-            # WHEN the poller wakes up once
+            # WHEN the poller wakes up once, with the time to read all of it
+            poller.read_budget_s = 10.0
             poller._ready()
             # THEN all 104 datagrams were read; the newest of each stream was handled, in
             # arrival order, with the heartbeat and the other component's setpoint
@@ -209,3 +213,58 @@ def test_a_backlog_of_setpoints_is_read_at_once_and_only_the_newest_handled():
             link.close()
 
     run_bounded(scenario(), 20.0)
+
+
+def test_a_wake_up_delivers_what_it_read_within_its_budget_while_the_input_keeps_coming():
+    """A ground station that keeps sending faster than a busy fleet reads (one datagram a round,
+    the tick between rounds) must not hold what was read, a TIMESYNC request first of all,
+    until it stops: the wake-up delivers after its read budget and the next one reads on."""
+    async def scenario(budget_s: float) -> tuple[int, int, list[str]]:
+        got: list[str] = []
+        loop = asyncio.get_running_loop()
+        link = await UdpLink.open(("127.0.0.1", 0), ("127.0.0.1", 9),
+                                  LinkImpairment(np.random.default_rng(0)), loop.time,
+                                  lambda lk, msgs, addr: got.extend(m.get_type() for m in msgs),
+                                  name="v1")
+        poller = LinkPoller()
+        poller.attach(link)
+        poller.read_budget_s = budget_s
+        poller.between = lambda: time.sleep(0.002)  # a fleet tick that takes 2 ms
+        where = ("127.0.0.1", link.local_address[1])
+        timesync = _frame(mavlink.MAVLink_timesync_message(0, 12345))
+        setpoints = [_frame(mavlink.MAVLink_set_attitude_target_message(
+            0, 1, 1, 128, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0.5)) for _ in range(300)]
+
+        def ground_station() -> None:  # the request, then a setpoint every millisecond
+            gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            try:
+                gcs.sendto(timesync, where)
+                for data in setpoints:
+                    gcs.sendto(data, where)
+                    time.sleep(0.001)
+            finally:
+                gcs.close()
+
+        sender = threading.Thread(target=ground_station)
+        try:
+            sender.start()
+            # (waiting here, not in the loop: its own wake-ups would read first)
+            assert poller._epoll.poll(5.0), "nothing arrived"
+            # WHEN the poller wakes up once while the stream goes on
+            poller._ready()
+            return poller.datagrams, poller.budget_stops, list(got)
+        finally:
+            sender.join()
+            poller.close()
+            link.close()
+
+    # THEN, with the budget, it read a few datagrams, stopped at the budget and delivered them,
+    # the TIMESYNC request first
+    read, stops, got = run_bounded(scenario(0.005), 20.0)
+    assert stops == 1 and 1 <= read <= 20
+    assert got[0] == "TIMESYNC"
+    # while a wake-up without one read on until the ground station stopped sending, holding
+    # the request all that time
+    read, stops, got = run_bounded(scenario(math.inf), 20.0)
+    assert stops == 0 and read == 301
+    assert got[0] == "TIMESYNC"
