@@ -91,6 +91,7 @@ from gcs.fly.stats import (
     round_trip_report,
 )
 from gcs.fly.telemetry import StatusSlices, team_sample, vehicle_statuses
+from gcs.fly.telemetry import warm_up as sample_warm_up
 from gcs.geodesy import Geodetic, TeamFrame
 from gcs.link import (
     CommandNotConfirmedError,
@@ -522,10 +523,11 @@ class Flight:
     def _warm_up(self, team: TeamConfig, setup: FlightSetup, rhohat: np.ndarray,
                  nominal: np.ndarray | None) -> None:
         """Compile (or load from numba's cache) every kernel the flight runs, on throwaway
-        copies: the law's, the prediction audit's and the formation error's in the tick, the
-        error series' of the records at the end. Compiled in the first formation tick instead
-        (a new machine's first flight), the audit's stalled it for 0.5 s and more on a loaded
-        machine: every link then read as lost, and the formation stopped at its start."""
+        copies: the law's, the prediction audit's, the team sample's and the formation error's
+        in the tick, the error series' of the records at the end. Compiled in the first
+        formation tick instead (a new machine's first flight), the audit's stalled it for 0.5 s
+        and more on a loaded machine: every link then read as lost, and the formation stopped
+        at its start."""
         scratch = copy.deepcopy(self.law)
         n = team.n
         rotation = np.tile(np.eye(3), (n, 1, 1))
@@ -547,6 +549,7 @@ class Flight:
         audit.observe(meas.position_m, meas.velocity_mps, taken, meas.rotation, meas.omega_radps,
                       taken)
         fastpath.warm_up()
+        sample_warm_up()
 
     # --- lifetime --------------------------------------------------------------------------------
 

@@ -399,7 +399,8 @@ class VehicleProxy:
         batch). A wait for another message (a HEARTBEAT with the new mode, a PARAM_VALUE) comes
         through the slow path: 240 vehicles confirming their mode made every batch tell every
         vehicle, a burst of tens of milliseconds at the formation's start."""
-        return any(w[0] in TABLE_NAMES for w in self._waiters)
+        waiters = self._waiters  # asked for every vehicle at every batch: none is the rule
+        return bool(waiters) and any(w[0] in TABLE_NAMES for w in waiters)
 
     def _on_hot(self) -> None:
         """The port's hot path stored new messages of this vehicle: feed the clock filter the
