@@ -177,18 +177,17 @@ def _gather(own: np.ndarray, count: np.ndarray, lpn: np.ndarray, attq: np.ndarra
     tick at 240 vehicles, three times that beside the fleet). ``need[i, k]``: row i lacks
     message k of (LOCAL_POSITION_NED, ATTITUDE_QUATERNION, HIGHRES_IMU)."""
     for i in range(own.shape[0]):
-        mine = own[i]
         line = clock_line[i]
-        if mine and count[i, LPN] > 0:  # LOCAL_POSITION_NED: stamp, x y z, vx vy vz (NED)
+        need[i, 0] = not (own[i] and count[i, LPN] > 0)
+        need[i, 1] = not (own[i] and count[i, ATTQ] > 0)
+        need[i, 2] = not (own[i] and count[i, IMU] > 0)
+        if not need[i, 0]:  # LOCAL_POSITION_NED: stamp, x y z, vx vy vz (NED)
             for j in range(3):
                 pos[i, j] = lpn[i, 1 + j]
                 vel[i, j] = lpn[i, 4 + j]
             prx[i] = rx_s[i, LPN]
             ptaken[i] = _taken(lpn[i, 0], prx[i], line)
-            need[i, 0] = False
-        else:
-            need[i, 0] = True
-        if mine and count[i, ATTQ] > 0:  # ATTITUDE_QUATERNION: stamp, q1..q4, body rates (FRD)
+        if not need[i, 1]:  # ATTITUDE_QUATERNION: stamp, q1..q4, body rates (FRD)
             good = True
             norm2 = 0.0
             for j in range(4):
@@ -204,16 +203,10 @@ def _gather(own: np.ndarray, count: np.ndarray, lpn: np.ndarray, attq: np.ndarra
                 rates[i, j] = attq[i, 5 + j]
             arx[i] = rx_s[i, ATTQ]
             ataken[i] = _taken(attq[i, 0], arx[i], line)
-            need[i, 1] = False
-        else:
-            need[i, 1] = True
-        if mine and count[i, IMU] > 0:  # HIGHRES_IMU: stamp, specific force (FRD)
+        if not need[i, 2]:  # HIGHRES_IMU: stamp, specific force (FRD)
             for j in range(3):
                 force[i, j] = imu[i, 1 + j]
             irx[i] = rx_s[i, IMU]
-            need[i, 2] = False
-        else:
-            need[i, 2] = True
 
 
 @njit(cache=True)
