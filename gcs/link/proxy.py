@@ -181,6 +181,8 @@ class VehicleProxy:
         self._tasks: list[asyncio.Task[None]] = []
         self._t0_s = self._clock.now_s()
         self._link_state = LinkState.WAITING
+        #: when the monitor last saw the link come alive (HEARTBEAT staleness counts from there)
+        self._alive_since_s = self._t0_s
         self._mismatch: int | None = None  # sysid of a foreign vehicle HEARTBEAT, if any
         self.clock = VehicleClock()  # the vehicle's clock: true sample times (gcs.link.clock)
         self._round_trips: list[float] = []
@@ -201,7 +203,7 @@ class VehicleProxy:
         if self._owns_port:
             await self._port.open()
         self._port.attach(self.config.sysid, self, self._slot)
-        self._t0_s = self._clock.now_s()
+        self._t0_s = self._alive_since_s = self._clock.now_s()
         self._send_heartbeat()
         self._tasks = [
             asyncio.create_task(self._heartbeat_loop(), name=f"{self.name} heartbeat"),
@@ -328,11 +330,27 @@ class VehicleProxy:
 
     def heartbeat_stale(self) -> bool:
         """No HEARTBEAT for `heartbeat_timeout_s` while other messages arrive: the link is up,
-        but armed state and mode are those of the last HEARTBEAT (logged when it happens)."""
+        but armed state and mode are those of the last HEARTBEAT (logged when it happens).
+        Counted from the later of the last HEARTBEAT and the link's coming alive (its first
+        messages, or its return after a loss): a 1 Hz HEARTBEAT may well come a second after
+        the telemetry, and a ground station that started listening long before must not call
+        that silence."""
         hb = self._cache.latest("HEARTBEAT")
-        hb_rx = hb.rx_time_s if hb is not None else self._t0_s
+        since = max(hb.rx_time_s if hb is not None else -math.inf, self._alive_since_s)
         return (self._last_any_rx_s() > -math.inf
-                and self._clock.now_s() - hb_rx > self.config.heartbeat_timeout_s)
+                and self._clock.now_s() - since > self.config.heartbeat_timeout_s)
+
+    def _note_link_state(self, state: LinkState) -> None:
+        """The monitor's view of the link changed to ``state``: counted and logged."""
+        if state == LinkState.LOST:
+            self._n["link_lost_events"] += 1
+            logger.warning("%s: link lost (no message for > %.2f s)", self.name,
+                           self.config.link_timeout_s)
+        else:
+            logger.info("%s: link %s", self.name, state.value)
+            if state == LinkState.ALIVE:
+                self._alive_since_s = self._clock.now_s()
+        self._link_state = state
 
     def rate_hz(self, kind: str) -> float:
         """Receive rate of one message type (EWMA of its intervals; NaN before two arrived,
@@ -865,13 +883,7 @@ class VehicleProxy:
         while True:
             state = self.link_state()
             if state != self._link_state:
-                if state == LinkState.LOST:
-                    self._n["link_lost_events"] += 1
-                    logger.warning("%s: link lost (no message for > %.2f s)", self.name,
-                                   self.config.link_timeout_s)
-                else:
-                    logger.info("%s: link %s", self.name, state.value)
-                self._link_state = state
+                self._note_link_state(state)
             if state == LinkState.ALIVE and self.heartbeat_stale() != stale:
                 stale = not stale
                 if stale:
