@@ -98,13 +98,11 @@ class ArduPilotNode(VehicleNode):
                     battery_remaining: float, tilt_cos: float) -> CopterObservation:
         return CopterObservation(position, velocity, yaw, on_ground, battery_remaining, tilt_cos)
 
-    def status_row(self, now_s: float) -> tuple:
-        row = list(super().status_row(now_s))
-        ap = self.autopilot
-        row[4] = ap.base_mode(now_s) & 0x7F  # SAFETY_ARMED added per HEARTBEAT
-        row[5] = ap.landed_state()
-        row[1] = ap.system_status(now_s)
-        return tuple(row)
+    def base_mode_flags(self, now_s: float) -> int:
+        return self.autopilot.base_mode(now_s) & 0x7F  # SAFETY_ARMED added per HEARTBEAT
+
+    def landed_state(self) -> int:
+        return self.autopilot.landed_state()
 
     def refresh_extra(self, now_s: float) -> None:
         i, ap, st = self.index, self.autopilot, self.status

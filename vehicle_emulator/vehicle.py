@@ -239,24 +239,32 @@ class VehicleNode:
 
     def status_row(self, now_s: float) -> tuple:
         """This vehicle's values of `FleetStatus.ROW_COLUMNS`, in that order."""
-        i, ap = self.index, self.autopilot
-        if self.plant.on_ground[i]:
-            landed = 1
-        elif ap.nav_state is NavState.AUTO_TAKEOFF:
-            landed = 3
-        elif ap.nav_state is NavState.AUTO_LAND:
-            landed = 4
-        else:
-            landed = 2
+        ap = self.autopilot
         return (
             ap.armed,
             ap.system_status(now_s),
             ap.prearm_ok(now_s),
             ap.custom_mode,
-            1 | _BASE_FLAGS.get(ap.nav_state, 4 | 16 | 8),
-            landed,
+            self.base_mode_flags(now_s),
+            self.landed_state(),
             min(self.counters.total(self.decode_rejected), 65535),
         )
+
+    def base_mode_flags(self, now_s: float) -> int:
+        """HEARTBEAT base_mode without SAFETY_ARMED (added per HEARTBEAT): PX4's flags of the
+        navigation state."""
+        return 1 | _BASE_FLAGS.get(self.autopilot.nav_state, 4 | 16 | 8)
+
+    def landed_state(self) -> int:
+        """MAV_LANDED_STATE: on the ground by the plant, else from the navigation state."""
+        nav = self.autopilot.nav_state
+        if self.plant.on_ground[self.index]:
+            return 1
+        if nav is NavState.AUTO_TAKEOFF:
+            return 3
+        if nav is NavState.AUTO_LAND:
+            return 4
+        return 2
 
     def refresh_extra(self, now_s: float) -> None:
         """Status a personality keeps beyond `status_row`'s columns (none here)."""
