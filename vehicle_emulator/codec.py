@@ -79,35 +79,42 @@ CRC_TABLE = _x25_table()
 
 
 @njit(cache=True)
+def frame_payload(payload, length, msgid, crc_extra, sysid, compid, seq, table, out, at):
+    """Frame the first ``length`` bytes of ``payload`` into ``out[at:]`` (MAVLink 2, unsigned,
+    trailing zero bytes trimmed as pymavlink trims them); returns the frame's length."""
+    plen = length
+    while plen > 1 and payload[plen - 1] == 0:
+        plen -= 1
+    out[at] = 0xFD
+    out[at + 1] = plen
+    out[at + 2] = 0
+    out[at + 3] = 0
+    out[at + 4] = seq
+    out[at + 5] = sysid
+    out[at + 6] = compid
+    out[at + 7] = msgid & 0xFF
+    out[at + 8] = (msgid >> 8) & 0xFF
+    out[at + 9] = (msgid >> 16) & 0xFF
+    for j in range(plen):
+        out[at + 10 + j] = payload[j]
+    crc = 0xFFFF
+    for j in range(1, 10 + plen):
+        crc = (crc >> 8) ^ table[(crc ^ out[at + j]) & 0xFF]
+    crc = (crc >> 8) ^ table[(crc ^ crc_extra) & 0xFF]
+    out[at + 10 + plen] = crc & 0xFF
+    out[at + 11 + plen] = (crc >> 8) & 0xFF
+    return 12 + plen
+
+
+@njit(cache=True)
 def _frame_rows(payload, msgid, crc_extra, sysid, compid, seq, rows_vehicle, table, out, out_len):
     """Frame each payload row into ``out`` (MAVLink 2, unsigned); bumps ``seq`` per vehicle."""
     k, length = payload.shape
     for r in range(k):
-        plen = length
-        while plen > 1 and payload[r, plen - 1] == 0:
-            plen -= 1
         v = rows_vehicle[r]
-        o = out[r]
-        o[0] = 0xFD
-        o[1] = plen
-        o[2] = 0
-        o[3] = 0
-        o[4] = seq[v]
+        out_len[r] = frame_payload(payload[r], length, msgid, crc_extra, sysid[v], compid,
+                                   seq[v], table, out[r], 0)
         seq[v] = (seq[v] + 1) & 0xFF
-        o[5] = sysid[v]
-        o[6] = compid
-        o[7] = msgid & 0xFF
-        o[8] = (msgid >> 8) & 0xFF
-        o[9] = (msgid >> 16) & 0xFF
-        for j in range(plen):
-            o[10 + j] = payload[r, j]
-        crc = 0xFFFF
-        for j in range(1, 10 + plen):
-            crc = (crc >> 8) ^ table[(crc ^ o[j]) & 0xFF]
-        crc = (crc >> 8) ^ table[(crc ^ crc_extra) & 0xFF]
-        o[10 + plen] = crc & 0xFF
-        o[11 + plen] = (crc >> 8) & 0xFF
-        out_len[r] = 12 + plen
 
 
 def wire_dtype(msg_class: Any) -> np.dtype:

@@ -252,6 +252,7 @@ def fleet_to_ned_frd(
     sf,
     att_sp,
     rate_sp,
+    rows,
     noisy,
     n_att,
     n_gyro,
@@ -270,9 +271,10 @@ def fleet_to_ned_frd(
     rate_sp_frd,
     yaw_ned,
 ):
-    """ENU/FLU fleet state -> NED/FRD telemetry quantities (see frames.py for the maps)."""
-    n = rot.shape[0]
-    for i in range(n):
+    """ENU/FLU fleet state -> NED/FRD telemetry quantities (see frames.py for the maps), for
+    the vehicles ``rows`` (the others' outputs are left as they were); ``noisy`` (a subset of
+    ``rows``) get the noise rows ``n_*[k]`` for ``noisy[k]``."""
+    for i in rows:
         r = rot[i]
         # R_ned_frd = P R F: rows swapped (0<->1), row 2 negated; columns 1, 2 negated
         for c in range(3):
@@ -318,7 +320,7 @@ def fleet_to_ned_frd(
             pos_ned[i, j] += n_pos[k, j]
             vel_ned[i, j] += n_vel[k, j]
             acc_frd[i, j] += n_acc[k, j]
-    for i in range(n):
+    for i in rows:
         a = r_ned[i]
         q[i, 0], q[i, 1], q[i, 2], q[i, 3] = quat_from_matrix(a)
         eul[i, 0] = math.atan2(a[2, 1], a[2, 2])

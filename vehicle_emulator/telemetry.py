@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from vehicle_emulator import frames
-from vehicle_emulator.codec import BatchEncoder, mavlink
+from vehicle_emulator import frames, hotstreams
+from vehicle_emulator.codec import CRC_TABLE, BatchEncoder, mavlink
 from vehicle_emulator.geodesy import enu_to_geodetic
 from vehicle_emulator.plant import FleetPlant
 
@@ -57,6 +57,7 @@ NOISE_GYRO_RADPS = 0.003
 NOISE_ACC_MPS2 = 0.05
 
 _NEED_POSITION = frozenset({"LOCAL_POSITION_NED"})
+_NO_NOISE = {key: np.zeros((0, 3)) for key in ("att", "gyro", "pos", "vel", "acc")}
 _SENSORS = 0x1 | 0x2 | 0x4 | 0x8 | 0x20 | 0x400 | 0x800 | 0x1000 | 0x8000 | 0x200000
 _PREARM_CHECK = 0x10000000  # MAV_SYS_STATUS_PREARM_CHECK: health set while arming would pass
 
@@ -138,11 +139,11 @@ class FleetStatus:
 
 
 @njit(cache=True)
-def _select_sources(model, rot, rot_est, omega, rate_meas, pos, pos_est, vel, vel_est, sf,
+def _select_sources(rows, model, rot, rot_est, omega, rate_meas, pos, pos_est, vel, vel_est, sf,
                     accel_imu, out_rot, out_w, out_pos, out_vel, out_sf):
-    """Per vehicle, what telemetry reports: the true state (nominal) or the sensor model's
-    measurements and estimates (``model[i]``)."""
-    for i in range(model.shape[0]):
+    """Per vehicle of ``rows``, what telemetry reports: the true state (nominal) or the sensor
+    model's measurements and estimates (``model[i]``)."""
+    for i in rows:
         cal = model[i]
         for a in range(3):
             for b in range(3):
@@ -196,6 +197,13 @@ class Telemetry:
         self.encoders = {nm: BatchEncoder(_msg_class(nm)) for nm in self.names}
         self.seq = np.zeros(n, dtype=np.uint8)
         self.sent = np.zeros(len(self.names), dtype=np.int64)
+        #: the 100 Hz streams framed in one compiled pass (vehicle_emulator/hotstreams.py);
+        #: False: through the general path like the others (the reference its tests compare to)
+        self.fused = True
+        self._hot_cols = np.array([self.index[nm] for nm in hotstreams.NAMES], dtype=np.int64)
+        self._hot_compid = self.encoders[hotstreams.NAMES[0]].compid
+        self._hot_out = np.empty((n, hotstreams.ROW_BYTES), dtype=np.uint8)
+        self._hot_len = np.zeros(n, dtype=np.int64)
         self._d: dict[str, np.ndarray] | None = None
         self._builders = {
             "HEARTBEAT": self._heartbeat,
@@ -279,10 +287,16 @@ class Telemetry:
         due = self.next_due_s <= now_s
         if not due.any():
             return {}
-        self._derive(plant, status)
-        t_pos_ms = self._d["t_pos_ms"] if self._d is not None else None
+        self._derive(plant, status, np.flatnonzero(due.any(axis=1)))
+        d = self._d
+        assert d is not None
+        t_pos_ms = d["t_pos_ms"]
+        if self.fused:
+            per_vehicle = self._frame_hot(now_s, status, enabled).copy()
+            due[:, self._hot_cols] = False
+        else:
+            per_vehicle = np.zeros(self.n, dtype=np.int64)
         chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-        per_vehicle = np.zeros(self.n, dtype=np.int64)
         for k in np.flatnonzero(due.any(axis=0)):
             idx = np.flatnonzero(due[:, k])
             nxt = self.next_due_s[idx, k] + self.interval_s[idx, k]
@@ -290,7 +304,6 @@ class Telemetry:
             idx = idx[enabled[idx]]
             name = self.names[k]
             if name in _NEED_POSITION:
-                assert t_pos_ms is not None
                 idx = idx[t_pos_ms[idx] >= status.position_from_ms[idx]]
             if idx.size == 0:
                 continue
@@ -301,21 +314,37 @@ class Telemetry:
             self.sent[k] += idx.size
             per_vehicle[idx] += ln
             chunks.append((idx, out, ln))
-        if not chunks:
-            return {}
         ends = np.cumsum(per_vehicle)
-        cursor = ends - per_vehicle
-        starts = cursor.copy()
+        if ends[-1] == 0:
+            return {}
+        starts = ends - per_vehicle
+        cursor = starts.copy()
         buf = np.empty(int(ends[-1]), dtype=np.uint8)
+        if self.fused:  # each vehicle's hot frames first: their sequence numbers came first
+            hotstreams.place_rows(self._hot_out, self._hot_len, buf, starts, cursor)
         for idx, out, ln in chunks:
             _scatter(out, ln, idx, buf, cursor)
         data = buf.tobytes()
         return {int(v): data[starts[v] : ends[v]] for v in np.flatnonzero(per_vehicle).tolist()}
 
+    def _frame_hot(self, now_s: float, status: FleetStatus, enabled: np.ndarray) -> np.ndarray:
+        """The 100 Hz streams due at ``now_s`` framed into ``_hot_out`` (hotstreams.py);
+        returns each vehicle's bytes of them."""
+        d = self._d
+        assert d is not None
+        hotstreams.frame_streams(
+            now_s, self.next_due_s, self.interval_s, self._hot_cols, enabled,
+            status.position_from_ms, d["q"], d["w_frd"], d["t_att_ms"], d["pos_ned"],
+            status.origin_ned_m, d["vel_ned"], d["t_pos_ms"], d["acc_frd"], d["gimu_frd"],
+            d["t_att_us"], d["z_up"], HOME_ALT_M, status.sysid, self._hot_compid, self.seq,
+            CRC_TABLE, self._hot_out, self._hot_len, self.sent)
+        return self._hot_len
+
     # --- derived quantities, once per collect --------------------------------------------------
 
-    def _derive(self, plant: FleetPlant, status: FleetStatus) -> None:
-        """NED/FRD views of the whole fleet (numba), plus noise for vehicles with EMU_NOISE."""
+    def _derive(self, plant: FleetPlant, status: FleetStatus, rows: np.ndarray) -> None:
+        """NED/FRD views of the vehicles ``rows`` (numba; the others' are left as they were:
+        only the vehicles with a message due are read), plus noise for those with EMU_NOISE."""
         n = plant.n
         d = self._d
         if d is None or d["pos_ned"].shape[0] != n:
@@ -332,7 +361,7 @@ class Telemetry:
                 "rate_sp_frd": np.empty((n, 3)),
                 "yaw_ned": np.empty(n),
             }
-        noisy = np.flatnonzero(status.noise)
+        noisy = rows[status.noise[rows]]
         if noisy.size:
             k = noisy.size
             nz = {
@@ -343,15 +372,17 @@ class Telemetry:
                 "acc": self.rng.normal(0.0, NOISE_ACC_MPS2, (k, 3)),
             }
         else:
-            nz = {key: np.zeros((0, 3)) for key in ("att", "gyro", "pos", "vel", "acc")}
+            nz = _NO_NOISE
         ob = plant.onboard
         model = ob.sensor_model
-        if model.any():
+        modelled = bool(model.any())
+        if modelled:
             if "src_rot" not in d or d["src_rot"].shape[0] != n:
                 d["src_rot"], d["src_w"] = np.empty((n, 3, 3)), np.empty((n, 3))
                 d["src_pos"], d["src_vel"] = np.empty((n, 3)), np.empty((n, 3))
                 d["src_sf"], d["gimu_frd"] = np.empty((n, 3)), np.empty((n, 3))
             _select_sources(
+                rows,
                 model,
                 plant.rotation,
                 ob.rotation_est,
@@ -382,6 +413,7 @@ class Telemetry:
             *src,
             plant.attitude_sp,
             plant.rate_sp_flu_radps,
+            rows,
             noisy,
             nz["att"],
             nz["gyro"],
@@ -400,10 +432,11 @@ class Telemetry:
             d["rate_sp_frd"],
             d["yaw_ned"],
         )
-        if model.any():  # HIGHRES_IMU gyro: the IMU's own (PX4: raw means), FLU -> FRD
+        if modelled:  # HIGHRES_IMU gyro: the IMU's own (PX4: raw means), FLU -> FRD
             g = d["gimu_frd"]
-            g[:] = d["w_frd"]
-            g[model] = ob.gyro_imu_flu_radps[model] * np.array([1.0, -1.0, -1.0])
+            g[rows] = d["w_frd"][rows]
+            imu = rows[model[rows]]
+            g[imu] = ob.gyro_imu_flu_radps[imu] * np.array([1.0, -1.0, -1.0])
         else:
             d["gimu_frd"] = d["w_frd"]
         att_s, pos_s = plant.sample_time_s()

@@ -84,6 +84,7 @@ def test_fleet_kernel_matches_the_numpy_conversions(q, p, v):
         sf,
         r,
         w,
+        np.arange(1),
         np.zeros(0, dtype=np.int64),
         none,
         none,
