@@ -90,6 +90,27 @@ def test_fault_clock_from_boot_option():
     assert emu.plant.mass_kg[0] == pytest.approx(0.425)
 
 
+def _read_param(emu: Emulator, link, name: str) -> float:
+    _send(emu, 0, mavlink.MAVLink_param_request_read_message(1, 1, name.encode(), -1), link)
+    values = [m for m in link.msgs if m.get_type() == "PARAM_VALUE" and m.param_id == name]
+    return values[-1].param_value
+
+
+def test_the_fault_clock_parameter_reads_the_clock_when_asked():
+    # GIVEN a vehicle whose fault clock does not start before OFFBOARD, and one that starts it
+    # at boot
+    waiting, (w_link,) = _emu()
+    running, (r_link,) = _emu(param_overrides={"EMU_FLT_T0": 1})
+    # WHEN 1.5 simulated seconds pass and EMU_FLT_CLK is read, then 0.5 s more
+    _run(waiting, 1.5)
+    _run(running, 1.5)
+    # THEN it reads -1 while the clock has not started, and the clock's time when read
+    assert _read_param(waiting, w_link, "EMU_FLT_CLK") == -1.0
+    assert _read_param(running, r_link, "EMU_FLT_CLK") == pytest.approx(1.5, abs=1e-6)
+    _run(running, 2.0)
+    assert _read_param(running, r_link, "EMU_FLT_CLK") == pytest.approx(2.0, abs=1e-6)
+
+
 def test_link_loss_and_motor_efficiency_faults():
     emu, (link,) = _emu(
         faults=[
