@@ -34,6 +34,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from vehicle_emulator.jitcache import compiling
+from vehicle_emulator.latecompile import watch_late_compiles
 from vehicle_emulator.personality import AUTOPILOT_NAMES, DEFAULT_AUTOPILOT, personality_of
 from vehicle_emulator.runner import STREAM_MODES, Emulator, LinkPlan, RealtimeClock, RunStats
 from vehicle_emulator.sched import (
@@ -256,6 +257,7 @@ async def _amain(args: argparse.Namespace) -> int:
         streams=args.streams,
     )
     warm_up(emu)
+    late = watch_late_compiles("vehicle-emu", log)
     clock = RealtimeClock(args.realtime_factor)
     plans = [link_plan(s, args, single=not args.fleet) for s in specs]
     await emu.open_links(plans, clock)
@@ -324,6 +326,8 @@ async def _amain(args: argparse.Namespace) -> int:
         # the most datagrams one socket held at a wake-up (a backlog: the fleet fell behind)
         "deepest_backlog": emu.poller.deepest if emu.poller is not None else 0,
         "read_budget_stops": emu.poller.budget_stops if emu.poller is not None else 0,
+        # numba compiles after the ready line (each silenced every link while it ran)
+        "compiled_after_ready": late.compiled,
         "by_vehicle": [_vehicle_summary(node) for node in emu.nodes],
     }
     if args.stats_json:
@@ -372,7 +376,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     try:
         if args.compile_only:
-            warm_up(Emulator([default_vehicle(1, on_ground=True)]))
+            # every personality, so that any team's fleet finds its kernels in the cache
+            warm_up(Emulator([dataclasses.replace(default_vehicle(k + 1, on_ground=True),
+                                                  autopilot=name)
+                              for k, name in enumerate(AUTOPILOT_NAMES)]))
             return 0
         return asyncio.run(_amain(args))
     except (TeamFileError, SchedulingError) as exc:

@@ -13,7 +13,7 @@ import logging
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -140,6 +140,12 @@ class _Pace:
             self.next_tick_s = self.clock.now_s()
 
 
+def _renumbered(spec: VehicleSpec, shift: int) -> VehicleSpec:
+    """A spare copy of ``spec`` with another vehicle id and sysid (warm-up fleets only)."""
+    return replace(spec, vehicle_id=spec.vehicle_id + 1000 * shift,
+                   sysid=(spec.sysid + shift - 1) % 254 + 1)
+
+
 class _NullLink:
     name = "null"
 
@@ -252,12 +258,21 @@ class Emulator:
         self._ack_nodes: dict[int, VehicleNode] = {}
 
     def warm_up(self) -> None:
-        """Load/compile the JIT kernels on a throwaway copy, so the first real tick is not
-        late (call before starting the clock)."""
-        spare = Emulator(self.specs[:1], physics_rate_hz=1.0 / self.plant.dt_s, tick_s=self.tick_s)
-        for node in spare.nodes:
-            node.links.append(_NullLink())
-        spare.advance_to(0.05)
+        """Load/compile every JIT kernel the run will call, on throwaway fleets, so that nothing
+        compiles after the ready line (call before starting the clock).
+
+        numba specialises a kernel per array layout, and the layout of a view depends on the
+        number of rows: a column of an (n, 3) array is contiguous for n = 1 and strided for
+        n >= 2, for the whole fleet and for the subsets of it a tick works on (the vehicles of
+        one personality, those with a message due). So the spares are one vehicle, one vehicle
+        of each personality the fleet has, and two of each: every layout this fleet can hand a
+        kernel, whatever its size."""
+        kinds = list({spec.autopilot: spec for spec in self.specs}.values())
+        for specs in (kinds[:1], kinds, kinds + [_renumbered(s, len(kinds)) for s in kinds]):
+            spare = Emulator(specs, physics_rate_hz=1.0 / self.plant.dt_s, tick_s=self.tick_s)
+            for node in spare.nodes:
+                node.links.append(_NullLink())
+            spare.advance_to(0.05)
         HotDecoder().decode([b""])  # the receive side's batch kernel
 
     @property

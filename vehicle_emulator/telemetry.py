@@ -444,7 +444,7 @@ class Telemetry:
         d["t_att_us"] = (att_s * 1e6).astype(np.int64)
         d["t_pos_ms"] = (pos_s * 1e3).astype(np.int64)
         d["t_pos_us"] = (pos_s * 1e6).astype(np.int64)
-        d["z_up"] = src[2][:, 2]
+        d["z_up"] = np.ascontiguousarray(src[2][:, 2])  # one layout for frame_streams
 
     # --- builders: fill payload rows for vehicles idx ----------------------------------------
 
