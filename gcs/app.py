@@ -134,6 +134,7 @@ from gcs.mission.machine import (
 from gcs.mission.safety import SafetyRules
 from gcs.mission.stability import MIN_DECAY_PER_S, describe_margins, torque_margins
 from gcs.report import build_report, write_report
+from vehicle_emulator.latecompile import watch_late_compiles
 
 logger = logging.getLogger(__name__)
 
@@ -462,6 +463,7 @@ class Flight:
         self._tie_arrays = (None if fr.vehicles == "shared"
                             else (self.ties.offsets_enu_m, self.ties.rotations))
         self.hover_estimates: dict[int, HoverEstimate] = {}
+        self.compiled_after_ready: list[str] = []  # numba compiles while flying (run())
         self.scheduling: Scheduling | None = None  # what the OS gave (gcs fly sets it)
         self.max_yaw_rate_radps = team.fly.rates.max_yaw_rate_radps
         self.limited_ticks = np.zeros(self.n, dtype=np.int64)  # rate or torque limit applied
@@ -476,7 +478,8 @@ class Flight:
                               remote_host=v.link.remote_host or "127.0.0.1",
                               learn_remote=v.link.learn_remote,
                               link_timeout_s=team.fly.link_timeout_s,
-                              timesync_period_s=team.fly.timesync_period_s)
+                              timesync_period_s=team.fly.timesync_period_s,
+                              silent_wait_s=setup.plan.connect_timeout_s)
             for v in vehicles
         ]
         check_unique_sysids(self.links)
@@ -559,6 +562,9 @@ class Flight:
         out.mkdir(parents=True, exist_ok=True)
         loop = asyncio.get_running_loop()
         with contextlib.ExitStack() as sync_stack:
+            late = watch_late_compiles("gcs fly", logger)
+            sync_stack.callback(late.close)
+            self.compiled_after_ready = late.compiled
             tlog = sync_stack.enter_context(TlogWriter(out / TLOG_NAME))
             self._tlog = tlog
             sync_stack.callback(self._remove_signal_handlers, loop)
@@ -1158,6 +1164,8 @@ class Flight:
                             for vid, r in self.machine.goto_results.items()},
             "events": self.machine.notes[-50:],
             "statustext": self._statustexts(),
+            # numba compiles during the flight (each stalled the tick while it ran)
+            "compiled_after_ready": self.compiled_after_ready,
         })
         report = build_report(log)
         write_report(out / REPORT_NAME, report)

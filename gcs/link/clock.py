@@ -74,6 +74,7 @@ class VehicleClock:
         self.resets = 0
         self._rtt = np.empty(RTT_WINDOW)
         self._rtt_sent = np.empty(RTT_WINDOW)  # when each round trip's request went out [s]
+        self._rtt_link = np.ones(RTT_WINDOW, dtype=bool)  # False: it measured a stop, not the link
         self._nrtt = 0
         self._rtt_total = 0
         self._least_delay_s = 0.0
@@ -130,13 +131,16 @@ class VehicleClock:
                 self._a, self._b = least, 0.0
                 self._publish()
 
-    def on_round_trip(self, rtt_s: float, sent_s: float = math.nan) -> None:
+    def on_round_trip(self, rtt_s: float, sent_s: float = math.nan, *,
+                      of_link: bool = True) -> None:
         """A TIMESYNC reply that came back ``rtt_s`` after its request, sent at ``sent_s``
-        (the caller's clock; NaN: unknown)."""
+        (the caller's clock; NaN: unknown). ``of_link=False``: the reply was held by a stop of
+        the vehicle or host; it still bounds the clock offset, but `round_trips_s` leaves it out."""
         if not (math.isfinite(rtt_s) and rtt_s >= 0.0):
             return
         self._rtt[self._rtt_total % RTT_WINDOW] = rtt_s
         self._rtt_sent[self._rtt_total % RTT_WINDOW] = sent_s
+        self._rtt_link[self._rtt_total % RTT_WINDOW] = of_link
         self._rtt_total += 1
         self.last_round_trip_s = rtt_s
         self._nrtt = min(self._nrtt + 1, RTT_WINDOW)
@@ -177,14 +181,22 @@ class VehicleClock:
     def least_delay_s(self) -> float:
         return self._least_delay_s
 
+    def disown_last_round_trip(self) -> None:
+        """The latest round trip measured a stop, not the link (its reply came bunched with the
+        next one): `round_trips_s` leaves it out from now on."""
+        if self._nrtt:
+            self._rtt_link[(self._rtt_total - 1) % RTT_WINDOW] = False
+
     def round_trips_s(self, since_s: float = -math.inf) -> np.ndarray:
-        """The last (up to RTT_WINDOW) round trips, oldest first; with ``since_s``, only those
-        whose request went out at or after it (on the clock ``on_round_trip`` was given)."""
+        """The last (up to RTT_WINDOW) round trips of the link, oldest first; with ``since_s``,
+        only those whose request went out at or after it (on the clock ``on_round_trip`` was
+        given). Round trips that measured a stop (``of_link=False``) are left out."""
         k = self._rtt_total % RTT_WINDOW if self._nrtt == RTT_WINDOW else 0
         trips = np.roll(self._rtt[: self._nrtt], -k)
-        if since_s == -math.inf:
-            return trips
-        return trips[np.roll(self._rtt_sent[: self._nrtt], -k) >= since_s]
+        keep = np.roll(self._rtt_link[: self._nrtt], -k)
+        if since_s != -math.inf:
+            keep &= np.roll(self._rtt_sent[: self._nrtt], -k) >= since_s
+        return trips[keep]
 
     def sample_time_s(self, t_vehicle_s: float, rx_s: float) -> float:
         """When a sample stamped ``t_vehicle_s`` and received at ``rx_s`` was taken, on the

@@ -10,8 +10,10 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 from collections.abc import AsyncIterator, Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Protocol
 
 from gcs.link.codec import MAVLinkMessage
 from gcs.link.enums import MavCmd, MavResult
@@ -21,9 +23,30 @@ logger = logging.getLogger(__name__)
 #: Builds and sends one COMMAND_LONG: (command, confirmation, params[7]) -> None.
 SendCommand = Callable[[int, int, Sequence[float]], None]
 
+_VOICE_POLL_S = 0.05  # how often a wait for a silent vehicle looks for its next message
+
+
+class Liveness(Protocol):
+    """When the vehicle was last heard, on one clock [s] (the proxy's)."""
+
+    def now_s(self) -> float: ...
+
+    def last_heard_s(self) -> float:
+        """Receive time of the vehicle's latest message of any type; -inf before the first."""
+        ...
+
+    def up_since_s(self) -> float:
+        """When its link came up (the origin of the times in messages)."""
+        ...
+
 
 class CommandTimeoutError(TimeoutError):
-    """No final COMMAND_ACK after all attempts."""
+    """No final COMMAND_ACK after all attempts; ``reason`` is the message without the vehicle
+    and command ('got no COMMAND_ACK in 3 attempts of 0.5 s')."""
+
+    def __init__(self, message: str, reason: str = "") -> None:
+        super().__init__(message)
+        self.reason = reason or message
 
 
 class CommandRejectedError(RuntimeError):
@@ -57,6 +80,7 @@ class CommandStats:
     timeouts: int = 0  # commands that raised CommandTimeoutError
     acks_unexpected: int = 0  # COMMAND_ACK with no command waiting (late or duplicate)
     acks_for_others: int = 0  # COMMAND_ACK addressed to another GCS
+    silent_waits: int = 0  # commands that waited for a vehicle that had fallen silent
 
 
 @dataclass(slots=True)
@@ -96,14 +120,17 @@ def command_label(command: int) -> str:
 class CommandChannel:
     """Pending-ACK registry and retry loop for one vehicle (``name`` prefixes every message)."""
 
-    def __init__(self, name: str, gcs_sysid: int, send: SendCommand) -> None:
+    def __init__(self, name: str, gcs_sysid: int, send: SendCommand, *,
+                 liveness: Liveness | None = None, silent_wait_s: float = 0.0) -> None:
         self._name = name
         self._gcs_sysid = gcs_sysid
         self._send = send
+        self._liveness = liveness
+        self._silent_wait_s = silent_wait_s
         self._pending: dict[int, AckLog] = {}
         self._locks: dict[int, asyncio.Lock] = {}
         self._n = {"sent": 0, "retries": 0, "timeouts": 0, "acks_unexpected": 0,
-                   "acks_for_others": 0}
+                   "acks_for_others": 0, "silent_waits": 0}
 
     def stats(self) -> CommandStats:
         return CommandStats(**self._n)
@@ -164,20 +191,65 @@ class CommandChannel:
                              f"got {retries}, {timeout_s}")
         p = [float(x) for x in params] + [0.0] * (7 - len(params))
         label = command_label(command)
-        for attempt in range(retries + 1):
-            if attempt > 0:
-                self._n["retries"] += 1
-            if not log.in_progress:
-                self._send(command, attempt, p)
-                self._n["sent"] += 1
-            try:
-                async with asyncio.timeout(timeout_s):
-                    return await asyncio.shield(log.first)
-            except TimeoutError:
-                logger.debug("%s: %s attempt %d timed out", self._name, label, attempt + 1)
+        waited = False
+        while True:
+            sent_s = self._liveness.now_s() if self._liveness is not None else 0.0
+            for attempt in range(retries + 1):
+                if attempt > 0:
+                    self._n["retries"] += 1
+                if not log.in_progress:
+                    self._send(command, attempt, p)
+                    self._n["sent"] += 1
+                try:
+                    async with asyncio.timeout(timeout_s):
+                        return await asyncio.shield(log.first)
+                except TimeoutError:
+                    logger.debug("%s: %s attempt %d timed out", self._name, label, attempt + 1)
+            silence = self._silence(sent_s)
+            if silence is None or waited:
+                break
+            # alive but silent (compiling, starting, paused): nothing at all came back, so
+            # nothing was refused; wait for it to speak, then ask again (once)
+            waited = True
+            self._n["silent_waits"] += 1
+            if not await self._await_voice(label, sent_s, silence):
+                self._n["timeouts"] += 1
+                reason = (f"got no COMMAND_ACK: the vehicle, heard at {silence:.2f} s, sent "
+                          f"nothing at all for {self._silent_wait_s:g} s more (alive before, "
+                          "silent since; not a refusal)")
+                raise CommandTimeoutError(f"{self._name}: {label} {reason}", reason)
         self._n["timeouts"] += 1
-        raise CommandTimeoutError(
-            f"{self._name}: {label} got no COMMAND_ACK in {retries + 1} attempts of {timeout_s} s")
+        reason = f"got no COMMAND_ACK in {retries + 1} attempts of {timeout_s:g} s"
+        raise CommandTimeoutError(f"{self._name}: {label} {reason}", reason)
+
+    def _silence(self, sent_s: float) -> float | None:
+        """When the vehicle was heard before the command and not since: the time it was last
+        heard [s after its link came up]; else None (it answered other things: no excuse)."""
+        live = self._liveness
+        if live is None or not self._silent_wait_s > 0.0:
+            return None
+        last = live.last_heard_s()
+        if not math.isfinite(last) or last >= sent_s:
+            return None
+        return last - live.up_since_s()
+
+    async def _await_voice(self, label: str, sent_s: float, heard_at_s: float) -> bool:
+        """Wait, at most `silent_wait_s`, until anything arrives from the vehicle after
+        ``sent_s``; says so when it starts. Returns True if the vehicle spoke."""
+        live = self._liveness
+        assert live is not None
+        logger.warning("%s: %s unanswered: heard at %.2f s, silent since; waiting up to %g s "
+                       "for it to speak (a vehicle program that is compiling or starting is "
+                       "silent, not refusing)", self._name, label, heard_at_s,
+                       self._silent_wait_s)
+        deadline = asyncio.get_running_loop().time() + self._silent_wait_s
+        while asyncio.get_running_loop().time() < deadline:
+            if live.last_heard_s() >= sent_s:
+                logger.warning("%s: heard again after %.1f s of silence; asking again",
+                               self._name, live.now_s() - live.up_since_s() - heard_at_s)
+                return True
+            await asyncio.sleep(_VOICE_POLL_S)
+        return live.last_heard_s() >= sent_s
 
     async def command_long(self, command: int, params: Sequence[float] = (), *,
                            timeout_s: float = 0.5, retries: int = 2) -> MavResult:

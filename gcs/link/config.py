@@ -44,6 +44,10 @@ class VehicleLinkConfig:
     # TIMESYNC requests for the round trip (gcs.link.clock); 0: none. On a shared port one
     # request per period reaches every vehicle behind one address, and all use its replies.
     timesync_period_s: float = 0.5
+    # a vehicle heard before that sends nothing at all while a command waits for its ACK is
+    # alive but busy (a program compiling or starting, a paused process), not refusing: the
+    # command waits this long for it to speak, then asks again; 0: fail after the retries
+    silent_wait_s: float = 30.0
     signing_key: bytes | None = None  # 32 bytes enables MAVLink 2 signing on this link
     signing_link_id: int = 0
     allow_unsigned: bool = False  # with a key: also accept unsigned packets
@@ -65,6 +69,8 @@ class VehicleLinkConfig:
         for key in ("heartbeat_period_s", "link_timeout_s", "heartbeat_timeout_s"):
             value = getattr(self, key)
             _check(value > 0.0, f"{where}: {key}: expected > 0, got {value}")
+        _check(self.silent_wait_s >= 0.0,
+               f"{where}: silent_wait_s: expected >= 0, got {self.silent_wait_s}")
         _check(self.timesync_period_s >= 0.0,
                f"{where}: timesync_period_s: expected >= 0, got {self.timesync_period_s}")
         if self.signing_key is not None:

@@ -31,7 +31,10 @@ from numba import njit
 from pymavlink.dialects.v20 import common as mavlink
 
 from gcs.link.codec import SeqBlock
-from gcs.link.telemetry import RATE_EWMA_ALPHA  # the rate estimate: the cache's, per message
+from gcs.link.telemetry import (  # the rate estimate: the cache's, per message
+    RATE_CLIP,
+    RATE_EWMA_ALPHA,
+)
 
 #: The hot messages, decoded into the table's value arrays, in table order (columns of the
 #: rx/count/raw arrays).
@@ -203,8 +206,14 @@ def scan(buf, offsets, lengths, addr_codes, rx_times, wall_us,  # noqa: ANN001, 
                                 if count[slot, kind] > 0:
                                     dt = rx_s - rx[slot, kind]
                                     old = interval[slot, kind]
-                                    interval[slot, kind] = (dt if old != old
-                                                            else old + RATE_EWMA_ALPHA * (dt - old))
+                                    # telemetry.next_interval
+                                    if old != old:
+                                        interval[slot, kind] = np.inf
+                                    elif old == np.inf:
+                                        interval[slot, kind] = dt
+                                    else:
+                                        interval[slot, kind] = old + RATE_EWMA_ALPHA * (
+                                            min(dt, RATE_CLIP * old) - old)
                                 rx[slot, kind] = rx_s
                                 count[slot, kind] += 1
                                 rawlen[slot, kind] = size

@@ -63,6 +63,7 @@ from gcs.link.telemetry import (
     TypeStats,
     VehicleState,
     build_state,
+    rate_of,
 )
 from gcs.link.tlog import TlogWriter
 from gcs.link.udp import Address, LinkClosedError, UdpStats
@@ -88,6 +89,9 @@ _TLOG_STAMP = struct.Struct(">Q")  # a tlog record's Unix time [us] (gcs.link.tl
 STAMPED_TYPES = frozenset({"LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "ATTITUDE"})
 #: Round trips kept for the flight report (at 2 Hz: over five hours).
 MAX_ROUND_TRIPS = 40_000
+#: Two TIMESYNC replies whose arrivals are closer than this fraction of their requests' spacing
+#: came bunched: held, then released together (see `_on_timesync_reply`).
+BUNCHED = 0.25
 #: A command is not confirmed once its timeout has passed AND this many HEARTBEATs received
 #: after its ACK did not show the effect; with fewer heard (a lossy link), the wait goes on up to
 #: CONFIRM_LOSSY_FACTOR x the timeout (command_confirmed).
@@ -120,6 +124,7 @@ class ProxyCounters:
     heartbeat_stale_events: int = 0  # HEARTBEAT silent for heartbeat_timeout_s, link up
     timesync_sent: int = 0  # TIMESYNC requests this proxy sent
     timesync_replies: int = 0  # replies (to any request on its port) timed into the clock
+    timesync_bunched: int = 0  # replies held and released together (left out: not the link)
 
 
 @dataclass(frozen=True, slots=True)
@@ -174,7 +179,8 @@ class VehicleProxy:
         self._cache = TelemetryCache()
         self._seq = SequenceTracker()
         self._n: dict[str, int] = {f.name: 0 for f in fields(ProxyCounters)}
-        self._commands = CommandChannel(self.name, config.gcs_sysid, self._send_command)
+        self._commands = CommandChannel(self.name, config.gcs_sysid, self._send_command,
+                                        liveness=self, silent_wait_s=config.silent_wait_s)
         self.statustexts = StatusTextLog(self.name)  # every STATUSTEXT of the vehicle
         self._waiters: list[tuple[str, Callable[[MAVLinkMessage], bool], asyncio.Future[Received]]]
         self._waiters = []
@@ -186,6 +192,7 @@ class VehicleProxy:
         self._mismatch: int | None = None  # sysid of a foreign vehicle HEARTBEAT, if any
         self.clock = VehicleClock()  # the vehicle's clock: true sample times (gcs.link.clock)
         self._round_trips: list[float] = []
+        self._last_reply = (-math.inf, -math.inf, False)  # request and reply time, recorded
         # the hot path (gcs.link.fastpath): this vehicle's row in its port's table, if it has one
         self._slot = slot if table is not None else None
         self._hot_decoded: dict[int, tuple[int, Received]] = {}
@@ -304,6 +311,19 @@ class VehicleProxy:
             return self._cache.last_any_rx_s
         return max(self._cache.last_any_rx_s, float(table.last_any_rx_s[self._slot]))
 
+    # the commands' view of liveness (gcs.link.commands.Liveness)
+
+    def now_s(self) -> float:
+        return self._clock.now_s()
+
+    def last_heard_s(self) -> float:
+        """Receive time of the vehicle's latest message of any type; -inf before the first."""
+        return self._last_any_rx_s()
+
+    def up_since_s(self) -> float:
+        """When this proxy's link came up."""
+        return self._t0_s
+
     def _accepted(self) -> int:
         table = self._port.table
         own = self._n["messages_accepted"]
@@ -353,15 +373,21 @@ class VehicleProxy:
         self._link_state = state
 
     def rate_hz(self, kind: str) -> float:
-        """Receive rate of one message type (EWMA of its intervals; NaN before two arrived,
+        """Receive rate of one message type (EWMA of its intervals; NaN before three arrived,
         0 if never); cheaper than `stats` for the few a check needs."""
         table = self._port.table
         if self._slot is not None and table is not None and kind in TABLE_NAMES:
             k = TABLE_NAMES.index(kind)
             if table.count[self._slot, k] > 0:
-                interval = float(table.interval_s[self._slot, k])
-                return 1.0 / interval if interval > 0.0 else math.nan
+                return rate_of(float(table.interval_s[self._slot, k]))
         return self._cache.rate_hz(kind)
+
+    def _restart_rate(self, kind: str) -> None:
+        """Measure ``kind``'s receive rate afresh (telemetry.TelemetryCache.restart_rate)."""
+        self._cache.restart_rate(kind)
+        table = self._port.table
+        if self._slot is not None and table is not None and kind in TABLE_NAMES:
+            table.interval_s[self._slot, TABLE_NAMES.index(kind)] = math.nan
 
     def stats(self) -> LinkStats:
         """Every counter of the link; the hot path's counts (gcs.link.fastpath) included."""
@@ -378,8 +404,7 @@ class VehicleProxy:
                 if count == 0:
                     continue
                 slow = by_type.get(kind)
-                interval = float(table.interval_s[i, k])
-                rate = 1.0 / interval if interval > 0.0 else math.nan
+                rate = rate_of(float(table.interval_s[i, k]))
                 last = float(table.rx_s[i, k])
                 if slow is not None:
                     last = max(last, slow.last_rx_s)
@@ -482,9 +507,22 @@ class VehicleProxy:
         if sent is None or now_s < sent:
             return
         self._n["timesync_replies"] += 1
-        self.clock.on_round_trip(now_s - sent, sent)
-        if len(self._round_trips) < MAX_ROUND_TRIPS:
+        # A link delays replies; it does not bunch them. Replies to requests a period apart that
+        # arrive together were held by a vehicle (or host) that stopped for a while: their round
+        # trips measure that stop, not the link, and both leave the link's record.
+        last_sent, last_rx, last_kept = self._last_reply
+        bunched = now_s - last_rx < BUNCHED * (sent - last_sent)
+        if bunched:
+            self._n["timesync_bunched"] += 1
+            if last_kept:  # the reply before this one was the bunch's first
+                self._n["timesync_bunched"] += 1
+                self.clock.disown_last_round_trip()
+                if self._round_trips:
+                    self._round_trips.pop()
+        elif len(self._round_trips) < MAX_ROUND_TRIPS:
             self._round_trips.append(now_s - sent)
+        self.clock.on_round_trip(now_s - sent, sent, of_link=not bunched)
+        self._last_reply = (sent, now_s, not bunched)
 
     def _on_foreign(self, msg: MAVLinkMessage, addr: Address) -> None:
         """Called by a port serving only this vehicle: a valid message from another sysid."""
@@ -746,12 +784,16 @@ class VehicleProxy:
         try:
             result = await self.command_long(MavCmd.SET_MESSAGE_INTERVAL, [msg_id, interval_us],
                                              timeout_s=timeout_s, retries=retries)
-        except CommandTimeoutError:
-            raise CommandTimeoutError(f"{what}: SET_MESSAGE_INTERVAL got no COMMAND_ACK in "
-                                      f"{retries + 1} attempts of {timeout_s:g} s") from None
+        except CommandTimeoutError as exc:
+            raise CommandTimeoutError(f"{what}: SET_MESSAGE_INTERVAL {exc.reason}",
+                                      exc.reason) from None
         if check and result != MavResult.ACCEPTED:
             raise CommandRejectedError(f"{what}: SET_MESSAGE_INTERVAL answered {result.name}",
                                        MavCmd.SET_MESSAGE_INTERVAL, result)
+        if result == MavResult.ACCEPTED:  # the rate asked for is measured from here on
+            msg_type = mavlink.mavlink_map.get(msg_id)
+            if msg_type is not None:
+                self._restart_rate(msg_type.msgname)
         return result
 
     # --- setpoints (each returns immediately; NaN/inf raise SetpointError, range is clamped) -----

@@ -17,6 +17,22 @@ FloatArray = frames.FloatArray
 
 #: Weight of the newest inter-arrival interval in the per-type rate estimate.
 RATE_EWMA_ALPHA = 0.1
+#: An interval enters the estimate clipped at this many times the estimate: a silence (a
+#: vehicle program that stopped a few seconds, a lost burst) moves it by at most 30 %, and a
+#: stream that really slowed down is followed within a few of its intervals.
+RATE_CLIP = 4.0
+
+
+def next_interval(old: float, dt: float) -> float:
+    """The rate estimate's mean interval [s] after an interval ``dt``. ``old`` NaN: nothing
+    measured yet, so this first interval (from whatever came before: a default rate, a start-up
+    silence) is skipped and +inf returned; +inf: ``dt`` seeds the estimate. (Inlined in
+    gcs.link.fastpath's compiled receive loop.)"""
+    if old != old:
+        return math.inf
+    if old == math.inf:
+        return dt
+    return old + RATE_EWMA_ALPHA * (min(dt, RATE_CLIP * old) - old)
 
 
 class Clock(Protocol):
@@ -113,9 +129,8 @@ class TelemetryCache:
         kind = msg.get_type()
         prev = self._latest.get(kind)
         if prev is not None:
-            dt = rx_time_s - prev.rx_time_s
-            old = self._interval_s.get(kind)
-            self._interval_s[kind] = dt if old is None else old + RATE_EWMA_ALPHA * (dt - old)
+            self._interval_s[kind] = next_interval(self._interval_s.get(kind, math.nan),
+                                                   rx_time_s - prev.rx_time_s)
         self._latest[kind] = Received(msg, rx_time_s)
         self._count[kind] = self._count.get(kind, 0) + 1
         self._last_any_rx_s = max(self._last_any_rx_s, rx_time_s)
@@ -130,19 +145,29 @@ class TelemetryCache:
         return self._last_any_rx_s
 
     def rate_hz(self, kind: str) -> float:
-        """Receive rate of one type (NaN before two messages arrived, 0 if none did)."""
+        """Receive rate of one type (NaN before three messages arrived, 0 if none did)."""
         if kind not in self._latest:
             return 0.0
-        interval = self._interval_s.get(kind)
-        return 1.0 / interval if interval is not None and interval > 0.0 else math.nan
+        return rate_of(self._interval_s.get(kind, math.nan))
+
+    def restart_rate(self, kind: str) -> None:
+        """Measure ``kind``'s rate afresh (its stream was just asked for another rate): the
+        interval from its latest message to the next one is skipped, the one after seeds."""
+        self._interval_s.pop(kind, None)
 
     def type_stats(self) -> dict[str, TypeStats]:
         out: dict[str, TypeStats] = {}
         for kind, rec in self._latest.items():
-            interval = self._interval_s.get(kind)
-            rate = 1.0 / interval if interval is not None and interval > 0.0 else math.nan
-            out[kind] = TypeStats(self._count[kind], rec.rx_time_s, rate)
+            out[kind] = TypeStats(self._count[kind], rec.rx_time_s,
+                                  rate_of(self._interval_s.get(kind, math.nan)))
         return out
+
+
+def rate_of(interval_s: float) -> float:
+    """Rate [Hz] of a mean interval (NaN: none measured yet)."""
+    if interval_s == math.inf:
+        return math.nan
+    return 1.0 / interval_s if interval_s > 0.0 else math.nan
 
 
 def _frozen(a: FloatArray) -> FloatArray:

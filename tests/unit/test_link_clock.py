@@ -135,3 +135,17 @@ def test_a_bound_line_always_holds_what_sample_time_uses():
         assert by_row == pytest.approx(clock.sample_time_s(t_vehicle, rx), abs=1e-12)
     assert clock.resets == 1
     assert np.isnan(team[[0, 2]]).all()  # the other rows untouched
+
+
+def test_a_round_trip_that_measured_a_stop_leaves_the_links_record_but_bounds_the_offset():
+    # GIVEN a link's round trips of ~10 ms, then two replies held by a stopped vehicle
+    clock = VehicleClock()
+    for k, rtt in enumerate((0.010, 0.011, 0.012)):
+        clock.on_round_trip(rtt, float(k))
+    clock.on_round_trip(3.8, 3.0)  # released first: it looks like any reply when it arrives
+    clock.disown_last_round_trip()  # the next reply came bunched with it
+    clock.on_round_trip(3.3, 3.5, of_link=False)
+    # THEN the link's round trips are the three of the link alone, with or without a start
+    assert list(clock.round_trips_s()) == [0.010, 0.011, 0.012]
+    assert list(clock.round_trips_s(1.0)) == [0.011, 0.012]
+    assert list(clock.round_trips_s(3.0)) == []

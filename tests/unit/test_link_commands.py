@@ -171,3 +171,86 @@ def test_ack_log_result_rules() -> None:
         assert log.result == MavResult.DENIED  # a refusal is not undone by a later ACCEPTED
 
     run(scenario())
+
+
+class Heard:
+    """A vehicle's liveness on the event loop's clock: heard at `last`, up since 0."""
+
+    def __init__(self, last: float) -> None:
+        self.last = last
+
+    def now_s(self) -> float:
+        return asyncio.get_running_loop().time() - self.t0
+
+    def last_heard_s(self) -> float:
+        return self.last
+
+    def up_since_s(self) -> float:
+        return 0.0
+
+    def start(self) -> None:
+        self.t0 = asyncio.get_running_loop().time() - 0.2  # its link came up 0.2 s ago
+        self.last = 0.13  # and it was last heard 0.13 s after that
+
+
+def silent_vehicle(policy: Callable[[int, int], Sequence[int]], wait_s: float) -> Vehicle:
+    vehicle = Vehicle(policy)
+    heard = Heard(-float("inf"))
+    vehicle.channel = CommandChannel("vehicle 0 (sysid 1)", 255, vehicle.send, liveness=heard,
+                                     silent_wait_s=wait_s)
+    vehicle.heard = heard  # type: ignore[attr-defined]
+    return vehicle
+
+
+def test_a_vehicle_silent_since_before_the_command_is_waited_for_then_asked_again(
+        caplog: pytest.LogCaptureFixture) -> None:
+    # GIVEN a vehicle heard at 0.13 s and silent since (a program compiling), that answers the
+    # command once it speaks again 0.4 s later
+    async def scenario() -> MavResult:
+        vehicle = silent_vehicle(lambda c, n: [], wait_s=5.0)
+        vehicle.heard.start()
+
+        def speaks() -> None:
+            vehicle.heard.last = vehicle.heard.now_s()
+            vehicle.policy = lambda c, n: [MavResult.ACCEPTED]
+        asyncio.get_running_loop().call_later(0.4, speaks)
+        result = await vehicle.channel.command_long(ARM, [1.0], timeout_s=0.05, retries=2)
+        assert [n for _, n, _ in vehicle.sent] == [0, 1, 2, 0]  # a new round once it spoke
+        assert vehicle.channel.stats().silent_waits == 1
+        return result
+
+    # WHEN a command gets no ACK THEN it waits (and says so), asks again and gets its answer
+    assert run(scenario()) == MavResult.ACCEPTED
+    assert ("vehicle 0 (sysid 1): MAV_CMD_COMPONENT_ARM_DISARM (400) unanswered: heard at "
+            "0.13 s, silent since; waiting up to 5 s for it to speak") in caplog.text
+
+
+def test_a_vehicle_silent_for_longer_than_the_bound_fails_saying_it_was_silent() -> None:
+    async def scenario() -> None:
+        vehicle = silent_vehicle(lambda c, n: [], wait_s=0.2)
+        vehicle.heard.start()
+        await vehicle.channel.command_long(ARM, [1.0], timeout_s=0.03, retries=1)
+
+    with pytest.raises(CommandTimeoutError, match=(
+            r"vehicle 0 \(sysid 1\): MAV_CMD_COMPONENT_ARM_DISARM \(400\) got no COMMAND_ACK: "
+            r"the vehicle, heard at 0\.13 s, sent nothing at all for 0\.2 s more \(alive "
+            r"before, silent since; not a refusal\)")):
+        run(scenario())
+
+
+def test_a_vehicle_that_talks_but_never_acks_fails_after_its_retries_without_waiting() -> None:
+    # GIVEN a vehicle whose telemetry keeps arriving (heard "now" at every look) but that never
+    # answers the command: that is a refusal to answer, not a silence
+    async def scenario() -> Vehicle:
+        vehicle = silent_vehicle(lambda c, n: [], wait_s=30.0)
+        vehicle.heard.start()
+        vehicle.heard.last_heard_s = vehicle.heard.now_s  # type: ignore[method-assign]
+        t0 = asyncio.get_running_loop().time()
+        with pytest.raises(CommandTimeoutError, match=r"got no COMMAND_ACK in 3 attempts of "
+                                                       r"0\.03 s"):
+            await vehicle.channel.command_long(ARM, [1.0], timeout_s=0.03, retries=2)
+        assert asyncio.get_running_loop().time() - t0 < 5.0  # not the 30 s silence bound
+        return vehicle
+
+    vehicle = run(scenario(), timeout_s=10.0)
+    assert vehicle.channel.stats().silent_waits == 0

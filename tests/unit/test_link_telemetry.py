@@ -75,6 +75,21 @@ def test_cache_keeps_the_latest_and_estimates_rate() -> None:
     assert cache.latest("ATTITUDE") is None
 
 
+def test_a_silence_moves_the_rate_little_and_a_slower_stream_is_followed() -> None:
+    # GIVEN a 5 Hz stream, then 4 s of silence (its vehicle program stopped), then 5 Hz again
+    cache = TelemetryCache()
+    times = [0.2 * k for k in range(20)] + [3.8 + 4.0 + 0.2 * k for k in range(1, 4)]
+    for t in times:
+        cache.update(MAV.extended_sys_state_encode(0, 1), t)
+    # THEN three intervals after it the rate is within 20 % of the stream's (an interval of 4 s
+    # taken at face value leaves 1.7 Hz: a ready check would read a 5 Hz stream as broken)
+    assert cache.rate_hz("EXTENDED_SYS_STATE") == pytest.approx(5.0, rel=0.2)
+    # AND a stream that really slowed to 1 Hz is read as 1 Hz within 20 of its intervals
+    for k in range(1, 21):
+        cache.update(MAV.extended_sys_state_encode(0, 1), 8.4 + k)
+    assert cache.rate_hz("EXTENDED_SYS_STATE") == pytest.approx(1.0, rel=0.2)
+
+
 def test_state_before_any_telemetry_is_nan_with_infinite_age() -> None:
     state = build_state(TelemetryCache(), sysid=3, now_s=5.0)
     assert np.all(np.isnan(state.position_enu_m)) and np.all(np.isnan(state.rotation_enu_flu))
