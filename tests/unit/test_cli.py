@@ -142,3 +142,26 @@ def test_console_script_is_installed_and_runs():
     result = subprocess.run([str(exe), "--help"], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0
     assert all(word in result.stdout for word in ("sim", "check", "plot"))
+
+
+def test_fly_help_says_what_it_does_its_exit_statuses_and_defaults(capsys):
+    # GIVEN `gcs fly --help`
+    with pytest.raises(SystemExit) as exit_:
+        main(["fly", "--help"])
+    assert exit_.value.code == 0
+    out = capsys.readouterr().out
+    # THEN it names the sequence, in order
+    steps = [re.search(rf"^  {step} ", out, re.MULTILINE) for step in
+             ("connect", "preflight", "arm", "offboard", "formation", "land")]
+    assert all(steps), out
+    assert [m.start() for m in steps] == sorted(m.start() for m in steps)
+    # AND every exit status with its meaning, one per line (the description's line breaks kept)
+    for status, meaning in ((0, "flown"), (1, "aborted"), (2, "configuration or setup error"),
+                            (130, "operator abort")):
+        assert re.search(rf"^  {status} +{meaning}", out, re.MULTILINE), out
+    # AND every option that takes a value states its default
+    flat = " ".join(out.split())
+    for option in ("--mode", "--controller", "--tick-rate-hz", "--duration-s", "--end-action",
+                   "--out DIR", "--status", "--connect-timeout-s", "--log-level"):
+        help_text = flat.split(f" {option}", 1)[1].split(" --", 1)[0]
+        assert "(default: " in help_text, (option, help_text)
