@@ -34,7 +34,7 @@ CONVERGED_FORMATION_ERROR_M = 0.01
 #: (estimator noise, link delay), not the simulation's 0.01 m, which they never meet, and a
 #: noisy error that dips below a threshold in the last few samples has not converged to it.
 #: Samples whose error is unknown (a skipped tick) are left out.
-FLY_CONVERGED_FORMATION_ERRORS_M = (0.01, 0.1, 1.0)
+FLY_CONVERGED_FORMATION_ERRORS_M = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
 FLY_CONVERGED_HOLD_FRACTION = 1 / 3
 LINK_FIELDS = (
     "setpoints_sent",
