@@ -1,4 +1,4 @@
-"""The flight report (report.json, spec/flight-report.md) and the terminal summary of a FlightLog.
+"""The flight report (report.json, docs/report.md) and the terminal summary of a FlightLog.
 
 ``build_report`` resamples the log every ``REPORT_PERIOD_S`` (0.1 s) by picking the samples at
 multiples of 0.1 s, converts positions and velocities from the app's ENU to local NED
@@ -132,7 +132,7 @@ def _converged(source: str, t_s: np.ndarray, error_m: np.ndarray) -> tuple[float
 def _check_stats(what: str, stats: Mapping[str, Any], fields: tuple[str, ...]) -> dict[str, Any]:
     missing = [f for f in fields if f not in stats]
     if missing:
-        raise ValueError(f"report {what}: missing fields {missing} (spec/flight-report.md)")
+        raise ValueError(f"report {what}: missing fields {missing} (docs/report.md)")
     return dict(stats)
 
 
@@ -153,7 +153,7 @@ def build_report(
     if log.source == "fly" and (link is None or tick is None):
         raise ValueError(
             "report of a 'fly' log: the link and tick statistics are mandatory "
-            "(spec/flight-report.md); pass link= and tick="
+            "(docs/report.md); pass link= and tick="
         )
 
     grid_t, idx = metrics.grid_indices(log.t_s, REPORT_PERIOD_S)

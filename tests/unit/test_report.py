@@ -1,4 +1,4 @@
-"""Metrics against hand-computed values, and report.json against spec/flight-report.md."""
+"""Metrics against hand-computed values, and report.json against its schema (docs/report.md)."""
 
 from __future__ import annotations
 
