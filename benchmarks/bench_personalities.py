@@ -1,7 +1,7 @@
 """Today's `gcs fly` against each emulator personality, beside the team's recorded SITL flights.
 
 For each autopilot, the team file of the recorded formation flight
-(`../shared/data/sitl/flights/<autopilot>/`) is flown with `gcs fly --mode rates --emulators`
+(FLIGHTS below, `<autopilot>/`: the team's recordings, outside this repository) is flown with `gcs fly --mode rates --emulators`
 against `vehicle-emu` with that personality, and with `nominal` (the paper's nominal model) for
 contrast, on free loopback ports. The SITL vehicles all booted at one home (their origins
 coincided by accident: `gcs fly` cannot yet tie separate origins together), so the emulated team
@@ -158,7 +158,8 @@ def section(results: dict[str, dict[str, dict]]) -> str:
         HEADING, "",
         "`benchmarks/bench_personalities.py` (rerun: `.venv/bin/python "
         "benchmarks/bench_personalities.py`). Today's `gcs fly --mode rates` flies the team "
-        "file of each recorded SITL formation flight (`../shared/data/sitl/flights/`) against "
+        "file of each recorded SITL formation flight (the team's recordings, kept outside this "
+        "repository) against "
         "`vehicle-emu` with that autopilot's personality and with `nominal`; the first row of "
         "each table is the recorded SITL flight itself (flown with the paper's gains, k_eps 8 "
         "and the recorded initial estimates). Ours fly what gcs fly flies today: the bundled "

@@ -93,7 +93,7 @@ def main() -> int:
     ]
     body += [
         "",
-        "Target: 60 s of Scenario I in <= 6 s wall (the plain-numpy reference of the spec needs 69 s).",
+        "Target: 60 s of Scenario I in <= 6 s wall (a plain-numpy reference implementation needs 69 s).",
         "What limits it: the plant RK4 step costs about 1 us for four vehicles (see the 100 Hz row,",
         "where the law runs one step in ten); the rest is the law, evaluated every millisecond. Each",
         "compiled stage allocates its small (n, 3) result arrays, about forty per tick; at roughly",

@@ -1,8 +1,8 @@
-"""Accuracy of the ways to obtain u', u'' (spec 9) along the Scenario I closed loop.
+"""Accuracy of the ways to obtain u', u'' (docs/control-law.md) along the Scenario I closed loop.
 
 Flies Scenario I with the default sampled law at 1 kHz and, at every tick, compares the model-based
 closed form (measured acceleration, the law's own mass estimate) and Levant's differentiator (28)
-with the exact oracle of spec 2.9 (true masses, T = |u|) evaluated at the same state.
+with the exact oracle (true masses, T = |u|; docs/control-law.md) evaluated at the same state.
 Run: `.venv/bin/python benchmarks/derivative_accuracy.py`.
 """
 

@@ -6,8 +6,8 @@
 
 The table (docs/emulator.md, "Calibration") replays the recorded setpoint stream
 (vehicle_emulator/replay.py) into N vehicles of each personality and sets the recorded figures
-(the JSON summaries in ../shared/data/sitl, or $SITL_DATA_DIR) beside the emulated ones: mean over
-the vehicles and repetitions, the ratio, and the tolerance of tests/unit/test_calibration.py.
+(the JSON summaries of the recordings, from replay.data_dir()) beside the emulated ones: mean
+over the vehicles and repetitions, the ratio, and the tolerance of tests/unit/test_calibration.py.
 
 ``--fit`` refits what is fitted rather than derived (PX4's rate loop is PX4's and SIH's own
 numbers, nothing to fit):

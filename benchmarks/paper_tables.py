@@ -1,4 +1,4 @@
-"""Print our Scenario I / II figures beside the spec's reference values, as markdown tables.
+"""Print our Scenario I / II figures beside the reference values, as markdown tables.
 
 Run: `.venv/bin/python benchmarks/paper_tables.py` (about 10 s with numba's cache warm). The
 output is what docs/reproducing-the-paper.md shows.
@@ -57,9 +57,9 @@ def main() -> int:
         for k, v in logs.items()
     }
     print(
-        "| t (s) | spec formation error (m) | "
+        "| t (s) | reference formation error (m) | "
         + " | ".join(f"{k}" for k in logs)
-        + " | spec velocity error (m/s) | "
+        + " | reference velocity error (m/s) | "
         + " | ".join(f"{k}" for k in logs)
         + " |"
     )
@@ -73,7 +73,7 @@ def main() -> int:
             + " |"
         )
     print()
-    print("| t (s) | spec UAV1..4 | verification | default |")
+    print("| t (s) | reference UAV1..4 | verification | default |")
     print("|---|---|---|---|")
     for t, ref in REF_MASS.items():
         print(
@@ -86,7 +86,7 @@ def main() -> int:
     a_d = simulate(s2, SimOptions()).log
     b_d = simulate(s2, SimOptions(law="baseline")).log
     print(
-        "| t (s) | spec adaptive z | verification z1..z4 | default z1..z4 | spec baseline z1 | verification baseline z1..z4 | default baseline z1..z4 |"
+        "| t (s) | reference adaptive z | verification z1..z4 | default z1..z4 | reference baseline z1 | verification baseline z1..z4 | default baseline z1..z4 |"
     )
     print("|---|---|---|---|---|---|---|")
     for t in REF_Z2:

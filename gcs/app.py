@@ -128,6 +128,7 @@ from gcs.mission.machine import (
     CommandResult,
     MissionMachine,
     MissionPlan,
+    NoteLevel,
     Outcome,
     Phase,
 )
@@ -986,12 +987,14 @@ class Flight:
         return True
 
     def _log_notes(self) -> None:
-        notes = self.machine.notes
-        for text in notes[self._notes_logged:]:
-            # the outcome itself is printed by the command line; its stop is worth a warning
-            logger.log(logging.WARNING if text.startswith("stopping") else logging.INFO,
+        """Log the mission's new notes at their level (the outcome itself is printed by the
+        command line; a stop before the formation's end is a warning, the normal end is not)."""
+        m = self.machine
+        for text, level in zip(m.notes[self._notes_logged:], m.note_levels[self._notes_logged:],
+                               strict=True):
+            logger.log(logging.WARNING if level is NoteLevel.WARNING else logging.INFO,
                        "mission: %s", text)
-        self._notes_logged = len(notes)
+        self._notes_logged = len(m.notes)
 
     def _run_law(self, k: int, sample: TeamSample, now_s: float) -> TeamCommand | None:
         if self._k0 is None:

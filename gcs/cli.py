@@ -65,8 +65,13 @@ def build_parser() -> argparse.ArgumentParser:
     comp.add_argument("--no-emulator", action="store_true",
                       help="only the ground station's parts (law and simulator)")
 
-    check = sub.add_parser("check", help="validate a team config and print what it says")
-    _add_team(check)
+    check = sub.add_parser(
+        "check", help="validate a team config and print what it says",
+        usage="gcs check [-h] (FILE | --team FILE)")
+    check.add_argument("file", nargs="?", type=Path, metavar="FILE", help="team config (YAML)")
+    check.add_argument("--team", type=Path, default=None, metavar="FILE",
+                       help="team config (YAML), as the other commands take it")
+    check.set_defaults(check_parser=check)  # for the usage error of _check_file
 
     plot = sub.add_parser("plot", help="redraw the figures of a run directory")
     plot.add_argument("run_dir", type=Path)
@@ -74,11 +79,23 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _check_file(args: argparse.Namespace) -> Path:
+    """The one team file `gcs check` was given, as FILE or as --team FILE; otherwise a usage
+    error (exit 2) naming what was given."""
+    parser: argparse.ArgumentParser = args.check_parser
+    if args.file is not None and args.team is not None:
+        parser.error(f"give the team file once, as FILE or as --team FILE, not both "
+                     f"(got {args.file} and --team {args.team})")
+    if args.file is None and args.team is None:
+        parser.error("a team file is required: gcs check FILE (or --team FILE)")
+    return args.file if args.file is not None else args.team
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         if args.command == "check":
-            team = load_team(args.team)
+            team = load_team(_check_file(args))
             print(describe(team))
             return EXIT_OK
         if args.command == "compile":

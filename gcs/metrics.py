@@ -1,6 +1,6 @@
 """Pure error metrics of a formation flight and helpers to read a time series (no I/O, no clock).
 
-Conventions (spec/control-law.md section 4): "formation error" is max over all pairs i < j of
+Conventions (docs/report.md): "formation error" is max over all pairs i < j of
 |p_i - p_j - theta_ij| with theta_ij = theta_i - theta_j; "velocity error" is max_i |v_i - v_r|;
 "attitude error" is max_i tr(I - R_i^e). Vectors may be in any one frame, consistently. All
 functions are vectorised over leading (sample) axes and propagate NaN (an unknown sample gives an

@@ -2,8 +2,8 @@
 
 The same interface as ``autopilot.Autopilot`` (``start``, ``arm``, ``set_mode``, ``takeoff``,
 ``land``, ``tick``, ``demand``/``demand_version``, ``events``), for the ``ardupilot``
-personality: ArduCopter 4.7.0-dev SITL as recorded (../shared/data/sitl/README.md, ArduPilot
-sections 1-3). No clock, no I/O: ``now_s`` is the emulator's simulated time since start.
+personality: ArduCopter 4.7.0-dev SITL as recorded (docs/emulator.md,
+"ArduPilot personality"). No clock, no I/O: ``now_s`` is the emulator's simulated time since start.
 
 * Modes: ``custom_mode`` is the mode number (``Mode``). Disarmed, every mode the emulator flies is
   accepted (ArduPilot skips its checks then); armed, a mode that needs a position estimate is

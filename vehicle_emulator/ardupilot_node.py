@@ -2,7 +2,7 @@
 
 ``ArduPilotNode`` is the VehicleNode (vehicle.py) of a vehicle whose personality's protocol family
 is ``ardupilot``, around the pure ArduCopter state machine (ardupilot.py); what it reproduces is
-ArduCopter 4.7.0-dev SITL as recorded (../shared/data/sitl/README.md, ArduPilot sections 1-3):
+ArduCopter 4.7.0-dev SITL as recorded (docs/emulator.md, "ArduPilot personality"):
 
 * Streams: nothing but HEARTBEAT (1 Hz) and ArduPilot's own TIMESYNC request every 10 s until
   asked (``DEFAULT_RATES_HZ``). SET_MESSAGE_INTERVAL is ACCEPTED for every stream ArduPilot maps

@@ -4,7 +4,7 @@ No clock, no I/O: every call takes ``now_s`` (the emulator's simulated time) and
 ``Observation``; the result is a MAV_RESULT, the current ``demand`` (what the inner loops fly,
 see plant.ControlMode) and queued ``events`` (STATUSTEXT lines) that the runner drains.
 
-PX4 rules reproduced (spec/mavlink.md; recorded on PX4 v1.16.0 SITL): custom_mode = main << 16 |
+PX4 rules reproduced (recorded on PX4 v1.16.0 SITL; docs/emulator.md): custom_mode = main << 16 |
 sub << 24; offboard is available while the newest setpoint is younger than COM_OF_LOSS_T (PX4's
 offboardCheck.cpp: ``now < last_setpoint + COM_OF_LOSS_T``), so a single setpoint just before
 DO_SET_MODE is enough (MAVSDK's ``set_attitude_rate`` then ``start``). Armed, OFFBOARD without one

@@ -102,7 +102,35 @@ def link_plan(spec: VehicleSpec, args: argparse.Namespace, single: bool) -> Link
 
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
-        prog="vehicle-emu", description="PX4-like quadrotor emulator over MAVLink 2 / UDP."
+        prog="vehicle-emu",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="""\
+Emulated quadrotors that a ground station reaches over MAVLink 2 / UDP as it
+would reach SITL instances: modes, COMMAND_ACKs, arming, streams, ports,
+parameters, the paper's rigid-body model at 1 kHz. Each vehicle has a
+personality (--autopilot, or the team file's emulator.autopilot):
+  px4        (default) behaves like PX4 v1.16.0 SITL (SIH) as recorded: OFFBOARD,
+             its rate loop, motors, EKF-like estimate wander, own EKF origin
+  ardupilot  behaves like ArduCopter 4.7.0-dev SITL as recorded: GUIDED_NOGPS,
+             ephemeral source port, its fitted rate response and noise
+  nominal    the paper's nominal model, not an autopilot: PX4's protocol, stiff
+             drag-free loops, noise-free, actuator setpoints honoured
+One vehicle per process (--id N: sysid N, PX4 SITL instance N-1's ports) or a
+whole team (--fleet --team FILE). docs/emulator.md describes every detail.""",
+        epilog="""\
+examples:
+  vehicle-emu --id 1                        Table I UAV 1 on the ground, PX4 ports
+  vehicle-emu --id 2 --team configs/square4.yaml
+                                            UAV 2 of the team, in the air
+  vehicle-emu --fleet --team configs/square4.yaml
+                                            the whole team in one process
+  vehicle-emu --fleet --team configs/square4.yaml --autopilot ardupilot
+                                            the same team as ArduCopter vehicles
+  vehicle-emu --fleet --team configs/square4.yaml --autopilot nominal
+                                            the paper's model (its figures)
+
+exit status: 0 stopped (Ctrl-C, SIGTERM, --duration); 2 bad team file or a
+--scheduling refused; 3 a port is taken.""",
     )
     who = ap.add_mutually_exclusive_group(required=True)
     who.add_argument("--id", type=int, help="vehicle id N (sysid N, PX4 SITL instance N-1)")
@@ -178,7 +206,9 @@ def _parser() -> argparse.ArgumentParser:
         "--duration", type=float, default=None, help="stop after this many simulated seconds"
     )
     ap.add_argument("--stats-json", help="write pacing/CPU figures here at exit")
-    ap.add_argument("--log-level", default="INFO")
+    ap.add_argument("--log-level", default="INFO",
+                    help="Python logging level on stderr; INFO logs every command and its result "
+                         "(default: INFO)")
     return ap
 
 

@@ -160,7 +160,7 @@ class Sensors:
 
 
 # PX4 v1.16.0 SITL with SIH (airframe 10040 sihsim_quadx), parameters as read back
-# (../shared/data/sitl/px4/params.txt). SIH: square X, rotors at (+-L, +-L) with L =
+# (the recording's parameter dump). SIH: square X, rotors at (+-L, +-L) with L =
 # SIH_L_ROLL = SIH_L_PITCH = 0.2 m, SIH_T_MAX 5 N and SIH_Q_MAX 0.1 N m per rotor at full command,
 # inertia SIH_IXX/IYY/IZZ 0.025/0.025/0.030 kg m^2. PX4's control allocation (pseudo-inverse of
 # CA_ROTOR*, then normalised: roll and pitch columns to +-1/sqrt(2) for four rotors, yaw to +-1)

@@ -1,4 +1,4 @@
-"""Replay of the recorded SITL flight (../shared/data/sitl) into an in-process emulator.
+"""Replay of the recorded SITL flight (the recordings: `data_dir`) into an in-process emulator.
 
 The recorded ground station streamed SET_ATTITUDE_TARGET at 100 Hz (body rates + thrust) through a
 hover, six rate doublets and two thrust doublets, with its thrust from an altitude law on
@@ -51,8 +51,9 @@ TICK_S = 0.002  # the runner's default loop tick
 
 
 def data_dir() -> Path:
-    """The recordings: $SITL_DATA_DIR, else ../shared/data/sitl next to the repository, else
-    the copy of the replayed files in the repository (tests/data/sitl, for a clean checkout)."""
+    """The recordings: $SITL_DATA_DIR, else the team's shared data folder next to the
+    repository, else the copy of the replayed files in the repository (tests/data/sitl, for a
+    clean checkout)."""
     env = os.environ.get("SITL_DATA_DIR")
     if env:
         return Path(env)

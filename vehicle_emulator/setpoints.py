@@ -1,7 +1,7 @@
 """SET_ATTITUDE_TARGET / SET_ACTUATOR_CONTROL_TARGET / SET_POSITION_TARGET_LOCAL_NED fields ->
 checked offboard setpoints, as PX4 reads them. Pure.
 
-PX4's type_mask rules (spec/mavlink.md): bits set = ignore (1 roll rate, 2 pitch rate, 4 yaw rate,
+PX4's type_mask rules (docs/emulator.md): bits set = ignore (1 roll rate, 2 pitch rate, 4 yaw rate,
 64 throttle, 128 attitude; 32 = use thrust_body). If bit 128 is clear the quaternion is the
 setpoint (attitude wins) and a non-ignored yaw rate is a feed-forward; else body rates are used
 only if roll AND pitch rates are both not ignored (an ignored yaw rate then means 0). Otherwise

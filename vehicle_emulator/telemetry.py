@@ -1,6 +1,6 @@
 """Telemetry scheduler: which message is due for which vehicle, built and framed in batches.
 
-Rates are PX4's onboard-link defaults (spec/mavlink.md) unless a vehicle's personality sets its
+Rates are PX4's onboard-link defaults (docs/emulator.md) unless a vehicle's personality sets its
 own (``set_defaults``: ArduPilot streams almost nothing until asked), per vehicle and message,
 changeable with MAV_CMD_SET_MESSAGE_INTERVAL. LOCAL_POSITION_NED is sent only with a position
 sample taken at or after the vehicle's ``FleetStatus.position_from_ms`` (ArduPilot: once its

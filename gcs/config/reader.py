@@ -133,16 +133,48 @@ _Loader.add_constructor("tag:yaml.org,2002:map", _construct_map)
 _Loader.add_constructor("tag:yaml.org,2002:seq", _construct_seq)
 
 
+#: pyyaml contexts whose mark is where a construct opened that the parser found unfinished: the
+#: fault is on that line, however far below the parser gave up (a missing `]` on line 35 is
+#: noticed at the next key, line 45). Other contexts (`while parsing a block mapping`) mark the
+#: enclosing block; there the fault is where the parser stopped.
+_OPENED_AT_CONTEXT = {
+    "while parsing a flow mapping": "the flow mapping opened there is not closed",
+    "while parsing a flow sequence": "the flow sequence opened there is not closed",
+    "while scanning a quoted scalar": "the quoted string opened there is not closed",
+    "while scanning a simple key": "the key there has no ':'",
+}
+
+
+def _yaml_error(exc: yaml.MarkedYAMLError, source: str) -> ConfigError:
+    """One line naming the line of the fault and the line where pyyaml gave up, if another."""
+    context, problem = exc.context_mark, exc.problem_mark
+    opened = _OPENED_AT_CONTEXT.get(exc.context or "")
+    fault = context if opened is not None and context is not None else problem or context
+    if fault is None:
+        return ConfigError(source, "(top level)", f"invalid YAML: {exc.problem or exc}")
+    notes = []
+    if opened is not None:
+        notes.append(opened)
+    elif exc.context and context is not None and context.line != fault.line:
+        what = exc.context.removeprefix("while parsing a ")
+        notes.append(f"in the {what} that starts at line {context.line + 1}"
+                     if what != exc.context else f"{exc.context} at line {context.line + 1}")
+    if problem is not None and problem.line != fault.line:
+        notes.append(f"the parser gave up at line {problem.line + 1}")
+    syntax = isinstance(exc, yaml.scanner.ScannerError | yaml.parser.ParserError)
+    kind = "YAML syntax error" if syntax else "invalid YAML"
+    where = f"{kind} at line {fault.line + 1}, column {fault.column + 1}" + (
+        f" ({'; '.join(notes)})" if notes else "")
+    err = ConfigError(source, where, exc.problem or exc.context or "syntax error")
+    err.line = fault.line + 1
+    return err
+
+
 def _parse_yaml(text: str, source: str) -> Any:
     try:
         return yaml.load(text, Loader=_Loader)  # _Loader is a SafeLoader: plain data only
     except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "(top level)"
-        problem = " ".join(p for p in (exc.context, exc.problem) if p) or "syntax error"
-        err = ConfigError(source, where, f"invalid YAML: {problem}")
-        err.line = mark.line + 1 if mark else None
-        raise err from None
+        raise _yaml_error(exc, source) from None
     except yaml.YAMLError as exc:
         raise ConfigError(source, "(top level)", f"invalid YAML: {exc}") from None
 

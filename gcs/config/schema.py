@@ -348,7 +348,8 @@ Fault = FaultConfig | LinkLossFault | PacketLossFault | MotorEfficiencyFault
 @dataclass(frozen=True, slots=True)
 class FlyModeConfig:
     """`gcs fly` settings of one control mode: the tick rate over the link and, where the paper's
-    attitude gains are not stable at that rate (spec section 9), the gains flown instead."""
+    attitude gains are not stable at that rate (docs/control-law.md, "Discrete-time
+    implementation"), the gains flown instead."""
 
     tick_rate_hz: float
     alpha_eps: float | None = None  # None: controller.gains.alpha_eps (actuators mode)

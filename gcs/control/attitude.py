@@ -1,5 +1,5 @@
 """Attitude loop: errors (15)-(17), regressor (19), adaptive torque (26), inertia update (27),
-and the thrust + body-rate variant for autopilots that take rate setpoints (spec section 9).
+and the thrust + body-rate variant for autopilots that take rate setpoints (docs/control-law.md).
 
 R is body-to-world (ENU/FLU); omega, omega^c, tau are body-frame vectors; R^c, omega^c, omega^c'
 come from geometry.command_attitude / command_angular_velocity. Batched over the team.
@@ -127,7 +127,7 @@ def adaptive_torque(
 @njit(cache=True)
 def rate_command(eps: np.ndarray, wc_body: np.ndarray, k_eps: float,
                  k_eps_yaw: float) -> np.ndarray:
-    """Body-rate setpoint (n, 3) [rad/s, FLU] for the thrust + body-rate mode (spec section 9).
+    """Body-rate setpoint (n, 3) [rad/s, FLU] for the thrust + body-rate mode (docs/control-law.md).
 
     omega_cmd = R^eT omega^c - k_eps eps: the command attitude's own rate as feed-forward plus
     attitude feedback (for small errors eps ~ 2 x rotation vector, so the error decays at 2 k_eps).

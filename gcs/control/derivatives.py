@@ -1,14 +1,15 @@
 """Time derivatives u', u'' of the command force: model-based closed form and Levant's (28).
 
-The command angular velocity (spec 2.5) needs u' and u''. Two ways to get them:
+The command angular velocity (docs/control-law.md) needs u' and u''. Two ways to get them:
 
-* `force_derivatives`: differentiate (23) analytically along the closed loop (spec 2.9). It needs
+* `force_derivatives`: differentiate (23) analytically along the closed loop. It needs
   each vehicle's acceleration v' (measured: specific force rotated to world minus g e3; in the
   test oracle, the model with the true mass), its neighbours' accelerations (their telemetry), and
   a gain k_i with v_i'' = k_i (T_i' R_i e3 + T_i R_i (omega_i x e3)): k_i = 1/m_i gives the exact
   oracle, k_i = 1/kappa_i (the law's own mass estimate) the implementable model-based method.
 * `levant_advance`: the paper's robust exact differentiator (28) run on the sampled u with
-  explicit-Euler substeps, for comparison (it needs L >= 1e3 and substeps <= 1e-4 s, spec 4.2).
+  explicit-Euler substeps, for comparison (it needs L >= 1e3 and substeps <= 1e-4 s:
+  docs/control-law.md).
 """
 
 from __future__ import annotations

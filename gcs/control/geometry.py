@@ -1,4 +1,4 @@
-"""SO(3) geometry of the law: hat/vee, the command attitude (14) and its body rates (spec 2.5).
+"""SO(3) geometry of the law: hat/vee, the command attitude (14) and its body rates.
 
 Frames: world ENU (z up, e3 = [0, 0, 1]), body FLU; a rotation maps body to world. Every function
 here is pure and compiled with numba; the batched ones take arrays shaped (n, 3) / (n, 3, 3) and
@@ -57,8 +57,9 @@ def is_nonsingular(force_n: np.ndarray) -> np.ndarray:
 def command_attitude(force_n: np.ndarray) -> np.ndarray:
     """Command attitude R^c (n, 3, 3) of eq. (14): the minimal rotation taking e3 to u/|u|.
 
-    R^c = I + k^ + (k^)^2 / (1 + b_z) with b = u/|u|, k = e3 x b (spec 2.4, with the (2,2) entry
-    corrected). The caller checks `is_nonsingular` first; a singular force gives non-finite output.
+    R^c = I + k^ + (k^)^2 / (1 + b_z) with b = u/|u|, k = e3 x b (with the (2,2) entry corrected:
+    docs/control-law.md, "Deviations from the paper"). The caller checks `is_nonsingular` first;
+    a singular force gives non-finite output.
     """
     n = force_n.shape[0]
     rc = np.empty((n, 3, 3))
@@ -84,7 +85,7 @@ def command_attitude(force_n: np.ndarray) -> np.ndarray:
 def command_angular_velocity(
     force_n: np.ndarray, dforce: np.ndarray, ddforce: np.ndarray, rc: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Body rate omega^c of R^c and its time derivative, both (n, 3), from u, u', u'' (spec 2.5).
+    """Body rate omega^c of R^c and its time derivative, both (n, 3), from u, u', u''.
 
     (omega^c)^ = R^cT dR^c/dt. Closed forms, replacing the paper's Appendix (which is wrong as
     printed): with n = |u|, r1 = R^c e1, r2 = R^c e2, D = n (n + u_z),

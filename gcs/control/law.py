@@ -71,7 +71,7 @@ def position_stage(
 def attitude_stage(rotation, omega_radps, force_n, dforce, ddforce, rhohat, gains, adaptive,
                    heading_rad):
     """Command attitude (14) turned by heading_rad (n,) about its thrust axis (zeros: the
-    paper's), its rates (spec 2.5), torque (26), rhohat' (27), rate command.
+    paper's), its rates (docs/control-law.md), torque (26), rhohat' (27), rate command.
 
     Returns (rc, wc, dwc, tau, rho_rate, omega_cmd, eps, tr_err, we).
     """

@@ -7,7 +7,7 @@ costs O(n + m) for m edges. `reference` is (4, 3): v_r and its first three time 
 formation.reference_velocity).
 
 Saturation: sat(x) = sigma_a tanh(x / sigma_a), dsat = 1 - tanh^2(x / sigma_a),
-ddsat = -(2 / sigma_a) tanh(x / sigma_a) dsat (spec section 1; sigma_a = 1 in the paper).
+ddsat = -(2 / sigma_a) tanh(x / sigma_a) dsat (sigma_a = 1 in the paper).
 """
 
 from __future__ import annotations
@@ -142,7 +142,7 @@ def mass_estimator_rate(
     phi_values: np.ndarray,
     gains: LawGains,
 ) -> np.ndarray:
-    """I&I update mhat_i' of (24), with the sign corrected (spec 2.3).
+    """I&I update mhat_i' of (24), with the sign corrected (docs/control-law.md, "Deviations").
 
     mhat' = -g dsat(v_z) mhat / (3 sigma_a phi) + T zeta^T R e3 / (3 sigma_a alpha_m),
     zeta = dsat(v) componentwise. Needs no acceleration: alpha_m mhat/phi -> m exponentially.

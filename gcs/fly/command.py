@@ -17,6 +17,7 @@ from typing import TextIO
 from gcs.app import Flight, FlightSetupError, FlyOptions, prepare
 from gcs.config import FLY_MODES, TeamConfig, load_team
 from gcs.fly.sched import SchedulingError, apply_scheduling
+from gcs.mission.machine import EXIT_ABORTED, EXIT_OK
 from gcs.precompile import compile_law
 from gcs.report import summary_table
 from gcs.status import StatusView
@@ -28,31 +29,73 @@ EXIT_SETUP = 2
 EXIT_INTERRUPTED = 130
 
 
+FLY_DESCRIPTION = """\
+Fly the team of a team file in formation over MAVLink, then land it:
+  connect    wait for every vehicle to be heard (up to fly.connect_timeout_s)
+  preflight  link, streams, EKF origin, tilt, geofence and mode checks
+  arm        arm and take off the vehicles on the ground (fly.start)
+  go to      fly each vehicle to its start position (fly.go_to_start)
+  offboard   stream setpoints, then switch every vehicle to its offboard mode
+             (PX4 OFFBOARD, ArduPilot GUIDED_NOGPS)
+  formation  fly the paper's law for mission.duration_s
+  land       land every vehicle, or hold (fly.end_action)
+Ctrl-C or the abort key (q or a) stops the flight with fly.abort_action (land
+by default). The records (report.json, timeseries.csv, flight.tlog, figures)
+are written to --out.
+Defaults "the file's" are the team file's keys (docs/configuration.md)."""
+
+
+def fly_epilog() -> str:
+    """`gcs fly --help`'s closing text: the exit statuses (from their constants) and examples."""
+    return f"""\
+exit status:
+  {EXIT_OK:<3}  flown: the formation phase ran to its end and every vehicle landed
+       (or holds, --end-action hold)
+  {EXIT_ABORTED:<3}  aborted: a safety rule or a failed check stopped the flight; the
+       vehicles got fly.abort_action; the reason is printed and in report.json
+  {EXIT_SETUP:<3}  configuration or setup error: nothing was commanded (a bad team file,
+       a GCS port in use, an emulator fleet that did not start, scheduling refused)
+  {EXIT_INTERRUPTED:<3}  operator abort (Ctrl-C, SIGTERM, the abort key), after the vehicles
+       are down
+
+examples:
+  gcs fly --team configs/square4.yaml --emulators
+  gcs fly --team configs/square4.yaml --mode rates --end-action hold
+  gcs fly --team configs/square4_massdrop.yaml --controller baseline --out runs/drop
+
+docs/gcs.md describes the sequence, the modes and the safety rules."""
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("fly", help="fly the team in formation over MAVLink and write records")
-    p.add_argument("--team", required=True, type=Path, help="team config (YAML)")
+    p = sub.add_parser("fly", help="fly the team in formation over MAVLink and write records",
+                       description=FLY_DESCRIPTION, epilog=fly_epilog(),
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--team", required=True, type=Path, metavar="FILE", help="team config (YAML)")
     p.add_argument("--mode", choices=FLY_MODES, default=None,
                    help="setpoints sent to the vehicles: thrust + body rates, thrust + torque, "
                         "thrust + attitude, or auto: rates, or attitude where the link's delay "
                         "needs it (default: the file's fly.mode, auto)")
     p.add_argument("--controller", choices=("adaptive", "baseline"), default=None,
-                   help="law (default: the file's)")
+                   help="law (default: the file's controller.law)")
     p.add_argument("--tick-rate-hz", type=float, default=None,
-                   help="control tick (default: fly.<mode>.tick_rate_hz)")
-    p.add_argument("--duration-s", type=float, default=None, help="formation phase length")
+                   help="control tick (default: the file's fly.<mode>.tick_rate_hz)")
+    p.add_argument("--duration-s", type=float, default=None,
+                   help="formation phase length (default: the file's mission.duration_s)")
     p.add_argument("--end-action", choices=("land", "hold"), default=None,
-                   help="after the formation phase (default: fly.end_action)")
-    p.add_argument("--out", type=Path, default=None,
-                   help="output directory (default runs/<name>-fly)")
+                   help="after the formation phase (default: the file's fly.end_action, land)")
+    p.add_argument("--out", type=Path, default=None, metavar="DIR",
+                   help="output directory (default: runs/<name>-fly)")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--status", choices=("auto", "rich", "plain", "off"), default="auto",
-                   help="live status: rich table on a terminal, one plain line otherwise")
+                   help="live status: rich table on a terminal, one plain line otherwise "
+                        "(default: auto)")
     p.add_argument("--emulators", action="store_true",
                    help="start `vehicle-emu --fleet --team FILE` for the flight and stop it after")
     p.add_argument("--connect-timeout-s", type=float, default=None,
-                   help="wait this long for every vehicle to be heard (default: "
+                   help="wait this long for every vehicle to be heard (default: the file's "
                         "fly.connect_timeout_s, 60 s)")
-    p.add_argument("--log-level", default="WARNING", help="Python logging level (stderr)")
+    p.add_argument("--log-level", default="WARNING",
+                   help="Python logging level on stderr (default: WARNING)")
 
 
 class EmulatorFleetError(RuntimeError):

@@ -177,7 +177,8 @@ def link_report(
     telemetry_lost: Sequence[int],
     extra: Sequence[dict[str, Any]] | None = None,
 ) -> dict[str, dict[str, Any]]:
-    """The report's `link` object: per vehicle id, the spec's fields plus `extra[i]`."""
+    """The report's `link` object: per vehicle id, the schema's fields (docs/report.md)
+    plus `extra[i]`."""
     p50, p99, top = ages.percentiles_ms(50), ages.percentiles_ms(99), ages.percentiles_ms(100)
     rx99 = ages.percentiles_ms(99, received=True)
     out: dict[str, dict[str, Any]] = {}

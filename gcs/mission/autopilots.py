@@ -3,8 +3,8 @@ off, how they are commanded, and what must be configured on the vehicle before f
 
 One `AutopilotProfile` per supported autopilot, chosen per vehicle from its HEARTBEAT.autopilot
 (`profile_for`), so a team may mix autopilots. The mission machine and the composition root use
-the profile instead of PX4 constants. Facts: ../shared/spec/mavlink.md (docs/gcs.md says why each
-mode was chosen).
+the profile instead of PX4 constants. Facts: PX4 v1.16.0 and ArduCopter 4.7.0-dev SITL as
+recorded (docs/mavlink.md, docs/emulator.md; docs/gcs.md says why each mode was chosen).
 
 * PX4 (12): arms in Hold (AUTO_LOITER, commanded first when it reports another mode); OFFBOARD;
   hold AUTO_LOITER; land with MAV_CMD_NAV_LAND; NAV_TAKEOFF with an AMSL

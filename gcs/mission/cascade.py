@@ -4,7 +4,7 @@ In `rates` and `attitude` mode the autopilot closes the innermost loop, and the 
 on top of it: the position loop (21)-(23) commands a tilt, the tilt is what the autopilot's loops
 deliver some time later. The paper designs its gains for a vehicle that tracks its attitude
 command at once; a real autopilot does not (PX4 v1.16 SIH: roll-rate t63 87 ms with 37 %
-overshoot, yaw rate 0.82 of a 1 rad/s step after 0.6 s; recorded, ../shared/data/sitl). With the
+overshoot, yaw rate 0.82 of a 1 rad/s step after 0.6 s; recorded: docs/emulator.md). With the
 paper's gains (c_p 4, alpha_p 2) and k_eps 8 that lag closes two limit cycles on the px4
 personality (docs/gcs.md, "Control modes"): the ground station's attitude loop at ~2.4 Hz
 (roll/pitch coning, the body-rate limit active on 95 % of the setpoints, noise or not) and the

@@ -95,6 +95,14 @@ class Phase(Enum):
     DONE = "done"
 
 
+class NoteLevel(Enum):
+    """How much a note matters: INFO for the flight's normal course, its normal end included;
+    WARNING for an anomaly (a stop before the formation's end, start paths that cross)."""
+
+    INFO = "info"
+    WARNING = "warning"
+
+
 class Cmd(Enum):
     """What the app must do to one vehicle (it maps these to proxy calls)."""
 
@@ -244,6 +252,7 @@ class MissionMachine:
     formation_t0_s: float | None = None
     outcome: Outcome | None = None
     notes: list[str] = field(default_factory=list)  # human-readable events, newest last
+    note_levels: list[NoteLevel] = field(default_factory=list)  # notes[k]'s level
     _v: dict[int, _Vehicle] = field(default_factory=dict)
     _phase_since_s: float | None = None
     _configured_s: float | None = None  # PREFLIGHT: when the CONFIGURE commands had all ended
@@ -438,8 +447,9 @@ class MissionMachine:
         self._phase_since_s = self._now_s
         self._note(f"phase {phase.value}")
 
-    def _note(self, text: str) -> None:
+    def _note(self, text: str, level: NoteLevel = NoteLevel.INFO) -> None:
         self.notes.append(text)
+        self.note_levels.append(level)
 
     def _statuses(self) -> list[VehicleStatus]:
         return [v.status for v in self._v.values() if v.status is not None]
@@ -636,7 +646,8 @@ class MissionMachine:
         starts = {vid: plan.start_of(vid) for vid in flown}
         for i, j, d in crossing_pairs(positions, starts, plan.separation_m):
             self._note(f"warning: vehicles {i} and {j} start within {plan.separation_m:g} m of "
-                       f"one altitude and their horizontal legs come {d:.2f} m apart")
+                       f"one altitude and their horizontal legs come {d:.2f} m apart",
+                       NoteLevel.WARNING)
         return self._drive()
 
     def _update_goto_vehicle(self, vid: int) -> None:
@@ -876,7 +887,7 @@ class MissionMachine:
                 v.stop = _Stop(action)
         self._stop_reason = Outcome(code, reason)
         self._stopping_since_s = self._now_s
-        self._note(f"stopping ({action}): {reason}")
+        self._note(f"stopping ({action}): {reason}", NoteLevel.INFO if end else NoteLevel.WARNING)
         self._enter(Phase.STOPPING)
 
     def _stopping(self) -> list[Command]:

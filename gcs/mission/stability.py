@@ -1,4 +1,4 @@
-"""Discrete-time stability of the attitude loops as flown over a link (spec section 9). Pure.
+"""Discrete-time stability of the attitude loops as flown over a link (docs/gcs.md). Pure.
 
 The paper designs its attitude loop in continuous time. Over MAVLink the command is computed at a
 fixed tick of period h from telemetry that is up to about one tick old, and held (zero-order hold)

@@ -5,8 +5,9 @@ Two kernels share the law (gcs.control.law) and the physics (vehicle_emulator.ph
 * `run_sampled`: what a flight computer does. The law runs every `ctrl_every` plant steps on the
   sampled state, its outputs are held (zero-order hold) while the plant is integrated by RK4, and
   its own states (mhat, rhohat) are integrated by forward Euler over the control period.
-* `run_oracle`: the verification mode of spec section 4: the law is evaluated inside every RK4
-  stage with the exact u', u'' of spec 2.9, which use the TRUE masses; tests only.
+* `run_oracle`: the verification mode (docs/reproducing-the-paper.md): the law is evaluated
+  inside every RK4 stage with the exact u', u'' (docs/control-law.md), which use the TRUE masses;
+  tests only.
 
 Both advance the state arrays in place and write log rows every `log_every` plant steps, so
 the Python caller can run a long flight in chunks and show progress between them. The graph is
@@ -265,8 +266,8 @@ def _oracle_rates(
     gains,
     adaptive,
 ):
-    """Closed-loop vector field with the exact u', u'' (spec 2.9). Returns the state
-    derivatives and the law's diagnostics at this state."""
+    """Closed-loop vector field with the exact u', u'' (the oracle of docs/control-law.md).
+    Returns the state derivatives and the law's diagnostics at this state."""
     ref = reference_velocity(t, ref_c, ref_a, ref_w, ref_ph)
     u, a, s, ve, ph, kappa, t_n, mhat_rate = position_stage(
         p, v, rot, mhat, nominal_mass, graph, offsets, ref, gains, adaptive

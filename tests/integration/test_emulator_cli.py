@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import signal
 import socket
@@ -33,6 +34,21 @@ def test_console_script_help():
     out = subprocess.run([exe, "--help"], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0
     assert "--fleet" in out.stdout and "--team" in out.stdout
+
+
+def test_help_says_what_it_emulates_and_shows_examples():
+    # GIVEN `vehicle-emu --help`
+    out = subprocess.run([*EMU, "--help"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0
+    # THEN each personality is named with what it stands for, one per line
+    for pattern in (r"^  px4 +\(default\) behaves like PX4 v1\.16\.0 SITL",
+                    r"^  ardupilot +behaves like ArduCopter 4\.7\.0-dev SITL",
+                    r"^  nominal +the paper's nominal model"):
+        assert re.search(pattern, out.stdout, re.MULTILINE), out.stdout
+    # AND examples for one vehicle, a fleet and another personality
+    for example in ("vehicle-emu --id 1 ", "vehicle-emu --fleet --team configs/square4.yaml\n",
+                    "vehicle-emu --fleet --team configs/square4.yaml --autopilot ardupilot"):
+        assert f"\n  {example}" in out.stdout, out.stdout
 
 
 def test_fleet_runs_every_vehicle_on_its_own_endpoint_and_exits_cleanly(tmp_path):

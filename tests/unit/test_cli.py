@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -77,10 +78,37 @@ def test_plot_of_a_directory_without_records_fails_clearly(tmp_path, capsys):
     assert "holds no timeseries.csv" in capsys.readouterr().err
 
 
-def test_check_prints_what_it_understood(capsys):
-    assert main(["check", "--team", str(CONFIGS / "square4.yaml")]) == 0
+@pytest.mark.parametrize("how", ["positional", "--team"])
+def test_check_prints_what_it_understood(capsys, how):
+    # GIVEN the team file as `gcs check FILE` (as the docs write it) or as `--team FILE`
+    path = str(CONFIGS / "square4.yaml")
+    argv = ["check", path] if how == "positional" else ["check", "--team", path]
+    # WHEN checked THEN it prints what it understood
+    assert main(argv) == 0
     out = capsys.readouterr().out
     assert "square4" in out and "4 vehicles" in out
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        ([], r"gcs check: error: a team file is required: gcs check FILE \(or --team FILE\)"),
+        (
+            ["a.yaml", "--team", "b.yaml"],
+            r"gcs check: error: give the team file once, as FILE or as --team FILE, not both "
+            r"\(got a\.yaml and --team b\.yaml\)",
+        ),
+    ],
+)
+def test_check_wants_exactly_one_team_file(capsys, args, message):
+    # GIVEN no team file, or one as FILE and another as --team
+    # WHEN checked THEN a usage error (exit 2) says what to give
+    with pytest.raises(SystemExit) as exit_:
+        main(["check", *args])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "usage: gcs check [-h] (FILE | --team FILE)" in err
+    assert re.search(message, err), err
 
 
 def test_bad_config_is_one_clear_line_and_exit_2(tmp_path, capsys):
@@ -114,3 +142,26 @@ def test_console_script_is_installed_and_runs():
     result = subprocess.run([str(exe), "--help"], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0
     assert all(word in result.stdout for word in ("sim", "check", "plot"))
+
+
+def test_fly_help_says_what_it_does_its_exit_statuses_and_defaults(capsys):
+    # GIVEN `gcs fly --help`
+    with pytest.raises(SystemExit) as exit_:
+        main(["fly", "--help"])
+    assert exit_.value.code == 0
+    out = capsys.readouterr().out
+    # THEN it names the sequence, in order
+    steps = [re.search(rf"^  {step} ", out, re.MULTILINE) for step in
+             ("connect", "preflight", "arm", "offboard", "formation", "land")]
+    assert all(steps), out
+    assert [m.start() for m in steps] == sorted(m.start() for m in steps)
+    # AND every exit status with its meaning, one per line (the description's line breaks kept)
+    for status, meaning in ((0, "flown"), (1, "aborted"), (2, "configuration or setup error"),
+                            (130, "operator abort")):
+        assert re.search(rf"^  {status} +{meaning}", out, re.MULTILINE), out
+    # AND every option that takes a value states its default
+    flat = " ".join(out.split())
+    for option in ("--mode", "--controller", "--tick-rate-hz", "--duration-s", "--end-action",
+                   "--out DIR", "--status", "--connect-timeout-s", "--log-level"):
+        help_text = flat.split(f" {option}", 1)[1].split(" --", 1)[0]
+        assert "(default: " in help_text, (option, help_text)

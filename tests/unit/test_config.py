@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -670,11 +671,68 @@ def test_yaml_syntax_error_names_file_and_line(tmp_path):
     path = write(tmp_path, "name: x\nmission: {duration_s: [1, 2\nvehicles: []\n")
     with pytest.raises(
         ConfigError,
-        match=r"team\.yaml: line 3, column 9: invalid YAML: while "
-        r"parsing a flow sequence expected ',' or '\]'",
+        match=r"team\.yaml: YAML syntax error at line 2, column 23 \(the flow sequence opened "
+        r"there is not closed; the parser gave up at line 3\): expected ',' or '\]'",
     ) as e:
         load_team(path)
-    assert e.value.line == 3
+    assert e.value.line == 2
+
+
+def break_line(text: str, line: int, old: str, new: str) -> str:
+    """`text` with `old` replaced by `new` on 1-based `line` (which must hold it)."""
+    lines = text.splitlines(keepends=True)
+    assert old in lines[line - 1], lines[line - 1]
+    lines[line - 1] = lines[line - 1].replace(old, new, 1)
+    return "".join(lines)
+
+
+@pytest.mark.parametrize(
+    ("fault", "old", "new", "match"),
+    [
+        # an unclosed flow sequence: pyyaml gives up at the next key, 10 lines below (a comment)
+        (
+            "  edges: [[1, 2]",
+            "[4, 1]]",
+            "[4, 1]",
+            r"square4\.yaml: YAML syntax error at line {line}, column 10 \(the flow sequence "
+            r"opened there is not closed; the parser gave up at line (\d+)\): expected ','",
+        ),
+        # an unclosed flow mapping
+        (
+            "  rates: {tick_rate_hz",
+            "c_p: 2.0}",
+            "c_p: 2.0",
+            r"square4\.yaml: YAML syntax error at line {line}, column 10 \(the flow mapping "
+            r"opened there is not closed; the parser gave up at line (\d+)\)",
+        ),
+        # bad indentation: pyyaml's context_mark is the enclosing block, the fault its own line
+        (
+            "  takeoff_altitude_m:",
+            "  takeoff",
+            "     takeoff",
+            r"square4\.yaml: YAML syntax error at line {line}, column 6 \(in the block mapping "
+            r"that starts at line (\d+)\): expected <block end>",
+        ),
+    ],
+)
+def test_yaml_syntax_error_names_the_faulty_line_not_where_the_parser_gave_up(
+    tmp_path, fault, old, new, match
+):
+    # GIVEN square4.yaml with one line broken
+    text = SQUARE4.read_text()
+    line = 1 + next(k for k, s in enumerate(text.splitlines()) if s.startswith(fault))
+    lines = text.splitlines(keepends=True)
+    assert old in lines[line - 1]
+    lines[line - 1] = lines[line - 1].replace(old, new, 1)
+    broken = tmp_path / "square4.yaml"
+    broken.write_text("".join(lines))
+    # WHEN loaded THEN the error names the broken line, and where the parser gave up (below
+    # it) or the block it is in (above it)
+    with pytest.raises(ConfigError, match=match.format(line=line)) as e:
+        load_team(broken)
+    assert e.value.line == line
+    other = int(re.search(match.format(line=line), str(e.value))[1])
+    assert other > line if "gave up" in match else other < line
 
 
 @pytest.mark.parametrize(
@@ -689,10 +747,10 @@ def test_yaml_syntax_error_names_file_and_line(tmp_path):
         ("42\n", r"\(top level\): expected a mapping of sections, got int 42"),
         (
             "name: a\nmission: {}\nname: b\n",
-            r"team\.yaml: line 3, column 1: invalid YAML: duplicate "
+            r"team\.yaml: invalid YAML at line 3, column 1: duplicate "
             r"key 'name' \(first on line 1\)",
         ),
-        ("? [1, 2]\n: x\n", r"line 1, column 3: invalid YAML: a key must be a plain scalar"),
+        ("? [1, 2]\n: x\n", r"invalid YAML at line 1, column 3: a key must be a plain scalar"),
     ],
 )
 def test_non_mapping_top_level_and_duplicate_keys(tmp_path, text, match):

@@ -5,14 +5,17 @@ from __future__ import annotations
 
 import ast
 import dataclasses
+import logging
 import math
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_autopilots import fly_with_failures
 
+from gcs.app import Flight
 from gcs.mission.machine import (
     EXIT_ABORTED,
     EXIT_INTERRUPTED,
@@ -21,6 +24,7 @@ from gcs.mission.machine import (
     CommandResult,
     MissionMachine,
     MissionPlan,
+    NoteLevel,
     Phase,
 )
 from gcs.mission.safety import SafetyRules, VehicleStatus, flight_problems, preflight_problems
@@ -125,6 +129,37 @@ def test_airborne_team_flies_the_whole_sequence_and_lands():
     assert all(not s.armed and s.landed for s in w.v.values())
     assert [n for n in m.notes if n.startswith("phase")] == [
         "phase preflight", "phase prime", "phase formation", "phase stopping", "phase done"]
+
+
+def log_notes(m: MissionMachine, caplog) -> list[tuple[int, str]]:
+    """(level, message) of what the app logs for the machine's notes (Flight._log_notes)."""
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="gcs.app"):
+        Flight._log_notes(SimpleNamespace(machine=m, _notes_logged=0))  # type: ignore[arg-type]
+    return [(r.levelno, r.getMessage()) for r in caplog.records]
+
+
+def test_a_normal_end_is_logged_at_info_and_an_abort_as_a_warning(caplog):
+    # GIVEN a mission flown to its normal end (formation complete, landed)
+    m = machine()
+    World(m).run(30.0)
+    assert m.outcome.exit_code == EXIT_OK
+    # WHEN its notes are logged THEN none is a warning, the stop and the end included
+    logged = log_notes(m, caplog)
+    assert (logging.INFO, "mission: stopping (land): formation complete") in logged
+    assert (logging.INFO, "mission: done: exit 0: formation complete") in logged
+    assert [msg for level, msg in logged if level != logging.INFO] == []
+    assert set(m.note_levels) == {NoteLevel.INFO} and len(m.note_levels) == len(m.notes)
+    # GIVEN a mission stopped by a geofence breach instead
+    m = machine(duration_s=60.0)
+    w = World(m)
+    while m.phase is not Phase.FORMATION:
+        w.tick()
+    w.v[2] = dataclasses.replace(w.v[2], position_enu_m=(6.0, 0.0, 70.0))
+    w.run(10.0)
+    # THEN its stop is the one warning
+    warnings = [msg for level, msg in log_notes(m, caplog) if level == logging.WARNING]
+    assert len(warnings) == 1 and warnings[0].startswith("mission: stopping (land): vehicle 2")
 
 
 def test_vehicles_on_the_ground_are_armed_and_take_off_first():
