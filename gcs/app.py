@@ -45,6 +45,7 @@ from gcs.config import (
     FLY_ACTIONS,
     FLY_MODES,
     MODES,
+    TORQUE_MODES,
     ConfigError,
     TeamConfig,
     check_go_to_start,
@@ -53,7 +54,7 @@ from gcs.control.formation import reference_velocity
 from gcs.control.gains import GRAVITY_MPS2, LawGains
 from gcs.control.law import SingularCommandError, TeamCommand, TeamLaw, TeamMeasurement
 from gcs.control.position import phi
-from gcs.flightlog import FlightLog, FlightLogBuilder, save_timeseries
+from gcs.flightlog import FlightLog, FlightLogBuilder, estimates_record, save_timeseries
 from gcs.fly.collector import PacedCollector
 from gcs.fly.delay import DelayJudge
 from gcs.fly.measure import (
@@ -440,10 +441,13 @@ class Flight:
         rhohat = np.array([v.estimates.inertia_kgm2 if adaptive else v.baseline_inertia_kgm2
                            for v in vehicles], dtype=float)
         d = team.controller.derivative
+        # rhohat acts only through the torque (26): in rates and attitude mode it is held
+        inertia_estimated = adaptive and setup.mode in TORQUE_MODES
         self.law = TeamLaw(
             setup.gains, team.adjacency(), team.offsets_enu_m(), team.initial_mhat(), rhohat,
             nominal_mass_kg=nominal, adaptive=adaptive, derivative=d.method,
             levant_lipschitz=d.levant_lipschitz, levant_substep_s=d.levant_substep_s,
+            estimate_inertia=inertia_estimated,
         )
         self.ref_arrays = tuple(np.ascontiguousarray(a, dtype=float)
                                 for a in team.reference_velocity.as_arrays())
@@ -466,6 +470,9 @@ class Flight:
         self.hover_estimates: dict[int, HoverEstimate] = {}
         self.compiled_after_ready: list[str] = []  # numba compiles while flying (run())
         self.scheduling: Scheduling | None = None  # what the OS gave (gcs fly sets it)
+        # per vehicle, what flies it beyond its autopilot family (gcs fly --emulators: the
+        # emulator's personality); for the records only
+        self.vehicle_notes: dict[int, str] = {}
         self.max_yaw_rate_radps = team.fly.rates.max_yaw_rate_radps
         self.limited_ticks = np.zeros(self.n, dtype=np.int64)  # rate or torque limit applied
         # Before the formation starts (PRIME), vehicles get level, zero-rate setpoints at the
@@ -499,7 +506,12 @@ class Flight:
             source="fly", controller=setup.law, team=team.source_path, name=team.name,
             extra={"mode": setup.mode, "mode_choice": setup.mode_choice,
                    "tick_rate_hz": setup.tick_rate_hz, "derivative": d.method,
-                   "gains": setup.gains._asdict(), "stability": setup.stability},
+                   "gains": setup.gains._asdict(), "stability": setup.stability,
+                   "estimates": estimates_record(
+                       mass_from=[("hover" if v.estimates.from_hover else "team") if adaptive
+                                  else "nominal" for v in vehicles],
+                       inertia_from="team" if adaptive else "nominal",
+                       inertia_kgm2=rhohat, inertia_estimated=inertia_estimated)},
         )
         self.ticks = TickStats(setup.tick_rate_hz)
         self.ages = AgeStats(self.n)
@@ -1124,6 +1136,13 @@ class Flight:
                                     "text": e.text} for e in p.statustexts.texts()]
                 for i, p in enumerate(self.proxies)}
 
+    def _vehicle_kind(self, vehicle_id: int) -> str:
+        """'PX4', or with a note 'PX4 (vehicle-emu px4)': the autopilot family its HEARTBEAT
+        named (the machine's profile) and what the command line knows of the vehicle."""
+        name = self.machine.profile(vehicle_id).name
+        note = self.vehicle_notes.get(vehicle_id)
+        return f"{name} ({note})" if note else name
+
     def _write_records(self, outcome: Outcome) -> FlyResult:
         out = self.options.out_dir
         if len(self.builder) == 0:
@@ -1166,6 +1185,7 @@ class Flight:
                                        "error_at_t0_m": self._start_error_m.get(vid)}
                             for vid, r in self.machine.goto_results.items()},
             "events": self.machine.notes[-50:],
+            "vehicle_kinds": [self._vehicle_kind(vid) for vid in self.ids],
             "statustext": self._statustexts(),
             # numba compiles during the flight (each stalled the tick while it ran)
             "compiled_after_ready": self.compiled_after_ready,

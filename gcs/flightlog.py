@@ -111,6 +111,9 @@ class FlightLog:
     Static metadata: vehicle_ids (n,) and sysids (n,) ints, offsets_enu_m (n, 3) theta_i [m],
     source "sim" | "fly", controller "adaptive" | "baseline", team (config path), name, and
     ``extra``: a JSON-compatible dict of per-run figures (e.g. ``{"link": ..., "tick": ...}``).
+    The figures read from it (absent in older logs): ``mode`` ("actuators" | "rates" |
+    "attitude"), ``estimates`` (``estimates_record``) and, from gcs fly, ``vehicle_kinds``
+    (one line per vehicle, e.g. "PX4 (vehicle-emu px4)").
     """
 
     t_s: np.ndarray
@@ -313,6 +316,47 @@ class FlightLog:
             "name": self.name,
             "extra": dict(self.extra),
         }
+
+
+#: ``estimates_record`` mass_from values: where each vehicle's initial mass estimate came from
+MASS_FROM = ("hover", "team", "nominal")
+
+
+def estimates_record(
+    *,
+    mass_from: Sequence[str],
+    inertia_from: str,
+    inertia_kgm2: Any,
+    inertia_estimated: bool,
+) -> dict[str, Any]:
+    """``FlightLog.extra["estimates"]``: what the run's law started its estimates from and
+    whether it integrated the inertia estimate (JSON-ready).
+
+    mass_from (n,): per vehicle, "hover" (mhat_i(0) from its hover thrust, gcs fly), "team"
+    (the team file's estimates.mhat) or "nominal" (the baseline's known mass, not estimated);
+    inertia_from: "team" (estimates.inertia_kgm2) or "nominal" (the baseline's known inertia);
+    inertia_kgm2 (n, 3): rhohat_i(0); inertia_estimated: False when rhohat was held at
+    rhohat(0) (the baseline, or a mode that does not command the torque: TORQUE_MODES).
+    Raises ValueError for a value outside those.
+    """
+    bad = [m for m in mass_from if m not in MASS_FROM]
+    if bad or inertia_from not in ("team", "nominal"):
+        raise ValueError(
+            f"estimates_record: mass_from expects {MASS_FROM} and inertia_from team or nominal, "
+            f"got {list(mass_from)} and {inertia_from!r}"
+        )
+    inertia = np.asarray(inertia_kgm2, dtype=np.float64)
+    if inertia.shape != (len(mass_from), 3):
+        raise ValueError(
+            f"estimates_record: inertia_kgm2: expected shape ({len(mass_from)}, 3), "
+            f"got {inertia.shape}"
+        )
+    return {
+        "mass_from": list(mass_from),
+        "inertia_from": inertia_from,
+        "inertia_kgm2": inertia.tolist(),
+        "inertia_estimated": bool(inertia_estimated),
+    }
 
 
 class FlightLogBuilder:

@@ -12,21 +12,35 @@ Files written by ``write_figures(log, out_dir)`` (Scenario I):
                               given pairs, e.g. the graph's edges)
   fig4_velocity_errors.png    Fig. 4: v_i - v_r, x / y / z
   fig5_attitude_errors.png    Fig. 5: tr(I - R_i^e) and |omega_i^e|
-  fig6_mass_estimates.png     Fig. 6: alpha_m mhat_i / phi_i (solid) and the true mass (dashed)
-  fig7_inertia_estimates.png  Fig. 7: Jhat_i x / y / z
+  fig6_mass_estimates.png     Fig. 6: alpha_m mhat_i / phi_i (solid) from its initial value (circle)
+                              and the true mass (dashed); where the truth is known, a second panel
+                              with the estimate's error relative to it [%]
+  fig7_inertia_estimates.png  Fig. 7: Jhat_i x / y / z; only for a run whose setpoint is the torque
+                              (26) (actuators mode: gcs.config.TORQUE_MODES) or of unknown mode. In
+                              rates and attitude mode the autopilot's loops make the torque, Jhat
+                              is neither used nor integrated, and no Fig. 7 is written (one left
+                              from an earlier run in the directory is removed)
   errors_semilogy.png         (not in the paper) formation, velocity and attitude error of the team
                               on a log scale, to read convergence down to the numerical floor
 Files written by ``write_comparison_figures(adaptive_log, baseline_log, out_dir)`` (Scenario II):
   fig8_adaptive_z.png         Fig. 8: z and v_z of each UAV with the adaptive law
   fig9_baseline_z.png         Fig. 9: the same with the non-adaptive baseline
 A change of the true mass (e.g. the 30 % drop of Scenario II) is marked with a dotted line.
+
+Every figure's title says what the run was (``run_description``): the source, law and control
+mode, the vehicles (gcs fly: the autopilot family each HEARTBEAT named, and the emulator's
+personality with --emulators) and where the estimates started (mhat(0) from each vehicle's hover
+thrust or from the team file; Jhat(0), and whether it was estimated), read from ``log.extra``
+(flightlog.estimates_record); what an older log did not record is said to be "not recorded".
 """
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -34,22 +48,40 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from gcs import metrics
+from gcs.config import TORQUE_MODES
 from gcs.flightlog import FlightLog
+
+logger = logging.getLogger(__name__)
 
 SNAPSHOT_TIMES_S = (0.0, 10.0, 30.0, 60.0)
 DPI = 120
 AXES = ("x", "y", "z")
+FIG7_NAME = "fig7_inertia_estimates.png"
+#: what each control mode sends the vehicle (the title's words)
+MODE_SETPOINTS = {
+    "actuators": "thrust + torque (26)",
+    "rates": "thrust + body rates",
+    "attitude": "thrust + attitude",
+}
+#: the title's words for estimates_record's mass_from
+MASS_FROM_TEXT = {
+    "hover": "from hover thrust",
+    "team": "from the team file",
+    "nominal": "known (baseline, not estimated)",
+}
 
 
 def _color(j: int) -> str:
     return f"C{j % 10}"
 
 
-def _new_figure(rows: int, title: str, height_per_row: float = 2.4) -> tuple[Figure, list[Axes]]:
-    fig = Figure(figsize=(8.0, 1.3 + height_per_row * rows), dpi=DPI, layout="constrained")
+def _new_figure(
+    rows: int, title: str, log: FlightLog, height_per_row: float = 2.4
+) -> tuple[Figure, list[Axes]]:
+    fig = Figure(figsize=(8.0, 2.0 + height_per_row * rows), dpi=DPI, layout="constrained")
     FigureCanvasAgg(fig)
     axes = list(fig.subplots(rows, 1, sharex=True, squeeze=False)[:, 0])
-    fig.suptitle(title)
+    _title(fig, title, log)
     for ax in axes:
         ax.grid(True, alpha=0.3)
     axes[-1].set_xlabel("t [s]")
@@ -62,8 +94,97 @@ def _save(fig: Figure, out_dir: Path, filename: str) -> Path:
     return path
 
 
+def _title(fig: Figure, title: str, log: FlightLog) -> None:
+    """`title` over the run's description (two small lines)."""
+    fig.suptitle(f"{title}\n{run_description(log)}", fontsize="medium")
+
+
 def _subtitle(log: FlightLog) -> str:
-    return f"{log.name} ({log.source}, {log.controller})"
+    mode = log.extra.get("mode")
+    mode_text = f"{mode} mode" if mode else "mode not recorded"
+    return f"{log.name}: {log.source}, {log.controller} law, {mode_text}"
+
+
+def _estimates(log: FlightLog) -> dict[str, Any] | None:
+    est = log.extra.get("estimates")
+    return est if isinstance(est, dict) else None
+
+
+def torque_commanded(log: FlightLog) -> bool | None:
+    """True when the run's setpoint was the law's torque (26) (TORQUE_MODES), False when it was
+    not, None when the log does not say (no ``extra["mode"]``)."""
+    mode = log.extra.get("mode")
+    return None if mode is None else mode in TORQUE_MODES
+
+
+def inertia_estimated(log: FlightLog) -> bool | None:
+    """Whether the run integrated Jhat (27): as recorded, else (older logs) the adaptive law in a
+    torque mode; None when neither says."""
+    est = _estimates(log)
+    if est is not None and "inertia_estimated" in est:
+        return bool(est["inertia_estimated"])
+    torque = torque_commanded(log)
+    return None if torque is None else torque and log.controller == "adaptive"
+
+
+def _vehicles_text(log: FlightLog) -> str:
+    kinds = log.extra.get("vehicle_kinds")
+    if not isinstance(kinds, list) or len(kinds) != log.n_vehicles:
+        if log.source == "sim":
+            return "vehicles: the nominal model (6)-(9) in-process"
+        return "vehicles: not recorded"
+    groups: dict[str, list[str]] = {}
+    for vid, kind in zip(log.vehicle_ids.tolist(), kinds, strict=True):
+        groups.setdefault(str(kind), []).append(str(vid))
+    if len(groups) == 1:
+        return f"vehicles: {next(iter(groups))}"
+    return "vehicles: " + "; ".join(f"UAV {', '.join(v)}: {k}" for k, v in groups.items())
+
+
+def _mass_from_text(log: FlightLog) -> str:
+    est = _estimates(log)
+    mass_from = est.get("mass_from") if est is not None else None
+    if not isinstance(mass_from, list) or len(mass_from) != log.n_vehicles:
+        return r"$\hat m(0)$ source not recorded"
+    groups: dict[str, list[str]] = {}
+    for vid, source in zip(log.vehicle_ids.tolist(), mass_from, strict=True):
+        groups.setdefault(MASS_FROM_TEXT.get(source, str(source)), []).append(str(vid))
+    if len(groups) == 1:
+        return rf"$\hat m(0)$ {next(iter(groups))}"
+    return "; ".join(rf"$\hat m(0)$ of UAV {', '.join(v)} {k}" for k, v in groups.items())
+
+
+def _inertia_text(log: FlightLog) -> str:
+    est = _estimates(log)
+    j0 = np.asarray(est["inertia_kgm2"], dtype=float) if est and "inertia_kgm2" in est else None
+    start = (
+        rf"$\hat J(0)$ = {j0.flat[0]:g} kg m$^2$"
+        if j0 is not None and j0.size and np.all(j0 == j0.flat[0])
+        else r"$\hat J(0)$ per vehicle"
+        if j0 is not None
+        else r"$\hat J(0)$ not recorded"
+    )
+    estimated, torque = inertia_estimated(log), torque_commanded(log)
+    if torque is False:
+        held = est is not None and est.get("inertia_estimated") is False
+        unused = f"not used in {log.extra['mode']} mode"
+        return f"{start}, held there ({unused})" if held else rf"$\hat J$ {unused}"
+    if estimated is None:
+        return f"{start}, estimation not recorded"
+    if not estimated:
+        return f"{start}, known (baseline, not estimated)"
+    return f"{start}, estimated and used in the torque"
+
+
+def run_description(log: FlightLog) -> str:
+    """Three lines for a figure's title: the run (source, law, mode and what it sends), the
+    vehicles, and where the estimates started."""
+    mode = log.extra.get("mode")
+    sends = f" ({MODE_SETPOINTS[mode]})" if mode in MODE_SETPOINTS else ""
+    return (
+        f"{_subtitle(log)}{sends}\n{_vehicles_text(log)}\n"
+        f"{_mass_from_text(log)}; {_inertia_text(log)}"
+    )
 
 
 def _legend(ax: Axes, n_entries: int) -> None:
@@ -112,7 +233,7 @@ def fig2_formation(log: FlightLog, snapshot_times_s: Sequence[float] = SNAPSHOT_
 
     fig = Figure(figsize=(13.0, 6.0), dpi=DPI, layout="constrained")
     FigureCanvasAgg(fig)
-    fig.suptitle(f"Fig. 2 - Formation snapshots: {_subtitle(log)}")
+    _title(fig, "Fig. 2 - Formation snapshots", log)
     ax3 = fig.add_subplot(1, 2, 1, projection="3d")
     ax2 = fig.add_subplot(1, 2, 2)
 
@@ -174,7 +295,7 @@ def _pair_indices(log: FlightLog, pairs: Sequence[tuple[int, int]] | None) -> np
 def fig3_position_offsets(log: FlightLog, pairs: Sequence[tuple[int, int]] | None = None) -> Figure:
     idx = _pair_indices(log, pairs)
     d = metrics.relative_offsets(log.position_enu_m, log.offsets_enu_m, idx)
-    fig, axes = _new_figure(3, f"Fig. 3 - Position offsets: {_subtitle(log)}")
+    fig, axes = _new_figure(3, "Fig. 3 - Position offsets", log)
     for a, ax in enumerate(axes):
         for q, (i, j) in enumerate(idx):
             ax.plot(
@@ -191,7 +312,7 @@ def fig3_position_offsets(log: FlightLog, pairs: Sequence[tuple[int, int]] | Non
 
 def fig4_velocity_errors(log: FlightLog) -> Figure:
     e = log.velocity_enu_mps - log.reference_velocity_enu_mps[:, None, :]
-    fig, axes = _new_figure(3, f"Fig. 4 - Velocity errors: {_subtitle(log)}")
+    fig, axes = _new_figure(3, "Fig. 4 - Velocity errors", log)
     for a, ax in enumerate(axes):
         for j in range(log.n_vehicles):
             ax.plot(log.t_s, e[:, j, a], color=_color(j), lw=1.0, label=f"UAV {log.vehicle_ids[j]}")
@@ -201,7 +322,7 @@ def fig4_velocity_errors(log: FlightLog) -> Figure:
 
 
 def fig5_attitude_errors(log: FlightLog) -> Figure:
-    fig, axes = _new_figure(2, f"Fig. 5 - Attitude errors: {_subtitle(log)}", 2.8)
+    fig, axes = _new_figure(2, "Fig. 5 - Attitude errors", log, 2.8)
     for j in range(log.n_vehicles):
         label = f"UAV {log.vehicle_ids[j]}"
         axes[0].plot(log.t_s, log.attitude_error[:, j], color=_color(j), lw=1.0, label=label)
@@ -213,12 +334,19 @@ def fig5_attitude_errors(log: FlightLog) -> Figure:
 
 
 def fig6_mass_estimates(log: FlightLog) -> Figure:
-    fig, axes = _new_figure(1, f"Fig. 6 - Mass estimates: {_subtitle(log)}", 4.2)
+    """The mass estimates from their initial values (circles) against the true masses (dashed,
+    where known: the simulated plant, or the team file's plant that the emulator flies); with a
+    known truth, a second panel with the error relative to it."""
+    known = np.isfinite(log.mass_true_kg).any(axis=0)
+    rows = 2 if known.any() else 1
+    fig, axes = _new_figure(rows, "Fig. 6 - Mass estimates", log, 4.2 if rows == 1 else 3.0)
     ax = axes[0]
+    m = log.mass_estimate_kg
+    first = np.array([_first_finite(m[:, j]) for j in range(log.n_vehicles)])
     for j in range(log.n_vehicles):
         vid = log.vehicle_ids[j]
-        ax.plot(log.t_s, log.mass_estimate_kg[:, j], color=_color(j), lw=1.2, label=f"UAV {vid}")
-        if np.isfinite(log.mass_true_kg[:, j]).any():
+        ax.plot(log.t_s, m[:, j], color=_color(j), lw=1.2, label=f"UAV {vid}")
+        if known[j]:
             ax.plot(
                 log.t_s,
                 log.mass_true_kg[:, j],
@@ -227,13 +355,48 @@ def fig6_mass_estimates(log: FlightLog) -> Figure:
                 ls="--",
                 label=f"UAV {vid} true",
             )
+        k0, m0 = first[j]
+        if np.isfinite(m0):
+            ax.plot(log.t_s[int(k0)], m0, "o", color=_color(j), mfc="none", ms=7, mew=1.5)
     ax.set_ylabel(r"$\alpha_m \hat m_i / \phi_i$ [kg]")
-    _legend(ax, 2 * log.n_vehicles)
+    ax.set_title(_mass_panel_title(log, first[:, 1]), fontsize="small")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize="small")
+    if rows == 2:
+        rel = 100.0 * (m - log.mass_true_kg) / log.mass_true_kg
+        for j in np.flatnonzero(known):
+            axes[1].plot(
+                log.t_s, rel[:, j], color=_color(j), lw=1.0, label=f"UAV {log.vehicle_ids[j]}"
+            )
+        axes[1].axhline(0.0, color="k", lw=0.8)
+        axes[1].set_ylabel(r"$(\alpha_m \hat m_i / \phi_i - m_i) / m_i$ [%]")
+        axes[1].set_title("estimate error relative to the true mass", fontsize="small")
     return fig
 
 
+def _first_finite(a: np.ndarray) -> tuple[float, float]:
+    """(index, value) of the first finite sample of a (k,) series; (0, NaN) if there is none."""
+    ok = np.flatnonzero(np.isfinite(a))
+    return (0.0, np.nan) if ok.size == 0 else (float(ok[0]), float(a[ok[0]]))
+
+
+def _mass_panel_title(log: FlightLog, initial_kg: np.ndarray) -> str:
+    """E.g. 'mhat(0) from hover thrust: 0.845, 1.23 kg; dashed: true (the plant) 0.85, 1.2 kg'."""
+
+    def values(a: np.ndarray) -> str:
+        return ", ".join("?" if not np.isfinite(x) else f"{x:.3g}" for x in a)
+
+    text = f"\u25cb {_mass_from_text(log)}: {values(initial_kg)} kg"
+    true0 = np.array([_first_finite(log.mass_true_kg[:, j])[1] for j in range(log.n_vehicles)])
+    if np.isfinite(true0).any():
+        text += f"; dashed: true (the plant) {values(true0)} kg"
+    else:
+        text += "; true masses unknown"
+    return text
+
+
 def fig7_inertia_estimates(log: FlightLog) -> Figure:
-    fig, axes = _new_figure(3, f"Fig. 7 - Inertia estimates: {_subtitle(log)}")
+    """Jhat_i per axis; for a run that commands the torque (TORQUE_MODES), see write_figures."""
+    fig, axes = _new_figure(3, "Fig. 7 - Inertia estimates", log)
     for a, ax in enumerate(axes):
         for j in range(log.n_vehicles):
             ax.plot(
@@ -252,7 +415,7 @@ def errors_semilogy(log: FlightLog) -> Figure:
     fe = metrics.formation_error(log.position_enu_m, log.offsets_enu_m)
     ve = metrics.velocity_error(log.velocity_enu_mps, log.reference_velocity_enu_mps)
     ae = log.attitude_error.max(axis=1)
-    fig, axes = _new_figure(1, f"Team errors (log scale): {_subtitle(log)}", 4.2)
+    fig, axes = _new_figure(1, "Team errors (log scale)", log, 4.2)
     ax = axes[0]
     floor = np.finfo(np.float64).tiny  # a log axis cannot show exact zeros; clip to the tiniest
     for values, label in (
@@ -271,7 +434,7 @@ def errors_semilogy(log: FlightLog) -> Figure:
 
 
 def fig_z(log: FlightLog, number: int, title: str) -> Figure:
-    fig, axes = _new_figure(2, f"Fig. {number} - {title}: {_subtitle(log)}", 2.8)
+    fig, axes = _new_figure(2, f"Fig. {number} - {title}", log, 2.8)
     events = _mass_change_times(log)
     for j in range(log.n_vehicles):
         label = f"UAV {log.vehicle_ids[j]}"
@@ -298,20 +461,33 @@ def write_figures(
 ) -> list[Path]:
     """Write Figs. 2-7 (and errors_semilogy.png) of ``log`` into ``out_dir`` (created if needed).
 
-    ``pairs``: vehicle-id pairs for Fig. 3 (e.g. the graph's edges); default every pair i < j.
-    Returns the paths written, in figure order, once all are on disk.
+    Fig. 7 only where the run commanded the torque (or its mode is not recorded): in rates and
+    attitude mode Jhat is not used, and a Fig. 7 already in ``out_dir`` (an earlier run's) is
+    removed so that none is read as this run's. ``pairs``: vehicle-id pairs for Fig. 3 (e.g. the
+    graph's edges); default every pair i < j. Returns the paths written, in figure order, once
+    all are on disk.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    figures = (
+    figures = [
         ("fig2_formation.png", fig2_formation(log, snapshot_times_s)),
         ("fig3_position_offsets.png", fig3_position_offsets(log, pairs)),
         ("fig4_velocity_errors.png", fig4_velocity_errors(log)),
         ("fig5_attitude_errors.png", fig5_attitude_errors(log)),
         ("fig6_mass_estimates.png", fig6_mass_estimates(log)),
-        ("fig7_inertia_estimates.png", fig7_inertia_estimates(log)),
-        ("errors_semilogy.png", errors_semilogy(log)),
-    )
+    ]
+    if torque_commanded(log) is False:
+        stale = out / FIG7_NAME
+        if stale.exists():
+            stale.unlink()
+            logger.info(
+                "%s: removed: this run (%s mode) does not use the inertia estimate",
+                stale,
+                log.extra["mode"],
+            )
+    else:
+        figures.append((FIG7_NAME, fig7_inertia_estimates(log)))
+    figures.append(("errors_semilogy.png", errors_semilogy(log)))
     return [_save(fig, out, name) for name, fig in figures]
 
 

@@ -22,6 +22,10 @@ LAWS = ("adaptive", "baseline")
 MODES = ("rates", "actuators", "attitude")  # attitude: gcs fly only (the autopilot's loop)
 FLY_MODES = ("auto", *MODES)  # fly.mode / gcs fly --mode
 AUTO_MODES = ("rates", "attitude")  # what fly.mode auto chooses from, in order (gcs/app.py)
+#: the modes whose setpoint is the law's torque (26): the only ones in which the inertia estimate
+#: rhohat of (27) acts on the vehicle, so the only ones that integrate it (in rates and attitude
+#: mode the autopilot's own loops turn the setpoint into torque; rhohat stays at its initial value)
+TORQUE_MODES = ("actuators",)
 SIM_MODES = ("rates", "actuators")
 DERIVATIVE_METHODS = ("model", "levant")
 FAULT_KINDS = ("mass_drop", "link_loss", "packet_loss", "motor_efficiency")

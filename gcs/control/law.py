@@ -127,6 +127,10 @@ class TeamLaw:
     (a_ij != 0); the states mhat_i, rhohat_i, and the differentiator of vehicle i are vehicle
     i's own. Estimator states are integrated by forward Euler over the tick.
 
+    `estimate_inertia=False` holds rhohat at rhohat0 for the whole flight: for a flight whose
+    setpoint is not the torque (26) (thrust + body rates or attitude, gcs.config.TORQUE_MODES),
+    where the update (27) would integrate the errors of a loop the law does not close.
+
     The weight matrix `adjacency` (n, n) is read once, into `graph` (formation.EdgeList, as
     configured). `step` sums over `active_graph`: the same rows and neighbours with its own
     weight array, which a ground station may change in place between ticks (gcs fly zeroes the
@@ -146,6 +150,7 @@ class TeamLaw:
         derivative: str = "model",
         levant_lipschitz: float = 1e4,
         levant_substep_s: float = 1e-4,
+        estimate_inertia: bool = True,
     ) -> None:
         n = adjacency.shape[0]
         if derivative not in DERIVATIVE_METHODS:
@@ -164,6 +169,7 @@ class TeamLaw:
         if not adaptive and nominal_mass_kg is None:
             raise ValueError("the baseline law needs nominal masses")
         self.adaptive = adaptive
+        self.estimate_inertia = estimate_inertia
         self.derivative = DERIVATIVE_METHODS[derivative]
         self.levant_lipschitz = levant_lipschitz
         self.levant_substep_s = levant_substep_s
@@ -179,7 +185,8 @@ class TeamLaw:
         `reference_mps` (4, 3), then advance the adaptive states by `dt_s` seconds.
 
         adapt=False holds mhat and rhohat (e.g. while the autopilot, not this law, sets the
-        thrust: the I&I update (24) assumes the thrust it commands is the one applied)."""
+        thrust: the I&I update (24) assumes the thrust it commands is the one applied); rhohat
+        is held in any case without `estimate_inertia`."""
         g = self.gains
         u, a, s, ve, ph, kappa, t_n, mhat_rate = position_stage(
             meas.position_m,
@@ -254,5 +261,6 @@ class TeamLaw:
         )
         if adapt:
             self.mhat = self.mhat + dt_s * mhat_rate
-            self.rhohat = self.rhohat + dt_s * rho_rate
+            if self.estimate_inertia:
+                self.rhohat = self.rhohat + dt_s * rho_rate
         return command

@@ -22,6 +22,7 @@ from gcs.precompile import compile_law
 from gcs.report import summary_table
 from gcs.status import StatusView
 from vehicle_emulator.cli import READY_PREFIX
+from vehicle_emulator.team import load_team as load_emulator_team
 
 logger = logging.getLogger(__name__)
 
@@ -182,6 +183,13 @@ class EmulatorFleet:
             self.proc.wait(timeout=5)
 
 
+def emulated_personalities(team_path: Path) -> dict[int, str]:
+    """Per vehicle id, 'vehicle-emu <personality>' as the fleet that `--emulators` starts reads
+    the team file (its `emulator.autopilot` sections, else the emulator's default)."""
+    vehicles = load_emulator_team(team_path).vehicles
+    return {v.vehicle_id: f"vehicle-emu {v.autopilot}" for v in vehicles}
+
+
 @contextlib.contextmanager
 def emulator_fleet(team_path: Path, enabled: bool) -> Iterator[EmulatorFleet | None]:
     """Run the bundled emulator fleet for the team while flying (stopped on exit)."""
@@ -222,6 +230,7 @@ def run_fly(args: argparse.Namespace) -> int:
                 fleet.wait_ready(setup.plan.connect_timeout_s)
                 up = fleet.ready_line.removeprefix(READY_PREFIX).strip()
                 print(f"gcs fly: emulator fleet up: {up}", file=sys.stderr, flush=True)
+                flight.vehicle_notes = emulated_personalities(args.team)
             # after the fleet started: the emulators ask for their own (vehicle-emu --scheduling)
             flight.scheduling = apply_scheduling(team.fly.scheduling)
             fell_back = team.fly.scheduling == "auto" and flight.scheduling.policy == "normal"

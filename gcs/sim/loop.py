@@ -4,7 +4,8 @@ Two kernels share the law (gcs.control.law) and the physics (vehicle_emulator.ph
 
 * `run_sampled`: what a flight computer does. The law runs every `ctrl_every` plant steps on the
   sampled state, its outputs are held (zero-order hold) while the plant is integrated by RK4, and
-  its own states (mhat, rhohat) are integrated by forward Euler over the control period.
+  its own states (mhat, rhohat) are integrated by forward Euler over the control period; in
+  rates mode rhohat is held (the rate loop, not the torque (26), turns the command into torque).
 * `run_oracle`: the verification mode (docs/reproducing-the-paper.md): the law is evaluated
   inside every RK4 stage with the exact u', u'' (docs/control-law.md), which use the TRUE masses;
   tests only.
@@ -204,8 +205,9 @@ def run_sampled(
             rate_cmd[:, :] = omega_cmd
             for i in range(n):
                 mhat[i] += ctrl_dt * mhat_rate[i]
-                for k in range(3):
-                    rhohat[i, k] += ctrl_dt * rho_rate[i, k]
+                if mode != MODE_RATES:  # rhohat acts only through the torque (26)
+                    for k in range(3):
+                        rhohat[i, k] += ctrl_dt * rho_rate[i, k]
         if mode == MODE_RATES:
             # Idealised onboard rate loop at the plant rate: first-order tracking of the rate
             # command with gyroscopic compensation, as a well-tuned autopilot would do.

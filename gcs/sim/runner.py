@@ -9,12 +9,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gcs.config import ConfigError, TeamConfig
+from gcs.config import TORQUE_MODES, ConfigError, TeamConfig
 from gcs.control.formation import edge_list, reference_velocity
 from gcs.control.gains import LawGains
 from gcs.control.geometry import rotation_from_rpy
 from gcs.control.law import DERIVATIVE_METHODS
-from gcs.flightlog import FlightLog
+from gcs.flightlog import FlightLog, estimates_record
 from gcs.sim.loop import LOG_FIELDS, MODE_ACTUATORS, MODE_RATES, N_LOG, run_oracle, run_sampled
 
 _MODES = {"actuators": MODE_ACTUATORS, "rates": MODE_RATES}
@@ -117,6 +117,7 @@ def simulate(
         [vc.estimates.inertia_kgm2 if adaptive else vc.baseline_inertia_kgm2 for vc in vehicles],
         dtype=float,
     )
+    rhohat0 = rhohat.copy()  # the kernels advance rhohat in place
     nominal = np.array(
         [vc.nominal_mass_kg if vc.nominal_mass_kg is not None else math.nan for vc in vehicles]
     )
@@ -202,6 +203,12 @@ def simulate(
         name=team.name,
         extra={
             "mode": mode,
+            "estimates": estimates_record(
+                mass_from=["team" if adaptive else "nominal"] * n,
+                inertia_from="team" if adaptive else "nominal",
+                inertia_kgm2=rhohat0,
+                inertia_estimated=adaptive and mode in TORQUE_MODES,
+            ),
             "derivative": "exact (oracle)" if options.oracle else derivative,
             "plant_rate_hz": plant_hz,
             "controller_rate_hz": ctrl_hz,

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gcs.app import FlightSetupError, FlyOptions, prepare, true_mass_kg
+from gcs.app import Flight, FlightSetupError, FlyOptions, prepare, true_mass_kg
 from gcs.config import load_team
 from gcs.config.schema import ResponseConfig
 from gcs.control.formation import edge_list, reference_velocity
@@ -432,3 +432,37 @@ def test_the_flight_compiles_the_kernels_its_ticks_run_before_any_link_opens():
     before, after = out.strip().splitlines()[-1].split("] [")
     assert before.strip("[") == after.strip("]"), out
     assert "0" not in before.strip("[").split(", "), out
+
+
+@pytest.mark.parametrize(("mode", "estimated"),
+                         [("rates", False), ("attitude", False), ("actuators", True)])
+def test_the_flight_integrates_jhat_only_where_it_sends_the_torque(tmp_path, mode, estimated):
+    # GIVEN the demo team prepared for `mode` (mhat(0) from the hover: fly.initial_mass)
+    team = load_team(CONFIGS / "square4.yaml")
+    options = FlyOptions(out_dir=tmp_path, mode=mode)
+    flight = Flight(prepare(team, options), options)
+    j0 = team.initial_inertia_estimates_kgm2()
+    # WHEN its law ticks for 1 s with the vehicles out of formation, tilted and turning
+    rot = np.tile(rotation_from_rpy(0.1, -0.05, 0.2), (4, 1, 1))
+    meas = TeamMeasurement(team.initial_positions_enu_m(), np.full((4, 3), 0.3),
+                           np.zeros((4, 3)), rot, np.full((4, 3), 0.2))
+    ref = reference_velocity(0.0, *team.reference_velocity.as_arrays())
+    for _ in range(int(flight.setup.tick_rate_hz)):
+        command = flight.law.step(meas, ref, flight.period_s)
+    # THEN Jhat moved only where the torque (26) is the setpoint; rates and attitude mode hold
+    # it at Jhat(0), and so does what the records get
+    moved = np.abs(flight.law.rhohat - j0).max()
+    assert (moved > 1e-3) if estimated else (moved == 0.0)
+    if not estimated:
+        np.testing.assert_array_equal(command.inertia_estimate_kgm2, j0)
+    # AND the records say where each estimate started and whether Jhat was estimated
+    n = team.n
+    flight.builder.append(t_s=0.0, position_enu_m=meas.position_m, velocity_enu_mps=np.zeros((n, 3)),
+                          reference_velocity_enu_mps=np.zeros(3), attitude_error=np.zeros(n),
+                          omega_error_radps=np.zeros(n), mass_estimate_kg=np.ones(n),
+                          inertia_estimate_kgm2=j0, thrust_n=np.ones(n),
+                          force_enu_n=np.zeros((n, 3)))
+    log = flight.builder.build()
+    assert log.extra["mode"] == mode
+    assert log.extra["estimates"] == {"mass_from": ["hover"] * n, "inertia_from": "team",
+                                      "inertia_kgm2": j0.tolist(), "inertia_estimated": estimated}

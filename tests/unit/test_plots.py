@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from gcs import plots
-from gcs.flightlog import FlightLog
+from gcs.flightlog import FlightLog, estimates_record
 
 OFFSETS = np.array([[2.0, 2.0, 0.0], [2.0, -2.0, 0.0], [-2.0, -2.0, 0.0], [-2.0, 2.0, 0.0]])
 MASSES = np.array([0.85, 1.2, 0.35, 3.4])
@@ -22,6 +22,7 @@ def synthetic_log(
     dt: float = 0.02,
     mass_drop_t_s: float | None = None,
     known_mass: bool = True,
+    extra: dict | None = None,
 ) -> FlightLog:
     """Four vehicles converging exponentially onto the 4 m square while tracking v_r; with a
     mass drop, the baseline team climbs away afterwards (like the paper's Fig. 9)."""
@@ -67,6 +68,7 @@ def synthetic_log(
         controller=controller,
         team="configs/square4.yaml",
         name="square4",
+        extra=extra,
     )
 
 
@@ -120,3 +122,110 @@ def test_comparison_figures_8_and_9(tmp_path: Path) -> None:
     # the logs must be given in the right order
     with pytest.raises(ValueError, match="expected an 'adaptive' and a 'baseline' log"):
         plots.write_comparison_figures(baseline, adaptive, tmp_path)
+
+
+def demo_extra(mode: str, mass_from: str = "hover", estimated: bool = False) -> dict:
+    """What gcs fly records of the demo: its mode, the emulated vehicles, the estimates."""
+    return {
+        "mode": mode,
+        "vehicle_kinds": ["PX4 (vehicle-emu px4)"] * 4,
+        "estimates": estimates_record(
+            mass_from=[mass_from] * 4,
+            inertia_from="team",
+            inertia_kgm2=np.full((4, 3), 0.08),
+            inertia_estimated=estimated,
+        ),
+    }
+
+
+@pytest.mark.parametrize("mode", ["rates", "attitude"])
+def test_a_run_that_does_not_command_the_torque_has_no_fig7(tmp_path: Path, mode: str) -> None:
+    # GIVEN a fly run in `mode` and a Fig. 7 left in the directory by an earlier run
+    log = synthetic_log(extra=demo_extra(mode))
+    stale = tmp_path / "fig7_inertia_estimates.png"
+    stale.write_bytes(PNG_MAGIC)
+    # WHEN its figures are written there
+    paths = plots.write_figures(log, tmp_path)
+    # THEN no Fig. 7 is written and the earlier one is gone: none can be read as this run's
+    names = [p.name for p in paths]
+    assert "fig7_inertia_estimates.png" not in names and not stale.exists()
+    assert "fig6_mass_estimates.png" in names and len(names) == 6
+
+
+def test_actuators_mode_and_a_log_without_a_mode_keep_fig7(tmp_path: Path) -> None:
+    # GIVEN a run that flew the torque (26) (Jhat in use) and an older log that recorded no mode
+    for log, out in (
+        (synthetic_log(extra=demo_extra("actuators", "team", estimated=True)), tmp_path / "a"),
+        (synthetic_log(), tmp_path / "old"),
+    ):
+        # WHEN their figures are written THEN each has its Fig. 7
+        names = [p.name for p in plots.write_figures(log, out)]
+        assert "fig7_inertia_estimates.png" in names
+
+
+def test_every_title_says_the_mode_the_vehicles_and_the_initial_estimates() -> None:
+    # GIVEN the demo as recorded: rates mode, emulated PX4 vehicles, mhat(0) from hover thrust
+    log = synthetic_log(extra=demo_extra("rates"))
+    figures = [
+        plots.fig2_formation(log),
+        plots.fig3_position_offsets(log),
+        plots.fig4_velocity_errors(log),
+        plots.fig5_attitude_errors(log),
+        plots.fig6_mass_estimates(log),
+        plots.errors_semilogy(log),
+    ]
+    # THEN every title names the mode, the vehicles, where mhat(0) came from, and that Jhat is
+    # not in use
+    for fig in figures:
+        title = fig.get_suptitle()
+        assert "rates mode" in title and "thrust + body rates" in title, title
+        assert "PX4 (vehicle-emu px4)" in title, title
+        assert "from hover thrust" in title, title
+        assert "not used in rates mode" in title, title
+    # AND a log that recorded none of it says so rather than guessing
+    old = plots.fig6_mass_estimates(synthetic_log()).get_suptitle()
+    assert "mode not recorded" in old and "source not recorded" in old
+
+
+def test_fig7_of_a_torque_run_says_jhat_is_estimated_and_the_baseline_that_it_is_known() -> None:
+    adaptive = synthetic_log(extra=demo_extra("actuators", "team", estimated=True))
+    assert (
+        "estimated and used in the torque" in plots.fig7_inertia_estimates(adaptive).get_suptitle()
+    )
+    baseline = synthetic_log(
+        "baseline",
+        extra={
+            "mode": "actuators",
+            "estimates": estimates_record(
+                mass_from=["nominal"] * 4,
+                inertia_from="nominal",
+                inertia_kgm2=np.full((4, 3), 0.05),
+                inertia_estimated=False,
+            ),
+        },
+    )
+    title = plots.fig7_inertia_estimates(baseline).get_suptitle()
+    assert "baseline, not estimated" in title and "actuators mode" in title
+
+
+def test_fig6_marks_the_initial_estimates_the_truth_and_the_relative_error() -> None:
+    # GIVEN a run whose estimates start off the truth (0.5, 2, 0.5, 2 kg against MASSES)
+    log = synthetic_log(extra=demo_extra("rates"))
+    m0 = log.mass_estimate_kg[0]
+    fig = plots.fig6_mass_estimates(log)
+    top, bottom = fig.axes[:2]
+    # THEN the top panel marks each initial value with a circle at t = 0
+    circles = [ln for ln in top.get_lines() if ln.get_marker() == "o"]
+    assert sorted(float(ln.get_ydata()[0]) for ln in circles) == sorted(m0.tolist())
+    assert all(float(ln.get_xdata()[0]) == 0.0 for ln in circles)
+    # AND draws each true mass dashed, and states both sets of values in its title
+    dashed = [ln for ln in top.get_lines() if ln.get_linestyle() == "--"]
+    assert sorted(float(ln.get_ydata()[0]) for ln in dashed) == sorted(MASSES.tolist())
+    assert "from hover thrust: 0.5, 2, 0.5, 2 kg" in top.get_title()
+    assert "true (the plant) 0.85, 1.2, 0.35, 3.4 kg" in top.get_title()
+    # AND the bottom panel is the error relative to the truth, in %
+    rel = [ln.get_ydata() for ln in bottom.get_lines() if len(ln.get_ydata()) == log.n_samples]
+    np.testing.assert_allclose(rel[1][0], 100.0 * (2.0 - 1.2) / 1.2)
+    # AND without a known truth there is no relative panel and the title says so
+    unknown = plots.fig6_mass_estimates(synthetic_log(known_mass=False, extra=demo_extra("rates")))
+    assert len(unknown.axes) == 1 and "true masses unknown" in unknown.axes[0].get_title()

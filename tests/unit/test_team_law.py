@@ -9,6 +9,7 @@ import pytest
 
 from gcs.config import load_team
 from gcs.control.formation import reference_velocity
+from gcs.control.geometry import rotation_from_rpy
 from gcs.control.law import SingularCommandError, TeamLaw, TeamMeasurement
 from gcs.sim.runner import SimOptions, law_gains, simulate
 from vehicle_emulator.physics import rk4_step
@@ -124,3 +125,41 @@ def test_adapt_false_holds_the_estimates():
     # AND WHEN stepped with adaptation THEN they move (the vehicles are out of formation)
     law.step(meas, ref, 0.01)
     assert np.abs(law.mhat - before[0]).max() > 0
+
+
+def test_estimate_inertia_false_holds_rhohat_while_mhat_adapts():
+    # GIVEN two laws on the same team, one told not to estimate the inertia (a flight whose
+    # setpoint is not the torque (26)), and the vehicles out of formation, climbing
+    team = load_team(CONFIG)
+    args = (law_gains(team), team.adjacency(), team.offsets_enu_m(), team.initial_mhat(),
+            team.initial_inertia_estimates_kgm2())
+    held, used = TeamLaw(*args, estimate_inertia=False), TeamLaw(*args)
+    rot = np.tile(rotation_from_rpy(0.1, -0.05, 0.2), (4, 1, 1))
+    meas = TeamMeasurement(team.initial_positions_enu_m(), np.full((4, 3), 0.3), np.zeros((4, 3)),
+                           rot, np.full((4, 3), 0.2))
+    ref = reference_velocity(0.0, *team.reference_velocity.as_arrays())
+    # WHEN both tick for 1 s at 100 Hz
+    for _ in range(100):
+        a, b = held.step(meas, ref, 0.01), used.step(meas, ref, 0.01)
+    # THEN the held law's rhohat is still rhohat(0) and so is what it reports, while the other's
+    # moved; the mass estimators, and the commands of this tick's state, are the same in both
+    np.testing.assert_array_equal(held.rhohat, team.initial_inertia_estimates_kgm2())
+    np.testing.assert_array_equal(a.inertia_estimate_kgm2, team.initial_inertia_estimates_kgm2())
+    assert np.abs(used.rhohat - team.initial_inertia_estimates_kgm2()).max() > 1e-3
+    np.testing.assert_array_equal(held.mhat, used.mhat)
+    assert np.abs(held.mhat - team.initial_mhat()).max() > 1e-3
+    np.testing.assert_array_equal(a.rate_cmd_radps, b.rate_cmd_radps)
+
+
+@pytest.mark.parametrize(("mode", "estimated"), [("rates", False), ("actuators", True)])
+def test_gcs_sim_integrates_the_inertia_estimate_only_where_the_torque_is_flown(mode, estimated):
+    # GIVEN Scenario I simulated for 3 s in `mode`
+    team = load_team(CONFIG)
+    log = simulate(team, SimOptions(mode=mode, duration_s=3.0, log_rate_hz=100.0)).log
+    j0 = team.initial_inertia_estimates_kgm2()
+    # THEN rates mode (an autopilot rate loop makes the torque) keeps Jhat at Jhat(0) all along,
+    # actuators mode (the torque (26) uses Jhat) adapts it; the record says which
+    moved = np.abs(log.inertia_estimate_kgm2 - j0).max()
+    assert (moved > 1e-3) if estimated else (moved == 0.0)
+    assert log.extra["estimates"] == {"mass_from": ["team"] * 4, "inertia_from": "team",
+                                      "inertia_kgm2": j0.tolist(), "inertia_estimated": estimated}
