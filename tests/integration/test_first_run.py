@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -16,10 +17,16 @@ import time
 from pathlib import Path
 
 import pytest
+import yaml
 from pymavlink import mavutil
-from test_fly_emulator import Gcs, emulators, team_file
+from stall_relay import StallRelay
+from test_fly_emulator import ROOT, Gcs, emulators, team_file
 
+from vehicle_emulator.cli import READY_PREFIX
 from vehicle_emulator.testing import free_udp_port_block
+
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from make_grid import team_text  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
 
@@ -60,6 +67,7 @@ def test_manual_path_on_an_empty_cache_fleet_and_gcs_started_together(tmp_path, 
     assert again.returncode == 0 and "compiling" not in again.stderr
 
 
+@pytest.mark.timeout(1200)  # a compile from nothing, then four flights, on a busy machine
 def test_gcs_compile_leaves_every_program_ready(tmp_path, empty_cache):
     # GIVEN `gcs compile` (what `make install` runs) on an empty cache
     first = subprocess.run([sys.executable, "-m", "gcs.cli", "compile"], capture_output=True,
@@ -78,6 +86,95 @@ def test_gcs_compile_leaves_every_program_ready(tmp_path, empty_cache):
     emu = subprocess.run([sys.executable, "-m", "vehicle_emulator.cli", "--compile-only"],
                          capture_output=True, text=True, timeout=120)
     assert emu.returncode == 0 and "compiling" not in emu.stderr
+    # AND fleets of 1, 4 and 16 vehicles (and a team of every personality) fly on a copy of
+    # that cache without compiling anything after their ready lines, on either side: numba's
+    # compile events, which both programs watch from their ready line on, tell
+    for rows, cols, autopilots in ((1, 1, ["px4"]), (2, 2, ["px4"]), (4, 4, ["px4"]),
+                                   (2, 2, ["px4", "ardupilot", "nominal", "px4"])):
+        name = f"{rows}x{cols}-{'-'.join(sorted(set(autopilots)))}"
+        cache = tmp_path / f"cache-{name}"
+        shutil.copytree(empty_cache, cache)
+        late = _compiled_after_ready(tmp_path / f"fly-{name}", rows, cols, autopilots, cache)
+        assert late == {"vehicle-emu": [], "gcs fly": []}, (rows, cols, autopilots)
+
+
+def _compiled_after_ready(tmp: Path, rows: int, cols: int, autopilots: list[str],
+                          cache: Path) -> dict[str, list[str]]:
+    """Fly a rows x cols grid team (vehicle i of personality autopilots[i % len]) for 2 s with
+    `vehicle-emu --fleet` and `gcs fly` on numba cache `cache`; what each compiled after its
+    ready line."""
+    tmp.mkdir()
+    data = yaml.safe_load(team_text(rows, cols, None))
+    n = rows * cols
+    vehicle_base, gcs_base = free_udp_port_block(n), free_udp_port_block(n)
+    data["mission"]["duration_s"] = 2.0
+    for k, v in enumerate(data["vehicles"]):
+        kind = autopilots[k % len(autopilots)]
+        v["emulator"] = {"autopilot": kind}
+        # ArduPilot SITL sends from an ephemeral port (learned from its first message)
+        v["link"] = {"local_port": gcs_base + k, "remote_port": vehicle_base + k,
+                     **({"learn_remote": True} if kind == "ardupilot" else {})}
+    team = tmp / "team.yaml"
+    team.write_text(yaml.safe_dump(data, sort_keys=False))
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONUNBUFFERED": "1"}
+    stats = tmp / "emu.json"
+    with open(tmp / "emu.log", "w") as emu_log:
+        fleet = subprocess.Popen(
+            [sys.executable, "-m", "vehicle_emulator.cli", "--fleet", "--team", str(team),
+             *(["--param", "GUID_OPTIONS=8"] if "ardupilot" in autopilots else []),
+             "--stats-json", str(stats), "--log-level", "WARNING"],
+            stdout=subprocess.PIPE, stderr=emu_log, text=True, env=env)
+        try:
+            assert fleet.stdout is not None
+            assert fleet.stdout.readline().startswith(READY_PREFIX), (tmp / "emu.log").read_text()
+            gcs = subprocess.run(
+                [sys.executable, "-m", "gcs.cli", "fly", "--team", str(team), "--out",
+                 str(tmp / "run"), "--no-figures", "--status", "plain"],
+                capture_output=True, text=True, env=env, timeout=300)
+        finally:
+            fleet.terminate()
+            fleet.wait(timeout=30)
+    # the flight itself may end either way on a loaded machine; what it compiled is the point
+    late = {"vehicle-emu": json.loads(stats.read_text())["compiled_after_ready"]}
+    report = tmp / "run" / "report.json"
+    late["gcs fly"] = (json.loads(report.read_text())["extra"]["compiled_after_ready"]
+                       if report.exists() else [])
+    for prog, text in (("vehicle-emu", (tmp / "emu.log").read_text()), ("gcs fly", gcs.stderr)):
+        late[prog] += [line for line in text.splitlines() if "after ready" in line
+                       and line not in late[prog]]
+    return late
+
+
+def test_a_vehicle_heard_then_silent_during_configure_is_waited_for_not_failed(tmp_path):
+    # GIVEN one vehicle whose program stops for 4 s right after its first HEARTBEAT reached the
+    # ground station (as the fleet did while compiling after its ready line): the ground
+    # station's stream requests go unanswered, and nothing else arrives either
+    subprocess.run([sys.executable, "-m", "vehicle_emulator.cli", "--compile-only"], check=True,
+                   timeout=600)  # so that the vehicle boots in the connect window
+    data = yaml.safe_load(team_text(1, 1, None))
+    data["mission"]["duration_s"] = 2.0
+    vehicle_port, gcs_port = free_udp_port_block(1), free_udp_port_block(1)
+    with StallRelay(gcs_port, vehicle_port, stall_s=4.0) as relay:
+        gcs_team, emu_team = tmp_path / "gcs.yaml", tmp_path / "emu.yaml"
+        for path, local, remote in ((gcs_team, gcs_port, relay.gcs_side),
+                                    (emu_team, relay.vehicle_side, vehicle_port)):
+            data["vehicles"][0]["link"] = {"local_port": local, "remote_port": remote}
+            path.write_text(yaml.safe_dump(data, sort_keys=False))
+        gcs = Gcs(gcs_team, tmp_path / "run", "--mode", "rates", "--connect-timeout-s", "30")
+        gcs.wait_for("waiting for", 60)  # listening before the vehicle boots
+        with emulators(emu_team, vehicle_port, tmp_path, n=1):
+            code, out = gcs.finish(240)
+        err = gcs.log_path.read_text()
+        assert relay.stalled_at is not None and relay.held > 0, (relay.held, err[-2000:])
+    # THEN the ground station says the vehicle went silent and waits (bounded), instead of
+    # failing its stream request after 1.5 s; once the vehicle speaks, it asks again and flies
+    assert ("vehicle 1 (sysid 1): MAV_CMD_SET_MESSAGE_INTERVAL (511) unanswered: heard at "
+            in err), err[-3000:]
+    assert "silent since; waiting up to 30 s for it to speak" in err
+    assert "vehicle 1 (sysid 1): heard again after " in err
+    assert "configure failed" not in err
+    assert code == 0, err[-3000:]
+    assert "gcs fly: done: formation complete (exit 0)" in out
 
 
 def test_connect_names_who_was_heard_and_fails_with_a_line_per_missing_vehicle(tmp_path):
