@@ -135,14 +135,16 @@ class VehicleClock:
                       of_link: bool = True) -> None:
         """A TIMESYNC reply that came back ``rtt_s`` after its request, sent at ``sent_s``
         (the caller's clock; NaN: unknown). ``of_link=False``: the reply was held by a stop of
-        the vehicle or host; it still bounds the clock offset, but `round_trips_s` leaves it out."""
+        the vehicle or host; it still bounds the clock offset, but `round_trips_s` and
+        `last_round_trip_s` leave it out."""
         if not (math.isfinite(rtt_s) and rtt_s >= 0.0):
             return
         self._rtt[self._rtt_total % RTT_WINDOW] = rtt_s
         self._rtt_sent[self._rtt_total % RTT_WINDOW] = sent_s
         self._rtt_link[self._rtt_total % RTT_WINDOW] = of_link
         self._rtt_total += 1
-        self.last_round_trip_s = rtt_s
+        if of_link:
+            self.last_round_trip_s = rtt_s
         self._nrtt = min(self._nrtt + 1, RTT_WINDOW)
         self._least_delay_s = 0.5 * float(self._rtt[: self._nrtt].min())
         self._publish()
