@@ -10,7 +10,8 @@ OUT ?= runs/demo
 $(BIN)/activate: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	@echo "pip: installing the project and its test dependencies (one line per package)"
+	$(BIN)/python -m pip install --progress-bar on -e '.[test]'
 	$(BIN)/gcs compile
 	touch $(BIN)/activate
 
@@ -19,11 +20,15 @@ install: $(BIN)/activate
 # Three workers on two cores: the integration tests fly in real time and mostly wait (the suite
 # keeps the cores ~65 % busy), so a third file in flight cuts the wall time by a quarter. Tests
 # marked `alone` then run by themselves: flights whose figures the suite's own load would move
-# (pyproject.toml, the marker's text).
+# (pyproject.toml, the marker's text). Both stages always run; the target fails at the end if
+# either did.
 test: install
 	$(BIN)/ruff check gcs vehicle_emulator tests benchmarks
-	$(BIN)/python -m pytest -n 3 --dist loadfile -m "not alone"
-	$(BIN)/python -m pytest -m alone
+	status=0; \
+	$(BIN)/python -m pytest -n 3 --dist loadfile -m "not alone" || status=$$?; \
+	$(BIN)/python -m pytest -m alone || status=$$?; \
+	if [ $$status -ne 0 ]; then echo "make test: a stage failed (see above)"; fi; \
+	exit $$status
 
 # The main job: start the emulator fleet, fly the team over MAVLink, stop the emulators.
 demo: install

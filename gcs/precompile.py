@@ -1,8 +1,9 @@
 """`gcs compile`: fill numba's on-disk cache before any flight (run by `make install`).
 
 The law, the in-process simulator and the emulator physics are numba-compiled. A cold cache
-costs about 6 s (law), 17 s (simulator alone; 6 s after the law) and 10 s (emulator physics) on a
-2-core machine (docs/benchmarks.md). Compiling them here, once per source state, means neither
+costs about 20 s (law), 27 s (simulator alone; 10 s after the law) and 35 s (emulator physics,
+every personality) on a quiet 2-core machine, and several times that on a busy one
+(docs/benchmarks.md, "Start-up"). Compiling them here, once per source state, means neither
 `gcs fly` nor `vehicle-emu` nor `gcs sim` has to do it while a user, a link timeout or a vehicle
 waits. Each part is compiled through exactly the code path the programs run (a `Flight` of a
 small built-in team, a short `simulate`, `vehicle-emu --compile-only`), so what is cached is what
@@ -20,10 +21,11 @@ from pathlib import Path
 
 from vehicle_emulator.jitcache import compiling, is_compiled
 
-#: First-run compile times on this 2-core machine (docs/benchmarks.md), for the notice.
-LAW_COMPILE_S = 6.0
-SIM_COMPILE_S = 17.0  # alone
-SIM_AFTER_LAW_S = 6.0  # when the law's kernels are cached already
+#: First-run compile times on a quiet 2-core machine (docs/benchmarks.md, "Start-up"), for the
+#: notice: measured 17.6 s law, 7.8 s simulator after it, 27 s simulator alone (2026-12-04).
+LAW_COMPILE_S = 20.0
+SIM_COMPILE_S = 27.0  # alone
+SIM_AFTER_LAW_S = 10.0  # when the law's kernels are cached already
 
 # Two vehicles are enough: numba specialises on array types, not sizes. Both laws and both
 # derivative methods are compiled (placeholders filled in by `_team`).

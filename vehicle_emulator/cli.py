@@ -54,7 +54,7 @@ __all__ = ["main", "link_plan", "parse_address", "READY_PREFIX"]
 
 READY_PREFIX = "vehicle-emu: ready:"
 #: First-run compile of the physics on this 2-core machine (docs/benchmarks.md).
-COMPILE_ESTIMATE_S = 10.0
+COMPILE_ESTIMATE_S = 35.0  # every personality, quiet 2-core machine (docs/benchmarks.md)
 
 
 def parse_address(text: str) -> tuple[str, int]:

@@ -92,7 +92,8 @@ def compiling(part: str, what: str, estimate_s: float, prog: str,
     t0 = time.monotonic()
     if announce:
         print(f"{prog}: compiling {what} (first run after an install or an edit only, "
-              f"about {estimate_s:.0f} s on 2 cores) ...", file=out, flush=True)
+              f"about {estimate_s:.0f} s on 2 idle cores, longer on a busy machine) ...", file=out,
+              flush=True)
     yield
     if not announce:
         return
