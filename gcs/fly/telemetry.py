@@ -314,7 +314,7 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
             vehicle_id=ids[i], sysid=p.config.sysid, link=_LINK_TEXT[p.link_state()],
             armed=armed, mode=mode, landed=landed, position_enu_m=tuple(position[j]),
             velocity_enu_mps=tuple(velocity[j]), tilt_rad=tilt[j], data_age_s=age[j],
-            delay_s=transit[j], round_trip_s=p.clock.last_round_trip_s,
+            delay_s=transit[j], round_trip_s=p.clock.recent_round_trip_s,
             autopilot=autopilot, vehicle_type=vtype,
             sysid_mismatch=p.sysid_mismatch,
             rates_hz={k: p.rate_hz(k) for k in want_rates} if want_rates else {},

@@ -47,6 +47,9 @@ SPIKE_S = 3e-3
 RESET_S = 1.0
 #: TIMESYNC replies whose least round trip gives the least one-way delay.
 RTT_WINDOW = 20
+#: TIMESYNC replies whose median is the link's recent round trip (the delay rule's): a lasting
+#: delay shows in every reply, one reply a loaded machine holds up does not move the median.
+RECENT_ROUND_TRIPS = 3
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,6 +84,9 @@ class VehicleClock:
         #: the newest TIMESYNC round trip [s] (NaN before the first): a request that waits
         #: behind a backlog on its way out waits with the setpoints
         self.last_round_trip_s = math.nan
+        #: the median of the latest `RECENT_ROUND_TRIPS` round trips [s] (of those there are;
+        #: NaN before the first)
+        self.recent_round_trip_s = math.nan
 
     def bind_line(self, out: np.ndarray) -> None:
         """Keep the line of :meth:`sample_time_s`, (a, b, t_ref, least delay) with a NaN while
@@ -146,6 +152,9 @@ class VehicleClock:
         if of_link:
             self.last_round_trip_s = rtt_s
         self._nrtt = min(self._nrtt + 1, RTT_WINDOW)
+        recent = sorted(float(self._rtt[(self._rtt_total - k) % RTT_WINDOW])
+                        for k in range(1, min(self._nrtt, RECENT_ROUND_TRIPS) + 1))
+        self.recent_round_trip_s = 0.5 * (recent[(len(recent) - 1) // 2] + recent[len(recent) // 2])
         self._least_delay_s = 0.5 * float(self._rtt[: self._nrtt].min())
         self._publish()
 

@@ -68,6 +68,7 @@ from gcs.mission.goto import (
 from gcs.mission.safety import (
     Problem,
     SafetyRules,
+    SustainedDelays,
     VehicleStatus,
     flight_problems,
     preflight_problems,
@@ -267,6 +268,7 @@ class MissionMachine:
     _formation_error_m: float = math.nan  # latest, from the composition root
     _error_t0: float | None = None  # formation error at the formation start
     _goto: GoToStart | None = None  # the team's go-to-start progress
+    _delays: SustainedDelays = field(default_factory=SustainedDelays)
 
     def __post_init__(self) -> None:
         self._v = {vid: _Vehicle() for vid in self.vehicle_ids}
@@ -453,6 +455,11 @@ class MissionMachine:
 
     def _statuses(self) -> list[VehicleStatus]:
         return [v.status for v in self._v.values() if v.status is not None]
+
+    def _flight_problems(self) -> list[Problem]:
+        """The in-flight rules now; a link delay only once it has lasted (SustainedDelays)."""
+        return self._delays.sustained(flight_problems(self._statuses(), self.plan.rules),
+                                      self._now_s)
 
     def _send(self, vid: int, cmd: Cmd, altitude_m: float = math.nan,
               names: tuple[str, ...] = ()) -> Command:
@@ -666,7 +673,7 @@ class MissionMachine:
         g, plan = self._goto, self.plan.go_to_start
         assert g is not None and plan is not None
         flown = [vid for vid, v in self._v.items() if v.goto is not None]
-        problems = flight_problems(self._statuses(), self.plan.rules)
+        problems = self._flight_problems()
         for vid in flown:
             v, s = self._v[vid], self._v[vid].status
             name = self.profile(vid).position_mode.name
@@ -800,7 +807,7 @@ class MissionMachine:
                 f"landed state {landed} (need IN_AIR), mode {s.mode or '?'} (need {done})")
 
     def _prime(self) -> list[Command]:
-        problems = flight_problems(self._statuses(), self.plan.rules)
+        problems = self._flight_problems()
         if problems:
             self._begin_stop(problems, EXIT_ABORTED)
             return self._drive()
@@ -812,7 +819,7 @@ class MissionMachine:
 
     def _formation(self) -> list[Command]:
         t = self._now_s - (self.formation_t0_s or self._now_s)
-        problems = flight_problems(self._statuses(), self.plan.rules)
+        problems = self._flight_problems()
         problems += self._not_following(t)
         for vid, v in self._v.items():
             s = v.status

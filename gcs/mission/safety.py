@@ -21,6 +21,11 @@ QUADROTOR_TYPE = 2
 MAX_START_SPEED_MPS = 1.5
 #: A telemetry stream must reach this fraction of its requested rate in preflight.
 RATE_TOLERANCE = 0.5
+#: A vehicle's link delay over `max_data_age_s` stops the flight once it has been over it at
+#: every check for this long [s] (`SustainedDelays`): shorter than the half second a link may
+#: fall silent before it is lost (`link_lost_after_s`), so late data is flown no longer than
+#: none would be.
+DELAY_SUSTAINED_S = 0.25
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,8 +72,9 @@ class VehicleStatus:
     tilt_rad: float = math.nan
     data_age_s: float = math.inf
     delay_s: float = math.inf
-    #: the newest TIMESYNC round trip [s] (NaN: none yet): minus delay_s, how late what the
-    #: ground station sends reaches the vehicle (its setpoints included)
+    #: its recent TIMESYNC round trip [s]: the median of the latest 3 (gcs.link.clock; NaN: none
+    #: yet): minus delay_s, how late what the ground station sends reaches the vehicle (its
+    #: setpoints included)
     round_trip_s: float = math.nan
     autopilot: int = 0
     vehicle_type: int = 0
@@ -153,8 +159,9 @@ def delay_problem(status: VehicleStatus, rules: SafetyRules) -> Problem | None:
     """The vehicle's data arrives, but late: more than `max_data_age_s` after it was taken (from
     its own stamps). The law would act on where the vehicle was, not where it is. A vehicle that
     falls silent is the link rule's (its last sample's delay does not grow). Or what is sent to
-    it arrives that late (its newest TIMESYNC round trip less its data's delay): the law's
-    setpoints would act on a vehicle that has moved on."""
+    it arrives that late (its recent TIMESYNC round trip, the median of three, less its data's
+    delay): the law's setpoints would act on a vehicle that has moved on. One check's verdict:
+    `SustainedDelays` stops the flight on a delay that lasts."""
     if status.delay_s > rules.max_data_age_s and math.isfinite(status.delay_s):
         return Problem(
             status.vehicle_id,
@@ -169,11 +176,37 @@ def delay_problem(status: VehicleStatus, rules: SafetyRules) -> Problem | None:
         return Problem(
             status.vehicle_id,
             f"{status.name}: link delay: it answers TIMESYNC {status.round_trip_s:.2f} s after "
-            f"the request, so what it is sent (the setpoints) reaches it ~{uplink_s:.2f} s late "
-            f"(limit {rules.max_data_age_s:g} s, fly.max_data_age_s)",
+            f"the request (median of its latest 3), so what it is sent (the setpoints) reaches "
+            f"it ~{uplink_s:.2f} s late (limit {rules.max_data_age_s:g} s, fly.max_data_age_s)",
             "delay",
         )
     return None
+
+
+@dataclass(slots=True)
+class SustainedDelays:
+    """The delay rule over time: a vehicle's delay problem counts once it has been found at
+    every check for `hold_s` (`DELAY_SUSTAINED_S`). A lasting delay (a radio's queue, a link
+    that got slower) is in every check and stops the flight `hold_s` later; the odd late batch
+    of samples, or a reply, that a loaded machine holds up is not (the check after it finds
+    the data fresh again). Times are arguments (any monotonic clock, seconds)."""
+
+    hold_s: float = DELAY_SUSTAINED_S
+    _since_s: dict[int | None, float] = field(default_factory=dict)
+
+    def sustained(self, problems: Sequence[Problem], now_s: float) -> list[Problem]:
+        """`problems` without the delay problems not yet found at every check for `hold_s`
+        (the others pass as they are); a vehicle without a delay problem now starts afresh."""
+        late = {p.vehicle_id for p in problems if p.kind == "delay"}
+        for vid in [v for v in self._since_s if v not in late]:
+            del self._since_s[vid]
+        out = []
+        for p in problems:
+            if p.kind == "delay" and now_s - self._since_s.setdefault(p.vehicle_id, now_s) \
+                    < self.hold_s:
+                continue
+            out.append(p)
+        return out
 
 
 def tilt_problem(status: VehicleStatus, rules: SafetyRules) -> Problem | None:

@@ -251,12 +251,20 @@ def test_fleet_behind_one_gcs_port_with_requested_streams(tmp_path):
 
 
 def test_what_start_up_built_is_out_of_the_collectors_sight_for_the_run(tmp_path):
-    # GIVEN a fleet run for 2 simulated seconds with its figures written
+    # GIVEN a fleet run for 2 simulated seconds with its figures written, sending to ports this
+    # test holds and never answers (the default remotes, 14540-14543, are any ground station's
+    # on the machine: one listening there answers the fleet, and the fleet then reads its input)
     stats = tmp_path / "stats.json"
-    out = subprocess.run(
-        [*EMU, "--fleet", "--team", str(ROOT / "configs/square4.yaml"), "--duration", "2",
-         "--bind-base", str(free_udp_port_block(4)), "--stats-json", str(stats)],
-        capture_output=True, text=True, timeout=90)
+    sinks = clients_on_port_block(4)
+    try:
+        out = subprocess.run(
+            [*EMU, "--fleet", "--team", str(ROOT / "configs/square4.yaml"), "--duration", "2",
+             "--bind-base", str(free_udp_port_block(4)), "--remote-base", str(sinks[0].port),
+             "--stats-json", str(stats)],
+            capture_output=True, text=True, timeout=90)
+    finally:
+        for sink in sinks:
+            sink.close()
     assert out.returncode == 0, out.stderr
     # THEN the fleet, the libraries and the kernels were frozen before the run (a full
     # collection walks only what the run allocated), and the run's collections are counted

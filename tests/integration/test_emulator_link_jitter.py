@@ -4,7 +4,14 @@ TIMESYNC round trips and MAVLink sequence numbers, during the fault's window and
 A second vehicle on an unimpaired link answers the same TIMESYNCs at the same time: its round
 trips are what the machine itself adds (two processes' scheduling, the emulator's loop), so the
 fault's own delay is the difference of the two. On a loaded machine both grow alike; measured
-alone, the impaired mean rose 10-17 ms above the model beside two flights."""
+alone, the impaired mean rose 10-17 ms above the model beside two flights.
+
+A third vehicle's link has the latency and the jitter but no reordering: its packets wait on the
+same emulator timers as the impaired ones, so a loaded machine's lateness reaches its round trips
+as often as theirs, where the unimpaired vehicle's answers, sent at once, meet it once (with the
+latency alone, its timers kept one phase against the emulator's periodic work, and its round
+trips' 95 % ranged 82-145 ms in three runs on one busy machine). The impaired round trips' tail
+is bounded against it: the two links differ by the reorder hold alone."""
 
 from __future__ import annotations
 
@@ -28,7 +35,7 @@ LATENCY_MS, JITTER_MS, REORDER_P = 30.0, 10.0, 0.2
 WINDOW_S = 8.0  # the fault's duration_s, from boot (EMU_FLT_T0 = 1)
 # mean one-way delay: latency + uniform jitter mean + the hold of the reordered share
 ONE_WAY_MS = LATENCY_MS + JITTER_MS / 2.0 + REORDER_P * REORDER_HOLD_S * 1e3  # 39 ms
-IMPAIRED, REFERENCE = 1, 2  # sysids: the vehicle with the fault, the one without
+IMPAIRED, REFERENCE, DELAYED = 1, 2, 3  # sysids: the fault, none, the fault without reordering
 
 
 @dataclass
@@ -47,7 +54,7 @@ def _measure(client: MavClient, duration_s: float, rate_hz: float = 100.0) -> di
     vehicle heard; time each vehicle's answers (tc1 = its time, ts1 echoed) and count every
     message whose MAVLink sequence number is behind the one before it from that vehicle (it was
     overtaken)."""
-    out = {IMPAIRED: Measured(), REFERENCE: Measured()}
+    out = {IMPAIRED: Measured(), REFERENCE: Measured(), DELAYED: Measured()}
     sent: set[int] = set()
     end = time.monotonic() + duration_s
     next_send = time.monotonic()
@@ -71,11 +78,11 @@ def _measure(client: MavClient, duration_s: float, rate_hz: float = 100.0) -> di
     return out
 
 
-def _wait_for_both(client: MavClient, timeout_s: float) -> None:
-    """Until a HEARTBEAT came from both vehicles (pymavlink's udpin then sends to both)."""
+def _wait_for_all(client: MavClient, timeout_s: float) -> None:
+    """Until a HEARTBEAT came from every vehicle (pymavlink's udpin then sends to each)."""
     heard: set[int] = set()
     deadline = time.monotonic() + timeout_s
-    while heard != {IMPAIRED, REFERENCE}:
+    while heard != {IMPAIRED, REFERENCE, DELAYED}:
         assert time.monotonic() < deadline, f"heard only {sorted(heard)} in {timeout_s} s"
         m = client.recv(0.5)
         if m is not None and m.get_type() == "HEARTBEAT":
@@ -84,21 +91,27 @@ def _wait_for_both(client: MavClient, timeout_s: float) -> None:
 
 def test_latency_jitter_and_reordering_from_boot_then_a_clean_link(tmp_path):
     # GIVEN a packet_loss fault from boot on vehicle 1: 30 ms + uniform jitter 10 ms, 20 %
-    # reordered, 8 s; vehicle 2 on the same ground port with no fault
+    # reordered, 8 s; vehicle 2 on the same ground port with no fault, vehicle 3 with the 30 ms
+    # and the jitter, not reordered
     team = tmp_path / "team.yaml"
     team.write_text(yaml.safe_dump({
-        "vehicles": [{"id": IMPAIRED}, {"id": REFERENCE}],
+        "vehicles": [{"id": IMPAIRED}, {"id": REFERENCE}, {"id": DELAYED}],
         "faults": [{"kind": "packet_loss", "vehicle": IMPAIRED, "at_s": 0.0, "probability": 0.0,
                     "latency_ms": LATENCY_MS, "jitter_ms": JITTER_MS, "jitter": "uniform",
-                    "reorder_probability": REORDER_P, "duration_s": WINDOW_S}],
+                    "reorder_probability": REORDER_P, "duration_s": WINDOW_S},
+                   {"kind": "packet_loss", "vehicle": DELAYED, "at_s": 0.0, "probability": 0.0,
+                    "latency_ms": LATENCY_MS, "jitter_ms": JITTER_MS, "jitter": "uniform",
+                    "duration_s": WINDOW_S}],
     }))
     port = free_udp_port()
     client = MavClient(port, target_system=IMPAIRED)
     args = ["--team", str(team), "--param", "EMU_FLT_T0=1"]
     with run_emulator(["--id", str(IMPAIRED), *args], remote_port=port, log_dir=str(tmp_path)), \
             run_emulator(["--id", str(REFERENCE), *args], remote_port=port,
+                         log_dir=str(tmp_path)), \
+            run_emulator(["--id", str(DELAYED), *args], remote_port=port,
                          log_dir=str(tmp_path)):
-        _wait_for_both(client, 60)
+        _wait_for_all(client, 60)
         # WHEN the ground side times both vehicles' TIMESYNCs and watches their sequence numbers
         # for 4 s
         during = _measure(client, 4.0)
@@ -112,26 +125,35 @@ def test_latency_jitter_and_reordering_from_boot_then_a_clean_link(tmp_path):
     client.close()
     faulty, reference, clean = during[IMPAIRED], during[REFERENCE], after[IMPAIRED]
     rtt, machine_ms = faulty.rtt_ms, statistics.fmean(reference.rtt_ms)
+    delayed = during[DELAYED].rtt_ms
     log.info(
         "fault: %d RTTs mean %.1f ms (expected %.1f + the reference's %.2f) min %.1f p95 %.1f "
         "max %.1f sd %.1f; %d of %d messages behind; reference: %d RTTs p95 %.2f max %.2f; "
-        "clean: mean %.2f ms max %.2f, %d of %d behind (reference then: mean %.2f ms)",
+        "clean: mean %.2f ms median %.2f max %.2f, %d of %d behind (reference then: mean %.2f "
+        "ms median %.2f); "
+        "not reordered: %d RTTs min %.1f p95 %.1f max %.1f",
         len(rtt), statistics.fmean(rtt), 2 * ONE_WAY_MS, machine_ms, min(rtt),
         statistics.quantiles(rtt, n=20)[-1], max(rtt), statistics.stdev(rtt),
         faulty.backwards, faulty.messages, len(reference.rtt_ms),
         statistics.quantiles(reference.rtt_ms, n=20)[-1], max(reference.rtt_ms),
-        statistics.fmean(clean.rtt_ms), max(clean.rtt_ms), clean.backwards, clean.messages,
-        statistics.fmean(after[REFERENCE].rtt_ms),
+        statistics.fmean(clean.rtt_ms), statistics.median(clean.rtt_ms), max(clean.rtt_ms),
+        clean.backwards, clean.messages, statistics.fmean(after[REFERENCE].rtt_ms),
+        statistics.median(after[REFERENCE].rtt_ms), len(delayed), min(delayed),
+        statistics.quantiles(delayed, n=20)[-1], max(delayed),
     )
     # THEN each round trip is at least twice the latency (jitter and hold only add), and 95 % of
-    # them are within twice latency + jitter + hold = 120 ms, plus what the machine added to the
-    # reference's 95 % and 5 ms (both asyncio timers of a round trip fire at the emulator's
-    # next wake-up)
-    assert len(rtt) > 300 and len(reference.rtt_ms) > 300
-    assert min(rtt) >= 2 * LATENCY_MS
+    # them are within twice latency + jitter + hold = 120 ms plus what the machine added to the
+    # reference's 95 %, or, where the machine's lateness reaches the timers more often than the
+    # reference's prompt answers, within the unreordered link's 95 % (latency, jitter and that
+    # lateness) plus twice the hold (40 ms: the most reordering adds to a round trip); and 5 ms
+    # (two samples' 95 % differ by a few)
+    assert len(rtt) > 300 and len(reference.rtt_ms) > 300 and len(delayed) > 300
+    assert min(rtt) >= 2 * LATENCY_MS and min(delayed) >= 2 * LATENCY_MS
     p95 = statistics.quantiles(rtt, n=20)[-1]
     machine_p95 = statistics.quantiles(reference.rtt_ms, n=20)[-1]
-    assert p95 <= 2 * (LATENCY_MS + JITTER_MS + REORDER_HOLD_S * 1e3) + machine_p95 + 5.0
+    delayed_p95 = statistics.quantiles(delayed, n=20)[-1]
+    assert p95 <= max(2 * (LATENCY_MS + JITTER_MS + REORDER_HOLD_S * 1e3) + machine_p95,
+                      delayed_p95 + 2 * REORDER_HOLD_S * 1e3) + 5.0
     # AND the fault's mean is 2 (30 + 5 + 0.2 * 20) = 78 ms over the reference's: the standard
     # error of 300+ samples is < 1 ms; without the reorder hold it would be 70, without the
     # jitter 68, the hold on every packet 110. Above it: 5 ms, and twice the reference's mean,
@@ -144,6 +166,8 @@ def test_latency_jitter_and_reordering_from_boot_then_a_clean_link(tmp_path):
     assert faulty.backwards > 0.05 * faulty.messages
     assert reference.backwards == 0 and reference.messages > 500
     # AND after the window the link is clean again: in order, and its round trips no longer
-    # than the reference's then (within 3 ms; the 30 ms latency alone would add 60)
+    # than the reference's then: their medians within 5 ms (the 30 ms latency alone would add 60,
+    # the jitter alone 10; a mean moves with the few round trips a loaded machine holds up: 4.6
+    # ms apart beside two flights and two busy loops)
     assert clean.backwards == 0 and clean.messages > 500
-    assert statistics.fmean(clean.rtt_ms) - statistics.fmean(after[REFERENCE].rtt_ms) < 3.0
+    assert statistics.median(clean.rtt_ms) - statistics.median(after[REFERENCE].rtt_ms) < 5.0

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from test_fly_confirmed import commands_sent, fly_once
+from test_fly_confirmed import commands_sent, fly_once, write_team
 
 from vehicle_emulator.testing import free_udp_port_block
 
@@ -36,9 +36,7 @@ def mixed_team(tmp: Path, duration_s: float, z_shift: float = 0.0) -> Path:
         v["emulator"] = {"autopilot": autopilot, "boot_position_enu_m": [x, y, 0.0]}
         v["link"] = ({"local_port": gcs_base + k, "remote_port": bind_base + k}
                      if autopilot == "px4" else {"local_port": gcs_base + k, "learn_remote": True})
-    path = tmp / "mixed4.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
-    return path
+    return write_team(tmp / "mixed4.yaml", data)
 
 
 def test_mixed_px4_and_ardupilot_team_flies_from_the_ground_twice(tmp_path: Path) -> None:

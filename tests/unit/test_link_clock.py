@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -63,6 +65,25 @@ def test_timesync_round_trip_gives_the_least_one_way_delay():
     assert clock.least_delay_s == pytest.approx(0.050)
     assert clock.sample_time_s(t_vehicle, rx) == pytest.approx(t_true, abs=1.5e-3)
     assert list(clock.round_trips_s()) == [0.104, 0.101, 0.100, 0.130]
+
+
+def test_the_recent_round_trip_is_the_median_of_the_latest_three():
+    # GIVEN a link whose round trips take 10-12 ms
+    clock = VehicleClock()
+    assert math.isnan(clock.recent_round_trip_s)
+    for rtt in (0.010, 0.012, 0.011):
+        clock.on_round_trip(rtt)
+    assert clock.recent_round_trip_s == 0.011
+    # WHEN one reply is held up 0.43 s THEN the recent round trip stays with the others
+    clock.on_round_trip(0.430)
+    assert clock.recent_round_trip_s == 0.012
+    clock.on_round_trip(0.011)
+    assert clock.recent_round_trip_s == 0.011
+    # WHEN the link's delay lasts THEN the second late reply is the recent round trip
+    clock.on_round_trip(0.650)
+    clock.on_round_trip(0.640)
+    assert clock.recent_round_trip_s == 0.640
+    assert clock.last_round_trip_s == 0.640
 
 
 def test_round_trips_can_be_read_from_a_time_on_those_sent_since():
