@@ -84,8 +84,8 @@ class VehicleClock:
         #: the newest TIMESYNC round trip [s] (NaN before the first): a request that waits
         #: behind a backlog on its way out waits with the setpoints
         self.last_round_trip_s = math.nan
-        #: the median of the latest `RECENT_ROUND_TRIPS` round trips [s] (of those there are;
-        #: NaN before the first)
+        #: the median of the latest `RECENT_ROUND_TRIPS` round trips of the link [s] (of those
+        #: there are; NaN before the first)
         self.recent_round_trip_s = math.nan
 
     def bind_line(self, out: np.ndarray) -> None:
@@ -152,9 +152,7 @@ class VehicleClock:
         if of_link:
             self.last_round_trip_s = rtt_s
         self._nrtt = min(self._nrtt + 1, RTT_WINDOW)
-        recent = sorted(float(self._rtt[(self._rtt_total - k) % RTT_WINDOW])
-                        for k in range(1, min(self._nrtt, RECENT_ROUND_TRIPS) + 1))
-        self.recent_round_trip_s = 0.5 * (recent[(len(recent) - 1) // 2] + recent[len(recent) // 2])
+        self._update_recent()
         self._least_delay_s = 0.5 * float(self._rtt[: self._nrtt].min())
         self._publish()
 
@@ -194,9 +192,14 @@ class VehicleClock:
 
     def disown_last_round_trip(self) -> None:
         """The latest round trip measured a stop, not the link (its reply came bunched with the
-        next one): `round_trips_s` leaves it out from now on."""
+        next one): `round_trips_s` and `recent_round_trip_s` leave it out from now on."""
         if self._nrtt:
             self._rtt_link[(self._rtt_total - 1) % RTT_WINDOW] = False
+            self._update_recent()
+
+    def _update_recent(self) -> None:
+        recent = self.round_trips_s()[-RECENT_ROUND_TRIPS:]
+        self.recent_round_trip_s = float(np.median(recent)) if recent.size else math.nan
 
     def round_trips_s(self, since_s: float = -math.inf) -> np.ndarray:
         """The last (up to RTT_WINDOW) round trips of the link, oldest first; with ``since_s``,

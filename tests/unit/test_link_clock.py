@@ -170,3 +170,5 @@ def test_a_round_trip_that_measured_a_stop_leaves_the_links_record_but_bounds_th
     assert list(clock.round_trips_s()) == [0.010, 0.011, 0.012]
     assert list(clock.round_trips_s(1.0)) == [0.011, 0.012]
     assert list(clock.round_trips_s(3.0)) == []
+    # AND the recent round trip (the uplink delay rule's) is the link's too
+    assert clock.recent_round_trip_s == 0.011
