@@ -24,6 +24,9 @@ logger = logging.getLogger(__name__)
 SendCommand = Callable[[int, int, Sequence[float]], None]
 
 _VOICE_POLL_S = 0.05  # how often a wait for a silent vehicle looks for its next message
+#: A vehicle is silent once nothing at all came from it for this long: longer than the period of
+#: a 1 Hz HEARTBEAT, all that a vehicle may send before its streams are asked for.
+SILENT_AFTER_S = 1.5
 
 
 class Liveness(Protocol):
@@ -223,13 +226,14 @@ class CommandChannel:
         raise CommandTimeoutError(f"{self._name}: {label} {reason}", reason)
 
     def _silence(self, sent_s: float) -> float | None:
-        """When the vehicle was heard before the command and not since: the time it was last
-        heard [s after its link came up]; else None (it answered other things: no excuse)."""
+        """When the vehicle was heard before the command, not since, and nothing for
+        `SILENT_AFTER_S`: the time it was last heard [s after its link came up]; else None (it
+        sent other things, or too little time passed to tell: no excuse)."""
         live = self._liveness
         if live is None or not self._silent_wait_s > 0.0:
             return None
         last = live.last_heard_s()
-        if not math.isfinite(last) or last >= sent_s:
+        if not math.isfinite(last) or last >= sent_s or live.now_s() - last < SILENT_AFTER_S:
             return None
         return last - live.up_since_s()
 

@@ -44,6 +44,7 @@ def team_file(
     faults: list | None = None,
     massdrop: bool = False,
     autopilot: str = "nominal",
+    loaded_links: bool = False,
 ) -> Path:
     """square4 (or its Scenario II variant) on free ports: vehicle i binds bind_base + i and the
     GCS listens on gcs_base + i (the team file's link keys, which the emulator reads too)."""
@@ -68,6 +69,13 @@ def team_file(
         data["fly"]["response"] = response
         data["fly"]["rates"].update(k_eps=6.0, k_eps_yaw=4.0, alpha_p=2.0, c_p=4.0)
         data["fly"]["initial_mass"] = "team"
+    if loaded_links:
+        # A test that checks what the flight does, not how accurately: on a test machine busy
+        # with other flights the emulator answers TIMESYNC 15-30 ms late (loopback: 0.4 ms
+        # quiet), and preflight rightly refuses k_eps 6 at that delay. The file states a 30 ms
+        # link and flies the rates gains the criterion names as stable there (k_eps 2).
+        data["fly"]["link_delay_s"] = 0.03
+        data["fly"]["rates"]["k_eps"] = 2.0
     path = tmp / "team.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path
@@ -315,7 +323,7 @@ def test_scenario_two_over_the_link_adaptive_holds_baseline_climbs(tmp_path):
 
 def test_sigint_mid_flight_lands_and_disarms_every_vehicle(tmp_path):
     base = free_udp_port_block(4)
-    team = team_file(tmp_path, base, duration_s=60.0, z_shift=-6.0)
+    team = team_file(tmp_path, base, duration_s=60.0, z_shift=-6.0, loaded_links=True)
     with emulators(team, base, tmp_path):
         gcs = Gcs(team, tmp_path / "run", "--mode", "rates")
         gcs.wait_for("mission: phase formation", 60)
@@ -333,7 +341,7 @@ def test_sigint_mid_flight_lands_and_disarms_every_vehicle(tmp_path):
 
 def test_killing_one_emulator_is_detected_within_a_second_and_the_others_hold(tmp_path):
     base = free_udp_port_block(4)
-    team = team_file(tmp_path, base, duration_s=60.0)
+    team = team_file(tmp_path, base, duration_s=60.0, loaded_links=True)
     with emulators(team, base, tmp_path, separate=True) as procs:
         gcs = Gcs(team, tmp_path / "run", "--mode", "rates")
         gcs.wait_for("mission: phase formation", 60)

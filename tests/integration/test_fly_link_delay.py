@@ -43,13 +43,15 @@ def test_a_half_second_delay_step_on_one_vehicle_stops_the_formation_naming_it(t
     t_end = report["t_s"][-1]
     assert 6.5 <= t_end <= 9.5  # stopped within the step's first second (fault clock: OFFBOARD)
     # AND the report shows the true ages: vehicle 2's data was up to half a second old, the
-    # others' a few milliseconds (99 %; the odd one a loaded machine holds up, 65 ms in one CI
-    # run beside two flights, stays far below the rule's limit), while their receive ages
-    # stayed alike
+    # others' a quarter of that at most, 99 % of the time (a few milliseconds on a quiet
+    # machine, 65-100 ms p99 on one busy with other flights and loops; vehicle 2's step leaking
+    # into them would put theirs at its own), while their receive ages stayed alike
     link = report["link"]
     assert link["2"]["telemetry_age_max_ms"] >= 300.0
+    assert link["2"]["telemetry_age_p99_ms"] >= 300.0  # the step is > 1 % of the flight
     for vid in ("1", "3", "4"):
-        assert link[vid]["telemetry_age_p99_ms"] < 60.0, link[vid]
+        assert link[vid]["telemetry_age_p99_ms"] < 0.25 * link["2"]["telemetry_age_p99_ms"], \
+            link[vid]
         assert link[vid]["telemetry_age_max_ms"] < 150.0, link[vid]
         assert link[vid]["round_trip"]["n"] >= 10 and link[vid]["round_trip"]["p50_ms"] < 10.0
         assert link[vid]["clock"]["synced"] and link[vid]["clock"]["restarts"] == 0

@@ -189,8 +189,8 @@ class Heard:
         return 0.0
 
     def start(self) -> None:
-        self.t0 = asyncio.get_running_loop().time() - 0.2  # its link came up 0.2 s ago
-        self.last = 0.13  # and it was last heard 0.13 s after that
+        self.t0 = asyncio.get_running_loop().time() - 2.0  # its link came up 2 s ago
+        self.last = 0.13  # and it was last heard 0.13 s after that, 1.87 s ago
 
 
 def silent_vehicle(policy: Callable[[int, int], Sequence[int]], wait_s: float) -> Vehicle:
@@ -254,3 +254,18 @@ def test_a_vehicle_that_talks_but_never_acks_fails_after_its_retries_without_wai
 
     vehicle = run(scenario(), timeout_s=10.0)
     assert vehicle.channel.stats().silent_waits == 0
+
+
+def test_a_vehicle_quiet_for_less_than_a_heartbeat_period_is_not_called_silent() -> None:
+    # GIVEN a vehicle last heard 0.5 s ago (a 1 Hz HEARTBEAT is all it sends) that does not
+    # answer a command whose attempts take 0.09 s
+    async def scenario() -> Vehicle:
+        vehicle = silent_vehicle(lambda c, n: [], wait_s=30.0)
+        vehicle.heard.start()
+        vehicle.heard.last = vehicle.heard.now_s() - 0.5
+        with pytest.raises(CommandTimeoutError, match=r"in 3 attempts of 0\.03 s"):
+            await vehicle.channel.command_long(ARM, [1.0], timeout_s=0.03, retries=2)
+        return vehicle
+
+    # THEN that is an unanswered command, not a silence to wait out
+    assert run(scenario(), timeout_s=5.0).channel.stats().silent_waits == 0
