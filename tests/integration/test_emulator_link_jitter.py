@@ -89,6 +89,7 @@ def _wait_for_all(client: MavClient, timeout_s: float) -> None:
             heard.add(m.get_srcSystem())
 
 
+@pytest.mark.alone  # its tail figures measure the machine beside two other flights (make test)
 def test_latency_jitter_and_reordering_from_boot_then_a_clean_link(tmp_path):
     # GIVEN a packet_loss fault from boot on vehicle 1: 30 ms + uniform jitter 10 ms, 20 %
     # reordered, 8 s; vehicle 2 on the same ground port with no fault, vehicle 3 with the 30 ms
