@@ -835,7 +835,7 @@ class Flight:
                     behind = int((started - deadline) / h)
                     if behind >= 1:  # missed whole periods: jump to the newest deadline
                         if self.machine.phase is Phase.FORMATION:
-                            self.ticks.skipped += behind
+                            self._stalled(behind, deadline)
                         k += behind
                         deadline = t_start + k * h
                     self._tick(k, deadline, started)
@@ -846,6 +846,17 @@ class Flight:
                                          bool(self.machine.streaming))
         finally:
             self._finished.set()
+
+    def _stalled(self, periods: int, deadline_s: float) -> None:
+        """Count the skipped ticks; a stall (gcs.fly.stats.STALL_S or longer) is logged: the
+        vehicles flew it on their last setpoints."""
+        t_s = self.machine.formation_time_s(deadline_s)
+        t_s = math.nan if t_s is None else t_s
+        gap_s = self.ticks.skip(periods, t_s)
+        if gap_s is not None:
+            logger.warning("tick: the ground station stopped for %.0f ms at t = %.2f s (%d ticks "
+                           "skipped): the vehicles held their last setpoints meanwhile",
+                           1e3 * gap_s, t_s, periods)
 
     def _tick(self, k: int, deadline_s: float, now_s: float) -> None:
         sample = team_sample(self.proxies, now_s, self.last_sample, self._tie_arrays, self.hot)

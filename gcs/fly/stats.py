@@ -62,8 +62,16 @@ def _pct(a: np.ndarray, q: float) -> float:
     return float(np.percentile(a, q)) if a.size else float("nan")
 
 
+#: A gap between two ticks at least this long is a stall of the ground station [s]: its
+#: vehicles flew that long on the setpoints they had.
+STALL_S = 0.05
+#: Stalls listed in the report (the count covers them all).
+STALLS_LISTED = 50
+
+
 class TickStats:
-    """Lateness [s] and compute time [s] of every tick, skipped ticks, late count."""
+    """Lateness [s] and compute time [s] of every tick, skipped ticks, late count, and the
+    stalls (STALL_S or longer without a tick) with their time and length."""
 
     def __init__(self, rate_hz: float) -> None:
         self.rate_hz = rate_hz
@@ -72,6 +80,20 @@ class TickStats:
         self._late = _Grow(1)
         self._compute = _Grow(1)
         self.skipped = 0
+        self.stalls: list[tuple[float, float]] = []
+        self.stall_count = 0
+
+    def skip(self, periods: int, t_s: float) -> float | None:
+        """Count `periods` deadlines jumped over at time `t_s`; the stall's length [s] if the
+        ground station stopped for STALL_S or longer, else None."""
+        self.skipped += periods
+        gap_s = (periods + 1) * self.period_s
+        if gap_s < STALL_S:
+            return None
+        self.stall_count += 1
+        if len(self.stalls) < STALLS_LISTED:
+            self.stalls.append((t_s, gap_s))
+        return gap_s
 
     def record(self, lateness_s: float, compute_s: float) -> None:
         self._late.append(lateness_s)
@@ -102,6 +124,8 @@ class TickStats:
             "late_threshold_ms": 1e3 * self.threshold_s,
             "ticks": int(late.size),  # run; the skipped ones are late_pct's too
             "skipped_ticks": self.skipped,
+            "stalls": self.stall_count,
+            "stalls_at_s_ms": [[round(t, 3), round(1e3 * g, 1)] for t, g in self.stalls],
             "compute_p50_ms": 1e3 * _pct(comp, 50),
             "compute_p99_ms": 1e3 * _pct(comp, 99),
         }

@@ -279,10 +279,23 @@ def test_a_skipped_tick_counts_as_late_among_all_deadlines():
     stats = TickStats(100.0)
     for late in [0.0005] * 98 + [0.003]:
         stats.record(late, 0.001)
-    stats.skipped += 1
+    assert stats.skip(1, 3.0) is None  # 20 ms without a tick: late, not a stall
     # THEN 2 of the 100 deadlines were not met on time
     r = stats.report()
     assert r["late_pct"] == pytest.approx(2.0) and r["ticks"] == 99 and r["skipped_ticks"] == 1
+    assert r["stalls"] == 0 and r["stalls_at_s_ms"] == []
+
+
+def test_a_tick_gap_of_50_ms_or_more_is_a_stall_with_its_time_and_length():
+    # GIVEN a 250 Hz loop that jumped over 24 deadlines at 1.64 s (100 ms without a tick) and
+    # over 11 at 5 s (48 ms)
+    stats = TickStats(250.0)
+    assert stats.skip(24, 1.64) == pytest.approx(0.1)
+    assert stats.skip(11, 5.0) is None
+    # THEN the report counts one stall and lists it
+    r = stats.report()
+    assert r["skipped_ticks"] == 35 and r["stalls"] == 1
+    assert r["stalls_at_s_ms"] == [[1.64, 100.0]]
 
 
 def test_a_log_sample_whose_tick_was_skipped_is_taken_at_the_next_tick_run():
