@@ -11,7 +11,13 @@ same emulator timers as the impaired ones, so a loaded machine's lateness reache
 as often as theirs, where the unimpaired vehicle's answers, sent at once, meet it once (with the
 latency alone, its timers kept one phase against the emulator's periodic work, and its round
 trips' 95 % ranged 82-145 ms in three runs on one busy machine). The impaired round trips' tail
-is bounded against it: the two links differ by the reorder hold alone."""
+is bounded against it: the two links differ by the reorder hold alone.
+
+A machine whose every core is busy also stops as a whole now and then (~100 ms, a few times in
+10 s; docs/gcs.md, "Records"): the measuring loop sees such a stop as a gap between two of its
+turns (it turns at least every 10 ms), and a round trip in flight across one measures the stop,
+not the link. The longer a link's round trip, the more of its samples a stop catches, so the
+figures are taken from the round trips that no stop overlapped, on every link alike."""
 
 from __future__ import annotations
 
@@ -44,21 +50,35 @@ class Measured:
     backwards."""
 
     rtt_ms: list[float] = field(default_factory=list)
+    #: (sent, received) of each round trip [monotonic ns]
+    windows: list[tuple[int, int]] = field(default_factory=list)
     messages: int = 0
     backwards: int = 0
     last_seq: int | None = None
 
 
-def _measure(client: MavClient, duration_s: float, rate_hz: float = 100.0) -> dict[int, Measured]:
+#: a gap this long between two turns of the measuring loop is a stop of the machine [ns]
+STALL_NS = 50_000_000
+
+
+def _measure(client: MavClient, duration_s: float,
+             rate_hz: float = 100.0) -> tuple[dict[int, Measured], list[tuple[int, int]]]:
     """Send TIMESYNC (tc1 = 0, ts1 = our monotonic ns) at ``rate_hz`` for ``duration_s`` to every
     vehicle heard; time each vehicle's answers (tc1 = its time, ts1 echoed) and count every
     message whose MAVLink sequence number is behind the one before it from that vehicle (it was
-    overtaken)."""
+    overtaken). Also the machine's stops: (start, end) [ns] of each gap of STALL_NS or more
+    between two turns of this loop."""
     out = {IMPAIRED: Measured(), REFERENCE: Measured(), DELAYED: Measured()}
+    stalls: list[tuple[int, int]] = []
     sent: set[int] = set()
     end = time.monotonic() + duration_s
     next_send = time.monotonic()
+    turn_ns = time.monotonic_ns()
     while (now := time.monotonic()) < end:
+        now_ns = time.monotonic_ns()
+        if now_ns - turn_ns >= STALL_NS:
+            stalls.append((turn_ns, now_ns))
+        turn_ns = now_ns
         if now >= next_send:
             ts1 = time.monotonic_ns()
             sent.add(ts1)
@@ -74,8 +94,16 @@ def _measure(client: MavClient, duration_s: float, rate_hz: float = 100.0) -> di
             seen.backwards += 1
         seen.last_seq = seq
         if m.get_type() == "TIMESYNC" and m.tc1 != 0 and m.ts1 in sent:
-            seen.rtt_ms.append((time.monotonic_ns() - m.ts1) * 1e-6)
-    return out
+            received = time.monotonic_ns()
+            seen.rtt_ms.append((received - m.ts1) * 1e-6)
+            seen.windows.append((m.ts1, received))
+    return out, stalls
+
+
+def _unstalled(seen: Measured, stalls: list[tuple[int, int]]) -> list[float]:
+    """The round trips [ms] that no stop of the machine overlapped."""
+    return [rtt for rtt, (a, b) in zip(seen.rtt_ms, seen.windows, strict=True)
+            if not any(a < s_end and s_start < b for s_start, s_end in stalls)]
 
 
 def _wait_for_all(client: MavClient, timeout_s: float) -> None:
@@ -115,18 +143,25 @@ def test_latency_jitter_and_reordering_from_boot_then_a_clean_link(tmp_path):
         _wait_for_all(client, 60)
         # WHEN the ground side times both vehicles' TIMESYNCs and watches their sequence numbers
         # for 4 s
-        during = _measure(client, 4.0)
+        during, stalls = _measure(client, 4.0)
         texts = [m.text for m in client.seen("STATUSTEXT")]
         assert any(t.startswith("Fault: loss 0.00 +30+U10 ms reorder 0.20") for t in texts)
         assert not any(t.startswith("Fault end") for t in texts), "the window ended too soon"
         # AND again once the window is over and in-flight packets have landed
         client.wait_text(WINDOW_S + 5.0, lambda t: t.startswith("Fault end: loss 0.00 +0 ms"))
         client.collect(0.3)
-        after = _measure(client, 2.0)
+        after, after_stalls = _measure(client, 2.0)
     client.close()
     faulty, reference, clean = during[IMPAIRED], during[REFERENCE], after[IMPAIRED]
+    n_all = {k: len(v.rtt_ms) for k, v in during.items()}
+    for seen in during.values():
+        seen.rtt_ms = _unstalled(seen, stalls)
+    for seen in after.values():
+        seen.rtt_ms = _unstalled(seen, after_stalls)
     rtt, machine_ms = faulty.rtt_ms, statistics.fmean(reference.rtt_ms)
     delayed = during[DELAYED].rtt_ms
+    log.info("machine stops of >= 50 ms: %d during (%s ms), %d after; round trips kept of %s",
+             len(stalls), [round((b - a) * 1e-6) for a, b in stalls], len(after_stalls), n_all)
     log.info(
         "fault: %d RTTs mean %.1f ms (expected %.1f + the reference's %.2f) min %.1f p95 %.1f "
         "max %.1f sd %.1f; %d of %d messages behind; reference: %d RTTs p95 %.2f max %.2f; "
@@ -148,7 +183,8 @@ def test_latency_jitter_and_reordering_from_boot_then_a_clean_link(tmp_path):
     # reference's prompt answers, within the unreordered link's 95 % (latency, jitter and that
     # lateness) plus twice the hold (40 ms: the most reordering adds to a round trip); and 5 ms
     # (two samples' 95 % differ by a few)
-    assert len(rtt) > 300 and len(reference.rtt_ms) > 300 and len(delayed) > 300
+    assert min(n_all.values()) > 300
+    assert len(rtt) > 200 and len(reference.rtt_ms) > 200 and len(delayed) > 200
     assert min(rtt) >= 2 * LATENCY_MS and min(delayed) >= 2 * LATENCY_MS
     p95 = statistics.quantiles(rtt, n=20)[-1]
     machine_p95 = statistics.quantiles(reference.rtt_ms, n=20)[-1]
