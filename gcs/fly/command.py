@@ -17,7 +17,7 @@ from typing import TextIO
 from gcs.app import Flight, FlightSetupError, FlyOptions, prepare
 from gcs.config import FLY_MODES, TeamConfig, load_team
 from gcs.fly.sched import SchedulingError, apply_scheduling
-from gcs.mission.machine import EXIT_ABORTED, EXIT_OK
+from gcs.mission.machine import EXIT_ABORTED, EXIT_INTERRUPTED, EXIT_OK
 from gcs.precompile import compile_law
 from gcs.report import summary_table
 from gcs.status import StatusView
@@ -27,7 +27,6 @@ from vehicle_emulator.team import load_team as load_emulator_team
 logger = logging.getLogger(__name__)
 
 EXIT_SETUP = 2
-EXIT_INTERRUPTED = 130
 
 
 FLY_DESCRIPTION = """\
