@@ -1,7 +1,7 @@
 """Today's `gcs fly` against each emulator personality, beside the team's recorded SITL flights.
 
 For each autopilot, the team file of the recorded formation flight
-(FLIGHTS below, `<autopilot>/`: the team's recordings, outside this repository) is flown with `gcs fly --mode rates --emulators`
+(FLIGHTS below, `<autopilot>/`: the team's recordings, $SITL_DATA_DIR/flights or outside this repository) is flown with `gcs fly --mode rates --emulators`
 against `vehicle-emu` with that personality, and with `nominal` (the paper's nominal model) for
 contrast, on free loopback ports. The SITL vehicles all booted at one home (their origins
 coincided by accident: `gcs fly` cannot yet tie separate origins together), so the emulated team
@@ -30,7 +30,6 @@ import numpy as np
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
-FLIGHTS = ROOT.parent / "shared" / "data" / "sitl" / "flights"
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## Emulator personalities against SITL"
 TEAMS = {"px4": "px4/square4_px4sih.yaml", "ardupilot": "ardupilot/sitl4_relay.yaml"}
@@ -40,7 +39,11 @@ SITL_NAMES = {"px4": "PX4 v1.16.0 SIH", "ardupilot": "ArduCopter 4.7.0-dev SITL"
 
 sys.path.insert(0, str(ROOT))
 from benchmarks.docsection import write_section  # noqa: E402
+from vehicle_emulator.replay import data_dir  # noqa: E402
 from vehicle_emulator.testing import free_udp_port_block  # noqa: E402
+
+#: the recorded flights: $SITL_DATA_DIR/flights, else the shared data folder beside the checkout
+FLIGHTS = data_dir() / "flights"
 
 
 def team_for(autopilot: str, personality: str, work: Path, from_hover: bool = False) -> Path:
