@@ -514,6 +514,10 @@ async def _slow_burst() -> None:
         assert seq.received == 120 and seq.lost == 0 and seq.reordered == 0
 
 
+#: a turn of the test's 5 ms sending loop longer than this is a stop of the machine [s]
+STOP_S = 0.02
+
+
 def test_a_teams_hot_notices_spread_over_the_batches_at_each_proxys_own_phase() -> None:
     asyncio.run(asyncio.wait_for(_spread_notices(), 20.0))
 
@@ -550,10 +554,15 @@ async def _spread_notices() -> None:
         senders = [_sender(k + 1) for k in range(n)]
         base = time.monotonic()
 
+        stopped = [0.0]  # time the machine stopped this process (no samples, no notices)
+
         async def stream(seconds: float) -> None:
-            start = time.monotonic()
-            while time.monotonic() - start < seconds:
-                stamp_ms = int((time.monotonic() - base) * 1e3) + 1  # each sample newer
+            start = last = time.monotonic()
+            while (now := time.monotonic()) - start < seconds:
+                if now - last > STOP_S:  # a turn of 5 ms that took longer: the machine stopped
+                    stopped[0] += now - last - 0.005
+                last = now
+                stamp_ms = int((now - base) * 1e3) + 1  # each sample newer
                 for mav in senders:
                     a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(
                         stamp_ms, 1.0, 0, 0, 0, 0, 0)))
@@ -563,14 +572,19 @@ async def _spread_notices() -> None:
         # is due at once; a few periods later the notices are back at their phases)
         await stream(0.15)
         notices.clear()
+        stopped[0] = 0.0
         t0 = time.monotonic()
         await stream(0.4)
         await asyncio.sleep(0.02)
         elapsed = time.monotonic() - t0
-    # THEN each proxy was told about every HOT_NOTICE_S (not at every batch) ...
+    # THEN each proxy was told about every HOT_NOTICE_S (not at every batch) while samples
+    # flowed (a machine whose every core is busy stops now and then for ~100 ms: no samples
+    # come then, and one notice follows the stop) ...
     per_slot = np.bincount([k for _, k in notices], minlength=n)
-    periods = elapsed / HOT_NOTICE_S
-    assert np.all(per_slot >= periods - 2) and np.all(per_slot <= periods + 2), per_slot
+    flowing = elapsed / HOT_NOTICE_S
+    periods = (elapsed - stopped[0]) / HOT_NOTICE_S
+    assert np.all(per_slot >= periods - 2) and np.all(per_slot <= flowing + 2), (
+        per_slot, periods, flowing)
     # ... and no batch carried the whole team's notices: they came at the slots' own phases
     per_batch = np.bincount([b for b, _ in notices])
     assert per_batch.max() <= n // 2, per_batch
