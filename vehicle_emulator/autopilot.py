@@ -236,6 +236,12 @@ class Autopilot:
             return False
         return not (self.nav_state is NavState.OFFBOARD and not self.offboard_available(now_s))
 
+    def position_ok(self, now_s: float) -> bool:
+        """The estimator has a global position (SYS_STATUS GPS bit present, enabled, healthy):
+        PX4 v1.16.0 SIH set it in the same SYS_STATUS as the pre-arm bit, when arming became
+        possible; MAVSDK's ``is_global_position_ok`` reads it."""
+        return now_s >= self.ready_s
+
     def system_status(self, now_s: float) -> int:
         """HEARTBEAT system_status as PX4 v1.16.0 sent it: UNINIT (0) disarmed before the
         estimator is ready and disarmed in OFFBOARD, CRITICAL (5) while a failsafe holds the

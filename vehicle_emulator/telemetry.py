@@ -58,7 +58,8 @@ NOISE_ACC_MPS2 = 0.05
 
 _NEED_POSITION = frozenset({"LOCAL_POSITION_NED"})
 _NO_NOISE = {key: np.zeros((0, 3)) for key in ("att", "gyro", "pos", "vel", "acc")}
-_SENSORS = 0x1 | 0x2 | 0x4 | 0x8 | 0x20 | 0x400 | 0x800 | 0x1000 | 0x8000 | 0x200000
+_GPS = 0x20  # MAV_SYS_STATUS_SENSOR_GPS: present and enabled once there is a global position
+_SENSORS = 0x1 | 0x2 | 0x4 | 0x8 | 0x400 | 0x800 | 0x1000 | 0x8000 | 0x200000
 _PREARM_CHECK = 0x10000000  # MAV_SYS_STATUS_PREARM_CHECK: health set while arming would pass
 
 
@@ -73,6 +74,7 @@ class FleetStatus:
     landed_state: np.ndarray  # uint8 MAV_LANDED_STATE
     system_status: np.ndarray  # uint8 MAV_STATE
     prearm_ok: np.ndarray  # bool: SYS_STATUS pre-arm check health bit
+    position_ok: np.ndarray  # bool: SYS_STATUS GPS bit present and enabled (global position)
     mav_autopilot: np.ndarray  # uint8 MAV_AUTOPILOT of the personality
     origin_ned_m: np.ndarray  # (n, 3) EKF origin in the team frame (NED): LOCAL_POSITION_NED zero
     home_ned_m: np.ndarray  # (n, 3) home in the team frame (NED)
@@ -88,8 +90,8 @@ class FleetStatus:
 
     #: The columns a vehicle refreshes at the autopilot's rate (`VehicleNode.status_row`), in
     #: the row's order.
-    ROW_COLUMNS = ("armed", "system_status", "prearm_ok", "custom_mode", "base_mode_flags",
-                   "landed_state", "errors_comm")
+    ROW_COLUMNS = ("armed", "system_status", "prearm_ok", "position_ok", "custom_mode",
+                   "base_mode_flags", "landed_state", "errors_comm")
 
     def write_row(self, i: int, row: tuple) -> None:
         """One vehicle's `ROW_COLUMNS` values."""
@@ -125,6 +127,7 @@ class FleetStatus:
             landed_state=np.ones(n, dtype=np.uint8),
             system_status=np.full(n, 3, dtype=np.uint8),
             prearm_ok=np.ones(n, dtype=bool),
+            position_ok=np.ones(n, dtype=bool),
             mav_autopilot=np.full(n, 12, dtype=np.uint8),
             origin_ned_m=np.zeros((n, 3)),
             home_ned_m=np.zeros((n, 3)),
@@ -533,9 +536,12 @@ class Telemetry:
         rows["vtol_state"] = status.vtol_state[idx]
 
     def _sys_status(self, rows, idx, now_s, plant, status) -> None:
-        rows["onboard_control_sensors_present"] = _SENSORS | _PREARM_CHECK
-        rows["onboard_control_sensors_enabled"] = _SENSORS | _PREARM_CHECK
-        rows["onboard_control_sensors_health"] = _SENSORS | np.where(
+        # PX4 v1.16.0 SIH: the GPS health bit is set from boot, but GPS is present and enabled
+        # only once the estimator has a global position (with the pre-arm bit, when armable)
+        gps = np.where(status.position_ok[idx], _GPS, 0).astype(np.uint32)
+        rows["onboard_control_sensors_present"] = _SENSORS | _PREARM_CHECK | gps
+        rows["onboard_control_sensors_enabled"] = _SENSORS | _PREARM_CHECK | gps
+        rows["onboard_control_sensors_health"] = _SENSORS | _GPS | np.where(
             status.prearm_ok[idx], _PREARM_CHECK, 0
         ).astype(np.uint32)
         rows["load"] = 200

@@ -244,11 +244,16 @@ class VehicleNode:
             ap.armed,
             ap.system_status(now_s),
             ap.prearm_ok(now_s),
+            self.position_ok(now_s),
             ap.custom_mode,
             self.base_mode_flags(now_s),
             self.landed_state(),
             min(self.counters.total(self.decode_rejected), 65535),
         )
+
+    def position_ok(self, now_s: float) -> bool:
+        """SYS_STATUS GPS bit present and enabled: the estimator has a global position."""
+        return self.autopilot.position_ok(now_s)
 
     def base_mode_flags(self, now_s: float) -> int:
         """HEARTBEAT base_mode without SAFETY_ARMED (added per HEARTBEAT): PX4's flags of the
