@@ -25,6 +25,7 @@ from numba import njit
 from vehicle_emulator import frames, hotstreams
 from vehicle_emulator.codec import CRC_TABLE, BatchEncoder, mavlink
 from vehicle_emulator.geodesy import enu_to_geodetic
+from vehicle_emulator.gnss import GPS_RATE_HZ, fill_gps_raw_int
 from vehicle_emulator.plant import FleetPlant
 
 __all__ = ["DEFAULT_RATES_HZ", "FleetStatus", "Telemetry", "HOME_LAT_DEG", "HOME_LON_DEG"]
@@ -43,6 +44,7 @@ DEFAULT_RATES_HZ: dict[str, float] = {
     "TIMESYNC": 10.0,
     "BATTERY_STATUS": 0.5,
     "HOME_POSITION": 0.5,
+    "GPS_RAW_INT": GPS_RATE_HZ,
 }
 # The team frame's origin on the globe: PX4 SITL's default home (Zurich). Geodetic coordinates
 # (GLOBAL_POSITION_INT, HOME_POSITION, GPS_GLOBAL_ORIGIN) are exact WGS-84 (geodesy.py).
@@ -222,6 +224,7 @@ class Telemetry:
             "TIMESYNC": self._timesync,
             "BATTERY_STATUS": self._battery_status,
             "HOME_POSITION": self._home_position,
+            "GPS_RAW_INT": self._gps_raw_int,
         }
 
     # --- schedule -----------------------------------------------------------------------------
@@ -564,6 +567,11 @@ class Telemetry:
         rows["x"], rows["y"], rows["z"] = local[:, 0], local[:, 1], local[:, 2]
         rows["q"] = np.array([1.0, 0.0, 0.0, 0.0])
         rows["time_usec"] = int(now_s * 1e6)
+
+    def _gps_raw_int(self, rows, idx, now_s, plant, status) -> None:
+        d = self._d
+        lat, lon, alt = geodetic_of_ned(d["pos_ned"][idx])
+        fill_gps_raw_int(rows, d["t_pos_us"][idx], lat, lon, alt, d["vel_ned"][idx])
 
     def _battery_status(self, rows, idx, now_s, plant, status) -> None:
         rows["current_consumed"] = np.round(plant.charge_used_c[idx] / 3.6).astype(np.int32)
