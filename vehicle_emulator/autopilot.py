@@ -52,6 +52,7 @@ __all__ = [
 OFFBOARD_UNAVAILABLE_TEXT = "Switching to Offboard is currently not available"
 ARMING_HEALTH_TEXT = "Arming denied: Resolve system health failures first"
 FAILSAFE_TEXT = "Failsafe activated"
+ALREADY_HIGHER_TEXT = "Already higher than takeoff altitude"  # PX4 navigator, takeoff.cpp
 FORCE_MAGIC = 21196
 TAKEOFF_DONE_M = 0.15
 
@@ -449,6 +450,10 @@ class Autopilot:
             self._set_demand(self._mode_demand(obs))
 
     def _begin_takeoff(self, obs: Observation, alt_m: float) -> None:
+        """PX4's navigator never descends to a takeoff altitude: above it, it keeps its own."""
+        if obs.position_enu_m[2] > alt_m:
+            alt_m = self._takeoff_alt_m = obs.position_enu_m[2]
+            self._event(Severity.CRITICAL, ALREADY_HIGHER_TEXT)
         self._takeoff_climbing = True
         speed = self.params["MPC_TKO_SPEED"]
         self._set_demand(
