@@ -46,6 +46,7 @@ __all__ = [
     "Severity",
     "custom_mode_of",
     "nav_state_of",
+    "not_emulated",
 ]
 
 # PX4's wording (recorded, v1.16.0)
@@ -103,6 +104,16 @@ def nav_state_of(main_mode: int, sub_mode: int) -> NavState | None:
         sub = {2: NavState.AUTO_TAKEOFF, 3: NavState.AUTO_LOITER, 6: NavState.AUTO_LAND}
         return sub.get(sub_mode)
     return {2: NavState.ALTCTL, 3: NavState.POSCTL, 6: NavState.OFFBOARD}.get(main_mode)
+
+
+#: (main, sub) modes PX4 flies and the emulator does not: AUTO_RTL. A DO_SET_MODE for one gets a
+#: single UNSUPPORTED ACK, not PX4's ACCEPTED first, so no client takes it for a mode change.
+_NOT_EMULATED = frozenset({(4, 5)})
+
+
+def not_emulated(main_mode: int, sub_mode: int) -> bool:
+    """True for a PX4 mode the emulator does not fly (and refuses as UNSUPPORTED)."""
+    return (main_mode, sub_mode) in _NOT_EMULATED
 
 
 _MANUAL = frozenset({NavState.POSCTL, NavState.ALTCTL})  # modes flown from (RC) sticks
@@ -313,6 +324,9 @@ class Autopilot:
     def set_mode(self, now_s: float, obs: Observation, main_mode: int, sub_mode: int) -> MavResult:
         """DO_SET_MODE / SET_MODE with PX4 custom main and sub modes; an accepted mode is also the
         intended mode. OFFBOARD needs a recent setpoint only when armed (PX4 v1.16.0)."""
+        if not_emulated(main_mode, sub_mode):
+            self._event(Severity.CRITICAL, f"Mode main {main_mode} sub {sub_mode} not emulated")
+            return MavResult.UNSUPPORTED
         target = nav_state_of(main_mode, sub_mode)
         if target is None:
             return self._deny(f"Mode change denied: main {main_mode} sub {sub_mode} not available")
