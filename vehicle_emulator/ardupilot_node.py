@@ -98,6 +98,10 @@ class ArduPilotNode(VehicleNode):
                     battery_remaining: float, tilt_cos: float) -> CopterObservation:
         return CopterObservation(position, velocity, yaw, on_ground, battery_remaining, tilt_cos)
 
+    def position_ok(self, now_s: float) -> bool:
+        """SYS_STATUS GPS bit: set from boot, as before (ArduCopter's own timeline not modelled)."""
+        return True
+
     def base_mode_flags(self, now_s: float) -> int:
         return self.autopilot.base_mode(now_s) & 0x7F  # SAFETY_ARMED added per HEARTBEAT
 

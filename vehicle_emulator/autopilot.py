@@ -46,12 +46,14 @@ __all__ = [
     "Severity",
     "custom_mode_of",
     "nav_state_of",
+    "not_emulated",
 ]
 
 # PX4's wording (recorded, v1.16.0)
 OFFBOARD_UNAVAILABLE_TEXT = "Switching to Offboard is currently not available"
 ARMING_HEALTH_TEXT = "Arming denied: Resolve system health failures first"
 FAILSAFE_TEXT = "Failsafe activated"
+ALREADY_HIGHER_TEXT = "Already higher than takeoff altitude"  # PX4 navigator, takeoff.cpp
 FORCE_MAGIC = 21196
 TAKEOFF_DONE_M = 0.15
 
@@ -102,6 +104,16 @@ def nav_state_of(main_mode: int, sub_mode: int) -> NavState | None:
         sub = {2: NavState.AUTO_TAKEOFF, 3: NavState.AUTO_LOITER, 6: NavState.AUTO_LAND}
         return sub.get(sub_mode)
     return {2: NavState.ALTCTL, 3: NavState.POSCTL, 6: NavState.OFFBOARD}.get(main_mode)
+
+
+#: (main, sub) modes PX4 flies and the emulator does not: AUTO_RTL. A DO_SET_MODE for one gets a
+#: single UNSUPPORTED ACK, not PX4's ACCEPTED first, so no client takes it for a mode change.
+_NOT_EMULATED = frozenset({(4, 5)})
+
+
+def not_emulated(main_mode: int, sub_mode: int) -> bool:
+    """True for a PX4 mode the emulator does not fly (and refuses as UNSUPPORTED)."""
+    return (main_mode, sub_mode) in _NOT_EMULATED
 
 
 _MANUAL = frozenset({NavState.POSCTL, NavState.ALTCTL})  # modes flown from (RC) sticks
@@ -236,6 +248,12 @@ class Autopilot:
             return False
         return not (self.nav_state is NavState.OFFBOARD and not self.offboard_available(now_s))
 
+    def position_ok(self, now_s: float) -> bool:
+        """The estimator has a global position (SYS_STATUS GPS bit present, enabled, healthy):
+        PX4 v1.16.0 SIH set it in the same SYS_STATUS as the pre-arm bit, when arming became
+        possible; MAVSDK's ``is_global_position_ok`` reads it."""
+        return now_s >= self.ready_s
+
     def system_status(self, now_s: float) -> int:
         """HEARTBEAT system_status as PX4 v1.16.0 sent it: UNINIT (0) disarmed before the
         estimator is ready and disarmed in OFFBOARD, CRITICAL (5) while a failsafe holds the
@@ -306,6 +324,9 @@ class Autopilot:
     def set_mode(self, now_s: float, obs: Observation, main_mode: int, sub_mode: int) -> MavResult:
         """DO_SET_MODE / SET_MODE with PX4 custom main and sub modes; an accepted mode is also the
         intended mode. OFFBOARD needs a recent setpoint only when armed (PX4 v1.16.0)."""
+        if not_emulated(main_mode, sub_mode):
+            self._event(Severity.CRITICAL, f"Mode main {main_mode} sub {sub_mode} not emulated")
+            return MavResult.UNSUPPORTED
         target = nav_state_of(main_mode, sub_mode)
         if target is None:
             return self._deny(f"Mode change denied: main {main_mode} sub {sub_mode} not available")
@@ -443,6 +464,10 @@ class Autopilot:
             self._set_demand(self._mode_demand(obs))
 
     def _begin_takeoff(self, obs: Observation, alt_m: float) -> None:
+        """PX4's navigator never descends to a takeoff altitude: above it, it keeps its own."""
+        if obs.position_enu_m[2] > alt_m:
+            alt_m = self._takeoff_alt_m = obs.position_enu_m[2]
+            self._event(Severity.CRITICAL, ALREADY_HIGHER_TEXT)
         self._takeoff_climbing = True
         speed = self.params["MPC_TKO_SPEED"]
         self._set_demand(

@@ -25,6 +25,7 @@ from numba import njit
 from vehicle_emulator import frames, hotstreams
 from vehicle_emulator.codec import CRC_TABLE, BatchEncoder, mavlink
 from vehicle_emulator.geodesy import enu_to_geodetic
+from vehicle_emulator.gnss import GPS_RATE_HZ, fill_gps_raw_int
 from vehicle_emulator.plant import FleetPlant
 
 __all__ = ["DEFAULT_RATES_HZ", "FleetStatus", "Telemetry", "HOME_LAT_DEG", "HOME_LON_DEG"]
@@ -43,6 +44,7 @@ DEFAULT_RATES_HZ: dict[str, float] = {
     "TIMESYNC": 10.0,
     "BATTERY_STATUS": 0.5,
     "HOME_POSITION": 0.5,
+    "GPS_RAW_INT": GPS_RATE_HZ,
 }
 # The team frame's origin on the globe: PX4 SITL's default home (Zurich). Geodetic coordinates
 # (GLOBAL_POSITION_INT, HOME_POSITION, GPS_GLOBAL_ORIGIN) are exact WGS-84 (geodesy.py).
@@ -58,7 +60,8 @@ NOISE_ACC_MPS2 = 0.05
 
 _NEED_POSITION = frozenset({"LOCAL_POSITION_NED"})
 _NO_NOISE = {key: np.zeros((0, 3)) for key in ("att", "gyro", "pos", "vel", "acc")}
-_SENSORS = 0x1 | 0x2 | 0x4 | 0x8 | 0x20 | 0x400 | 0x800 | 0x1000 | 0x8000 | 0x200000
+_GPS = 0x20  # MAV_SYS_STATUS_SENSOR_GPS: present and enabled once there is a global position
+_SENSORS = 0x1 | 0x2 | 0x4 | 0x8 | 0x400 | 0x800 | 0x1000 | 0x8000 | 0x200000
 _PREARM_CHECK = 0x10000000  # MAV_SYS_STATUS_PREARM_CHECK: health set while arming would pass
 
 
@@ -73,6 +76,7 @@ class FleetStatus:
     landed_state: np.ndarray  # uint8 MAV_LANDED_STATE
     system_status: np.ndarray  # uint8 MAV_STATE
     prearm_ok: np.ndarray  # bool: SYS_STATUS pre-arm check health bit
+    position_ok: np.ndarray  # bool: SYS_STATUS GPS bit present and enabled (global position)
     mav_autopilot: np.ndarray  # uint8 MAV_AUTOPILOT of the personality
     origin_ned_m: np.ndarray  # (n, 3) EKF origin in the team frame (NED): LOCAL_POSITION_NED zero
     home_ned_m: np.ndarray  # (n, 3) home in the team frame (NED)
@@ -88,8 +92,8 @@ class FleetStatus:
 
     #: The columns a vehicle refreshes at the autopilot's rate (`VehicleNode.status_row`), in
     #: the row's order.
-    ROW_COLUMNS = ("armed", "system_status", "prearm_ok", "custom_mode", "base_mode_flags",
-                   "landed_state", "errors_comm")
+    ROW_COLUMNS = ("armed", "system_status", "prearm_ok", "position_ok", "custom_mode",
+                   "base_mode_flags", "landed_state", "errors_comm")
 
     def write_row(self, i: int, row: tuple) -> None:
         """One vehicle's `ROW_COLUMNS` values."""
@@ -125,6 +129,7 @@ class FleetStatus:
             landed_state=np.ones(n, dtype=np.uint8),
             system_status=np.full(n, 3, dtype=np.uint8),
             prearm_ok=np.ones(n, dtype=bool),
+            position_ok=np.ones(n, dtype=bool),
             mav_autopilot=np.full(n, 12, dtype=np.uint8),
             origin_ned_m=np.zeros((n, 3)),
             home_ned_m=np.zeros((n, 3)),
@@ -219,6 +224,7 @@ class Telemetry:
             "TIMESYNC": self._timesync,
             "BATTERY_STATUS": self._battery_status,
             "HOME_POSITION": self._home_position,
+            "GPS_RAW_INT": self._gps_raw_int,
         }
 
     # --- schedule -----------------------------------------------------------------------------
@@ -533,9 +539,12 @@ class Telemetry:
         rows["vtol_state"] = status.vtol_state[idx]
 
     def _sys_status(self, rows, idx, now_s, plant, status) -> None:
-        rows["onboard_control_sensors_present"] = _SENSORS | _PREARM_CHECK
-        rows["onboard_control_sensors_enabled"] = _SENSORS | _PREARM_CHECK
-        rows["onboard_control_sensors_health"] = _SENSORS | np.where(
+        # PX4 v1.16.0 SIH: the GPS health bit is set from boot, but GPS is present and enabled
+        # only once the estimator has a global position (with the pre-arm bit, when armable)
+        gps = np.where(status.position_ok[idx], _GPS, 0).astype(np.uint32)
+        rows["onboard_control_sensors_present"] = _SENSORS | _PREARM_CHECK | gps
+        rows["onboard_control_sensors_enabled"] = _SENSORS | _PREARM_CHECK | gps
+        rows["onboard_control_sensors_health"] = _SENSORS | _GPS | np.where(
             status.prearm_ok[idx], _PREARM_CHECK, 0
         ).astype(np.uint32)
         rows["load"] = 200
@@ -558,6 +567,11 @@ class Telemetry:
         rows["x"], rows["y"], rows["z"] = local[:, 0], local[:, 1], local[:, 2]
         rows["q"] = np.array([1.0, 0.0, 0.0, 0.0])
         rows["time_usec"] = int(now_s * 1e6)
+
+    def _gps_raw_int(self, rows, idx, now_s, plant, status) -> None:
+        d = self._d
+        lat, lon, alt = geodetic_of_ned(d["pos_ned"][idx])
+        fill_gps_raw_int(rows, d["t_pos_us"][idx], lat, lon, alt, d["vel_ned"][idx])
 
     def _battery_status(self, rows, idx, now_s, plant, status) -> None:
         rows["current_consumed"] = np.round(plant.charge_used_c[idx] / 3.6).astype(np.int32)

@@ -198,6 +198,37 @@ def run_emulator(
         emu.stop()
 
 
+@contextlib.contextmanager
+def run_emulator_ready(
+    args: Sequence[str], remote_port: int, log_dir: str = "/tmp", timeout_s: float = 60.0
+) -> Iterator[EmulatorProcess]:
+    """``run_emulator`` that returns the moment the emulator prints its ready line on stdout
+    (what ``gcs fly --emulators`` waits for); TimeoutError naming the log if it never does."""
+    bind_port = free_udp_port()
+    log_path = os.path.join(log_dir, f"vehicle-emu-{bind_port}.log")
+    cmd = [sys.executable, "-m", "vehicle_emulator.cli", *args,
+           "--bind", f"127.0.0.1:{bind_port}", "--remote", f"127.0.0.1:{remote_port}"]
+    with open(log_path, "w") as log:
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
+    emu = EmulatorProcess(proc, bind_port, remote_port, log_path)
+    try:
+        ready = threading.Event()
+
+        def read_stdout() -> None:  # drains stdout to the end so the emulator never blocks
+            assert proc.stdout is not None
+            for line in proc.stdout:
+                if line.startswith("vehicle-emu: ready:"):
+                    ready.set()
+
+        threading.Thread(target=read_stdout, daemon=True).start()
+        if not ready.wait(timeout_s):
+            raise TimeoutError(f"vehicle-emu printed no ready line within {timeout_s} s "
+                               f"(log {log_path})")
+        yield emu
+    finally:
+        emu.stop()
+
+
 @dataclass
 class MavClient:
     """pymavlink UDP client listening on 127.0.0.1:``port`` (the emulator's remote). Like

@@ -32,6 +32,7 @@ from vehicle_emulator.autopilot import (
     PositionTarget,
     RatesSetpoint,
     Severity,
+    not_emulated,
 )
 from vehicle_emulator.codec import GenericEncoder, mavlink
 from vehicle_emulator.faults import (
@@ -66,9 +67,10 @@ REPORT_PERIOD_S = 5.0
 LIMITED_TEXT_PERIOD_S = 1.0
 LIMITED_TEXT_BURST = 5
 STATUSTEXT_MAX_BYTES = 200  # 4 chunks
-# COMMAND_INT | PARAM_ENCODE_BYTEWISE | SET_ATTITUDE_TARGET | MAVLINK2 (+ SET_ACTUATOR_TARGET
-# where the personality honours it)
-CAPABILITIES = 0x8 | 0x10 | 0x40 | 0x2000
+# What is emulated: COMMAND_INT | PARAM_ENCODE_BYTEWISE | SET_ATTITUDE_TARGET |
+# SET_POSITION_TARGET_LOCAL_NED | MAVLINK2 (+ SET_ACTUATOR_TARGET where the personality honours
+# it). Not claimed: missions, fence, rally, FTP, SET_POSITION_TARGET_GLOBAL_INT, terrain.
+CAPABILITIES = 0x8 | 0x10 | 0x40 | 0x80 | 0x2000
 CAP_SET_ACTUATOR_TARGET = 0x400
 
 # PX4 base_mode flags per nav state (besides CUSTOM_MODE_ENABLED and SAFETY_ARMED).
@@ -244,11 +246,16 @@ class VehicleNode:
             ap.armed,
             ap.system_status(now_s),
             ap.prearm_ok(now_s),
+            self.position_ok(now_s),
             ap.custom_mode,
             self.base_mode_flags(now_s),
             self.landed_state(),
             min(self.counters.total(self.decode_rejected), 65535),
         )
+
+    def position_ok(self, now_s: float) -> bool:
+        """SYS_STATUS GPS bit present and enabled: the estimator has a global position."""
+        return self.autopilot.position_ok(now_s)
 
     def base_mode_flags(self, now_s: float) -> int:
         """HEARTBEAT base_mode without SAFETY_ARMED (added per HEARTBEAT): PX4's flags of the
@@ -559,7 +566,8 @@ class VehicleNode:
             p += [msg.x * 1e-7, msg.y * 1e-7, msg.z]
         else:
             p += [msg.param5, msg.param6, msg.param7]
-        twice = msg.command == CMD_DO_SET_MODE and self._ack_twice()
+        # a mode the emulator does not fly gets one ACK, UNSUPPORTED, not ACCEPTED first
+        twice = msg.command == CMD_DO_SET_MODE and self._ack_twice() and not _not_emulated(p)
         if twice:  # PX4 v1.16.0's MAVLink receiver ACKs before its commander has looked
             self._ack(CMD_DO_SET_MODE, MavResult.ACCEPTED, link, addr, msg)
         try:
@@ -606,6 +614,8 @@ class VehicleNode:
             return ap.takeoff(now_s, obs, alt)
         if cmd == 21:  # NAV_LAND
             return ap.land(now_s, obs)
+        if cmd in (20, 192):  # NAV_RETURN_TO_LAUNCH, DO_REPOSITION: not emulated (as AUTO_RTL)
+            return MavResult.UNSUPPORTED
         if cmd == 511:  # SET_MESSAGE_INTERVAL
             if not (math.isfinite(p[0]) and math.isfinite(p[1])):
                 return MavResult.DENIED
@@ -754,6 +764,11 @@ class VehicleNode:
             self.apply_fault(now_s, FaultSpec("mass_drop", 0, 0.0, fraction=v), None)
         elif name == "EMU_LINK_LOSS" and v > 0.0:
             self.apply_fault(now_s, FaultSpec("link_loss", 0, 0.0, duration_s=v), None)
+
+
+def _not_emulated(p: list[float]) -> bool:
+    """DO_SET_MODE params name a PX4 mode the emulator does not fly (autopilot.not_emulated)."""
+    return not_emulated(_int(p[1], -1), _int(p[2], -1))
 
 
 def _int(x: float, default: int = 0) -> int:
