@@ -554,13 +554,14 @@ async def _spread_notices() -> None:
         senders = [_sender(k + 1) for k in range(n)]
         base = time.monotonic()
 
-        stopped = [0.0]  # time the machine stopped this process (no samples, no notices)
+        stopped = [0.0, 0]  # time and count of the machine's stops of this process
 
         async def stream(seconds: float) -> None:
             start = last = time.monotonic()
             while (now := time.monotonic()) - start < seconds:
                 if now - last > STOP_S:  # a turn of 5 ms that took longer: the machine stopped
                     stopped[0] += now - last - 0.005
+                    stopped[1] += 1
                 last = now
                 stamp_ms = int((now - base) * 1e3) + 1  # each sample newer
                 for mav in senders:
@@ -572,7 +573,7 @@ async def _spread_notices() -> None:
         # is due at once; a few periods later the notices are back at their phases)
         await stream(0.15)
         notices.clear()
-        stopped[0] = 0.0
+        stopped[:] = [0.0, 0]
         t0 = time.monotonic()
         await stream(0.4)
         await asyncio.sleep(0.02)
@@ -585,9 +586,10 @@ async def _spread_notices() -> None:
     periods = (elapsed - stopped[0]) / HOT_NOTICE_S
     assert np.all(per_slot >= periods - 2) and np.all(per_slot <= flowing + 2), (
         per_slot, periods, flowing)
-    # ... and no batch carried the whole team's notices: they came at the slots' own phases
+    # ... and no batch carried the whole team's notices: they came at the slots' own phases,
+    # but for the first batch after each stop, when every slot is due at once
     per_batch = np.bincount([b for b, _ in notices])
-    assert per_batch.max() <= n // 2, per_batch
+    assert (per_batch > n // 2).sum() <= stopped[1], (per_batch, stopped)
 
 
 def test_the_team_sample_reads_each_message_the_table_has_even_while_another_is_missing() -> None:
