@@ -226,13 +226,19 @@ def test_default_streams_message_intervals_parameters_and_statustext(tmp_path):
         # own time (its stamps: a loaded host slows SITL's clock and the stream with it): the
         # usual step is the interval asked for; a late loop skips the odd message, as SITL's
         # does (96 Hz on a loaded run; 93.5 Hz in a CI run beside two flights), so the mean
-        # rate is bounded more loosely (50 or 200 Hz would fail both)
+        # rate is bounded more loosely (50 or 200 Hz would fail both). A machine whose every core
+        # is busy stops now and then for ~100 ms, and the emulator then skips the messages of
+        # the stop as a late loop does: steps of 50 ms or more are such stops, left out of the
+        # time the rate is taken over (79 Hz with one inside the 1 s window)
         request(client, "ATTITUDE_QUATERNION", 100)
         aq = client.collect(1.0, "ATTITUDE_QUATERNION")
         stamps_ms = [m.time_boot_ms for m in aq]
         assert len(aq) >= 50
-        assert statistics.median(b - a for a, b in itertools.pairwise(stamps_ms)) == 10
-        assert 85.0 <= (len(aq) - 1) / ((stamps_ms[-1] - stamps_ms[0]) * 1e-3) <= 102.0
+        steps_ms = [b - a for a, b in itertools.pairwise(stamps_ms)]
+        assert statistics.median(steps_ms) == 10
+        flowing_s = sum(d for d in steps_ms if d < 50) * 1e-3
+        kept = sum(1 for d in steps_ms if d < 50)
+        assert flowing_s > 0.5 and 85.0 <= kept / flowing_s <= 102.0
         request(client, "EXTENDED_SYS_STATE", 5)
         ess = client.wait("EXTENDED_SYS_STATE", 1)
         assert (ess.vtol_state, ess.landed_state) == (3, 1)  # MC, on the ground

@@ -155,7 +155,9 @@ def test_guid_options_without_bit_3_refuses_to_fly_and_never_arms(tmp_path: Path
         assert (s["mode"], s["armed"], s["setpoints_by_mode"]) == ("STABILIZE", False, {})
     # streams and the origin (REQUEST_MESSAGE 49), then PARAM_REQUEST_READs: reads only
     assert {c for _, c, _ in sent_commands(tmp_path)} <= {511, 512}
-    assert elapsed_s < 20.0, elapsed_s  # (measured 4 s on 2 cores)
+    # (measured 4 s on 2 cores, 25 s beside four other test flights and two compiles; a wait
+    # for a landing took up to 120 s, and the LAND it needs is already refused above)
+    assert elapsed_s < 60.0, elapsed_s
 
 
 def test_ardupilot_takes_off_flies_guided_nogps_and_lands(tmp_path: Path) -> None:
