@@ -248,6 +248,7 @@ class VehicleNode:
             self.base_mode_flags(now_s),
             self.landed_state(),
             min(self.counters.total(self.decode_rejected), 65535),
+            ap.attitude_target_published(),
         )
 
     def base_mode_flags(self, now_s: float) -> int:
