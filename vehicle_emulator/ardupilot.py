@@ -306,6 +306,10 @@ class ArduCopter:
         the gyros became consistent, in STABILIZE)."""
         return not self.arm_failures(now_s, mode_check=False)
 
+    def attitude_target_published(self) -> bool:
+        """ATTITUDE_TARGET is sent at its rate in every mode (the attitude controller's target)."""
+        return True
+
     def system_status(self, now_s: float) -> int:
         """HEARTBEAT system_status: BOOT (1) before "ArduPilot Ready", STANDBY (3) landed,
         ACTIVE (4) flying."""

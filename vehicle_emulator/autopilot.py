@@ -18,9 +18,12 @@ COM_DISARM_PRFLT after arming without takeoff.
 
 Intended mode (PX4's ``user_intended_mode``): the mode last selected by a command (DO_SET_MODE,
 SET_MODE, NAV_TAKEOFF, NAV_LAND; and Hold after a takeoff, which PX4's navigator selects itself).
-Failsafes change the mode, not the intended mode. After "Disarmed by landing" a vehicle whose
-intended mode is OFFBOARD goes back to OFFBOARD (PX4 v1.16.0 did so after an offboard-loss
-failsafe had landed it), where arming is then refused until a fresh setpoint arrives.
+Failsafes change the mode, not the intended mode. The mode after disarming (PX4's
+``UserModeIntention::_nav_state_after_disarming``) is the last selected mode that allows arming:
+Land and Takeoff never become it. After "Disarmed by landing" the vehicle is in that mode, so a
+flight that ended OFFBOARD -> NAV_LAND sits disarmed in OFFBOARD (PX4 v1.16.0, 2026-12-04:
+HEARTBEAT base_mode 1, custom_mode 393216), where arming is refused until a fresh setpoint
+arrives and no ATTITUDE_TARGET is sent (``attitude_target_published``).
 """
 
 from __future__ import annotations
@@ -117,6 +120,9 @@ def not_emulated(main_mode: int, sub_mode: int) -> bool:
 
 
 _MANUAL = frozenset({NavState.POSCTL, NavState.ALTCTL})  # modes flown from (RC) sticks
+# the modes the emulator flies that PX4 refuses to arm in (mode_req_prevent_arming): never the
+# mode after disarming
+_PREVENTS_ARMING = frozenset({NavState.AUTO_LAND})
 
 _MODE_NAMES = {
     NavState.ALTCTL: "Altitude",
@@ -198,6 +204,7 @@ class Autopilot:
     armed: bool = False
     nav_state: NavState = NavState.AUTO_LOITER
     intended_state: NavState = NavState.AUTO_LOITER  # last mode a command selected (see module)
+    after_disarm_state: NavState = NavState.AUTO_LOITER  # last selected mode that allows arming
     demand: Demand = field(default_factory=MotorsOff)
     demand_version: int = 0
     events: list[tuple[Severity, str]] = field(default_factory=list)
@@ -253,6 +260,12 @@ class Autopilot:
         PX4 v1.16.0 SIH set it in the same SYS_STATUS as the pre-arm bit, when arming became
         possible; MAVSDK's ``is_global_position_ok`` reads it."""
         return now_s >= self.ready_s
+
+    def attitude_target_published(self) -> bool:
+        """Whether PX4 publishes an attitude or rates setpoint, which its ATTITUDE_TARGET stream
+        sends (only on a new one): not disarmed in OFFBOARD, where no controller runs and no
+        setpoint arrives (PX4 v1.16.0 sent none there for 60 s; in Hold, disarmed, it did)."""
+        return self.armed or self.nav_state is not NavState.OFFBOARD
 
     def system_status(self, now_s: float) -> int:
         """HEARTBEAT system_status as PX4 v1.16.0 sent it: UNINIT (0) disarmed before the
@@ -338,7 +351,7 @@ class Autopilot:
                 self.first_offboard_s = now_s
         if target is NavState.AUTO_TAKEOFF:
             self._takeoff_alt_m = self.params["MIS_TAKEOFF_ALT"]
-        self.intended_state = target
+        self._select(target)
         self.failsafe_active = False
         self._enter(target, obs)
         return MavResult.ACCEPTED
@@ -349,7 +362,8 @@ class Autopilot:
         if not math.isfinite(alt) or alt < 0.5:
             alt = self.params["MIS_TAKEOFF_ALT"]
         self._takeoff_alt_m = alt
-        self.nav_state = self.intended_state = NavState.AUTO_TAKEOFF
+        self.nav_state = NavState.AUTO_TAKEOFF
+        self._select(NavState.AUTO_TAKEOFF)
         self.failsafe_active = False
         self._event(Severity.INFO, f"Takeoff to {alt:.1f} m")
         if self.armed:
@@ -358,8 +372,9 @@ class Autopilot:
 
     def land(self, now_s: float, obs: Observation) -> MavResult:
         """MAV_CMD_NAV_LAND: descend at MPC_LAND_SPEED, then disarm. A user mode selection in PX4:
-        Land becomes the intended mode (so the vehicle stays in Land after the disarm)."""
-        self.intended_state = NavState.AUTO_LAND
+        Land becomes the intended mode, but not the mode after disarming (Land prevents arming),
+        so after the landing the vehicle returns to the mode selected before it."""
+        self._select(NavState.AUTO_LAND)
         self.failsafe_active = False
         self._enter(NavState.AUTO_LAND, obs)
         return MavResult.ACCEPTED
@@ -394,7 +409,7 @@ class Autopilot:
                 limit = self.params["COM_DISARM_LAND"]
                 if limit >= 0.0 and on_ground_s > limit:
                     self._disarm("Disarmed by landing")
-                    self._resume_intended(obs)
+                    self._resume_after_disarm(obs)
             else:
                 limit = self.params["COM_DISARM_PRFLT"]
                 if limit >= 0.0 and now_s - self._armed_s > limit:
@@ -421,11 +436,19 @@ class Autopilot:
         self._event(Severity.INFO, text)
         self._set_demand(MotorsOff())
 
-    def _resume_intended(self, obs: Observation) -> None:
-        """After "Disarmed by landing": back to the intended mode if that is OFFBOARD and a
-        failsafe had left it (PX4 v1.16.0: HEARTBEAT OFFBOARD, base_mode 1, after the landing)."""
-        if self.intended_state is NavState.OFFBOARD and self.nav_state is not NavState.OFFBOARD:
-            self._enter(NavState.OFFBOARD, obs)
+    def _select(self, target: NavState) -> None:
+        """A user's mode selection: the intended mode, and the mode after disarming unless the
+        mode prevents arming (PX4's UserModeIntention::change)."""
+        self.intended_state = target
+        if target not in _PREVENTS_ARMING:
+            self.after_disarm_state = target
+
+    def _resume_after_disarm(self, obs: Observation) -> None:
+        """After "Disarmed by landing": the mode after disarming becomes the intended and the
+        current mode (PX4's UserModeIntention::onDisarm; v1.16.0 recorded OFFBOARD, base_mode 1,
+        after both a failsafe landing and a NAV_LAND from OFFBOARD)."""
+        self.intended_state = self.after_disarm_state
+        self._enter(self.after_disarm_state, obs)
 
     def _hold_demand(self, obs: Observation) -> Demand:
         if not self.armed:
@@ -497,7 +520,8 @@ class Autopilot:
             self._takeoff_climbing = False
             self._event(Severity.INFO, "Takeoff complete, holding")
             # PX4's navigator selects Hold itself: the intended mode follows (CURRENT_MODE, v1.16.0)
-            self.nav_state = self.intended_state = NavState.AUTO_LOITER
+            self.nav_state = NavState.AUTO_LOITER
+            self._select(NavState.AUTO_LOITER)
 
     def _offboard_lost(self, obs: Observation) -> None:
         """COM_OBL_RC_ACT; PX4's STATUSTEXT, then the emulator's "Mode: ..." line names the

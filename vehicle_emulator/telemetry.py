@@ -89,11 +89,14 @@ class FleetStatus:
     battery_voltage_v: np.ndarray
     battery_current_a: np.ndarray
     errors_comm: np.ndarray  # uint16: rejected input so far
+    #: bool: the autopilot publishes an attitude/rates setpoint (else no ATTITUDE_TARGET is sent,
+    #: whatever its interval: PX4 sends one only per new setpoint)
+    attitude_target: np.ndarray
 
     #: The columns a vehicle refreshes at the autopilot's rate (`VehicleNode.status_row`), in
     #: the row's order.
     ROW_COLUMNS = ("armed", "system_status", "prearm_ok", "position_ok", "custom_mode",
-                   "base_mode_flags", "landed_state", "errors_comm")
+                   "base_mode_flags", "landed_state", "errors_comm", "attitude_target")
 
     def write_row(self, i: int, row: tuple) -> None:
         """One vehicle's `ROW_COLUMNS` values."""
@@ -140,6 +143,7 @@ class FleetStatus:
             battery_voltage_v=np.full(n, 16.8),
             battery_current_a=np.zeros(n),
             errors_comm=np.zeros(n, dtype=np.uint16),
+            attitude_target=np.ones(n, dtype=bool),
         )
 
 
@@ -311,6 +315,8 @@ class Telemetry:
             name = self.names[k]
             if name in _NEED_POSITION:
                 idx = idx[t_pos_ms[idx] >= status.position_from_ms[idx]]
+            elif name == "ATTITUDE_TARGET":
+                idx = idx[status.attitude_target[idx]]
             if idx.size == 0:
                 continue
             enc = self.encoders[name]

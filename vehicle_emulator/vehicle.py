@@ -251,6 +251,7 @@ class VehicleNode:
             self.base_mode_flags(now_s),
             self.landed_state(),
             min(self.counters.total(self.decode_rejected), 65535),
+            ap.attitude_target_published(),
         )
 
     def position_ok(self, now_s: float) -> bool:

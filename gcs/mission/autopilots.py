@@ -103,6 +103,11 @@ class AutopilotProfile:
     prearm_bit_reliable: bool = False
     # how its own loops answer a setpoint at default tuning (the cascade criterion's default)
     response: AutopilotResponse = PX4_RESPONSE
+    # modes in which, disarmed on the ground, it publishes no setpoint and so sends none of
+    # `quiet_streams` (PX4: OFFBOARD, where a landing from OFFBOARD leaves it; gcs.mission.landed):
+    # preflight commands `arm_mode` first
+    quiet_modes: frozenset[str] = frozenset()
+    quiet_streams: tuple[str, ...] = ()
 
     def arm_retryable(self, result: str, text: str) -> bool:
         """True when an arming attempt that ended with `result` (a MAV_RESULT name, or
@@ -164,6 +169,8 @@ PX4 = AutopilotProfile(
     actuators_until=(1, 13),  # PX4 1.14 moved actuator control to its ROS 2 bridge
     prearm_bit_reliable=True,
     response=PX4_RESPONSE,
+    quiet_modes=frozenset({"OFFBOARD"}),
+    quiet_streams=("ATTITUDE_TARGET",),
 )
 
 #: GUID_OPTIONS bit 3: SET_ATTITUDE_TARGET `thrust` is normalised thrust, not a climb rate.

@@ -65,6 +65,7 @@ from gcs.mission.goto import (
     crossing_pairs,
     going_line,
 )
+from gcs.mission.landed import quiet_mode_cause, with_quiet_causes
 from gcs.mission.safety import (
     Problem,
     SafetyRules,
@@ -229,6 +230,7 @@ class _Vehicle:
     version: int | None = None  # AUTOPILOT_VERSION.flight_sw_version (IDENTIFY result)
     version_asked: bool = False
     heard: bool = False  # a message has arrived since the flight started (CONNECT)
+    quiet_left: bool = False  # PREFLIGHT commanded its arm mode to leave a quiet mode
     arm: _Arm | None = None  # vehicles that take off
     goto: _Goto | None = None  # vehicles that go to their start position
 
@@ -388,9 +390,12 @@ class MissionMachine:
                 v.stop.failure = f"{result.cmd.value} not accepted ({result.detail})"
         elif not result.ok and self.phase in (Phase.CONNECT, Phase.PREFLIGHT, Phase.ARM,
                                               Phase.TAKEOFF, Phase.GOTO, Phase.HOLD):
+            cause = (quiet_mode_cause(v.profile, v.status) if result.cmd is Cmd.ARM_MODE
+                     and v.profile is not None and v.status is not None else None)
             self._begin_stop(
-                [Problem(result.vehicle_id, f"vehicle {result.vehicle_id}: {result.cmd.value} "
-                                            f"failed: {result.detail}")],
+                [Problem(result.vehicle_id, (f"{cause}; " if cause else "")
+                         + f"vehicle {result.vehicle_id}: {result.cmd.value} failed: "
+                           f"{result.detail}")],
                 EXIT_ABORTED,
             )
         return self._drive()
@@ -519,13 +524,19 @@ class MissionMachine:
         if not self._idle() or self._now_s - self._configured_s < self.plan.settle_s:
             return []
         team = self._statuses()
-        reads = self._read_params(team)
+        reads = self._read_params(team) or self._leave_quiet_modes(team)
         if reads:
             return reads
+        if self._elapsed() < self.plan.arm_timeout_s and any(
+                v.quiet_left and quiet_mode_cause(v.profile, v.status) is not None
+                for v in self._v.values()):
+            return []  # its arm mode was confirmed; its status shows it at a later tick
         if any(s.frame_pending for s in team if s.link == "alive") and \
                 self._elapsed() < self.plan.origin_timeout_s:
             return []  # the origins are asked for by the composition root; their answers wait
-        problems = preflight_problems(team, self.plan.rules, self._configured_s)
+        problems = with_quiet_causes(
+            preflight_problems(team, self.plan.rules, self._configured_s), team,
+            {vid: v.profile for vid, v in self._v.items() if v.profile is not None})
         for s in team:
             profile = self._v[s.vehicle_id].profile
             if profile is not None:
@@ -600,6 +611,21 @@ class MissionMachine:
             elif profile.needs_version(self.plan.control_mode) and not v.version_asked:
                 v.version_asked = True
                 out.append(self._send(s.vehicle_id, Cmd.IDENTIFY))
+        return out
+
+    def _leave_quiet_modes(self, team: Sequence[VehicleStatus]) -> list[Command]:
+        """Once per vehicle on the ground, disarmed in a mode where its autopilot sends no
+        setpoint stream (gcs.mission.landed): its arm mode, before the streams are judged."""
+        out = []
+        for s in team:
+            v = self._v[s.vehicle_id]
+            if v.profile is None or v.quiet_left or s.link != "alive":
+                continue
+            cause = quiet_mode_cause(v.profile, s)
+            if cause is not None:
+                v.quiet_left = True
+                self._note(f"{cause}: commanding {v.profile.arm_mode.name} first")
+                out.append(self._send(s.vehicle_id, Cmd.ARM_MODE))
         return out
 
     def _to_prime(self) -> list[Command]:

@@ -116,7 +116,8 @@ def test_px4_from_the_ground_flown_twice_without_restarting_the_vehicles(tmp_pat
         # AND every mode change and the arming were confirmed (no ACK left unread)
         for k in range(1, 5):
             assert f"vehicle {k}: arm ok" in log1 and f"vehicle {k}: offboard ok" in log1
-        # WHEN flown again against the same vehicles (landed in Land, disarmed)
+        # WHEN flown again against the same vehicles (landed from OFFBOARD: disarmed in
+        # OFFBOARD, docs/emulator.md "After a landing")
         code2, out2, log2 = fly_once(team, tmp_path / "second")
         # THEN the second flight puts each in Hold, arms, flies and lands: exit 0 again
         assert code2 == 0, log2[-3000:]

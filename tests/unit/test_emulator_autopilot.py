@@ -242,25 +242,46 @@ def test_after_a_failsafe_landing_the_vehicle_returns_to_the_intended_offboard()
     assert ap.arm(17.0, GROUND, True) is MavResult.ACCEPTED
 
 
-def test_a_gcs_commanded_land_from_offboard_is_the_users_choice_and_stays_land():
-    # GIVEN OFFBOARD in the air WHEN the GCS sends NAV_LAND THEN Land is the intended mode
+def test_a_gcs_commanded_land_from_offboard_ends_disarmed_in_offboard():
+    # GIVEN OFFBOARD in the air WHEN the GCS sends NAV_LAND THEN Land is the intended mode, but
+    # not the mode after disarming (Land prevents arming: PX4's UserModeIntention)
     ap = _offboard_in_the_air(ParamStore())
     assert ap.land(1.2, AIR) is MavResult.ACCEPTED
     assert ap.nav_state is ap.intended_state is NavState.AUTO_LAND
-    # AND after the landing and the auto-disarm it stays in Land
+    assert ap.after_disarm_state is NavState.OFFBOARD
+    assert ap.attitude_target_published()
+    # WHEN it lands and auto-disarms THEN it is disarmed in OFFBOARD, as PX4 v1.16.0 SIH was
+    # after every rates flight of 2026-12-04 (HEARTBEAT base_mode 1, custom_mode 393216), with
+    # its pre-arm check failing and no ATTITUDE_TARGET
     _land_and_wait(ap, 10.0, 12.2)
-    assert not ap.armed and ap.nav_state is NavState.AUTO_LAND
+    assert not ap.armed and ap.nav_state is ap.intended_state is NavState.OFFBOARD
     assert (Severity.INFO, "Disarmed by landing") in ap.events
+    assert not ap.prearm_ok(13.0) and not ap.attitude_target_published()
+    # AND Hold, accepted disarmed, ends it: pre-arm passes, setpoints are published again
+    assert ap.set_mode(14.0, GROUND, 4, 3) is MavResult.ACCEPTED
+    assert ap.prearm_ok(14.0) and ap.attitude_target_published()
 
 
-def test_a_failsafe_that_holds_then_a_gcs_land_stays_land():
-    # GIVEN the default loss action (Position) WHEN the GCS then lands it THEN no return to OFFBOARD
+def test_a_failsafe_that_holds_then_a_gcs_land_ends_in_offboard():
+    # GIVEN the default loss action (Position) WHEN the GCS then lands it THEN after the landing
+    # it is back in OFFBOARD, the last selected mode that allows arming
     ap = _offboard_in_the_air(ParamStore())
     ap.tick(2.3, AIR)
     assert ap.nav_state is NavState.POSCTL and ap.intended_state is NavState.OFFBOARD
     assert ap.land(3.0, AIR) is MavResult.ACCEPTED and ap.intended_state is NavState.AUTO_LAND
     _land_and_wait(ap, 10.0, 12.2)
-    assert not ap.armed and ap.nav_state is NavState.AUTO_LAND
+    assert not ap.armed and ap.nav_state is NavState.OFFBOARD
+
+
+def test_after_a_landing_from_hold_the_vehicle_stays_in_hold():
+    # GIVEN Hold selected in the air (the GCS's hold before a land) WHEN it lands THEN Hold,
+    # the mode after disarming, is its mode again
+    ap = _offboard_in_the_air(ParamStore())
+    assert ap.set_mode(2.0, AIR, 4, 3) is MavResult.ACCEPTED
+    assert ap.land(3.0, AIR) is MavResult.ACCEPTED
+    _land_and_wait(ap, 10.0, 12.2)
+    assert not ap.armed and ap.nav_state is NavState.AUTO_LOITER
+    assert ap.prearm_ok(13.0) and ap.attitude_target_published()
 
 
 def test_intended_mode_follows_commands_and_the_takeoff_completion():
