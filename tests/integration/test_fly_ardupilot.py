@@ -218,7 +218,9 @@ def test_a_fixed_remote_port_misses_an_ephemeral_port_and_stops_at_once_commandi
     assert all(sequence(e) == [] for e in emus)
     assert {c for _, c, _ in sent_commands(tmp_path)} <= {511, 512}
     assert "vehicle 1: land" not in err and "vehicle 2: land" not in err
-    assert elapsed_s < 20.0, elapsed_s  # (measured 4 s; with LAND retries it took longer)
+    # (measured 4 s quiet, 22 s on a machine with four other flights, two compiles and two busy
+    # loops; the LAND retries this is about are caught by the assertions above)
+    assert elapsed_s < 60.0, elapsed_s
 
 
 def test_a_vehicle_that_never_sends_is_named_in_one_line_and_the_other_is_not_commanded(
