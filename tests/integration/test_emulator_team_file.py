@@ -1,0 +1,76 @@
+"""`vehicle-emu --fleet --team FILE` takes what a team file written for real SITL states, with
+the command line's port bases over the file's ports.
+
+Real `vehicle-emu` processes on 127.0.0.1, real pymavlink clients, the recorded 2026-12-04 team
+files (tests/data/sitl/; ports rewritten to free ones) and the real `gcs fly`.
+"""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from vehicle_emulator.testing import clients_on_port_block, free_udp_port_block
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
+
+ROOT = Path(__file__).resolve().parents[2]
+DATA = ROOT / "tests" / "data" / "sitl"
+EMU = [sys.executable, "-m", "vehicle_emulator.cli"]
+
+
+def recorded_team(name: str) -> dict:
+    """A recorded team file (tests/data/sitl/, copied from the 2026-12-04 flights)."""
+    return yaml.safe_load((DATA / name).read_text())
+
+
+def write(tmp: Path, data: dict, name: str = "team.yaml") -> Path:
+    path = tmp / name
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def test_fleet_port_bases_override_the_team_files_ports(tmp_path: Path) -> None:
+    # GIVEN the PX4 SIH team file, its links on a block of free ports (as PX4 SITL's layout)
+    data = recorded_team("team_px4sih.yaml")
+    file_gcs, file_bind = free_udp_port_block(4), free_udp_port_block(4)
+    for k, v in enumerate(data["vehicles"]):
+        v["link"] = {"local_port": file_gcs + k, "remote_host": "127.0.0.1",
+                     "remote_port": file_bind + k}
+    team = write(tmp_path, data)
+    # WHEN the fleet starts with --bind-base and --remote-base elsewhere
+    clients = clients_on_port_block(4)
+    bind_base = free_udp_port_block(4)
+    log_path = tmp_path / "fleet.log"
+    proc = subprocess.Popen(
+        [*EMU, "--fleet", "--team", str(team), "--bind-base", str(bind_base),
+         "--remote-base", str(clients[0].port)],
+        stdout=subprocess.DEVNULL, stderr=open(log_path, "w"))  # noqa: SIM115
+    try:
+        for k, c in enumerate(clients):
+            # THEN vehicle k+1 sends to remote_base + k and answers a command there, from
+            # bind_base + k (the client answers the address it heard)
+            c.wait("HEARTBEAT", 90)
+            assert c.peers == {("127.0.0.1", bind_base + k)}
+            assert c.command_acks(512, 148, count=1) == [0]  # REQUEST_MESSAGE: ACCEPTED
+        # AND nothing is bound on the team file's ports any more
+        for k in range(4):
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+                s.bind(("127.0.0.1", file_bind + k))
+    finally:
+        proc.terminate()
+        proc.wait(10)
+        for c in clients:
+            c.close()
+    # AND the log says which ports were used and that the flags overrode the file
+    log = log_path.read_text()
+    assert (f"--bind-base {bind_base} overrides the team file's link.remote_port" in log), log
+    assert f"--remote-base {clients[0].port} overrides the team file's link.local_port" in log
+    assert (f"vehicle 4 sysid 4: binds 127.0.0.1:{bind_base + 3} -> "
+            f"127.0.0.1:{clients[0].port + 3}") in log
+    assert "Traceback" not in log
