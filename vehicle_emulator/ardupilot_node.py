@@ -47,7 +47,6 @@ from vehicle_emulator.setpoints import (
     PositionTargetFields,
 )
 from vehicle_emulator.telemetry import DEFAULT_RATES_HZ as PX4_RATES_HZ
-from vehicle_emulator.telemetry import HOME_ALT_M, HOME_LAT_DEG, HOME_LON_DEG
 from vehicle_emulator.vehicle import Link, VehicleNode, _int
 
 log = logging.getLogger(__name__)
@@ -303,11 +302,11 @@ class ArduPilotNode(VehicleNode):
         if msg.coordinate_frame in GLOBAL_AMSL_FRAMES:
             amsl = alt
         elif msg.coordinate_frame in GLOBAL_RELATIVE_FRAMES:
-            amsl = HOME_ALT_M + self.autopilot.home_enu_m[2] + alt
+            amsl = self.telemetry.origin_lla[2] + self.autopilot.home_enu_m[2] + alt
         else:
             return None  # terrain frames: no terrain data
         return geodesy.geodetic_to_enu(np.array(lat), np.array(lon), np.array(amsl),
-                                       HOME_LAT_DEG, HOME_LON_DEG, HOME_ALT_M)
+                                       *self.telemetry.origin_lla)
 
     def _count_target(self, valid: bool, used: bool, what: str) -> None:
         mode = self.autopilot.mode.name

@@ -296,7 +296,10 @@ async def _amain(args: argparse.Namespace) -> int:
         param_overrides=overrides,
         message_intervals_ms=intervals,
         streams=args.streams,
+        **({"origin_lla": team.origin_lla} if team and team.origin_lla else {}),
     )
+    log.info("vehicle-emu: team frame origin %.7f, %.7f, %.2f m (%s)", *emu.telemetry.origin_lla,
+             "the team file's frame.origin" if team and team.origin_lla else "PX4 SITL's home")
     warm_up(emu)
     late = watch_late_compiles("vehicle-emu", log)
     clock = RealtimeClock(args.realtime_factor)

@@ -5,8 +5,10 @@ pyyaml (it never imports ``gcs``). The reader is tolerant: keys it does not use 
 it uses with a wrong type or value raises ``TeamFileError`` naming the key path, e.g.
 ``vehicles[2].plant.mass_kg: expected > 0, got -1.0``.
 
-Keys read: ``sim.plant_rate_hz``; ``vehicles[].id / sysid / initial / airframe / plant / link``;
-top-level ``faults`` (``{kind, vehicle, at_s, ...}``); ``emulator.autopilot / origin`` and
+Keys read: ``sim.plant_rate_hz``; ``frame.origin`` (the team frame's origin on the globe:
+GLOBAL_POSITION_INT, HOME_POSITION, GPS_GLOBAL_ORIGIN); ``vehicles[].id / sysid / initial /
+airframe / plant / link``; top-level ``faults`` (``{kind, vehicle, at_s, ...}``);
+``emulator.autopilot / origin`` and
 ``vehicles[].emulator.autopilot / origin_enu_m / boot_position_enu_m`` (personality.py). Positions
 are ENU metres, z up. A vehicle boots at ``emulator.boot_position_enu_m`` when given (e.g. on the
 ground, away from the team file's start position, which a ground station then flies it to), else
@@ -128,6 +130,9 @@ class TeamSpec:
     vehicles: tuple[VehicleSpec, ...]
     faults: tuple[FaultSpec, ...] = ()
     physics_rate_hz: float = 1000.0
+    # the team frame's origin on the globe (lat deg, lon deg, alt m), ``frame.origin``; None:
+    # not stated (the emulator's default, PX4 SITL's home)
+    origin_lla: tuple[float, float, float] | None = None
 
     def vehicle(self, vehicle_id: int) -> VehicleSpec:
         """The vehicle with this id; KeyError naming the ids present otherwise."""
@@ -404,7 +409,22 @@ def parse_team(raw: Any, name: str = "team") -> TeamSpec:
     rate_raw = _get(sim, "plant_rate_hz", "sim")
     rate = 1000.0 if rate_raw is None else _float(rate_raw, "sim.plant_rate_hz", positive=True)
     team_name = raw.get("name") if isinstance(raw.get("name"), str) else name
-    return TeamSpec(name=team_name, vehicles=vehicles, faults=faults, physics_rate_hz=rate)
+    return TeamSpec(name=team_name, vehicles=vehicles, faults=faults, physics_rate_hz=rate,
+                    origin_lla=_frame_origin(raw.get("frame")))
+
+
+def _frame_origin(frame: Any) -> tuple[float, float, float] | None:
+    """``frame.origin``: [lat deg, lon deg, alt m] of the team frame's origin, or None."""
+    if frame is None:
+        return None
+    raw = _get(frame, "origin", "frame")
+    if raw is None:
+        return None
+    lat, lon, alt = _vec3(raw, "frame.origin")
+    for value, limit, what in ((lat, 90.0, "latitude"), (lon, 180.0, "longitude")):
+        if abs(value) > limit:
+            raise TeamFileError(f"frame.origin: {what} {value!r} outside -{limit}..{limit} deg")
+    return (lat, lon, alt)
 
 
 def load_team(path: str | Path) -> TeamSpec:

@@ -1,5 +1,6 @@
-"""`vehicle-emu --fleet --team FILE` takes what a team file written for real SITL states, with
-the command line's port bases over the file's ports.
+"""`vehicle-emu --fleet --team FILE` takes what a team file written for real SITL states: the
+team frame's origin on the globe (`frame.origin`), and the command line's port bases over the
+file's ports.
 
 Real `vehicle-emu` processes on 127.0.0.1, real pymavlink clients, the recorded 2026-12-04 team
 files (tests/data/sitl/; ports rewritten to free ones) and the real `gcs fly`.
@@ -14,7 +15,9 @@ from pathlib import Path
 
 import pytest
 import yaml
+from pymavlink.dialects.v20 import common as mavlink
 
+from vehicle_emulator.geodesy import geodetic_to_enu
 from vehicle_emulator.testing import clients_on_port_block, free_udp_port_block
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
@@ -74,3 +77,49 @@ def test_fleet_port_bases_override_the_team_files_ports(tmp_path: Path) -> None:
     assert (f"vehicle 4 sysid 4: binds 127.0.0.1:{bind_base + 3} -> "
             f"127.0.0.1:{clients[0].port + 3}") in log
     assert "Traceback" not in log
+
+
+def test_home_and_origin_come_from_the_team_files_frame_origin(tmp_path: Path) -> None:
+    # GIVEN the PX4 SIH team file (frame.origin: SIH's home, 47.397742, 8.545594, 489.4 m; the
+    # emulator's own default is 488.0 m), vehicle 2 booted 3 m east and 4 m south of it
+    data = recorded_team("team_px4sih.yaml")
+    lat0, lon0, alt0 = data["frame"]["origin"]
+    assert alt0 == 489.4
+    data["vehicles"][1]["emulator"]["boot_position_enu_m"] = [3.0, -4.0, 0.0]
+    clients = clients_on_port_block(4)
+    bind_base = free_udp_port_block(4)
+    for k, v in enumerate(data["vehicles"]):
+        v["link"] = {"local_port": clients[0].port + k, "remote_host": "127.0.0.1",
+                     "remote_port": bind_base + k}
+    team = write(tmp_path, data)
+    proc = subprocess.Popen([*EMU, "--fleet", "--team", str(team)], stdout=subprocess.DEVNULL,
+                            stderr=open(tmp_path / "fleet.log", "w"))  # noqa: SIM115
+    try:
+        for k in (0, 1):
+            c = clients[k]
+            boot_enu = data["vehicles"][k]["emulator"]["boot_position_enu_m"]
+            c.wait("HEARTBEAT", 90)
+            # WHEN a client asks for the EKF origin
+            c.send(mavlink.MAVLink_command_long_message(k + 1, 1, 512, 0, 49, 0, 0, 0, 0, 0, 0))
+            origin = c.wait("GPS_GLOBAL_ORIGIN", 5)
+            # THEN it is the ground point below the boot position, about frame.origin: at
+            # 489.4 m for vehicle 1 (was 488.0)
+            enu = geodetic_to_enu(origin.latitude * 1e-7, origin.longitude * 1e-7,
+                                  origin.altitude * 1e-3, lat0, lon0, alt0)
+            assert enu == pytest.approx(boot_enu, abs=0.02)
+            # AND HOME_POSITION and GLOBAL_POSITION_INT (on the ground) are there too
+            home = c.wait("HOME_POSITION", 5)
+            enu = geodetic_to_enu(home.latitude * 1e-7, home.longitude * 1e-7,
+                                  home.altitude * 1e-3, lat0, lon0, alt0)
+            assert enu == pytest.approx(boot_enu, abs=0.05)
+            # (the estimate, which wanders as PX4's does: within 0.7 m here, half the 1.4 m
+            # that the emulator's own home altitude was off)
+            gp = c.wait("GLOBAL_POSITION_INT", 5)
+            enu = geodetic_to_enu(gp.lat * 1e-7, gp.lon * 1e-7, gp.alt * 1e-3, lat0, lon0, alt0)
+            assert enu == pytest.approx(boot_enu, abs=0.7)
+        assert clients[0].seen("GPS_GLOBAL_ORIGIN")[-1].altitude == 489400
+    finally:
+        proc.terminate()
+        proc.wait(10)
+        for c in clients:
+            c.close()
