@@ -24,7 +24,7 @@ from vehicle_emulator.ardupilot_node import ArduPilotNode
 from vehicle_emulator.autopilot import Autopilot, Severity
 from vehicle_emulator.codec import GenericEncoder, HotDecoder
 from vehicle_emulator.faults import FaultSchedule, LinkImpairment
-from vehicle_emulator.params import ParamStore, param_table
+from vehicle_emulator.params import ParamError, ParamStore, param_table
 from vehicle_emulator.personality import personality_of
 from vehicle_emulator.plant import FleetPlant
 from vehicle_emulator.server import LinkPoller, UdpLink
@@ -209,6 +209,13 @@ class Emulator:
             params.set("EMU_NOISE", 1.0 if personality.sensors.noise_default else 0.0)
             params.set("EMU_MASS_KG", spec.mass_kg, force=True)
             params.set("EMU_THR_MAX_N", 4.0 * spec.rotor_thrust_max_n, force=True)
+            for name, value in spec.autopilot_params:  # the team file's; --param wins
+                try:
+                    params.set(name, value)
+                except ParamError as exc:
+                    raise ValueError(f"vehicle {spec.vehicle_id} (sysid {spec.sysid}, "
+                                     f"{spec.autopilot}): emulator.autopilot_params: {exc}"
+                                     ) from None
             for name, value in (param_overrides or {}).items():
                 if name in params:  # a mixed team: each vehicle takes the names it has
                     params.set(name, value)

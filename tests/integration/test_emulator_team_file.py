@@ -1,6 +1,6 @@
 """`vehicle-emu --fleet --team FILE` takes what a team file written for real SITL states: the
-team frame's origin on the globe (`frame.origin`), and the command line's port bases over the
-file's ports.
+team frame's origin on the globe (`frame.origin`), the parameters the real vehicles were booted
+with (`emulator.autopilot_params`), and the command line's port bases over the file's ports.
 
 Real `vehicle-emu` processes on 127.0.0.1, real pymavlink clients, the recorded 2026-12-04 team
 files (tests/data/sitl/; ports rewritten to free ones) and the real `gcs fly`.
@@ -8,6 +8,7 @@ files (tests/data/sitl/; ports rewritten to free ones) and the real `gcs fly`.
 
 from __future__ import annotations
 
+import os
 import socket
 import subprocess
 import sys
@@ -123,3 +124,55 @@ def test_home_and_origin_come_from_the_team_files_frame_origin(tmp_path: Path) -
         proc.wait(10)
         for c in clients:
             c.close()
+
+
+@pytest.mark.parametrize(("params", "message"), [
+    ({"GUID_OPTION": 8}, "emulator.autopilot_params.GUID_OPTION: the ardupilot personality has "
+                         "no parameter 'GUID_OPTION' (docs/emulator.md, Parameters)"),
+    ({"GUID_OPTIONS": "eight"}, "emulator.autopilot_params.GUID_OPTIONS: expected a number, "
+                                "got 'eight'"),
+])
+def test_a_bad_autopilot_parameter_is_one_line_naming_the_key(
+        tmp_path: Path, params: dict, message: str) -> None:
+    # GIVEN the ArduCopter SITL team file with a misspelt name or a non-number
+    data = recorded_team("team_arducopter_sitl.yaml")
+    data["emulator"] = {"autopilot": "ardupilot", "autopilot_params": params}
+    team = write(tmp_path, data)
+    # WHEN the fleet starts THEN it exits 2 with one line naming the key path
+    out = subprocess.run([*EMU, "--fleet", "--team", str(team)], capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 2
+    assert out.stderr.strip().splitlines()[-1] == f"vehicle-emu: {team}: {message}"
+
+
+def test_the_arducopter_sitl_team_file_flies_the_emulator_unchanged(tmp_path: Path) -> None:
+    # GIVEN the team file written for four real ArduCopter SITL vehicles (booted with
+    # GUID_OPTIONS 8 at frame.origin, Canberra, 584 m), its ports rewritten to free ones, and
+    # the one section a user adds for the emulator: the personality and the parameters the
+    # real vehicles were booted with
+    data = recorded_team("team_arducopter_sitl.yaml")
+    gcs_base = free_udp_port_block(4)
+    for k, v in enumerate(data["vehicles"]):
+        v["link"]["local_port"] = gcs_base + k
+    data["emulator"] = {"autopilot": "ardupilot", "autopilot_params": {"GUID_OPTIONS": 8}}
+    team = write(tmp_path, data)
+    # WHEN `vehicle-emu --fleet --team` runs it (booted at once, to keep the test short) and
+    # `gcs fly` flies it
+    emu = subprocess.Popen([*EMU, "--fleet", "--team", str(team), "--param", "EMU_BOOT_SCALE=0"],
+                           stdout=subprocess.DEVNULL,
+                           stderr=open(tmp_path / "fleet.log", "w"))  # noqa: SIM115
+    try:
+        fly = subprocess.run(
+            [sys.executable, "-m", "gcs.cli", "fly", "--team", str(team), "--out",
+             str(tmp_path / "run"), "--no-figures", "--status", "off", "--duration-s", "3"],
+            stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=200,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"}, check=False)
+    finally:
+        emu.terminate()
+        emu.wait(10)
+    # THEN the preflight finds GUID_OPTIONS 8 and every origin at the team frame's origin (no
+    # `GUID_OPTIONS = 0 (bit mask 8 clear)`, no origin 3.3e6 m away), and the flight lands
+    assert "bit mask 8 clear" not in fly.stderr
+    assert "from the team frame's origin" not in fly.stderr
+    assert fly.returncode == 0, fly.stderr[-3000:]
+    assert "gcs fly: done: formation complete (exit 0)" in fly.stdout
