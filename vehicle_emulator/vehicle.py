@@ -546,6 +546,10 @@ class VehicleNode:
             self.counters.last_reject_reason = "setpoint clamped"
         self.autopilot.on_setpoint(now_s, d.setpoint)
 
+    def _on_request_data_stream(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
+        """REQUEST_DATA_STREAM (deprecated): PX4 does not handle it; an ArduPilot node does."""
+        self.counters.unhandled += 1
+
     def _on_set_mode(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
         if msg.target_system not in (0, self.sysid):
             self.counters.other_target += 1
@@ -815,6 +819,7 @@ _HANDLERS = {  # msgid -> VehicleNode method name (looked up on the node: overri
     86: "_on_position_target_global",
     139: "_on_actuator_target",
     11: "_on_set_mode",
+    66: "_on_request_data_stream",
     76: "_on_command",
     75: "_on_command",
     111: "_on_timesync",
