@@ -9,6 +9,7 @@ ArduCopter 4.7.0-dev SITL as recorded (docs/emulator.md, "ArduPilot personality"
   to a message of its own, HEARTBEAT included; DENIED with "No ap_message for mavlink id (N)" for
   one it does not map (TIMESYNC, ODOMETRY). GET_MESSAGE_INTERVAL: the interval, -1 when off;
   0 and FAILED for an unmapped id. LOCAL_POSITION_NED only once the EKF has a position.
+  REQUEST_DATA_STREAM (MAVProxy's way) sets ArduCopter's stream groups (``DATA_STREAM_GROUPS``).
 * One COMMAND_ACK per command; the SET_MODE message is acknowledged as command 11 (ArduPilot's
   quirk); an accepted mode change sends an extra HEARTBEAT at once (on the next tick).
 * STATUSTEXT up to 50 bytes, never chunked. Parameters: ArduCopter's names, integers cast to
@@ -47,7 +48,6 @@ from vehicle_emulator.setpoints import (
     PositionTargetFields,
 )
 from vehicle_emulator.telemetry import DEFAULT_RATES_HZ as PX4_RATES_HZ
-from vehicle_emulator.telemetry import HOME_ALT_M, HOME_LAT_DEG, HOME_LON_DEG
 from vehicle_emulator.vehicle import Link, VehicleNode, _int
 
 log = logging.getLogger(__name__)
@@ -67,6 +67,21 @@ MAPPED_MSGIDS = frozenset({
     194, 241, 242, 245, 435, 437,
 })
 MSG_SET_MODE = 11
+#: ArduCopter's stream groups (GCS_Mavlink.cpp ``STREAM_*_msgs``) by MAV_DATA_STREAM id, with the
+#: messages of each group the emulator sends (the others it does not emulate: RAW_IMU,
+#: SCALED_PRESSURE, RC_CHANNELS, SERVO_OUTPUT_RAW, VFR_HUD, AHRS, SYSTEM_TIME, ...). Id 0 (ALL)
+#: sets every group; PARAMS is never set by a request.
+DATA_STREAM_GROUPS: dict[int, tuple[str, ...]] = {
+    1: (),  # RAW_SENSORS: RAW_IMU, SCALED_IMU2/3, SCALED_PRESSURE/2/3
+    2: ("SYS_STATUS", "GPS_RAW_INT"),  # EXTENDED_STATUS (+ POWER_STATUS, MEMINFO, ...)
+    3: (),  # RC_CHANNELS: SERVO_OUTPUT_RAW, RC_CHANNELS
+    4: (),  # RAW_CONTROLLER: nothing on a copter
+    6: ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"),  # POSITION
+    10: ("ATTITUDE",),  # EXTRA1 (+ SIMSTATE, AHRS2, PID_TUNING)
+    11: (),  # EXTRA2: VFR_HUD
+    12: ("BATTERY_STATUS",),  # EXTRA3 (+ AHRS, SYSTEM_TIME, EKF_STATUS_REPORT, VIBRATION, ...)
+}
+MAV_DATA_STREAM_ALL = 0
 #: Stand-in for SITL's plain-text banner: 164 bytes in 3 datagrams before the first packet, of
 #: which the recording keeps only the version line (the text itself was not logged).
 BANNER = (
@@ -203,6 +218,28 @@ class ArduPilotNode(VehicleNode):
         self._ack(MSG_SET_MODE, result, link, addr, msg)
         self.drain_events(now_s)
 
+    def _on_request_data_stream(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
+        """REQUEST_DATA_STREAM as GCS_Common.cpp's handle_request_data_stream: start_stop 1 sets
+        the group's rate to req_message_rate Hz (every message of the group at 1000/rate ms),
+        start_stop 0 or a rate of 0 stops the group, any other start_stop is ignored; no
+        answer either way. Unknown stream ids change nothing."""
+        if msg.target_system not in (0, self.sysid):
+            self.counters.other_target += 1
+            return
+        if msg.start_stop not in (0, 1):
+            return
+        rate_hz = int(msg.req_message_rate) if msg.start_stop == 1 else 0
+        stream = int(msg.req_stream_id)
+        if stream == MAV_DATA_STREAM_ALL:
+            names = [n for group in DATA_STREAM_GROUPS.values() for n in group]
+        else:
+            names = list(DATA_STREAM_GROUPS.get(stream, ()))
+        # ArduPilot's interval is whole milliseconds: 1000 // rate
+        interval_us = -1.0 if rate_hz <= 0 else max(1000 // rate_hz, 1) * 1e3
+        for name in names:
+            msgid = int(getattr(mavlink, f"MAVLINK_MSG_ID_{name}"))
+            self.telemetry.set_interval(self.index, msgid, interval_us, now_s)
+
     def _streamed(self, msgid: int) -> bool:
         """ArduPilot maps it and the emulator streams it."""
         k = self.telemetry.msgids.get(msgid)
@@ -303,11 +340,11 @@ class ArduPilotNode(VehicleNode):
         if msg.coordinate_frame in GLOBAL_AMSL_FRAMES:
             amsl = alt
         elif msg.coordinate_frame in GLOBAL_RELATIVE_FRAMES:
-            amsl = HOME_ALT_M + self.autopilot.home_enu_m[2] + alt
+            amsl = self.telemetry.origin_lla[2] + self.autopilot.home_enu_m[2] + alt
         else:
             return None  # terrain frames: no terrain data
         return geodesy.geodetic_to_enu(np.array(lat), np.array(lon), np.array(amsl),
-                                       HOME_LAT_DEG, HOME_LON_DEG, HOME_ALT_M)
+                                       *self.telemetry.origin_lla)
 
     def _count_target(self, valid: bool, used: bool, what: str) -> None:
         mode = self.autopilot.mode.name

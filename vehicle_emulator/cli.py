@@ -53,6 +53,9 @@ log = logging.getLogger("vehicle_emulator")
 __all__ = ["main", "link_plan", "parse_address", "READY_PREFIX"]
 
 READY_PREFIX = "vehicle-emu: ready:"
+#: PX4 SITL instance 0's ports: it binds 14580 and sends to 14540 (instance i: + i).
+DEFAULT_BIND_BASE = 14580
+DEFAULT_REMOTE_BASE = 14540
 #: First-run compile of the physics on this 2-core machine (docs/benchmarks.md).
 COMPILE_ESTIMATE_S = 35.0  # every personality, quiet 2-core machine (docs/benchmarks.md)
 
@@ -78,13 +81,18 @@ def link_plan(spec: VehicleSpec, args: argparse.Namespace, single: bool) -> Link
     i = spec.vehicle_id - 1
     udpclient = personality_of(spec.autopilot).protocol.family == "ardupilot"
     forced = args.bind is not None if single else args.bind_base is not None
-    bind = ("127.0.0.1", (args.bind_base or 14580) + i)
-    remote = ("127.0.0.1", args.remote_base + min(i, 9))
+    bind = ("127.0.0.1", DEFAULT_BIND_BASE + i)
+    remote = ("127.0.0.1", DEFAULT_REMOTE_BASE + min(i, 9))
     gcs_bind = ("127.0.0.1", 18570 + i)
     gcs_remote = ("127.0.0.1", 14550)
     lk = spec.link
     bind = lk.bind or bind
     remote = lk.remote or remote
+    if not single:  # the bases are command-line flags: they override the team file's ports
+        if args.bind_base is not None:
+            bind = (bind[0], args.bind_base + i)
+        if args.remote_base is not None:
+            remote = (remote[0], args.remote_base + min(i, 9))
     if single:
         bind = args.bind or bind
         remote = args.remote or remote
@@ -149,8 +157,11 @@ exit status: 0 stopped (Ctrl-C, SIGTERM, --duration); 2 bad team file or a
     ap.add_argument("--gcs-bind", type=parse_address, help="second link's local address")
     ap.add_argument("--gcs-remote", type=parse_address, help="second link's peer")
     ap.add_argument("--bind-base", type=int, default=None,
-                    help="fleet: bind base port (default 14580; forces a bind for ardupilot)")
-    ap.add_argument("--remote-base", type=int, default=14540, help="fleet: remote base port")
+                    help=f"fleet: vehicle i binds BASE+i-1 (default: the team file's ports, else "
+                    f"{DEFAULT_BIND_BASE}+i-1; forces a bind for ardupilot)")
+    ap.add_argument("--remote-base", type=int, default=None,
+                    help=f"fleet: vehicle i sends to BASE+min(i-1, 9) (default: the team file's "
+                    f"ports, else {DEFAULT_REMOTE_BASE}+min(i-1, 9))")
     ap.add_argument("--in-air", action="store_true", help="without --team: start at 10 m, holding")
     ap.add_argument(
         "--message-intervals",
@@ -285,11 +296,20 @@ async def _amain(args: argparse.Namespace) -> int:
         param_overrides=overrides,
         message_intervals_ms=intervals,
         streams=args.streams,
+        **({"origin_lla": team.origin_lla} if team and team.origin_lla else {}),
     )
+    log.info("vehicle-emu: team frame origin %.7f, %.7f, %.2f m (%s)", *emu.telemetry.origin_lla,
+             "the team file's frame.origin" if team and team.origin_lla else "PX4 SITL's home")
     warm_up(emu)
     late = watch_late_compiles("vehicle-emu", log)
     clock = RealtimeClock(args.realtime_factor)
     plans = [link_plan(s, args, single=not args.fleet) for s in specs]
+    if args.fleet and team is not None:
+        for flag, base, key in (("--bind-base", args.bind_base, "link.remote_port"),
+                                ("--remote-base", args.remote_base, "link.local_port")):
+            if base is not None:
+                log.info("vehicle-emu: %s %d overrides the team file's %s: vehicle i uses "
+                         "port %d+i-1", flag, base, key, base)
     await emu.open_links(plans, clock)
     ephemeral = []
     for node, plan in zip(emu.nodes, plans, strict=True):

@@ -24,12 +24,12 @@ from vehicle_emulator.ardupilot_node import ArduPilotNode
 from vehicle_emulator.autopilot import Autopilot, Severity
 from vehicle_emulator.codec import GenericEncoder, HotDecoder
 from vehicle_emulator.faults import FaultSchedule, LinkImpairment
-from vehicle_emulator.params import ParamStore, param_table
+from vehicle_emulator.params import ParamError, ParamStore, param_table
 from vehicle_emulator.personality import personality_of
 from vehicle_emulator.plant import FleetPlant
 from vehicle_emulator.server import LinkPoller, UdpLink
 from vehicle_emulator.team import FaultSpec, VehicleSpec
-from vehicle_emulator.telemetry import FleetStatus, Telemetry
+from vehicle_emulator.telemetry import DEFAULT_ORIGIN_LLA, FleetStatus, Telemetry
 from vehicle_emulator.vehicle import VehicleNode
 
 log = logging.getLogger(__name__)
@@ -166,11 +166,14 @@ class Emulator:
         param_overrides: dict[str, float] | None = None,
         message_intervals_ms: dict[int, float] | None = None,
         streams: str = "default",
+        origin_lla: tuple[float, float, float] = DEFAULT_ORIGIN_LLA,
     ) -> None:
         """``message_intervals_ms``: ArduPilot's message-intervals file (msgid -> interval),
         preloaded into every ardupilot vehicle's streams. ``streams``: ``default`` (each
         personality's streams from boot) or ``requested`` (HEARTBEAT only, every other stream
-        off until the ground station asks for it: Telemetry.requested_only)."""
+        off until the ground station asks for it: Telemetry.requested_only). ``origin_lla``: the
+        team frame's origin on the globe (lat deg, lon deg, alt m; the team file's
+        ``frame.origin``)."""
         if streams not in STREAM_MODES:
             raise ValueError(f"streams: expected one of {', '.join(STREAM_MODES)}, got {streams!r}")
         sysids = [s.sysid for s in specs]
@@ -180,7 +183,7 @@ class Emulator:
         self.plant = FleetPlant(specs, dt_s=1.0 / physics_rate_hz)
         self.tick_s = max(tick_s, self.plant.dt_s)
         self.status = FleetStatus.create(sysids)
-        self.telemetry = Telemetry(len(specs), np.random.default_rng(seed))
+        self.telemetry = Telemetry(len(specs), np.random.default_rng(seed), origin_lla=origin_lla)
         self.link_up = np.ones(len(specs), dtype=bool)
         self.nodes: list[VehicleNode] = []
         self._next_autopilot_s = 0.0
@@ -206,6 +209,13 @@ class Emulator:
             params.set("EMU_NOISE", 1.0 if personality.sensors.noise_default else 0.0)
             params.set("EMU_MASS_KG", spec.mass_kg, force=True)
             params.set("EMU_THR_MAX_N", 4.0 * spec.rotor_thrust_max_n, force=True)
+            for name, value in spec.autopilot_params:  # the team file's; --param wins
+                try:
+                    params.set(name, value)
+                except ParamError as exc:
+                    raise ValueError(f"vehicle {spec.vehicle_id} (sysid {spec.sysid}, "
+                                     f"{spec.autopilot}): emulator.autopilot_params: {exc}"
+                                     ) from None
             for name, value in (param_overrides or {}).items():
                 if name in params:  # a mixed team: each vehicle takes the names it has
                     params.set(name, value)

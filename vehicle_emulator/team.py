@@ -5,9 +5,13 @@ pyyaml (it never imports ``gcs``). The reader is tolerant: keys it does not use 
 it uses with a wrong type or value raises ``TeamFileError`` naming the key path, e.g.
 ``vehicles[2].plant.mass_kg: expected > 0, got -1.0``.
 
-Keys read: ``sim.plant_rate_hz``; ``vehicles[].id / sysid / initial / airframe / plant / link``;
-top-level ``faults`` (``{kind, vehicle, at_s, ...}``); ``emulator.autopilot / origin`` and
-``vehicles[].emulator.autopilot / origin_enu_m / boot_position_enu_m`` (personality.py). Positions
+Keys read: ``sim.plant_rate_hz``; ``frame.origin`` (the team frame's origin on the globe:
+GLOBAL_POSITION_INT, HOME_POSITION, GPS_GLOBAL_ORIGIN); ``vehicles[].id / sysid / initial /
+airframe / plant / link``; top-level ``faults`` (``{kind, vehicle, at_s, ...}``);
+``emulator.autopilot / origin / autopilot_params`` and ``vehicles[].emulator.autopilot /
+origin_enu_m / boot_position_enu_m / autopilot_params`` (personality.py; ``autopilot_params``:
+the parameters the real vehicles were booted with, checked against the personality's table,
+a vehicle's names over the team's). Positions
 are ENU metres, z up. A vehicle boots at ``emulator.boot_position_enu_m`` when given (e.g. on the
 ground, away from the team file's start position, which a ground station then flies it to), else
 at ``initial.position_enu_m``.
@@ -22,7 +26,8 @@ from typing import Any
 
 import yaml
 
-from vehicle_emulator.personality import AUTOPILOT_NAMES, DEFAULT_AUTOPILOT
+from vehicle_emulator.params import ParamError, ParamStore, param_table
+from vehicle_emulator.personality import AUTOPILOT_NAMES, DEFAULT_AUTOPILOT, personality_of
 from vehicle_emulator.physics import TABLE_I
 
 __all__ = [
@@ -83,6 +88,9 @@ class VehicleSpec:
     # EKF origin in the team frame; None: the personality decides (its own boot position below
     # the vehicle, or the team frame's origin for a personality without own origins)
     origin_enu_m: tuple[float, float, float] | None = None
+    # parameters the vehicle boots with (``emulator.autopilot_params``), name -> value, in the
+    # team file's order; applied after the personality's defaults
+    autopilot_params: tuple[tuple[str, float], ...] = ()
 
     @property
     def starts_in_air(self) -> bool:
@@ -128,6 +136,9 @@ class TeamSpec:
     vehicles: tuple[VehicleSpec, ...]
     faults: tuple[FaultSpec, ...] = ()
     physics_rate_hz: float = 1000.0
+    # the team frame's origin on the globe (lat deg, lon deg, alt m), ``frame.origin``; None:
+    # not stated (the emulator's default, PX4 SITL's home)
+    origin_lla: tuple[float, float, float] | None = None
 
     def vehicle(self, vehicle_id: int) -> VehicleSpec:
         """The vehicle with this id; KeyError naming the ids present otherwise."""
@@ -301,8 +312,8 @@ def _vehicle(raw: Any, index: int, team_emulator: dict[str, Any]) -> VehicleSpec
 def _emulator_keys(
     section: Any, path: str, team_emulator: dict[str, Any]
 ) -> dict[str, Any]:
-    """``autopilot`` and ``origin_enu_m`` of a vehicle from its own and the team's
-    ``emulator:`` sections (the vehicle's win)."""
+    """``autopilot``, ``origin_enu_m`` and ``autopilot_params`` of a vehicle from its own and
+    the team's ``emulator:`` sections (the vehicle's win)."""
     autopilot = _get(section, "autopilot", path)
     if autopilot is None:
         autopilot = team_emulator["autopilot"]
@@ -315,7 +326,53 @@ def _emulator_keys(
         origin = (0.0, 0.0, 0.0)
     else:
         origin = None
-    return {"autopilot": autopilot, "origin_enu_m": origin}
+    # the team's names apply to the vehicles whose personality has them (a mixed team); a
+    # vehicle's own names must all be its personality's
+    names = _param_names(autopilot)
+    params = {k: v for k, v in team_emulator["autopilot_params"].items() if k in names}
+    own = _autopilot_params(_get(section, "autopilot_params", path), f"{path}.autopilot_params")
+    for name, value in own.items():
+        key = f"{path}.autopilot_params.{name}"
+        if name not in names:
+            raise TeamFileError(_unknown_param(key, autopilot, name))
+        _check_param_value(key, autopilot, name, value)
+    for name, value in params.items():
+        _check_param_value(f"emulator.autopilot_params.{name}", autopilot, name, value)
+    params.update(own)
+    return {"autopilot": autopilot, "origin_enu_m": origin,
+            "autopilot_params": tuple(params.items())}
+
+
+def _autopilot_params(raw: Any, path: str) -> dict[str, float]:
+    """An ``autopilot_params`` mapping: parameter name -> number."""
+    if raw is None:
+        return {}
+    if not isinstance(raw, dict):
+        raise TeamFileError(f"{path}: expected a mapping of parameter names to numbers, "
+                            f"got {raw!r}")
+    out: dict[str, float] = {}
+    for name, value in raw.items():
+        if not isinstance(name, str) or not name:
+            raise TeamFileError(f"{path}: expected parameter names, got {name!r}")
+        out[name] = _float(value, f"{path}.{name}")
+    return out
+
+
+def _param_names(autopilot: str) -> frozenset[str]:
+    return frozenset(p.name for p in param_table(personality_of(autopilot).protocol.family))
+
+
+def _check_param_value(path: str, autopilot: str, name: str, value: float) -> None:
+    store = ParamStore.for_family(personality_of(autopilot).protocol.family)
+    try:
+        store.set(name, value)
+    except ParamError as exc:
+        raise TeamFileError(f"{path}: {exc}") from None
+
+
+def _unknown_param(path: str, autopilot: str, name: str) -> str:
+    return (f"{path}: the {autopilot} personality has no parameter {name!r} (docs/emulator.md, "
+            "Parameters)")
 
 
 def _team_emulator(raw: Any) -> dict[str, Any]:
@@ -328,11 +385,13 @@ def _team_emulator(raw: Any) -> dict[str, Any]:
     if origin not in ORIGIN_KINDS:
         raise TeamFileError(f"emulator.origin: expected one of {', '.join(ORIGIN_KINDS)}, "
                             f"got {origin!r}")
+    params = _autopilot_params(section.get("autopilot_params"), "emulator.autopilot_params")
     return {
         "autopilot": DEFAULT_AUTOPILOT
         if autopilot is None
         else _autopilot(autopilot, "emulator.autopilot"),
         "origin": origin,
+        "autopilot_params": params,
     }
 
 
@@ -390,6 +449,11 @@ def parse_team(raw: Any, name: str = "team") -> TeamSpec:
         raise TeamFileError("vehicles: expected a non-empty list")
     team_emulator = _team_emulator(raw)
     vehicles = tuple(_vehicle(v, i, team_emulator) for i, v in enumerate(vehicles_raw))
+    for name in team_emulator["autopilot_params"]:
+        if not any(name in _param_names(v.autopilot) for v in vehicles):
+            autopilots = "/".join(sorted({v.autopilot for v in vehicles}))
+            raise TeamFileError(_unknown_param(f"emulator.autopilot_params.{name}", autopilots,
+                                               name))
     ids = [v.vehicle_id for v in vehicles]
     sysids = [v.sysid for v in vehicles]
     if len(set(ids)) != len(ids):
@@ -404,7 +468,22 @@ def parse_team(raw: Any, name: str = "team") -> TeamSpec:
     rate_raw = _get(sim, "plant_rate_hz", "sim")
     rate = 1000.0 if rate_raw is None else _float(rate_raw, "sim.plant_rate_hz", positive=True)
     team_name = raw.get("name") if isinstance(raw.get("name"), str) else name
-    return TeamSpec(name=team_name, vehicles=vehicles, faults=faults, physics_rate_hz=rate)
+    return TeamSpec(name=team_name, vehicles=vehicles, faults=faults, physics_rate_hz=rate,
+                    origin_lla=_frame_origin(raw.get("frame")))
+
+
+def _frame_origin(frame: Any) -> tuple[float, float, float] | None:
+    """``frame.origin``: [lat deg, lon deg, alt m] of the team frame's origin, or None."""
+    if frame is None:
+        return None
+    raw = _get(frame, "origin", "frame")
+    if raw is None:
+        return None
+    lat, lon, alt = _vec3(raw, "frame.origin")
+    for value, limit, what in ((lat, 90.0, "latitude"), (lon, 180.0, "longitude")):
+        if abs(value) > limit:
+            raise TeamFileError(f"frame.origin: {what} {value!r} outside -{limit}..{limit} deg")
+    return (lat, lon, alt)
 
 
 def load_team(path: str | Path) -> TeamSpec:

@@ -28,7 +28,10 @@ from vehicle_emulator.geodesy import enu_to_geodetic
 from vehicle_emulator.gnss import GPS_RATE_HZ, fill_gps_raw_int
 from vehicle_emulator.plant import FleetPlant
 
-__all__ = ["DEFAULT_RATES_HZ", "FleetStatus", "Telemetry", "HOME_LAT_DEG", "HOME_LON_DEG"]
+__all__ = [
+    "DEFAULT_ORIGIN_LLA", "DEFAULT_RATES_HZ", "FleetStatus", "Telemetry", "HOME_LAT_DEG",
+    "HOME_LON_DEG",
+]
 
 DEFAULT_RATES_HZ: dict[str, float] = {
     "HEARTBEAT": 1.0,
@@ -46,11 +49,13 @@ DEFAULT_RATES_HZ: dict[str, float] = {
     "HOME_POSITION": 0.5,
     "GPS_RAW_INT": GPS_RATE_HZ,
 }
-# The team frame's origin on the globe: PX4 SITL's default home (Zurich). Geodetic coordinates
-# (GLOBAL_POSITION_INT, HOME_POSITION, GPS_GLOBAL_ORIGIN) are exact WGS-84 (geodesy.py).
+# The team frame's origin on the globe when the team file states none (its `frame.origin`):
+# PX4 SITL's default home (Zurich). Geodetic coordinates (GLOBAL_POSITION_INT, HOME_POSITION,
+# GPS_GLOBAL_ORIGIN) are exact WGS-84 (geodesy.py).
 HOME_LAT_DEG = 47.397742
 HOME_LON_DEG = 8.545594
 HOME_ALT_M = 488.0
+DEFAULT_ORIGIN_LLA = (HOME_LAT_DEG, HOME_LON_DEG, HOME_ALT_M)
 # Noise standard deviations when EMU_NOISE = 1.
 NOISE_POS_M = 0.01
 NOISE_VEL_MPS = 0.02
@@ -174,12 +179,15 @@ def _scatter(out, ln, idx, buf, cursor):
         cursor[v] = c + ln[r]
 
 
-def geodetic_of_ned(ned_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def geodetic_of_ned(
+    ned_m: np.ndarray, origin_lla: tuple[float, float, float] = DEFAULT_ORIGIN_LLA
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Team-frame NED points (..., 3) -> (lat deg, lon deg, altitude m) on the WGS-84
-    ellipsoid (the emulator reports ellipsoid heights as AMSL: no geoid model)."""
+    ellipsoid (the emulator reports ellipsoid heights as AMSL: no geoid model); the team
+    frame's origin is ``origin_lla`` (lat deg, lon deg, alt m)."""
     ned = np.asarray(ned_m, dtype=float)
     enu = np.stack((ned[..., 1], ned[..., 0], -ned[..., 2]), axis=-1)
-    return enu_to_geodetic(enu, HOME_LAT_DEG, HOME_LON_DEG, HOME_ALT_M)
+    return enu_to_geodetic(enu, *origin_lla)
 
 
 def _msg_class(name: str) -> Any:
@@ -189,7 +197,12 @@ def _msg_class(name: str) -> Any:
 class Telemetry:
     """Per-vehicle, per-message schedule plus batched builders for the whole fleet."""
 
-    def __init__(self, n: int, rng: np.random.Generator, start_s: float = 0.0) -> None:
+    def __init__(
+        self, n: int, rng: np.random.Generator, start_s: float = 0.0,
+        origin_lla: tuple[float, float, float] = DEFAULT_ORIGIN_LLA,
+    ) -> None:
+        """``origin_lla``: the team frame's origin (lat deg, lon deg, alt m) on the globe."""
+        self.origin_lla = origin_lla
         self.names = list(DEFAULT_RATES_HZ)
         self.index = {name: k for k, name in enumerate(self.names)}
         self.msgids = {int(_msg_class(nm).id): k for k, nm in enumerate(self.names)}
@@ -348,7 +361,7 @@ class Telemetry:
             now_s, self.next_due_s, self.interval_s, self._hot_cols, enabled,
             status.position_from_ms, d["q"], d["w_frd"], d["t_att_ms"], d["pos_ned"],
             status.origin_ned_m, d["vel_ned"], d["t_pos_ms"], d["acc_frd"], d["gimu_frd"],
-            d["t_att_us"], d["z_up"], HOME_ALT_M, status.sysid, self._hot_compid, self.seq,
+            d["t_att_us"], d["z_up"], self.origin_lla[2], status.sysid, self._hot_compid, self.seq,
             CRC_TABLE, self._hot_out, self._hot_len, self.sent)
         return self._hot_len
 
@@ -511,8 +524,9 @@ class Telemetry:
         rows["xacc"], rows["yacc"], rows["zacc"] = acc[:, 0], acc[:, 1], acc[:, 2]
         rows["xgyro"], rows["ygyro"], rows["zgyro"] = w[:, 0], w[:, 1], w[:, 2]
         z = d["z_up"][idx]
-        rows["abs_pressure"] = 1013.25 * (1.0 - 2.25577e-5 * (HOME_ALT_M + z)) ** 5.25588
-        rows["pressure_alt"] = HOME_ALT_M + z
+        alt0_m = self.origin_lla[2]
+        rows["abs_pressure"] = 1013.25 * (1.0 - 2.25577e-5 * (alt0_m + z)) ** 5.25588
+        rows["pressure_alt"] = alt0_m + z
         rows["temperature"] = 25.0
         rows["fields_updated"] = 0x3F | 0x200 | 0x800 | 0x1000
 
@@ -520,7 +534,7 @@ class Telemetry:
         d = self._d
         p = d["pos_ned"][idx]
         v = d["vel_ned"][idx]
-        lat, lon, alt = geodetic_of_ned(p)
+        lat, lon, alt = geodetic_of_ned(p, self.origin_lla)
         rows["time_boot_ms"] = d["t_pos_ms"][idx]
         rows["lat"] = np.round(lat * 1e7)
         rows["lon"] = np.round(lon * 1e7)
@@ -565,7 +579,7 @@ class Telemetry:
 
     def _home_position(self, rows, idx, now_s, plant, status) -> None:
         home = status.home_ned_m[idx]
-        lat, lon, alt = geodetic_of_ned(home)
+        lat, lon, alt = geodetic_of_ned(home, self.origin_lla)
         local = home - status.origin_ned_m[idx]
         rows["latitude"] = np.round(lat * 1e7)
         rows["longitude"] = np.round(lon * 1e7)
@@ -576,7 +590,7 @@ class Telemetry:
 
     def _gps_raw_int(self, rows, idx, now_s, plant, status) -> None:
         d = self._d
-        lat, lon, alt = geodetic_of_ned(d["pos_ned"][idx])
+        lat, lon, alt = geodetic_of_ned(d["pos_ned"][idx], self.origin_lla)
         fill_gps_raw_int(rows, d["t_pos_us"][idx], lat, lon, alt, d["vel_ned"][idx])
 
     def _battery_status(self, rows, idx, now_s, plant, status) -> None:

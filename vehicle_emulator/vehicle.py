@@ -52,7 +52,7 @@ from vehicle_emulator.setpoints import (
     from_position_target_local_ned,
 )
 from vehicle_emulator.team import FaultSpec, VehicleSpec
-from vehicle_emulator.telemetry import HOME_ALT_M, FleetStatus, Telemetry, geodetic_of_ned
+from vehicle_emulator.telemetry import FleetStatus, Telemetry, geodetic_of_ned
 
 log = logging.getLogger(__name__)
 
@@ -366,7 +366,8 @@ class VehicleNode:
 
     def origin_message(self, now_s: float) -> Any:
         """GPS_GLOBAL_ORIGIN: where this vehicle's LOCAL_POSITION_NED is zero."""
-        lat, lon, alt = geodetic_of_ned(self.status.origin_ned_m[self.index])
+        lat, lon, alt = geodetic_of_ned(self.status.origin_ned_m[self.index],
+                                        self.telemetry.origin_lla)
         return mavlink.MAVLink_gps_global_origin_message(
             int(round(float(lat) * 1e7)),
             int(round(float(lon) * 1e7)),
@@ -546,6 +547,10 @@ class VehicleNode:
             self.counters.last_reject_reason = "setpoint clamped"
         self.autopilot.on_setpoint(now_s, d.setpoint)
 
+    def _on_request_data_stream(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
+        """REQUEST_DATA_STREAM (deprecated): PX4 does not handle it; an ArduPilot node does."""
+        self.counters.unhandled += 1
+
     def _on_set_mode(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
         if msg.target_system not in (0, self.sysid):
             self.counters.other_target += 1
@@ -610,7 +615,8 @@ class VehicleNode:
                 return MavResult.DENIED
             return ap.set_mode(now_s, obs, _int(p[1]), _int(p[2]))
         if cmd == 22:  # NAV_TAKEOFF: param7 altitude AMSL (PX4)
-            home_amsl_m = HOME_ALT_M - float(self.status.home_ned_m[self.index, 2])
+            home_ned_m = self.status.home_ned_m[self.index]
+            home_amsl_m = self.telemetry.origin_lla[2] - float(home_ned_m[2])
             alt = p[6] - home_amsl_m if math.isfinite(p[6]) else math.nan
             return ap.takeoff(now_s, obs, alt)
         if cmd == 21:  # NAV_LAND
@@ -814,6 +820,7 @@ _HANDLERS = {  # msgid -> VehicleNode method name (looked up on the node: overri
     86: "_on_position_target_global",
     139: "_on_actuator_target",
     11: "_on_set_mode",
+    66: "_on_request_data_stream",
     76: "_on_command",
     75: "_on_command",
     111: "_on_timesync",

@@ -409,6 +409,15 @@ def _emulator_section(node: _Node, allowed: str) -> None:
     for key in ("origin_enu_m", "boot_position_enu_m"):
         if key in allowed.split() and not node.child(key).absent:
             node.child(key).vec3()
+    # the parameters the real vehicles were booted with: names -> numbers (the emulator checks
+    # the names against its personality's table)
+    params = node.child("autopilot_params")
+    if not params.absent:
+        if not isinstance(params.value, dict):
+            params.fail(f"expected a mapping of parameter names to numbers, got "
+                        f"{_kind(params.value)}")
+        for name in params.value:
+            params.child(str(name)).number()
 
 
 def _estimates(est: _Node, plant: _Node, gains: Gains) -> Estimates:
@@ -434,7 +443,8 @@ def _vehicle(node: _Node, gains: Gains) -> VehicleConfig:
         "id sysid offset_enu_m initial estimates airframe",
         "link plant nominal_mass_kg nominal_inertia_kgm2 emulator",
     )
-    _emulator_section(node.child("emulator"), "autopilot origin_enu_m boot_position_enu_m")
+    _emulator_section(node.child("emulator"),
+                      "autopilot origin_enu_m boot_position_enu_m autopilot_params")
     vehicle_id = node.child("id").integer(ge=1)
     sysid = node.child("sysid").integer(ge=1, le=255)
     ini = node.child("initial").keys(
@@ -841,7 +851,7 @@ def _team(root: _Node) -> TeamConfig:
         "name mission controller reference_velocity graph vehicles",
         "sim faults fly emulator frame",
     )
-    _emulator_section(root.child("emulator"), "autopilot origin")
+    _emulator_section(root.child("emulator"), "autopilot origin autopilot_params")
     name = root.child("name").string()
     mission = MissionConfig(
         root.child("mission").keys("duration_s").child("duration_s").number(gt=0.0)

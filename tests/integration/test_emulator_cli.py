@@ -55,7 +55,7 @@ def test_fleet_runs_every_vehicle_on_its_own_endpoint_and_exits_cleanly(tmp_path
     # GIVEN the Scenario I team (4 vehicles in the air) as one --fleet process
     clients = clients_on_port_block(4)
     remote_base = clients[0].port
-    bind_base = free_udp_port()
+    bind_base = free_udp_port_block(4)
     log = open(tmp_path / "fleet.log", "w")
     proc = subprocess.Popen(
         [
@@ -106,7 +106,7 @@ def test_fleet_vehicles_with_own_origins_report_local_positions_from_them(tmp_pa
     team.write_text(yaml.safe_dump(data))
     clients = clients_on_port_block(4)
     proc = subprocess.Popen(
-        [*EMU, "--fleet", "--team", str(team), "--bind-base", str(free_udp_port()),
+        [*EMU, "--fleet", "--team", str(team), "--bind-base", str(free_udp_port_block(4)),
          "--remote-base", str(clients[0].port)],
         stdout=subprocess.DEVNULL, stderr=open(tmp_path / "fleet.log", "w"),  # noqa: SIM115
     )
