@@ -133,9 +133,12 @@ def test_scenario_one_over_50_ms_links_with_jitter_and_loss_converges(tmp_path):
     report = gcs.report()
     t, fe = series(report, "formation_error_m")
     assert np.nanmax(fe[t >= 30.0]) <= 0.05
-    k20 = int(np.argmin(np.abs(t - 20.0)))
-    np.testing.assert_allclose(report["mass_estimate_kg"][k20], report["mass_true_kg"][k20],
-                               atol=0.05)
+    # the record nearest 20 s that has the estimates (a skipped tick leaves a row empty)
+    est = np.array(report["mass_estimate_kg"], dtype=float)
+    rows = np.flatnonzero(np.isfinite(est).all(axis=1))
+    k20 = int(rows[np.argmin(np.abs(t[rows] - 20.0))])
+    assert abs(t[k20] - 20.0) <= 0.5
+    np.testing.assert_allclose(est[k20], report["mass_true_kg"][k20], atol=0.05)
     # AND the report shows the delay that was flown: true ages past the 50 ms transport,
     # round trips of two transports
     for vid, link in report["link"].items():
