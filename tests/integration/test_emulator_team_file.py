@@ -100,6 +100,9 @@ def test_home_and_origin_come_from_the_team_files_frame_origin(tmp_path: Path) -
             c = clients[k]
             boot_enu = data["vehicles"][k]["emulator"]["boot_position_enu_m"]
             c.wait("HEARTBEAT", 90)
+            # (the client's socket filled with the vehicle's telemetry while the one before was
+            # checked: read it down first, or the answer may find the buffer full)
+            c.collect(0.5)
             # WHEN a client asks for the EKF origin
             c.send(mavlink.MAVLink_command_long_message(k + 1, 1, 512, 0, 49, 0, 0, 0, 0, 0, 0))
             origin = c.wait("GPS_GLOBAL_ORIGIN", 5)
