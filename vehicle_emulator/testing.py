@@ -171,6 +171,18 @@ class EmulatorProcess:
         with open(self.log_path) as fh:
             return fh.read()
 
+    def explain(self, error: BaseException, lines: int = 15) -> None:
+        """Add the emulator's state and the tail of its log to ``error`` (a failed wait then
+        says whether the emulator ran, exited or never got ready, and what it last did)."""
+        code = self.proc.poll()
+        state = "running" if code is None else f"exited with {code}"
+        try:
+            tail = self.log_text().splitlines()[-lines:]
+        except OSError as exc:
+            tail = [f"(log unreadable: {exc})"]
+        error.add_note(f"vehicle-emu pid {self.proc.pid} {state}; {self.log_path} ends:\n"
+                       + "\n".join(tail))
+
 
 @contextlib.contextmanager
 def run_emulator(
@@ -194,6 +206,9 @@ def run_emulator(
     emu = EmulatorProcess(proc, bind_port, remote_port, log_path)
     try:
         yield emu
+    except Exception as exc:
+        emu.explain(exc)
+        raise
     finally:
         emu.stop()
 
@@ -225,6 +240,9 @@ def run_emulator_ready(
             raise TimeoutError(f"vehicle-emu printed no ready line within {timeout_s} s "
                                f"(log {log_path})")
         yield emu
+    except Exception as exc:
+        emu.explain(exc)
+        raise
     finally:
         emu.stop()
 

@@ -21,7 +21,12 @@ from pymavlink.dialects.v20 import common as mavlink
 from vehicle_emulator.geodesy import geodetic_to_enu
 from vehicle_emulator.sched import EMU_RAISED_NICE, EMU_RT_PRIORITY
 from vehicle_emulator.telemetry import HOME_ALT_M, HOME_LAT_DEG, HOME_LON_DEG
-from vehicle_emulator.testing import clients_on_port_block, free_udp_port, free_udp_port_block
+from vehicle_emulator.testing import (
+    clients_on_port_block,
+    free_udp_port,
+    free_udp_port_block,
+    run_emulator,
+)
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 
@@ -336,3 +341,16 @@ def test_a_refused_scheduling_asked_for_by_name_is_a_one_line_error_before_any_l
                      f"{EMU_RAISED_NICE} (an rtprio limit of {EMU_RT_PRIORITY} for realtime; "
                      f"docs/emulator.md, \"Scheduling\")"], out.stderr
     assert "ready" not in out.stdout
+
+
+def test_a_failed_wait_on_an_emulator_names_its_state_and_log(tmp_path):
+    # GIVEN an emulator that refuses its arguments and exits
+    with pytest.raises(TimeoutError) as failed:
+        with run_emulator(["--id", "1", "--no-such-option"], log_dir=str(tmp_path)) as emu:
+            emu.proc.wait(30)
+            # WHEN the test's wait for it fails
+            raise TimeoutError("no HEARTBEAT within 1 s")
+    # THEN the error says the emulator exited, with what, and ends with the log's last lines
+    note = "\n".join(failed.value.__notes__)
+    assert f"pid {emu.proc.pid} exited with 2" in note
+    assert "--no-such-option" in note and emu.log_path in note
