@@ -56,7 +56,7 @@ from gcs.control.law import SingularCommandError, TeamCommand, TeamLaw, TeamMeas
 from gcs.control.position import phi
 from gcs.flightlog import FlightLog, FlightLogBuilder, estimates_record, save_timeseries
 from gcs.fly.collector import PacedCollector
-from gcs.fly.delay import DelayJudge
+from gcs.fly.delay import DelayJudge, unmeasured_delay_lines
 from gcs.fly.measure import (
     HOVER_MIN_SAMPLES,
     HOVER_RATE_HZ,
@@ -961,6 +961,14 @@ class Flight:
         except (CommandRejectedError, CommandTimeoutError, LinkClosedError) as exc:
             logger.debug("%s: origin request: %s", p.name, exc)
 
+    def _log_unmeasured_delays(self) -> None:
+        """At the law's start: name the links whose delay no TIMESYNC round trip measured."""
+        fly = self.team.fly
+        for line in unmeasured_delay_lines(
+                [(p.name, p.round_trips_s().size, p.stats().proxy.timesync_sent)
+                 for p in self.proxies], fly.timesync_period_s, fly.link_delay_s):
+            logger.warning("%s", line)
+
     def _record_hover_thrust(self) -> None:
         """PRIME: the vehicles hold on their own; keep the thrust they report (from_hover)."""
         hot = self.hot
@@ -1028,6 +1036,7 @@ class Flight:
                 i = self.team.index_of(vid)
                 self._start_error_m[vid] = float(np.linalg.norm(
                     sample.position_m[i] - np.asarray(r.target_enu_m)))
+            self._log_unmeasured_delays()
             if not self._initial_mass_from_hover(sample, now_s):
                 return self.last_command
         t = (k - self._k0) * self.period_s

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 from pymavlink.dialects.v20 import common as mavlink
+from pymavlink.generator.mavcrc import x25crc
 
 log = logging.getLogger(__name__)
 
@@ -185,6 +186,20 @@ class GenericEncoder:
         data = msg.pack(self.mav)  # pack() does not advance mav.seq (send() would)
         self._seq[self._index] = (seq + 1) & 0xFF
         return data
+
+    def pack_newer(self, msg: Any, newer_fields: bytes) -> bytes:
+        """MAVLink 2 frame of ``msg`` with ``newer_fields`` appended to its payload: the
+        extension bytes of a newer definition of the message than this dialect's (a receiver
+        that knows only the older one must read past them)."""
+        payload = msg.unpacker.pack(*(getattr(msg, n) for n in msg.ordered_fieldnames))
+        payload = (payload + newer_fields).rstrip(b"\x00") or b"\x00"
+        seq = int(self._seq[self._index])
+        self._seq[self._index] = (seq + 1) & 0xFF
+        header = bytes((0xFD, len(payload), 0, 0, seq, self.mav.srcSystem, self.mav.srcComponent,
+                        msg.id & 0xFF, (msg.id >> 8) & 0xFF, msg.id >> 16))
+        crc = x25crc(header[1:] + payload)
+        crc.accumulate(bytes((msg.crc_extra,)))
+        return header + payload + crc.crc.to_bytes(2, "little")
 
 
 @dataclass(slots=True)

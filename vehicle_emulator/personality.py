@@ -52,6 +52,9 @@ class Protocol:
     own_origin: bool  # LOCAL_POSITION_NED relative to the vehicle's own EKF origin
     param_defaults: tuple[tuple[str, float], ...] = ()  # parameter defaults as recorded
     statustext_end: str = ""  # appended to every STATUSTEXT (PX4 v1.16.0 ends each in a TAB)
+    # appended to each TIMESYNC reply's payload: PX4 v1.16.0 sends the newer TIMESYNC, whose
+    # target_system/target_component it leaves unset (recorded: b8 34 in 132 of 162 replies)
+    timesync_reply_targets: bytes = b""
 
     @property
     def version_word(self) -> int:
@@ -286,7 +289,7 @@ PERSONALITIES: dict[str, Personality] = {
         # the offboard-loss failsafe) instead of holding
         Protocol("px4", MAV_AUTOPILOT_PX4, (1, 16, 0), actuator_setpoints=False, ack_twice=True,
                  arming_ready_s=3.0, own_origin=True, param_defaults=(("COM_RC_IN_MODE", 4),),
-                 statustext_end="\t"),
+                 statustext_end="\t", timesync_reply_targets=b"\xb8\x34"),
         dynamics=PX4_DYNAMICS,
         sensors=PX4_SENSORS,
     ),

@@ -696,7 +696,10 @@ class VehicleNode:
 
     def _on_timesync(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
         if msg.tc1 == 0:
-            self.send_msg(mavlink.MAVLink_timesync_message(int(now_s * 1e9), msg.ts1), link, addr)
+            reply = mavlink.MAVLink_timesync_message(int(now_s * 1e9), msg.ts1)
+            targets = self.personality.protocol.timesync_reply_targets
+            link.send(self.encoder.pack_newer(reply, targets) if targets
+                      else self.encoder.pack(reply), addr)
 
     # --- parameters ----------------------------------------------------------------------------
 

@@ -65,6 +65,18 @@ def measured_delay_s(round_trips_s: np.ndarray) -> float:
     return 0.5 * float(np.percentile(round_trips_s, 25)) if round_trips_s.size else math.nan
 
 
+def unmeasured_delay_lines(links: Sequence[tuple[str, int, int]], timesync_period_s: float,
+                           link_delay_s: float) -> list[str]:
+    """One line per link (name, round trips timed, TIMESYNC requests sent) whose delay nothing
+    measured: the delay rules then take the configured ``link_delay_s`` for it, which a flight
+    must say rather than assume a loopback link."""
+    assumed = f"the delay rules take fly.link_delay_s ({1e3 * link_delay_s:.0f} ms)"
+    if timesync_period_s <= 0.0:
+        return [f"link delays not measured (fly.timesync_period_s 0 sends no TIMESYNC): {assumed}"]
+    return [f"{name}: no reply to its {sent} TIMESYNC requests: its link delay is not measured; "
+            f"{assumed} for it" for name, timed, sent in links if timed == 0]
+
+
 class DelayJudge:
     """The criterion of one flight's mode and gains, re-evaluated at measured delays."""
 

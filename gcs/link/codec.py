@@ -64,7 +64,9 @@ class CodecStats:
     garbage_bytes: int  # bytes skipped while hunting for a start marker
     garbage_runs: int  # contiguous runs of such bytes
     bad_crc: int
-    bad_length: int  # payload too long for its message id, or unknown incompat flags
+    bad_length: int  # MAVLink 1 payload too long for its message id, or unknown incompat flags
+    newer_fields: int  # MAVLink 2 payloads longer than our definition (extension fields of a
+    #                    newer one, e.g. PX4 1.16's TIMESYNC targets): decoded without them
     truncated: int  # frame cut off at the end of a datagram
     unknown_id: int  # well-framed message whose id is not in the common dialect
     bad_signature: int  # signed frame whose signature does not match our key
@@ -282,8 +284,14 @@ class MavlinkCodec:
             payload_len = frame[1]
         msg_type = mavlink.mavlink_map.get(msg_id)
         if msg_type is not None and payload_len > msg_type.unpacker.size:
-            self._counts["bad_length"] += 1
-            return None
+            if frame[0] != STX_V2:
+                self._counts["bad_length"] += 1
+                return None
+            # MAVLink 2 appends fields to a message as extensions: a sender with a newer
+            # definition sends more bytes (its CRC covers them); a receiver reads what it knows
+            newer = True
+        else:
+            newer = False
         self._mav.frame_signed = signed
         self._mav.last_reject = ""
         try:
@@ -294,6 +302,8 @@ class MavlinkCodec:
         if isinstance(msg, mavlink.MAVLink_unknown):
             self._counts["unknown_id"] += 1
             return None
+        if newer:
+            self._counts["newer_fields"] += 1
         return msg
 
     def _count_error(self, reason: str, signed: bool) -> None:

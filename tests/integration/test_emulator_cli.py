@@ -345,11 +345,11 @@ def test_a_refused_scheduling_asked_for_by_name_is_a_one_line_error_before_any_l
 
 def test_a_failed_wait_on_an_emulator_names_its_state_and_log(tmp_path):
     # GIVEN an emulator that refuses its arguments and exits
-    with pytest.raises(TimeoutError) as failed:
-        with run_emulator(["--id", "1", "--no-such-option"], log_dir=str(tmp_path)) as emu:
-            emu.proc.wait(30)
-            # WHEN the test's wait for it fails
-            raise TimeoutError("no HEARTBEAT within 1 s")
+    with (pytest.raises(TimeoutError) as failed,
+          run_emulator(["--id", "1", "--no-such-option"], log_dir=str(tmp_path)) as emu):
+        emu.proc.wait(30)
+        # WHEN the test's wait for it fails
+        raise TimeoutError("no HEARTBEAT within 1 s")
     # THEN the error says the emulator exited, with what, and ends with the log's last lines
     note = "\n".join(failed.value.__notes__)
     assert f"pid {emu.proc.pid} exited with 2" in note

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 import re
 import textwrap
@@ -315,7 +316,7 @@ def test_message_interval_and_timesync(ground_vehicle):
     stamps = [m.time_boot_ms for m in client.collect(2.0, "ATTITUDE")]
     # paced on the vehicle's own clock: a loaded host that stops it for a while costs messages
     # in the 2 s (as PX4, it sends one late, never the backlog), not the 100 ms spacing
-    gaps = sorted(b - a for a, b in zip(stamps, stamps[1:]))
+    gaps = sorted(b - a for a, b in itertools.pairwise(stamps))
     assert 10 <= len(stamps) <= 23
     assert gaps[len(gaps) // 2] == pytest.approx(100, abs=4)
     assert client.command(511, 30, -1) == ACCEPTED  # off

@@ -466,3 +466,6 @@ def test_four_vehicles_of_both_personalities_on_one_gcs_port_fly_to_completion(t
     assert all(report["link"][str(k)]["setpoints_sent"] > 500 for k in range(1, 5))
     assert not any(report["link"][str(k)]["lost"] for k in range(1, 5))
     assert "which no vehicle on this port has" not in log and "stranger_address" not in log
+    # AND every link's delay was measured (px4's TIMESYNC replies carry newer fields)
+    assert all(report["link"][str(k)]["round_trip"]["n"] >= 10 for k in range(1, 5))
+    assert "TIMESYNC requests: its link delay is not measured" not in log

@@ -254,6 +254,30 @@ def test_both_personalities_on_one_port_are_learned_and_their_streams_requested(
     assert len(set(remotes)) == 3
 
 
+def test_timesync_round_trips_are_measured_on_px4_whose_replies_carry_newer_fields(
+        tmp_path: Path) -> None:
+    # GIVEN a px4 and an ardupilot vehicle on one GCS port; PX4 v1.16.0 answers TIMESYNC with
+    # the newer 18-byte message (two target bytes it leaves unset), ArduPilot with 16 bytes
+    gcs_port = free_udp_port()
+
+    async def scenario() -> list[Any]:
+        async with MavlinkPort(gcs_port) as port, contextlib.AsyncExitStack() as stack:
+            proxies = [await stack.enter_async_context(VehicleProxy(learned(k), port=port))
+                       for k in (1, 2)]
+            for proxy in proxies:
+                await proxy.wait_heartbeat(timeout_s=60.0)
+            # WHEN the ground station's TIMESYNC requests (every 0.5 s) run for a while
+            await wait_until(lambda: all(p.stats().proxy.timesync_replies >= 4 for p in proxies),
+                             timeout_s=30.0)
+            return [p.stats() for p in proxies]
+
+    with emulators_on(gcs_port, tmp_path, ["px4", "ardupilot"]):
+        px4, ardupilot = run_bounded(scenario(), timeout_s=100.0)
+    # THEN both links time their round trips, px4's replies read past their newer fields
+    assert px4.codec.newer_fields >= 4 and px4.codec.bad_length == 0
+    assert ardupilot.codec.newer_fields == 0 and ardupilot.codec.bad_length == 0
+
+
 # --- liveness ---------------------------------------------------------------------------------------
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gcs.fly.delay import unmeasured_delay_lines
 from gcs.mission.cascade import (
     ARDUPILOT_RESPONSE,
     PX4_RESPONSE,
@@ -291,3 +292,16 @@ def test_prediction_buys_stiffness_at_a_lasting_delay_and_makes_attitude_mode_th
         assert stiffness("attitude", response, 0.2, True) > 0.0
         assert stiffness("rates", response, 0.2, True) == 0.0
         assert stiffness("rates", response, 0.2, False) == 0.0
+
+
+def test_a_link_whose_timesync_requests_got_no_reply_is_named_with_the_delay_assumed():
+    # GIVEN two links at the law's start: one timed 8 round trips, one got no reply to 40
+    # requests (real PX4's replies before the codec read past their newer fields)
+    links = [("vehicle 1 (sysid 1)", 8, 40), ("vehicle 2 (sysid 2)", 0, 40)]
+    # THEN only the second is named, with the configured delay the rules take instead
+    assert unmeasured_delay_lines(links, 0.5, 0.01) == [
+        "vehicle 2 (sysid 2): no reply to its 40 TIMESYNC requests: its link delay is not "
+        "measured; the delay rules take fly.link_delay_s (10 ms) for it"]
+    # AND with the requests switched off, one line says no link was measured
+    (line,) = unmeasured_delay_lines(links, 0.0, 0.02)
+    assert line.startswith("link delays not measured") and "(20 ms)" in line

@@ -353,8 +353,10 @@ async def _team_setpoints(tlog: TlogWriter) -> None:
         socks = [_udp(gcs_port) for _ in range(2)]
         for s, _ in socks:
             s.setblocking(False)
+        # no TIMESYNC requests: the sockets below are read for setpoints only, however slowly
         cfgs = [VehicleLinkConfig(vehicle_id=k + 1, sysid=k + 1, local_port=gcs_port,
-                                  remote_port=socks[k][1]) for k in range(2)]
+                                  remote_port=socks[k][1], timesync_period_s=0.0)
+                for k in range(2)]
         async with (VehicleProxy(cfgs[0], port=port, slot=0, tlog=tlog) as p1,
                     VehicleProxy(cfgs[1], port=port, slot=1, tlog=tlog) as p2):
             await asyncio.sleep(0.05)

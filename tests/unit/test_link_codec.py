@@ -124,13 +124,32 @@ def test_unknown_message_id_is_counted_not_returned() -> None:
     count(codec.stats(), unknown_id=1, bad_crc=0, truncated=0)
 
 
-def test_payload_longer_than_the_message_is_bad_length() -> None:
-    # GIVEN a HEARTBEAT header claiming 20 payload bytes (a HEARTBEAT has 9)
-    frame = bytearray(HEARTBEAT_V2[:10]) + bytes(20) + b"\x00\x00"
-    frame[1] = 20
+def test_a_newer_definitions_extension_fields_are_read_past_not_refused() -> None:
+    # GIVEN PX4 v1.16.0's reply to a TIMESYNC request, as recorded (data/sitl px4/timing): an
+    # 18-byte payload whose last two bytes are the target fields of MAVLink's newer TIMESYNC
+    # (unset by PX4: b8 34), two more than the common dialect here defines
+    reply = bytes.fromhex("fd1200008301016f0000007f559a0900000000d7ff426515ed18b834a918")
     codec = MavlinkCodec()
-    assert codec.feed(bytes(frame) + HEARTBEAT_V2) != []
-    count(codec.stats(), bad_length=1, messages_in=1)
+    # WHEN it is fed THEN it decodes to the fields this dialect knows, counted as newer
+    (msg,) = codec.feed(reply)
+    assert msg.get_type() == "TIMESYNC" and (msg.get_srcSystem(), msg.get_srcComponent()) == (1, 1)
+    assert (msg.tc1, msg.ts1) == (int.from_bytes(reply[10:18], "little"),
+                                  int.from_bytes(reply[18:26], "little"))
+    count(codec.stats(), newer_fields=1, bad_length=0, bad_crc=0, messages_in=1)
+
+
+def test_a_longer_payload_must_still_pass_its_crc_and_mavlink1_has_no_extensions() -> None:
+    # GIVEN a MAVLink 2 HEARTBEAT claiming 20 payload bytes with a zero CRC, and a MAVLink 1
+    # HEARTBEAT claiming 20 bytes (MAVLink 1 frames have no extension fields)
+    v2 = bytearray(HEARTBEAT_V2[:10]) + bytes(20) + b"\x00\x00"
+    v2[1] = 20
+    v1 = bytearray(HEARTBEAT_V1[:6]) + bytes(20) + b"\x00\x00"
+    v1[1] = 20
+    codec = MavlinkCodec()
+    # WHEN fed before a good HEARTBEAT THEN both are refused and the good one is still read
+    assert len(codec.feed(bytes(v2) + HEARTBEAT_V2)) == 1
+    assert len(codec.feed(bytes(v1) + HEARTBEAT_V2)) == 1
+    count(codec.stats(), bad_crc=1, bad_length=1, newer_fields=0, messages_in=2)
 
 
 def test_unknown_incompat_flag_is_rejected() -> None:
