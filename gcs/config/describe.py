@@ -213,7 +213,8 @@ def _go_to_start_line(team: TeamConfig) -> str:
     if g.enabled == "false":
         return "     go to start: off (the law starts where the vehicles are)"
     text = (f"     go to start {g.enabled}: settled within {g.tolerance_m:g} m, drift < "
-            f"{g.max_speed_mps:g} m/s over {g.settle_s:g} s, timeout {g.timeout_s:g} s, cruise "
+            f"{g.max_speed_mps:g} m/s over {g.settle_s:g} s (or, held at rest, within "
+            f"{g.tolerance_m:g} m + its wander), timeout {g.timeout_s:g} s, cruise "
             f"{g.cruise_speed_mps:g} m/s; start positions >= {g.min_altitude_m:g} m")
     try:
         check_go_to_start(team)

@@ -86,8 +86,7 @@ def check_started_at_the_start_positions(report: dict, log: str) -> None:
     # THEN the log said where each went, and that all settled
     for vid, (x, y, z) in starts.items():
         assert f"vehicle {vid} (sysid {vid}): going to start ({x:.2f}, {y:.2f}, {z:.2f}) m, " in log
-    assert "mission: go to start: all 4 vehicles settled within 0.5 m of their start positions" \
-        in log
+    assert "mission: go to start: all 4 vehicles settled at their start positions after " in log
     # AND the law's t = 0 sample has every vehicle within tolerance of its start position
     assert report["t_s"][0] == 0.0
     for k, vid in enumerate(v["id"] for v in report["vehicles"]):
@@ -96,7 +95,9 @@ def check_started_at_the_start_positions(report: dict, log: str) -> None:
         result = report["extra"]["go_to_start"][str(vid)]
         assert error <= TOLERANCE_M, (vid, error, result)
         assert result["settled"] and result["target_enu_m"] == starts[vid]
-        assert result["error_m"] <= TOLERANCE_M
+        # (by the hold rule, the mean over its rest within the tolerance plus its own wander)
+        wander = result["wander_m"] if result["rule"] == "holding" else 0.0
+        assert result["error_m"] <= TOLERANCE_M + wander
         assert result["error_at_t0_m"] == pytest.approx(error, abs=0.02)
         # (each flew 10-16 m from where it booted, 6-15 m of it across: not a trivial pass)
         assert math.dist(BOOT_ENU_M[k], starts[vid]) > 10.0
