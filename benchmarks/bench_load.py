@@ -30,7 +30,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from benchmarks.bench_fly import run  # noqa: E402
-from benchmarks.docsection import write_section  # noqa: E402
+from benchmarks.docsection import publish  # noqa: E402
 
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## Ticks beside busy processes"
@@ -129,9 +129,7 @@ def main() -> int:
                         row["why"] = str(exc).strip().splitlines()[-1]
                 print(row, flush=True)
     text = section(rows, args.duration_s, args.busy)
-    print(text)
-    if not args.no_write:
-        write_section(DOC, HEADING, text)
+    publish(DOC, HEADING, text, write=not args.no_write)
     return 0
 
 

@@ -17,3 +17,11 @@ def write_section(doc_path: Path, heading: str, text: str) -> None:
         rest = "" if end < 0 else "\n" + doc[end + 1:]  # a blank line before the next one
         doc = doc[:start] + text.rstrip("\n") + "\n" + rest
     doc_path.write_text(doc)
+
+
+def publish(doc_path: Path, heading: str, text: str, write: bool = True) -> None:
+    """Print a benchmark's section and, unless ``write`` is False (--no-write), put it in
+    ``doc_path`` (write_section)."""
+    print(text)
+    if write:
+        write_section(doc_path, heading, text)

@@ -130,6 +130,11 @@ class Onboard:
         self.position_error_phi = np.exp(
             -1.0 / (rates * np.array([se.position_error_tau_s for se in sen]))
         )
+        self.hold_wander_std = np.array([se.hold_wander_std_m for se in sen], dtype=f)
+        self.hold_wander_ar = np.array(
+            [sn.resonator_coefficients(se.hold_wander_hz, se.hold_wander_zeta, 1.0 / r)
+             if any(se.hold_wander_std_m) else (0.0, 0.0, 0.0)
+             for se, r in zip(sen, rates, strict=True)], dtype=f)
         # states
         self.noise_rng = np.array([sn.noise_seed(0, int(v)) for v in plant.sysid], dtype=np.uint64)
         self.gyro_filter_state = np.zeros((n, 3, 2))
@@ -167,6 +172,10 @@ class Onboard:
         self.integration_error = np.zeros((n, 3))
         self.gyro_bias = np.zeros((n, 3))
         self.disturbance_state = np.zeros((n, 3, 3))
+        self.hold_wander_state = np.zeros((n, 3, 3))
+        #: the hold wander now (ENU [m]) and the setpoint the position loop chases with it
+        self.hold_wander_enu_m = np.zeros((n, 3))
+        self._wandered_sp = np.zeros((n, 3))
         self.velocity_error = np.zeros((n, 3))
         self.position_error = np.zeros((n, 3))
         self.attitude_sample_step = np.zeros(n, dtype=np.int64)
@@ -239,6 +248,8 @@ class Onboard:
             self.gyro_bias_std,
             self.gyro_bias_phi,
             self.disturbance_ar,
+            self.hold_wander_std,
+            self.hold_wander_ar,
         )
 
     def _state_tuple(self) -> tuple:
@@ -277,6 +288,9 @@ class Onboard:
             self.integration_error,
             self.gyro_bias,
             self.disturbance_state,
+            self.hold_wander_state,
+            self.hold_wander_enu_m,
+            self._wandered_sp,
             self.torque_limited,  # last: the fleet kernel's mixer writes it (plant.py)
         )
 
@@ -323,14 +337,14 @@ def onboard_step(
         gyro_coef, dterm_coef, accel_coef, imu_mode, pos_delay, out_delay, gain_p, gain_i,
         gain_d, int_limit, yaw_alpha, accel_per_unit, accel_max, ref_gain, ref_phi, ref_gamma,
         angle_p, track, ref_delay, att_err_std, att_phi, vel_err_std, vel_phi, pos_phi,
-        disturbance, integ_phi, bias_std, bias_phi, dist_ar,
+        disturbance, integ_phi, bias_std, bias_phi, dist_ar, wander_std, wander_ar,
     ) = cal_par
     (
         rng, gyro_state, dterm_state, accel_state, gyro_raw, accel_raw, rate_meas, dgyro,
         gyro_imu, accel_imu, yaw_lpf, shaped, ref, angle_err, track_int, torque_next,
         thrust_next, torque_new, rot_est, pos_est, vel_est, pos_prev, vel_prev, att_step,
         pos_step, pos_prev_step, delay_buf, delay_idx, att_err, vel_err, pos_err, integ_err,
-        gyro_bias, dist_state, limited,
+        gyro_bias, dist_state, wander_state, wander, wandered_sp, limited,
     ) = cal_st
     for i in range(loop.shape[0]):
         if loop[i] == 0 or step % ctrl_div[i] != 0:
@@ -394,8 +408,12 @@ def onboard_step(
                 torque_sp[i, k] = torque_cmd[i, k] * tmax[i, k]
             continue
         if m == 5:  # the autopilot's own position loop flies on its estimates, as PX4's does
+            sp = pos_sp
+            if noise_on[i] and not landed and wander_ar[i, 2] != 0.0:
+                sp = wandered_sp
+                sn.hold_wander(i, rng, wander_std, wander_ar, wander_state, wander, pos_sp, sp)
             thr = position_control(
-                i, pos_est, vel_est, rot_est, pos_sp, vel_ff, pos_mask, yaw_sp, vel_int, hover,
+                i, pos_est, vel_est, rot_est, sp, vel_ff, pos_mask, yaw_sp, vel_int, hover,
                 landed, dt_c, att_sp,
             )
             attitude_control(i, rot_est, att_sp, yaw_rate_ff, rate_sp)

@@ -160,6 +160,13 @@ class Sensors:
     velocity_error_std_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)  # north, east, up
     velocity_error_tau_s: float = 1.0
     position_error_tau_s: float = 1.0
+    # the autopilot's own position hold (Hold, takeoff, OFFBOARD position setpoints), airborne,
+    # with EMU_NOISE = 1: the loop chases its setpoint plus a slow wander, a band-pass resonator
+    # per axis (north, east, up; 1 sigma [m]) at ``hold_wander_hz`` with damping
+    # ``hold_wander_zeta``; the vehicle and its estimate wander about the setpoint alike
+    hold_wander_std_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    hold_wander_hz: float = 0.1
+    hold_wander_zeta: float = 0.5
 
 
 # PX4 v1.16.0 SITL with SIH (airframe 10040 sihsim_quadx), parameters as read back
@@ -206,6 +213,14 @@ PX4_SENSORS = Sensors(
     velocity_error_std_mps=(0.126, 0.126, 0.147),
     velocity_error_tau_s=1.5,  # recorded vz autocorrelation 0.72 at 0.5 s
     position_error_tau_s=6.0,
+    # PX4's position hold on SIH (OFFBOARD position setpoints, 2026-12-04 go-to-start recording,
+    # four vehicles, 48 s each): 0.32-0.38 m RMS about the setpoint, 2 s means 0.26-0.31 m off
+    # and drifting 0.12-0.13 m/s (medians), 10 s means 0.16-0.22 m off; with this wander one
+    # 65 s hold of the personality gives 0.33 m, 0.29 m, 0.15 m/s and 0.19 m (fitted by hand,
+    # docs/emulator.md "Position hold")
+    hold_wander_std_m=(0.18, 0.28, 0.13),
+    hold_wander_hz=0.05,
+    hold_wander_zeta=0.25,
     # the attitude EKF2 reports: tilt integrates the noisy gyro and is pulled back to the truth
     # over 6 s (the recorded roll is a quarter of the true wander's size), plus slow errors on
     # pitch and heading (recorded autocorrelation 0.92 at 1 s, 0.33 at 3 s) (fitted)

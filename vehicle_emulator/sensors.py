@@ -203,6 +203,21 @@ def estimate_errors(i, dt_c, noise_on, att_std, att_phi, vel_std, vel_phi, pos_p
 
 
 @njit(cache=True)
+def hold_wander(i, rng, std, ar, state, wander, pos_sp, out):
+    """Advance vehicle i's position-hold wander by one control period (personality.Sensors:
+    a unit-variance band-pass resonator per axis, ``ar[i]`` its coefficients, scaled by ``std[i]``
+    = (north, east, up)) and write the setpoint its position loop chases, ``pos_sp[i]`` plus the
+    wander (ENU), to ``out[i]``."""
+    n0, n1 = gauss_pair(rng, i)
+    n2, _ = gauss_pair(rng, i)
+    noise = (n0, n1, n2)
+    for k in range(3):
+        s = std[i, 1] if k == 0 else (std[i, 0] if k == 1 else std[i, 2])
+        wander[i, k] = s * resonator_step(ar[i], state[i, k], noise[k])
+        out[i, k] = pos_sp[i, k] + wander[i, k]
+
+
+@njit(cache=True)
 def rotate_body(r: np.ndarray, e0: float, e1: float, e2: float, out: np.ndarray) -> None:
     """out = r exp(hat(e)) (Rodrigues): r (3, 3) turned by the small body-frame rotation e."""
     th = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)

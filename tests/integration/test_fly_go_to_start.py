@@ -8,10 +8,10 @@ start positions with SET_POSITION_TARGET_LOCAL_NED (PX4 in OFFBOARD, streamed fi
 GUIDED), settle, hold, and the law starts at t = 0 from there. What is checked is read from the
 flight's own records (report.json samples at t = 0, its `extra.go_to_start`, the .tlog) and log.
 
-The personalities hover with the wander PX4 SIH and ArduCopter SITL showed (estimate errors,
-process noise: the px4 personality's reported position strays 0.1-0.35 m from a Hold setpoint),
-so the team file's `tolerance_m` here is 0.5 m: settled means the mean position over
-`settle_s`, and the t = 0 sample is one instant of that wander.
+The personalities hover with the wander PX4 SIH and ArduCopter SITL showed (the px4
+personality holds a position setpoint 0.33 m RMS about it, slowly, as SIH did), and the team file
+keeps the docs' `tolerance_m` (0.3 m): a px4 vehicle settles by the hold rule (its mean over its
+rest within the tolerance plus its wander), and the t = 0 sample is one instant of that wander.
 """
 
 from __future__ import annotations
@@ -33,20 +33,22 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
 ROOT = Path(__file__).resolve().parents[2]
 #: where each vehicle boots: on the ground, south of the formation (team frame ENU [m])
 BOOT_ENU_M = ([6.0, -10.0, 0.0], [2.0, -10.0, 0.0], [-2.0, -10.0, 0.0], [-6.0, -10.0, 0.0])
-TOLERANCE_M = 0.5
+TOLERANCE_M = 0.3  # fly.go_to_start.tolerance_m's default (docs/configuration.md)
+#: the t = 0 sample is one instant of a hold that wanders 0.33 m RMS about its mean: within this
+#: of the start (each vehicle flew 10-16 m from where it booted; a stuck one is 6-14 m off)
+INSTANT_M = 1.0
 OFFBOARD_PX4 = 6
 
 
 def ground_team(tmp: Path, autopilot: str, duration_s: float) -> Path:
     """square4 (Scenario I) in rates mode, its vehicles booting on the ground at BOOT_ENU_M,
-    go-to-start on (auto) with TOLERANCE_M; px4: fixed ports, ardupilot: learned addresses."""
+    go-to-start on (auto) with its defaults; px4: fixed ports, ardupilot: learned addresses."""
     data = yaml.safe_load((ROOT / "configs" / "square4.yaml").read_text())
     gcs_base, bind_base = free_udp_port_block(4), free_udp_port_block(4)
     data["name"] = f"goto-{autopilot}"
     data["mission"]["duration_s"] = duration_s
     data["controller"]["mode"] = "rates"
     data["fly"]["geofence"]["min_enu_m"][2] = 0.5
-    data["fly"]["go_to_start"] = {"tolerance_m": TOLERANCE_M}
     data["emulator"] = {"autopilot": autopilot}  # each vehicle's own origin, where it boots
     for k, v in enumerate(data["vehicles"]):
         v["link"] = ({"local_port": gcs_base + k, "learn_remote": True} if autopilot == "ardupilot"
@@ -93,7 +95,7 @@ def check_started_at_the_start_positions(report: dict, log: str) -> None:
         n, e, d = report["position_ned_m"][0][k]
         error = math.dist((e, n, -d), starts[vid])
         result = report["extra"]["go_to_start"][str(vid)]
-        assert error <= TOLERANCE_M, (vid, error, result)
+        assert error <= INSTANT_M, (vid, error, result)
         assert result["settled"] and result["target_enu_m"] == starts[vid]
         # (by the hold rule, the mean over its rest within the tolerance plus its own wander)
         wander = result["wander_m"] if result["rule"] == "holding" else 0.0

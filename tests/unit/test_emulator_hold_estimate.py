@@ -43,3 +43,38 @@ def test_px4_hold_captures_the_position_estimate_so_the_reported_position_does_n
     target = plant.position_sp_enu_m[0]
     assert np.linalg.norm(target - estimate) < 0.01
     assert math.isclose(plant.position_mask[0].min(), 1.0)
+
+
+def _hold_track(autopilot: str, noise: int, seconds: float = 80.0, seed: int = 5) -> np.ndarray:
+    """Reported (estimated) positions [ENU m] of a vehicle holding in the air, every 0.1 s after
+    40 s (its wander builds up over ~13 s), relative to its hold setpoint."""
+    spec = replace(default_vehicle(1, on_ground=False), autopilot=autopilot)
+    emu = Emulator([spec], seed=seed, param_overrides={"EMU_NOISE": noise})
+    emu.nodes[0].links.append(RecordingLink())
+    run_until(emu, 40.0, tick_s=0.5)
+    plant = emu.plant
+    track = []
+    for k in range(int(seconds * 10)):
+        emu.advance_to(40.0 + 0.1 * (k + 1))
+        track.append(plant.onboard.position_est_enu_m[0] - plant.position_sp_enu_m[0])
+    return np.array(track)
+
+
+def test_px4_holds_its_position_setpoint_with_the_slow_wander_sih_showed():
+    # GIVEN four px4 vehicles holding for 60 s (SIH, 2026-12-04 go-to-start recording, four
+    # vehicles: 0.35-0.40 m RMS from the setpoint, moving slowly: their 2 s means 0.26-0.31 m
+    # off at the median; benchmarks/bench_px4_hold.py compares the two in full)
+    rms, means_2s = [], []
+    for seed in range(1, 5):
+        track = _hold_track("px4", 1, 60.0, seed)
+        rms.append(float(np.sqrt((track ** 2).sum(axis=1).mean())))
+        means = track[: len(track) // 20 * 20].reshape(-1, 20, 3).mean(axis=1)
+        means_2s.append(float(np.median(np.linalg.norm(means, axis=1))))
+    # THEN they wander as much, and slowly (their 2 s means stay off the setpoint); without the
+    # wander the personality held 0.16 m RMS, its 2 s means 0.15 m off
+    assert 0.25 <= float(np.median(rms)) <= 0.5, rms
+    assert 0.2 <= float(np.median(means_2s)) <= 0.4, means_2s
+    # AND without noise it holds to the millimetre, and ArduPilot's personality holds tightly
+    assert np.abs(_hold_track("px4", 0, 20.0)).max() < 0.01
+    ardupilot = _hold_track("ardupilot", 1, 20.0)
+    assert float(np.sqrt((ardupilot ** 2).sum(axis=1).mean())) < 0.1

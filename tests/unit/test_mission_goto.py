@@ -262,7 +262,7 @@ def test_a_vehicle_that_is_not_there_is_not_settled_by_its_wander(bias_m, radius
     g, settled_s = _hold(at, 40.0)
     assert settled_s is None
     (line,) = g.not_settled_lines(40.0, {1: "vehicle 1 (sysid 1)"}, at(40.0)[0])
-    assert why in line and "at rest: mean" in line and "wander <= 0.5 m" in line
+    assert why in line and "at rest: mean" in line and "wander <= 0.6 m" in line
     assert not g.results[1].settled and g.results[1].rule == ""
 
 
