@@ -34,9 +34,11 @@ ROOT = Path(__file__).resolve().parents[2]
 #: where each vehicle boots: on the ground, south of the formation (team frame ENU [m])
 BOOT_ENU_M = ([6.0, -10.0, 0.0], [2.0, -10.0, 0.0], [-2.0, -10.0, 0.0], [-6.0, -10.0, 0.0])
 TOLERANCE_M = 0.3  # fly.go_to_start.tolerance_m's default (docs/configuration.md)
-#: the t = 0 sample is one instant of a hold that wanders 0.33 m RMS about its mean: within this
-#: of the start (each vehicle flew 10-16 m from where it booted; a stuck one is 6-14 m off)
-INSTANT_M = 1.0
+#: the t = 0 sample is one instant of a hold that wanders 0.35-0.40 m RMS about a mean that
+#: settles within the tolerance plus that wander (and Hold then captures wherever the vehicle
+#: was): within this of the start (each vehicle flew 10-16 m from where it booted; one that did
+#: not go is 6-14 m off; measured at t = 0: up to 1.05 m)
+INSTANT_M = 2.0
 OFFBOARD_PX4 = 6
 
 
