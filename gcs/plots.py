@@ -64,7 +64,7 @@ MODE_SETPOINTS = {
     "actuators": "thrust + torque (26)",
     "rates": "thrust + body rates",
     "attitude": "thrust + attitude",
-    "position": "each vehicle's formation slot as a position setpoint",
+    "position": "formation slots as position setpoints",
 }
 #: the figures of the law's own states (attitude errors, estimates): not written for a run that
 #: ran no law (gcs fly's position mode), and one left from an earlier run in the directory is
@@ -110,8 +110,7 @@ def _title(fig: Figure, title: str, log: FlightLog) -> None:
 def _subtitle(log: FlightLog) -> str:
     mode = log.extra.get("mode")
     mode_text = f"{mode} mode" if mode else "mode not recorded"
-    law = ("no law (the autopilots' position control)" if not law_ran(log)
-           else f"{log.controller} law")
+    law = f"{log.controller} law" if law_ran(log) else "no law"
     return f"{log.name}: {log.source}, {law}, {mode_text}"
 
 
@@ -198,7 +197,7 @@ def run_description(log: FlightLog) -> str:
     mode = log.extra.get("mode")
     sends = f" ({MODE_SETPOINTS[mode]})" if mode in MODE_SETPOINTS else ""
     estimates = (f"{_mass_from_text(log)}; {_inertia_text(log)}" if law_ran(log)
-                 else "no mass or inertia estimation")
+                 else "the autopilots' own loops fly the slots; no mass or inertia estimation")
     return f"{_subtitle(log)}{sends}\n{_vehicles_text(log)}\n{estimates}"
 
 

@@ -188,9 +188,10 @@ def test_a_position_mode_run_has_the_formation_figures_and_no_estimate_figures(
     for fig in (plots.fig2_formation(position_mode_log()),
                 plots.errors_semilogy(position_mode_log())):
         title = fig.get_suptitle()
-        assert "no law (the autopilots' position control), position mode" in title, title
-        assert "formation slot as a position setpoint" in title, title
-        assert "no mass or inertia estimation" in title and "hat" not in title, title
+        assert "square4: fly, no law, position mode (formation slots as position setpoints)" \
+            in title, title
+        assert "the autopilots' own loops fly the slots; no mass or inertia estimation" in title
+        assert "hat" not in title, title  # no mhat(0) / Jhat(0) line
     # AND the log-scale figure draws no attitude error
     (ax,) = plots.errors_semilogy(position_mode_log()).axes
     assert [line.get_label().split()[0] for line in ax.get_lines()] == ["formation", "velocity"]
