@@ -43,8 +43,9 @@ from gcs import frames
 from gcs.config import (
     AUTO_MODES,
     FLY_ACTIONS,
+    FLY_CONTROL_MODES,
     FLY_MODES,
-    MODES,
+    POSITION_MODE,
     TORQUE_MODES,
     ConfigError,
     TeamConfig,
@@ -54,7 +55,14 @@ from gcs.control.formation import reference_velocity
 from gcs.control.gains import GRAVITY_MPS2, LawGains
 from gcs.control.law import SingularCommandError, TeamCommand, TeamLaw, TeamMeasurement
 from gcs.control.position import phi
-from gcs.flightlog import FlightLog, FlightLogBuilder, estimates_record, save_timeseries
+from gcs.control.slots import FormationSlots, SlotTargets
+from gcs.flightlog import (
+    AUTOPILOT_CONTROLLER,
+    FlightLog,
+    FlightLogBuilder,
+    estimates_record,
+    save_timeseries,
+)
 from gcs.fly.collector import PacedCollector
 from gcs.fly.delay import DelayJudge, unmeasured_delay_lines
 from gcs.fly.measure import (
@@ -73,7 +81,6 @@ from gcs.fly.measure import (
     normalised_thrust,
     normalised_torque,
     torque_max_nm,
-    yaw_rad,
 )
 from gcs.fly.origins import (
     TeamTies,
@@ -308,31 +315,39 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
     if options.mode is not None and options.mode not in FLY_MODES:
         raise FlightSetupError(f"mode {options.mode!r}: expected one of {FLY_MODES}")
     mode, mode_choice = resolve_mode(team, options.mode, options.tick_rate_hz)
-    law = options.law or team.controller.law
+    if mode not in FLY_CONTROL_MODES:
+        raise FlightSetupError(f"mode {mode!r}: expected one of {FLY_CONTROL_MODES}")
+    position = mode == POSITION_MODE
+    if position and options.law is not None:
+        raise FlightSetupError(f"--controller {options.law}: position mode runs no law (the "
+                               "autopilots fly their formation slots); leave --controller out")
+    # position mode: the autopilots' own position control flies; controller.law does not apply
+    law = AUTOPILOT_CONTROLLER if position else options.law or team.controller.law
     if fly.initial_mass == "from_hover" and law == "adaptive":
         try:
             team = team.with_hover_masses()
         except ConfigError as exc:
             raise FlightSetupError(str(exc)) from None
-    if mode not in MODES:
-        raise FlightSetupError(f"mode {mode!r}: expected one of {MODES}")
     if law == "baseline":
         try:
             team.with_law("baseline")
         except ConfigError as exc:
             raise FlightSetupError(str(exc)) from None
-    mode_cfg = fly.mode(mode)
-    rate = options.tick_rate_hz or mode_cfg.tick_rate_hz
+    rate = options.tick_rate_hz or fly.tick_rate_hz(mode)
     if not 0.0 < rate <= 1000.0:
         raise FlightSetupError(f"tick rate {rate:g} Hz: expected 0 < rate <= 1000")
     ratio = rate / fly.log_rate_hz
     if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-9 * ratio:
         raise FlightSetupError(
             f"tick rate {rate:g} Hz must be a multiple of fly.log_rate_hz {fly.log_rate_hz:g}")
-    gains = _mode_gains(team, mode)
+    # position mode: the team file's gains only to build the (unused) law object
+    gains = team.controller.gains if position else _mode_gains(team, mode)
     loop_refusals: dict[int, str] = {}
     judge = None
-    if mode == "actuators":
+    if position:
+        stability = ("position mode: no law runs on the ground station; each autopilot closes "
+                     "every loop on board (no cascade or torque criterion applies)")
+    elif mode == "actuators":
         # The criterion needs an inertia per vehicle: the nominal one where the file gives it,
         # else the initial estimate (never the plant's true value: the GCS does not know it).
         inertias = [
@@ -367,7 +382,7 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
     slow = min(rate, MAX_POSITION_RATE_HZ)
     required = {"ATTITUDE_QUATERNION": rate, "LOCAL_POSITION_NED": slow,
                 "EXTENDED_SYS_STATE": LANDED_STATE_RATE_HZ}
-    if team.controller.derivative.method == "model":
+    if team.controller.derivative.method == "model" and not position:
         required["HIGHRES_IMU"] = slow
     from_hover = law == "adaptive" and any(v.estimates.from_hover for v in team.vehicles)
     if from_hover:  # the autopilot's own hover thrust, read while it holds (docs/gcs.md)
@@ -435,17 +450,20 @@ class Flight:
         self.ids = team.ids()
         self.period_s = 1.0 / setup.tick_rate_hz
         self.machine = MissionMachine(setup.plan, self.ids)
+        # position mode (law "autopilot") runs no law: the one built here is never stepped
+        self.position_mode = setup.mode == POSITION_MODE
+        baseline = setup.law == "baseline"
         adaptive = setup.law == "adaptive"
         vehicles = team.vehicles
-        nominal = (team.nominal_masses_kg() if not adaptive else None)
-        rhohat = np.array([v.estimates.inertia_kgm2 if adaptive else v.baseline_inertia_kgm2
+        nominal = team.nominal_masses_kg() if baseline else None
+        rhohat = np.array([v.baseline_inertia_kgm2 if baseline else v.estimates.inertia_kgm2
                            for v in vehicles], dtype=float)
         d = team.controller.derivative
         # rhohat acts only through the torque (26): in rates and attitude mode it is held
         inertia_estimated = adaptive and setup.mode in TORQUE_MODES
         self.law = TeamLaw(
             setup.gains, team.adjacency(), team.offsets_enu_m(), team.initial_mhat(), rhohat,
-            nominal_mass_kg=nominal, adaptive=adaptive, derivative=d.method,
+            nominal_mass_kg=nominal, adaptive=not baseline, derivative=d.method,
             levant_lipschitz=d.levant_lipschitz, levant_substep_s=d.levant_substep_s,
             estimate_inertia=inertia_estimated,
         )
@@ -460,7 +478,9 @@ class Flight:
         self.torque_max = torque_max_nm(self.arm_m, self.anti_torque_m, self.rotor_max_n)
         self.max_rate_radps = team.fly.rates.max_rate_radps
         self.hover = HoverThrust(self.n)
-        self._from_hover = any(v.estimates.from_hover for v in vehicles)
+        self._from_hover = adaptive and any(v.estimates.from_hover for v in vehicles)
+        self.slots: FormationSlots | None = None  # position mode: fixed at the formation start
+        self._slot_yaw_ned = np.zeros(self.n)  # position mode: the heading each slot holds
         fr = team.frame
         self.ties = TeamTies(TeamFrame(Geodetic(*fr.origin)),
                              [f"vehicle {v.id} (sysid {v.sysid})" for v in vehicles],
@@ -477,8 +497,8 @@ class Flight:
         self.limited_ticks = np.zeros(self.n, dtype=np.int64)  # rate or torque limit applied
         # Before the formation starts (PRIME), vehicles get level, zero-rate setpoints at the
         # law's own initial mass estimate times g (what the law itself would ask at rest).
-        kappa0 = (setup.gains.alpha_m * team.initial_mhat() / 2.0 if adaptive
-                  else np.asarray(nominal, dtype=float))
+        kappa0 = (np.asarray(nominal, dtype=float) if baseline
+                  else setup.gains.alpha_m * team.initial_mhat() / 2.0)
         self.prime_thrust_norm = normalised_thrust(kappa0 * GRAVITY_MPS2, self.max_thrust_n)
         self.links = [
             VehicleLinkConfig(vehicle_id=v.id, sysid=v.sysid, local_port=v.link.local_port,
@@ -505,18 +525,23 @@ class Flight:
             vehicle_ids=self.ids, sysids=team.sysids(), offsets_enu_m=team.offsets_enu_m(),
             source="fly", controller=setup.law, team=team.source_path, name=team.name,
             extra={"mode": setup.mode, "mode_choice": setup.mode_choice,
-                   "tick_rate_hz": setup.tick_rate_hz, "derivative": d.method,
-                   "gains": setup.gains._asdict(), "stability": setup.stability,
-                   "estimates": estimates_record(
+                   "tick_rate_hz": setup.tick_rate_hz,
+                   "derivative": None if self.position_mode else d.method,
+                   "gains": None if self.position_mode else setup.gains._asdict(),
+                   "stability": setup.stability,
+                   "estimates": (estimates_record(  # no law, nothing estimated
+                       mass_from=["none"] * self.n, inertia_from="none", inertia_kgm2=None,
+                       inertia_estimated=False) if self.position_mode else estimates_record(
                        mass_from=[("hover" if v.estimates.from_hover else "team") if adaptive
                                   else "nominal" for v in vehicles],
                        inertia_from="team" if adaptive else "nominal",
-                       inertia_kgm2=rhohat, inertia_estimated=inertia_estimated)},
+                       inertia_kgm2=rhohat, inertia_estimated=inertia_estimated))},
         )
         self.ticks = TickStats(setup.tick_rate_hz)
         self.ages = AgeStats(self.n)
         # delay compensation (gcs/fly/predict.py) and its measured error
-        self.audit = PredictionAudit(self.n) if team.fly.predict else None
+        self.audit = (PredictionAudit(self.n) if team.fly.predict and not self.position_mode
+                      else None)
         self._tlog: TlogWriter | None = None  # the flight's, while it runs
         self.machine_every = max(1, round(setup.tick_rate_hz / MACHINE_RATE_HZ))
         self._status_slices = StatusSlices(team.n, self.machine_every)  # the mission's statuses
@@ -712,7 +737,8 @@ class Flight:
                 await p.takeoff(self._takeoff_amsl_m(p, c.altitude_m)
                                 if profile.takeoff_altitude_amsl else c.altitude_m)
             elif c.cmd is Cmd.OFFBOARD:
-                await self._set_mode(p, profile, profile.offboard, confirm=self._mode_timeout_s)
+                await self._set_mode(p, profile, self.machine.offboard_mode(c.vehicle_id),
+                                     confirm=self._mode_timeout_s)
             elif c.cmd is Cmd.POSITION_MODE:
                 await self._set_mode(p, profile, profile.position_mode,
                                      confirm=self._mode_timeout_s)
@@ -877,10 +903,14 @@ class Flight:
         streaming = m.streaming
         if m.phase is Phase.PRIME and self._from_hover:
             self._record_hover_thrust()
-        if m.law_active and (streaming or m.phase is Phase.FORMATION):
+        if m.law_active and (streaming or m.phase is Phase.FORMATION) and self.position_mode:
+            self._fly_slots(k, sample, streaming)
+        elif m.law_active and (streaming or m.phase is Phase.FORMATION):
             command = self._run_law(k, sample, now_s)
             if command is not None:
                 self._send(command, streaming)
+        elif m.phase is Phase.PRIME and self.position_mode:
+            self._prime_slots(sample, streaming)
         elif m.phase is Phase.PRIME:
             # level and still: zero rates or torque; in attitude mode, level at the heading
             level = (self.ties.rotations_to_local(level_rotations(sample.rotation))
@@ -889,32 +919,93 @@ class Flight:
                                streaming)
 
     def _send_position_targets(self, sample: TeamSample) -> None:
-        """Go to start: each vehicle the machine names gets SET_POSITION_TARGET_LOCAL_NED, its
-        team-frame target in its own local frame (p_local = R_i^T (p_team - o_i), ENU -> NED),
-        the target's velocity as feed-forward (R_i^T v_team), and the heading it had when it
-        first got one (so it does not yaw)."""
+        """Go to start: each vehicle the machine names gets its team-frame target and the
+        target's velocity as feed-forward (`_send_position_target`), and the heading it had
+        when it first got one (so it does not yaw)."""
         targets = self.machine.position_targets
         if not targets:
             return
-        local = None
-        for i, p in enumerate(self.proxies):
+        hold = None
+        for i in range(self.n):
             vid = self.ids[i]
-            tie = self.ties.ties[i]
-            if vid not in targets or tie is None:
+            if vid not in targets or self.ties.ties[i] is None:
                 continue
             if vid not in self._goto_yaw_ned:
-                if local is None:
-                    local = self.ties.rotations_to_local(sample.rotation)
-                yaw_enu = float(yaw_rad(local[i:i + 1])[0])
-                self._goto_yaw_ned[vid] = math.remainder(math.pi / 2.0 - yaw_enu, 2.0 * math.pi)
+                if hold is None:
+                    hold = self._yaw_ned(sample, "hold")
+                self._goto_yaw_ned[vid] = float(hold[i])
             position, velocity = targets[vid]
-            ned = frames.ned_from_enu(tie.local_from_team(position))
-            v_ned = frames.ned_from_enu(tie.vectors_local_from_team(velocity))
+            self._send_position_target(i, position, velocity, self._goto_yaw_ned[vid])
+
+    def _send_position_target(self, i: int, position_enu_m: Any, velocity_enu_mps: Any,
+                              yaw_ned_rad: float, acceleration_enu_mps2: Any = None) -> None:
+        """SET_POSITION_TARGET_LOCAL_NED to vehicle i: a team-frame target in its own local frame
+        (p_local = R_i^T (p_team - o_i), ENU -> NED), velocity (and acceleration) feed-forward
+        turned the same way (R_i^T v_team); a setpoint the link refuses stops the flight."""
+        tie = self.ties.ties[i]
+        assert tie is not None  # preflight refuses an untied vehicle
+        ned = frames.ned_from_enu(tie.local_from_team(position_enu_m))
+        v_ned = frames.ned_from_enu(tie.vectors_local_from_team(velocity_enu_mps))
+        a_ned = (None if acceleration_enu_mps2 is None
+                 else frames.ned_from_enu(tie.vectors_local_from_team(acceleration_enu_mps2)))
+        try:
+            self.proxies[i].send_position_target(ned, v_ned, yaw_ned_rad, a_ned)
+        except SetpointError as exc:
+            self._setpoint_errors += 1
+            self.machine.request_abort(str(exc), operator=False)
+
+    def _yaw_ned(self, sample: TeamSample, heading: str | float) -> np.ndarray:
+        """(n,) the yaw of a position setpoint [rad, from north, clockwise] in each vehicle's
+        local frame for a `fly.heading` policy: 'hold' its heading now, 'paper' east, a number
+        that compass heading (gcs.fly.measure.command_heading_rad)."""
+        yaw_enu = command_heading_rad(heading, self.ties.rotations_to_local(sample.rotation))
+        return np.remainder(np.pi / 2.0 - yaw_enu + np.pi, 2.0 * np.pi) - np.pi
+
+    # --- position mode: the formation slots (gcs/control/slots.py) ----------------------------
+
+    def _fly_slots(self, k: int, sample: TeamSample, streaming: frozenset[int]) -> None:
+        """Position mode from the formation start: c(0) fixed from the team's positions at its
+        first tick, then every streaming vehicle gets its slot c(t) + theta_i, v_r(t), v_r'(t)
+        and its heading (fly.heading); records as the law's, with no law figures."""
+        if self._k0 is None:
+            self._start_formation(k, sample)
             try:
-                p.send_position_target(ned, v_ned, self._goto_yaw_ned[vid])
-            except SetpointError as exc:
-                self._setpoint_errors += 1
-                self.machine.request_abort(str(exc), operator=False)
+                self.slots = FormationSlots.start(sample.position_m, self._offsets_m,
+                                                  self.ref_arrays)
+            except ValueError as exc:
+                self.machine.request_abort(f"t = 0 s: {exc}", operator=False)
+                return
+            self._slot_yaw_ned = self._yaw_ned(sample, self.team.fly.heading)
+        if self.slots is None:  # the start failed: the flight is stopping, the failsafes act
+            return
+        t = (k - self._k0) * self.period_s
+        targets = self.slots.at(t)
+        self.formation_t_s = t
+        log, self._next_log_k = log_due(k, self._k0, self.setup.log_every, self._next_log_k)
+        if self.machine.phase is Phase.FORMATION:
+            fresh = fresh_mask(sample, self.team.fly.stale_after_s)
+            self.ages.record(sample.delay_s, sample.age_s, fresh, np.zeros(self.n, dtype=np.int64))
+            if log:
+                self._log(t, sample, targets.velocity_enu_mps, None)
+        self._send_slots(targets, self._slot_yaw_ned, streaming)
+
+    def _prime_slots(self, sample: TeamSample, streaming: frozenset[int]) -> None:
+        """Position mode's PRIME: the slots of a formation starting now (no vehicle acts on them
+        in its hold mode), so that PX4 has a recent setpoint when OFFBOARD is commanded."""
+        try:
+            targets = FormationSlots.start(sample.position_m, self._offsets_m,
+                                           self.ref_arrays).at(0.0)
+        except ValueError as exc:
+            self.machine.request_abort(f"prime: {exc}", operator=False)
+            return
+        self._send_slots(targets, self._yaw_ned(sample, self.team.fly.heading), streaming)
+
+    def _send_slots(self, targets: SlotTargets, yaw_ned_rad: np.ndarray,
+                    streaming: frozenset[int]) -> None:
+        for i in range(self.n):
+            if self.ids[i] in streaming:
+                self._send_position_target(i, targets.position_enu_m[i], targets.velocity_enu_mps,
+                                           float(yaw_ned_rad[i]), targets.acceleration_enu_mps2)
 
     async def _origins_loop(self) -> None:
         """Tie each vehicle's local frame to the team frame through its origin: GPS_GLOBAL_ORIGIN
@@ -1027,15 +1118,19 @@ class Flight:
                        "mission: %s", text)
         self._notes_logged = len(m.notes)
 
+    def _start_formation(self, k: int, sample: TeamSample) -> None:
+        """The formation's first tick k (t = 0): each go-to-start vehicle's distance from its
+        start position then (the records)."""
+        self._k0 = self._next_log_k = k
+        for vid, r in self.machine.goto_results.items():
+            i = self.team.index_of(vid)
+            self._start_error_m[vid] = float(np.linalg.norm(
+                sample.position_m[i] - np.asarray(r.target_enu_m)))
+
     def _run_law(self, k: int, sample: TeamSample, now_s: float) -> TeamCommand | None:
         if self._k0 is None:
-            self._k0 = self._next_log_k = k
-            fly = self.team.fly
-            self.law.heading_rad = command_heading_rad(fly.heading, sample.rotation)
-            for vid, r in self.machine.goto_results.items():
-                i = self.team.index_of(vid)
-                self._start_error_m[vid] = float(np.linalg.norm(
-                    sample.position_m[i] - np.asarray(r.target_enu_m)))
+            self._start_formation(k, sample)
+            self.law.heading_rad = command_heading_rad(self.team.fly.heading, sample.rotation)
             self._log_unmeasured_delays()
             if not self._initial_mass_from_hover(sample, now_s):
                 return self.last_command
@@ -1066,7 +1161,7 @@ class Flight:
         if self.machine.phase is Phase.FORMATION:
             self.ages.record(sample.delay_s, sample.age_s, fresh, stale_neighbours)
             if log:
-                self._log(t, sample, ref, command)
+                self._log(t, sample, ref[0], command)
         return command
 
     def _law_input(self, sample: TeamSample, now_s: float) -> TeamMeasurement:
@@ -1088,16 +1183,19 @@ class Flight:
             self.audit.record(act, predicted, held, h_pos)
         return predicted
 
-    def _log(self, t: float, sample: TeamSample, ref: np.ndarray, c: TeamCommand) -> None:
+    def _log(self, t: float, sample: TeamSample, ref_velocity_enu_mps: np.ndarray,
+             c: TeamCommand | None) -> None:
+        """One record sample; `c` None (position mode: no law) records its figures as NaN."""
         p = sample.position_m
         self.formation_error_m = formation_error_m(p, self._offsets_m)  # no (n, n, 3) array
-        self.builder.append(
-            t_s=t, position_enu_m=p, velocity_enu_mps=sample.velocity_mps,
-            reference_velocity_enu_mps=ref[0], attitude_error=c.attitude_error,
-            omega_error_radps=c.omega_error_radps, mass_estimate_kg=c.mass_estimate_kg,
-            inertia_estimate_kgm2=c.inertia_estimate_kgm2, thrust_n=c.thrust_n,
-            force_enu_n=c.force_n, mass_true_kg=true_mass_kg(self.team, t),
-        )
+        law = {} if c is None else {
+            "attitude_error": c.attitude_error, "omega_error_radps": c.omega_error_radps,
+            "mass_estimate_kg": c.mass_estimate_kg,
+            "inertia_estimate_kgm2": c.inertia_estimate_kgm2, "thrust_n": c.thrust_n,
+            "force_enu_n": c.force_n}
+        self.builder.append(t_s=t, position_enu_m=p, velocity_enu_mps=sample.velocity_mps,
+                            reference_velocity_enu_mps=ref_velocity_enu_mps,
+                            mass_true_kg=true_mass_kg(self.team, t), **law)
 
     def _send(self, c: TeamCommand, streaming: frozenset[int]) -> None:
         """Thrust / max thrust; actuators: thrust-preserving torque limit of (51), then torque /

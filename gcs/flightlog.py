@@ -40,7 +40,10 @@ from gcs.metrics import grid_indices
 
 TIMESERIES_FORMAT = "formation-flight-timeseries/1"
 SOURCES = ("sim", "fly")
-CONTROLLERS = ("adaptive", "baseline")
+#: no law ran: the vehicles' own position controllers flew their formation slots (gcs fly's
+#: position mode, gcs/control/slots.py)
+AUTOPILOT_CONTROLLER = "autopilot"
+CONTROLLERS = ("adaptive", "baseline", AUTOPILOT_CONTROLLER)
 
 #: CSV data columns after ``t_s,vehicle_id``: (column name, FlightLog field, component or None).
 CSV_COLUMNS: tuple[tuple[str, str, int | None], ...] = (
@@ -109,11 +112,13 @@ class FlightLog:
       thrust_n (k, n)                   commanded collective thrust T_i [N]
       force_enu_n (k, n, 3)             command force u_i [N]
     Static metadata: vehicle_ids (n,) and sysids (n,) ints, offsets_enu_m (n, 3) theta_i [m],
-    source "sim" | "fly", controller "adaptive" | "baseline", team (config path), name, and
+    source "sim" | "fly", controller "adaptive" | "baseline" | "autopilot" (no law: gcs fly's
+    position mode; its estimates, thrust, force and attitude errors are NaN), team (config
+    path), name, and
     ``extra``: a JSON-compatible dict of per-run figures (e.g. ``{"link": ..., "tick": ...}``).
     The figures read from it (absent in older logs): ``mode`` ("actuators" | "rates" |
-    "attitude"), ``estimates`` (``estimates_record``) and, from gcs fly, ``vehicle_kinds``
-    (one line per vehicle, e.g. "PX4 (vehicle-emu px4)").
+    "attitude" | "position"), ``estimates`` (``estimates_record``) and, from gcs fly,
+    ``vehicle_kinds`` (one line per vehicle, e.g. "PX4 (vehicle-emu px4)").
     """
 
     t_s: np.ndarray
@@ -319,7 +324,10 @@ class FlightLog:
 
 
 #: ``estimates_record`` mass_from values: where each vehicle's initial mass estimate came from
-MASS_FROM = ("hover", "team", "nominal")
+#: ("none": no estimate at all, position mode)
+MASS_FROM = ("hover", "team", "nominal", "none")
+#: ``estimates_record`` inertia_from values ("none": no estimate at all, position mode)
+INERTIA_FROM = ("team", "nominal", "none")
 
 
 def estimates_record(
@@ -333,28 +341,35 @@ def estimates_record(
     whether it integrated the inertia estimate (JSON-ready).
 
     mass_from (n,): per vehicle, "hover" (mhat_i(0) from its hover thrust, gcs fly), "team"
-    (the team file's estimates.mhat) or "nominal" (the baseline's known mass, not estimated);
-    inertia_from: "team" (estimates.inertia_kgm2) or "nominal" (the baseline's known inertia);
+    (the team file's estimates.mhat), "nominal" (the baseline's known mass, not estimated) or
+    "none" (no law, no estimate: position mode); inertia_from: "team" (estimates.inertia_kgm2),
+    "nominal" (the baseline's known inertia) or "none" (with inertia_kgm2 None);
     inertia_kgm2 (n, 3): rhohat_i(0); inertia_estimated: False when rhohat was held at
     rhohat(0) (the baseline, or a mode that does not command the torque: TORQUE_MODES).
     Raises ValueError for a value outside those.
     """
     bad = [m for m in mass_from if m not in MASS_FROM]
-    if bad or inertia_from not in ("team", "nominal"):
+    if bad or inertia_from not in INERTIA_FROM:
         raise ValueError(
-            f"estimates_record: mass_from expects {MASS_FROM} and inertia_from team or nominal, "
-            f"got {list(mass_from)} and {inertia_from!r}"
+            f"estimates_record: mass_from expects {MASS_FROM} and inertia_from one of "
+            f"{INERTIA_FROM}, got {list(mass_from)} and {inertia_from!r}"
         )
-    inertia = np.asarray(inertia_kgm2, dtype=np.float64)
-    if inertia.shape != (len(mass_from), 3):
-        raise ValueError(
-            f"estimates_record: inertia_kgm2: expected shape ({len(mass_from)}, 3), "
-            f"got {inertia.shape}"
-        )
+    if inertia_from == "none":
+        if inertia_kgm2 is not None or inertia_estimated:
+            raise ValueError("estimates_record: inertia_from 'none' has no inertia_kgm2 and "
+                             "estimates nothing")
+        inertia = None
+    else:
+        inertia = np.asarray(inertia_kgm2, dtype=np.float64)
+        if inertia.shape != (len(mass_from), 3):
+            raise ValueError(
+                f"estimates_record: inertia_kgm2: expected shape ({len(mass_from)}, 3), "
+                f"got {inertia.shape}"
+            )
     return {
         "mass_from": list(mass_from),
         "inertia_from": inertia_from,
-        "inertia_kgm2": inertia.tolist(),
+        "inertia_kgm2": None if inertia is None else inertia.tolist(),
         "inertia_estimated": bool(inertia_estimated),
     }
 
@@ -410,18 +425,19 @@ class FlightLogBuilder:
         position_enu_m: Any,
         velocity_enu_mps: Any,
         reference_velocity_enu_mps: Any,
-        attitude_error: Any,
-        omega_error_radps: Any,
-        mass_estimate_kg: Any,
-        inertia_estimate_kgm2: Any,
-        thrust_n: Any,
-        force_enu_n: Any,
+        attitude_error: Any = None,
+        omega_error_radps: Any = None,
+        mass_estimate_kg: Any = None,
+        inertia_estimate_kgm2: Any = None,
+        thrust_n: Any = None,
+        force_enu_n: Any = None,
         mass_true_kg: Any = None,
     ) -> None:
         """Record one sample (shapes as in FlightLog without the leading k). Returns when stored.
 
-        ``mass_true_kg=None`` records unknown (NaN). Raises ValueError on a wrong shape or a time
-        that is not finite or not after the previous sample.
+        A series given as None is recorded unknown (NaN): ``mass_true_kg`` without a plant, the
+        law's figures of a flight that runs no law (position mode). Raises ValueError on a wrong
+        shape or a time that is not finite or not after the previous sample.
         """
         index = len(self._t)
         t = float(t_s)
@@ -439,15 +455,16 @@ class FlightLogBuilder:
             "attitude_error": attitude_error,
             "omega_error_radps": omega_error_radps,
             "mass_estimate_kg": mass_estimate_kg,
-            "mass_true_kg": np.full(self._n, np.nan) if mass_true_kg is None else mass_true_kg,
+            "mass_true_kg": mass_true_kg,
             "inertia_estimate_kgm2": inertia_estimate_kgm2,
             "thrust_n": thrust_n,
             "force_enu_n": force_enu_n,
         }
         checked: dict[str, np.ndarray] = {}
         for name, tail in SERIES_SHAPES.items():
-            a = np.array(values[name], dtype=np.float64)
             expected = tuple(self._n if s == "n" else s for s in tail)
+            a = (np.full(expected, np.nan) if values[name] is None
+                 else np.array(values[name], dtype=np.float64))
             if a.shape != expected:
                 raise ValueError(
                     f"FlightLogBuilder.append: sample {index} (t_s = {t!r}): {name}: expected "

@@ -14,7 +14,9 @@ Files written by ``write_figures(log, out_dir)`` (Scenario I):
   fig5_attitude_errors.png    Fig. 5: tr(I - R_i^e) and |omega_i^e|
   fig6_mass_estimates.png     Fig. 6: alpha_m mhat_i / phi_i (solid) from its initial value (circle)
                               and the true mass (dashed); where the truth is known, a second panel
-                              with the estimate's error relative to it [%]
+                              with the estimate's error relative to it [%]. Figs. 5 and 6 only for
+                              a run that ran the law: gcs fly's position mode runs none, estimates
+                              nothing, and gets neither (one left from an earlier run is removed)
   fig7_inertia_estimates.png  Fig. 7: Jhat_i x / y / z; only for a run whose setpoint is the torque
                               (26) (actuators mode: gcs.config.TORQUE_MODES) or of unknown mode. In
                               rates and attitude mode the autopilot's loops make the torque, Jhat
@@ -49,7 +51,7 @@ from matplotlib.figure import Figure
 
 from gcs import metrics
 from gcs.config import TORQUE_MODES
-from gcs.flightlog import FlightLog
+from gcs.flightlog import AUTOPILOT_CONTROLLER, FlightLog
 
 logger = logging.getLogger(__name__)
 
@@ -62,12 +64,18 @@ MODE_SETPOINTS = {
     "actuators": "thrust + torque (26)",
     "rates": "thrust + body rates",
     "attitude": "thrust + attitude",
+    "position": "formation slots as position setpoints",
 }
+#: the figures of the law's own states (attitude errors, estimates): not written for a run that
+#: ran no law (gcs fly's position mode), and one left from an earlier run in the directory is
+#: removed
+LAW_FIGURES = ("fig5_attitude_errors.png", "fig6_mass_estimates.png")
 #: the title's words for estimates_record's mass_from
 MASS_FROM_TEXT = {
     "hover": "from hover thrust",
     "team": "from the team file",
     "nominal": "known (baseline, not estimated)",
+    "none": "none",
 }
 
 
@@ -102,7 +110,14 @@ def _title(fig: Figure, title: str, log: FlightLog) -> None:
 def _subtitle(log: FlightLog) -> str:
     mode = log.extra.get("mode")
     mode_text = f"{mode} mode" if mode else "mode not recorded"
-    return f"{log.name}: {log.source}, {log.controller} law, {mode_text}"
+    law = f"{log.controller} law" if law_ran(log) else "no law"
+    return f"{log.name}: {log.source}, {law}, {mode_text}"
+
+
+def law_ran(log: FlightLog) -> bool:
+    """False for a run that ran no law (controller "autopilot": gcs fly's position mode): it
+    has no attitude errors, estimates, thrust or force to draw."""
+    return log.controller != AUTOPILOT_CONTROLLER
 
 
 def _estimates(log: FlightLog) -> dict[str, Any] | None:
@@ -178,13 +193,12 @@ def _inertia_text(log: FlightLog) -> str:
 
 def run_description(log: FlightLog) -> str:
     """Three lines for a figure's title: the run (source, law, mode and what it sends), the
-    vehicles, and where the estimates started."""
+    vehicles, and where the estimates started (or that nothing was estimated)."""
     mode = log.extra.get("mode")
     sends = f" ({MODE_SETPOINTS[mode]})" if mode in MODE_SETPOINTS else ""
-    return (
-        f"{_subtitle(log)}{sends}\n{_vehicles_text(log)}\n"
-        f"{_mass_from_text(log)}; {_inertia_text(log)}"
-    )
+    estimates = (f"{_mass_from_text(log)}; {_inertia_text(log)}" if law_ran(log)
+                 else "the autopilots' own loops fly the slots; no mass or inertia estimation")
+    return f"{_subtitle(log)}{sends}\n{_vehicles_text(log)}\n{estimates}"
 
 
 def _legend(ax: Axes, n_entries: int) -> None:
@@ -418,11 +432,13 @@ def errors_semilogy(log: FlightLog) -> Figure:
     fig, axes = _new_figure(1, "Team errors (log scale)", log, 4.2)
     ax = axes[0]
     floor = np.finfo(np.float64).tiny  # a log axis cannot show exact zeros; clip to the tiniest
-    for values, label in (
+    curves = [
         (fe, r"formation error $\max_{i<j} |p_i - p_j - \theta_{ij}|$ [m]"),
         (ve, r"velocity error $\max_i |v_i - v_r|$ [m/s]"),
-        (ae, r"attitude error $\max_i$ tr$(I - R_i^e)$ [-]"),
-    ):
+    ]
+    if law_ran(log):  # the law's R^e: no such error without a law
+        curves.append((ae, r"attitude error $\max_i$ tr$(I - R_i^e)$ [-]"))
+    for values, label in curves:
         ax.semilogy(log.t_s, np.maximum(values, floor), lw=1.2, label=label)
     ax.set_ylabel("error")
     ax.legend(loc="upper right", fontsize="small")
@@ -463,9 +479,10 @@ def write_figures(
 
     Fig. 7 only where the run commanded the torque (or its mode is not recorded): in rates and
     attitude mode Jhat is not used, and a Fig. 7 already in ``out_dir`` (an earlier run's) is
-    removed so that none is read as this run's. ``pairs``: vehicle-id pairs for Fig. 3 (e.g. the
-    graph's edges); default every pair i < j. Returns the paths written, in figure order, once
-    all are on disk.
+    removed so that none is read as this run's. Figs. 5 and 6 only where the law ran (not in
+    position mode: no attitude errors, nothing estimated), removed likewise. ``pairs``:
+    vehicle-id pairs for Fig. 3 (e.g. the graph's edges); default every pair i < j. Returns the
+    paths written, in figure order, once all are on disk.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -473,22 +490,28 @@ def write_figures(
         ("fig2_formation.png", fig2_formation(log, snapshot_times_s)),
         ("fig3_position_offsets.png", fig3_position_offsets(log, pairs)),
         ("fig4_velocity_errors.png", fig4_velocity_errors(log)),
-        ("fig5_attitude_errors.png", fig5_attitude_errors(log)),
-        ("fig6_mass_estimates.png", fig6_mass_estimates(log)),
     ]
+    if law_ran(log):
+        figures += [(LAW_FIGURES[0], fig5_attitude_errors(log)),
+                    (LAW_FIGURES[1], fig6_mass_estimates(log))]
+    else:
+        for name in LAW_FIGURES:
+            _remove_stale(out / name, "this run ran no law (no attitude errors, no estimates)")
     if torque_commanded(log) is False:
-        stale = out / FIG7_NAME
-        if stale.exists():
-            stale.unlink()
-            logger.info(
-                "%s: removed: this run (%s mode) does not use the inertia estimate",
-                stale,
-                log.extra["mode"],
-            )
+        _remove_stale(out / FIG7_NAME,
+                      f"this run ({log.extra['mode']} mode) does not use the inertia estimate")
     else:
         figures.append((FIG7_NAME, fig7_inertia_estimates(log)))
     figures.append(("errors_semilogy.png", errors_semilogy(log)))
     return [_save(fig, out, name) for name, fig in figures]
+
+
+def _remove_stale(path: Path, why: str) -> None:
+    """An earlier run's figure that this run does not write: removed, so that none is read as
+    this run's."""
+    if path.exists():
+        path.unlink()
+        logger.info("%s: removed: %s", path, why)
 
 
 def write_comparison_figures(

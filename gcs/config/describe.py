@@ -103,6 +103,9 @@ def describe(team: TeamConfig) -> str:
         "where rates fails the cascade criterion at fly.link_delay_s)",
         f"     {mode_line('rates', fly.rates)} (body-rate limit "
         f"{fly.rates.max_rate_radps:g} rad/s); {mode_line('actuators', fly.actuators)}",
+        f"     position {fly.position.tick_rate_hz:g} Hz (the baseline, only by fly.mode or "
+        "--mode: each vehicle's formation slot as a position setpoint, the autopilot closes "
+        "every loop; no law, no estimation)",
         f"     start {fly.start}, end {fly.end_action}, abort {fly.abort_action}, link loss "
         f"{fly.link_loss_action}; stale after {fly.stale_after_s:g} s, lost after "
         f"{fly.link_lost_after_s:g} s in flight, link timeout {fly.link_timeout_s:g} s, data "

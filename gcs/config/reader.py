@@ -20,6 +20,7 @@ from gcs.config.schema import (
     DERIVATIVE_METHODS,
     FAULT_KINDS,
     FLY_ACTIONS,
+    FLY_CONTROL_MODES,
     FLY_HEADINGS,
     FLY_INITIAL_MASSES,
     FLY_MODES,
@@ -60,6 +61,7 @@ from gcs.config.schema import (
     MotorEfficiencyFault,
     PacketLossFault,
     PlantParams,
+    PositionModeConfig,
     ReferenceVelocity,
     ResponseConfig,
     SimConfig,
@@ -659,6 +661,15 @@ def _fly_mode(node: _Node, default: FlyModeConfig) -> FlyModeConfig:
     )
 
 
+def _position_mode(node: _Node, default: PositionModeConfig) -> PositionModeConfig:
+    """fly.position: the baseline runs no law, so its block has no gains, only its tick rate."""
+    if node.absent:
+        return default
+    node.keys("", "tick_rate_hz")
+    return PositionModeConfig(
+        node.child("tick_rate_hz").number(default.tick_rate_hz, gt=0.0, le=1000.0))
+
+
 def _response(node: _Node) -> ResponseConfig | None:
     if node.absent:
         return None
@@ -748,11 +759,12 @@ def _fly(node: _Node) -> FlyConfig:
         return d
     node.keys(
         "",
-        "mode rates actuators attitude heading start takeoff_altitude_m end_action abort_action "
-        "link_loss_action stale_after_s link_lost_after_s link_timeout_s max_tilt_rad geofence "
-        "log_rate_hz connect_timeout_s takeoff_timeout_s land_timeout_s takeoff_tolerance_m "
-        "arm_timeout_s arm_retry_s mode_timeout_s formation_check response link_delay_s "
-        "initial_mass go_to_start max_data_age_s timesync_period_s predict scheduling",
+        "mode rates actuators attitude position heading start takeoff_altitude_m end_action "
+        "abort_action link_loss_action stale_after_s link_lost_after_s link_timeout_s "
+        "max_tilt_rad geofence log_rate_hz connect_timeout_s takeoff_timeout_s land_timeout_s "
+        "takeoff_tolerance_m arm_timeout_s arm_retry_s mode_timeout_s formation_check response "
+        "link_delay_s initial_mass go_to_start max_data_age_s timesync_period_s predict "
+        "scheduling",
     )
     geofence = None
     g = node.child("geofence")
@@ -770,6 +782,7 @@ def _fly(node: _Node) -> FlyConfig:
         rates=_fly_mode(node.child("rates"), d.rates),
         actuators=_fly_mode(node.child("actuators"), d.actuators),
         attitude=_fly_mode(node.child("attitude"), d.attitude),
+        position=_position_mode(node.child("position"), d.position),
         heading=_heading(node.child("heading")),
         start=node.child("start").string(d.start, FLY_STARTS),
         takeoff_altitude_m=node.child("takeoff_altitude_m").number(
@@ -811,8 +824,8 @@ def _fly(node: _Node) -> FlyConfig:
         node.child("link_lost_after_s").fail(
             f"expected > stale_after_s {fly.stale_after_s!r}, got {fly.link_lost_after_s!r}"
         )
-    for name in MODES:
-        rate = fly.mode(name).tick_rate_hz
+    for name in FLY_CONTROL_MODES:
+        rate = fly.tick_rate_hz(name)
         ratio = rate / fly.log_rate_hz
         if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-9 * ratio:
             node.child("log_rate_hz").fail(

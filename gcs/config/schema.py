@@ -20,7 +20,11 @@ GRAVITY_MPS2 = 9.81
 THRUST_MARGIN = 1.2  # max collective thrust must be >= THRUST_MARGIN * m g when a plant is given
 LAWS = ("adaptive", "baseline")
 MODES = ("rates", "actuators", "attitude")  # attitude: gcs fly only (the autopilot's loop)
-FLY_MODES = ("auto", *MODES)  # fly.mode / gcs fly --mode
+#: gcs fly's baseline: no law, each vehicle gets its slot of the moving formation as a position
+#: setpoint and the autopilot closes every loop (gcs/control/slots.py; never chosen by auto)
+POSITION_MODE = "position"
+FLY_CONTROL_MODES = (*MODES, POSITION_MODE)  # what gcs fly can fly (fly.<mode> blocks)
+FLY_MODES = ("auto", *FLY_CONTROL_MODES)  # fly.mode / gcs fly --mode
 AUTO_MODES = ("rates", "attitude")  # what fly.mode auto chooses from, in order (gcs/app.py)
 #: the modes whose setpoint is the law's torque (26): the only ones in which the inertia estimate
 #: rhohat of (27) acts on the vehicle, so the only ones that integrate it (in rates and attitude
@@ -369,6 +373,14 @@ class FlyModeConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class PositionModeConfig:
+    """`fly.position`: the baseline's settings. It runs no law, so it has no gains: only the
+    rate at which the slot setpoints are sent (the autopilot closes every loop on board)."""
+
+    tick_rate_hz: float = 50.0
+
+
+@dataclass(frozen=True, slots=True)
 class GeofenceConfig:
     """Axis-aligned box in the world ENU frame [m]; checked during the formation phase."""
 
@@ -434,8 +446,10 @@ class FlyConfig:
     rates: FlyModeConfig = FlyModeConfig(100.0)
     actuators: FlyModeConfig = FlyModeConfig(250.0)
     attitude: FlyModeConfig = FlyModeConfig(100.0)
-    # the heading R^c is turned to about its thrust axis: "hold" (each vehicle's at the
-    # formation start), "paper" (eq. (14) as it is), or a compass heading [deg, 0 north, 90 east]
+    position: PositionModeConfig = PositionModeConfig()
+    # the heading R^c is turned to about its thrust axis (position mode: the slots' yaw): "hold"
+    # (each vehicle's at the formation start), "paper" (eq. (14) as it is: east), or a compass
+    # heading [deg, 0 north, 90 east]
     heading: str | float = "hold"
     start: str = "auto"  # auto: take off the vehicles that report being on the ground
     takeoff_altitude_m: float = 2.5  # above home
@@ -474,8 +488,12 @@ class FlyConfig:
     go_to_start: GoToStartConfig = GoToStartConfig()
 
     def mode(self, name: str) -> FlyModeConfig:
-        """The settings of control mode `name` ('rates', 'actuators' or 'attitude')."""
+        """The settings of law mode `name` ('rates', 'actuators' or 'attitude')."""
         return {"rates": self.rates, "actuators": self.actuators, "attitude": self.attitude}[name]
+
+    def tick_rate_hz(self, name: str) -> float:
+        """The tick rate of control mode `name` (FLY_CONTROL_MODES: a law mode or position)."""
+        return self.position.tick_rate_hz if name == POSITION_MODE else self.mode(name).tick_rate_hz
 
 
 FRAME_VEHICLES = ("own", "shared")

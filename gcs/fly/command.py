@@ -36,8 +36,9 @@ Fly the team of a team file in formation over MAVLink, then land it:
   arm        arm and take off the vehicles on the ground (fly.start)
   go to      fly each vehicle to its start position (fly.go_to_start)
   offboard   stream setpoints, then switch every vehicle to its offboard mode
-             (PX4 OFFBOARD, ArduPilot GUIDED_NOGPS)
-  formation  fly the paper's law for mission.duration_s
+             (PX4 OFFBOARD, ArduPilot GUIDED_NOGPS; in position mode GUIDED)
+  formation  fly the paper's law for mission.duration_s (position mode: each
+             vehicle's formation slot as a position setpoint, no law)
   land       land every vehicle, or hold (fly.end_action)
 Ctrl-C or the abort key (q or a) stops the flight with fly.abort_action (land
 by default). The records (report.json, timeseries.csv, flight.tlog, figures)
@@ -61,6 +62,7 @@ exit status:
 examples:
   gcs fly --team configs/square4.yaml --emulators
   gcs fly --team configs/square4.yaml --mode rates --end-action hold
+  gcs fly --team configs/square4.yaml --mode position --emulators
   gcs fly --team configs/square4_massdrop.yaml --controller baseline --out runs/drop
 
 docs/gcs.md describes the sequence, the modes and the safety rules."""
@@ -73,10 +75,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--team", required=True, type=Path, metavar="FILE", help="team config (YAML)")
     p.add_argument("--mode", choices=FLY_MODES, default=None,
                    help="setpoints sent to the vehicles: thrust + body rates, thrust + torque, "
-                        "thrust + attitude, or auto: rates, or attitude where the link's delay "
-                        "needs it (default: the file's fly.mode, auto)")
+                        "thrust + attitude, each vehicle's formation slot as a position "
+                        "setpoint (position: no law, the autopilot's loops), or auto: rates, or "
+                        "attitude where the link's delay needs it (default: the file's fly.mode, "
+                        "auto)")
     p.add_argument("--controller", choices=("adaptive", "baseline"), default=None,
-                   help="law (default: the file's controller.law)")
+                   help="law (default: the file's controller.law; not with --mode position)")
     p.add_argument("--tick-rate-hz", type=float, default=None,
                    help="control tick (default: the file's fly.<mode>.tick_rate_hz)")
     p.add_argument("--duration-s", type=float, default=None,

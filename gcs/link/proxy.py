@@ -75,6 +75,8 @@ TYPE_MASK_ATTITUDE_THRUST = 7  # roll/pitch/yaw rates ignored: attitude + thrust
 #: SET_POSITION_TARGET_LOCAL_NED: acceleration (64, 128, 256) and yaw rate (2048) ignored:
 #: position, velocity (the position loop's feed-forward) and yaw
 TYPE_MASK_POSITION_VELOCITY_YAW = 64 | 128 | 256 | 2048
+#: ... and with the acceleration as feed-forward too (position mode's slots): yaw rate ignored
+TYPE_MASK_POSITION_VELOCITY_ACCELERATION_YAW = 2048
 MAV_FRAME_LOCAL_NED = 1
 AUTOPILOT_VERSION_ID = 148  # REQUEST_MESSAGE param1
 FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 forcing arm/disarm (PX4; ArduPilot disarm)
@@ -829,18 +831,25 @@ class VehicleProxy:
         self._n["setpoints_sent"] += 1
 
     def send_position_target(self, position_ned_m: ArrayLike, velocity_ned_mps: ArrayLike,
-                             yaw_ned_rad: float) -> None:
+                             yaw_ned_rad: float,
+                             acceleration_ned_mps2: ArrayLike | None = None) -> None:
         """SET_POSITION_TARGET_LOCAL_NED, MAV_FRAME_LOCAL_NED (the vehicle's own local frame:
-        PX4's and ArduPilot's EKF origin): position [m, NED], velocity feed-forward [m/s, NED]
-        and yaw [rad, from north, clockwise], accelerations and yaw rate ignored (type_mask
-        2496); returns immediately."""
+        PX4's and ArduPilot's EKF origin): position [m, NED], velocity feed-forward [m/s, NED],
+        yaw [rad, from north, clockwise] and, when given, acceleration feed-forward [m/s^2, NED]
+        (type_mask 2048: yaw rate ignored), else accelerations ignored too (type_mask 2496);
+        returns immediately."""
         pos = self._finite(position_ned_m, (3,), "position_ned_m")
         vel = self._finite(velocity_ned_mps, (3,), "velocity_ned_mps")
         yaw = self._finite(yaw_ned_rad, (), "yaw_ned_rad")
+        if acceleration_ned_mps2 is None:
+            mask, acc = TYPE_MASK_POSITION_VELOCITY_YAW, np.zeros(3)
+        else:
+            mask = TYPE_MASK_POSITION_VELOCITY_ACCELERATION_YAW
+            acc = self._finite(acceleration_ned_mps2, (3,), "acceleration_ned_mps2")
         self._send(self._codec.mav.set_position_target_local_ned_encode(
             self._time_boot_ms(), self.config.sysid, self.config.compid, MAV_FRAME_LOCAL_NED,
-            TYPE_MASK_POSITION_VELOCITY_YAW, *(float(x) for x in pos), *(float(x) for x in vel),
-            0.0, 0.0, 0.0, float(yaw), 0.0))
+            mask, *(float(x) for x in pos), *(float(x) for x in vel),
+            *(float(x) for x in acc), float(yaw), 0.0))
         self._n["setpoints_sent"] += 1
 
     def send_actuator_controls(self, torque_flu_norm: ArrayLike, thrust_norm: float) -> None:

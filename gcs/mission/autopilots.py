@@ -17,6 +17,10 @@ recorded (docs/mavlink.md, docs/emulator.md; docs/gcs.md says why each mode was 
   and GUIDED_NOGPS, and ignores it in every other mode). Go-to-start: SET_POSITION_TARGET_LOCAL_NED
   in GUIDED (relative to its EKF origin), where its takeoff leaves it. Preflight: GUID_OPTIONS
   bit 3 (8) must be set, otherwise `thrust` is read as a climb rate.
+
+Position mode (`gcs fly --mode position`, the baseline) sends the formation's slots as
+SET_POSITION_TARGET_LOCAL_NED, flown where the go-to-start flies them (`flies_in`: PX4 OFFBOARD,
+ArduPilot GUIDED, never GUIDED_NOGPS); it sends no thrust, so GUID_OPTIONS is not read for it.
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+from gcs.config.schema import POSITION_MODE
 from gcs.link.enums import mode_name
 from gcs.mission.cascade import ARDUPILOT_RESPONSE, PX4_RESPONSE, AutopilotResponse
 
@@ -49,12 +54,16 @@ class ModeSpec:
 
 @dataclass(frozen=True, slots=True)
 class ParamRequirement:
-    """A vehicle parameter whose bits in `mask` must all be set before flying; `fix` says what to
-    do and why, in one line."""
+    """A vehicle parameter whose bits in `mask` must all be set before flying one of
+    `control_modes` (empty: every mode); `fix` says what to do and why, in one line."""
 
     name: str
     mask: int
     fix: str
+    control_modes: frozenset[str] = frozenset()
+
+    def needed_for(self, control_mode: str) -> bool:
+        return not self.control_modes or control_mode in self.control_modes
 
     def problem(self, vehicle: str, value: float | None) -> str | None:
         """One line naming vehicle, parameter, value and fix; None when satisfied."""
@@ -122,6 +131,16 @@ class AutopilotProfile:
         """Name of a HEARTBEAT custom_mode, e.g. 'OFFBOARD', 'AUTO_LOITER', 'GUIDED_NOGPS'."""
         return mode_name(self.autopilot, custom_mode)
 
+    def flies_in(self, control_mode: str) -> ModeSpec:
+        """The mode the vehicle flies `control_mode`'s setpoints in: position mode's position
+        setpoints in `position_mode` (PX4 OFFBOARD, ArduPilot GUIDED), the law's attitude, rate
+        or actuator setpoints in `offboard` (PX4 OFFBOARD, ArduPilot GUIDED_NOGPS)."""
+        return self.position_mode if control_mode == POSITION_MODE else self.offboard
+
+    def params_for(self, control_mode: str) -> tuple[ParamRequirement, ...]:
+        """The required parameters that flying `control_mode` depends on."""
+        return tuple(r for r in self.required_params if r.needed_for(control_mode))
+
     def needs_version(self, control_mode: str) -> bool:
         """True when flying `control_mode` depends on the firmware version (AUTOPILOT_VERSION)."""
         return control_mode == "actuators" and self.actuators_until is not None
@@ -134,7 +153,8 @@ class AutopilotProfile:
         read or no answer); one line per problem, naming the vehicle and the fix."""
         out: list[str] = []
         if control_mode not in self.control_modes:
-            allowed = " or ".join(sorted(self.control_modes))
+            # the law's modes it flies (position mode is the baseline, not a fix for the law)
+            allowed = " or ".join(sorted(self.control_modes - {POSITION_MODE}))
             out.append(f"{vehicle}: {self.name} does not act on {control_mode} setpoints; fly "
                        f"it with --mode {allowed}")
         elif self.needs_version(control_mode):
@@ -147,7 +167,7 @@ class AutopilotProfile:
                 out.append(f"{vehicle}: {self.name} {version_text(version)} ignores "
                            f"SET_ACTUATOR_CONTROL_TARGET (only <= {until} acts on it); fly it "
                            "with --mode rates")
-        for req in self.required_params:
+        for req in self.params_for(control_mode):
             text = req.problem(vehicle, None if params is None else params.get(req.name))
             if text is not None:
                 out.append(text)
@@ -165,7 +185,8 @@ PX4 = AutopilotProfile(
     takeoff_altitude_amsl=True,
     setpoint_modes=frozenset({"OFFBOARD"}),
     hold_before_prime=False,
-    control_modes=frozenset({"rates", "actuators", "attitude"}),  # actuators: PX4 <= 1.13
+    # actuators: PX4 <= 1.13; position: SET_POSITION_TARGET_LOCAL_NED in OFFBOARD
+    control_modes=frozenset({"rates", "actuators", "attitude", POSITION_MODE}),
     actuators_until=(1, 13),  # PX4 1.14 moved actuator control to its ROS 2 bridge
     prearm_bit_reliable=True,
     response=PX4_RESPONSE,
@@ -176,7 +197,8 @@ PX4 = AutopilotProfile(
 #: GUID_OPTIONS bit 3: SET_ATTITUDE_TARGET `thrust` is normalised thrust, not a climb rate.
 GUID_OPTIONS_THRUST = ParamRequirement(
     "GUID_OPTIONS", 8,
-    "set GUID_OPTIONS bit 3 (8): otherwise ArduPilot reads thrust as a climb rate")
+    "set GUID_OPTIONS bit 3 (8): otherwise ArduPilot reads thrust as a climb rate",
+    frozenset({"rates", "attitude"}))  # position mode sends no thrust
 
 ARDUPILOT = AutopilotProfile(
     name="ArduPilot Copter", autopilot=ARDUPILOT_AUTOPILOT, family="ardupilot",
@@ -188,7 +210,8 @@ ARDUPILOT = AutopilotProfile(
     takeoff_altitude_amsl=False,
     setpoint_modes=frozenset({"GUIDED", "GUIDED_NOGPS"}),
     hold_before_prime=True,
-    control_modes=frozenset({"rates", "attitude"}),  # SET_ATTITUDE_TARGET only
+    # SET_ATTITUDE_TARGET in GUIDED_NOGPS; position: SET_POSITION_TARGET_LOCAL_NED in GUIDED
+    control_modes=frozenset({"rates", "attitude", POSITION_MODE}),
     position_mode=ModeSpec("GUIDED", 4),  # where it is after NAV_TAKEOFF
     position_needs_stream=False,
     required_params=(GUID_OPTIONS_THRUST,),

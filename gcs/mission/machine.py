@@ -5,7 +5,9 @@ STOPPING -> DONE.
 
 Each vehicle is driven through its autopilot's profile (gcs.mission.autopilots, chosen from its
 HEARTBEAT.autopilot and fixed at preflight): "offboard" below means the profile's offboard mode
-(PX4 OFFBOARD, ArduPilot GUIDED_NOGPS), "hold" its hold mode (PX4 AUTO_LOITER, ArduPilot BRAKE).
+(PX4 OFFBOARD, ArduPilot GUIDED_NOGPS), or, when the plan's control mode is `position` (the
+baseline: position setpoints, no law), its position mode (PX4 OFFBOARD, ArduPilot GUIDED;
+`offboard_mode`); "hold" its hold mode (PX4 AUTO_LOITER, ArduPilot BRAKE).
 
 The machine never touches a socket or a clock. The composition root (gcs/app.py) feeds it
 `on_tick(now_s, team)` with every vehicle's `VehicleStatus` as received, `on_result(...)` when a
@@ -56,7 +58,7 @@ from dataclasses import dataclass, field
 from enum import Enum
 
 from gcs.link.enums import LandedState
-from gcs.mission.autopilots import PX4, AutopilotProfile, profile_for
+from gcs.mission.autopilots import PX4, AutopilotProfile, ModeSpec, profile_for
 from gcs.mission.goto import (
     GotoResult,
     GoToStart,
@@ -114,7 +116,8 @@ class Cmd(Enum):
     ARM_MODE = "arm_mode"  # the profile's arm_mode (PX4 Hold, ArduPilot GUIDED), confirmed
     ARM = "arm"  # confirmed when HEARTBEAT shows armed
     TAKEOFF = "takeoff"  # altitude_m above home
-    OFFBOARD = "offboard"  # the profile's offboard mode (PX4 OFFBOARD, ArduPilot GUIDED_NOGPS)
+    OFFBOARD = "offboard"  # the profile's offboard mode (PX4 OFFBOARD, ArduPilot GUIDED_NOGPS;
+    # in position mode its position mode: ArduPilot GUIDED), MissionMachine.offboard_mode
     POSITION_MODE = "position_mode"  # the profile's position mode (PX4 OFFBOARD, ArduPilot
     # GUIDED), for the go-to-start position setpoints; confirmed
     HOLD = "hold"  # the profile's hold mode (PX4 AUTO_LOITER, ArduPilot BRAKE)
@@ -157,7 +160,8 @@ class MissionPlan:
 
     duration_s: float
     rules: SafetyRules = SafetyRules()
-    control_mode: str = "rates"  # rates | actuators: which setpoints the vehicles will get
+    control_mode: str = "rates"  # rates | actuators | attitude | position: which setpoints the
+    # vehicles will get, and so the mode they fly them in (AutopilotProfile.flies_in)
     start: str = "auto"  # auto | in_air | takeoff
     takeoff_altitude_m: float = 2.5
     end_action: str = "land"
@@ -334,9 +338,15 @@ class MissionMachine:
         found = profile_for(v.status.autopilot) if v.status is not None else None
         return found if found is not None else PX4
 
+    def offboard_mode(self, vehicle_id: int) -> ModeSpec:
+        """The mode the vehicle flies the formation's setpoints in (Cmd.OFFBOARD): the profile's
+        offboard mode, or in position mode its position mode (ArduPilot GUIDED, not
+        GUIDED_NOGPS; PX4 OFFBOARD either way)."""
+        return self.profile(vehicle_id).flies_in(self.plan.control_mode)
+
     def _in_offboard(self, vehicle_id: int) -> bool:
         s = self._v[vehicle_id].status
-        return s is not None and s.mode == self.profile(vehicle_id).offboard.name
+        return s is not None and s.mode == self.offboard_mode(vehicle_id).name
 
     def formation_time_s(self, now_s: float) -> float | None:
         return None if self.formation_t0_s is None else now_s - self.formation_t0_s
@@ -374,7 +384,7 @@ class MissionMachine:
         if result.cmd is Cmd.OFFBOARD:
             v.offboard_acked = result.ok
             if not result.ok and self.phase is Phase.FORMATION:
-                name = self.profile(result.vehicle_id).offboard.name
+                name = self.offboard_mode(result.vehicle_id).name
                 self._begin_stop(
                     [Problem(result.vehicle_id, f"vehicle {result.vehicle_id}: {name} refused: "
                                                 f"{result.detail}")],
@@ -604,7 +614,7 @@ class MissionMachine:
             if profile is None or s.link != "alive":
                 continue
             v.profile = profile
-            names = tuple(r.name for r in profile.required_params)
+            names = tuple(r.name for r in profile.params_for(self.plan.control_mode))
             if names and not v.params_asked:
                 v.params_asked = True
                 out.append(self._send(s.vehicle_id, Cmd.READ_PARAMS, names=names))
@@ -851,7 +861,7 @@ class MissionMachine:
             s = v.status
             if v.seen_offboard and s is not None and not self._in_offboard(vid) \
                     and s.link == "alive":
-                name = self.profile(vid).offboard.name
+                name = self.offboard_mode(vid).name
                 problems.append(Problem(vid, f"{s.name}: left {name} (now {s.mode or '?'})",
                                         "mode"))
         if problems:
@@ -859,7 +869,7 @@ class MissionMachine:
             return self._drive()
         if t >= self.plan.duration_s:
             never = [Problem(vid, f"{v.status.name}: never reported "
-                                  f"{self.profile(vid).offboard.name} during the formation "
+                                  f"{self.offboard_mode(vid).name} during the formation "
                                   f"(reports {v.status.mode or '?'})", "mode")
                      for vid, v in self._v.items() if not v.seen_offboard and v.status is not None]
             if never:
@@ -878,7 +888,7 @@ class MissionMachine:
             for vid, v in self._v.items():
                 s = v.status
                 if not v.seen_offboard and s is not None and s.link == "alive":
-                    name = self.profile(vid).offboard.name
+                    name = self.offboard_mode(vid).name
                     out.append(Problem(vid, f"{s.name}: never reported {name} in {t:.1f} s of "
                                             f"formation (reports {s.mode or '?'}): it does not "
                                             "fly the setpoints", "mode"))

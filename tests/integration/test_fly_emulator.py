@@ -18,7 +18,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -45,9 +45,11 @@ def team_file(
     massdrop: bool = False,
     autopilot: str = "nominal",
     loaded_links: bool = False,
+    origins_enu_m: Sequence[Sequence[float]] | None = None,
 ) -> Path:
     """square4 (or its Scenario II variant) on free ports: vehicle i binds bind_base + i and the
-    GCS listens on gcs_base + i (the team file's link keys, which the emulator reads too)."""
+    GCS listens on gcs_base + i (the team file's link keys, which the emulator reads too); one
+    shared EKF origin, or (`origins_enu_m`) each vehicle's own at that point of the team frame."""
     gcs_base = free_udp_port_block(4)
     data = yaml.safe_load(
         (ROOT / "configs" / ("square4_massdrop.yaml" if massdrop else "square4.yaml")).read_text()
@@ -61,6 +63,10 @@ def team_file(
     # The law and the link against the paper's nominal model (actuator setpoints honoured, no
     # sensor noise); the px4 and ardupilot personalities are flown in test_fly_personalities.py
     data["emulator"] = {"autopilot": autopilot, "origin": "shared"}
+    if origins_enu_m is not None:
+        data["emulator"]["origin"] = "own"
+        for v, origin in zip(data["vehicles"], origins_enu_m, strict=True):
+            v["emulator"] = {"origin_enu_m": list(origin)}
     if autopilot == "nominal":
         # the paper's vehicle, declared (fly.response): its stiff loops fly the paper's position
         # gains and the scenario's initial estimates (the cascade criterion passes k_eps 6 / 4)
@@ -213,12 +219,7 @@ def test_scenario_one_rates_mode_at_100_hz_with_origins_50_m_apart(tmp_path):
     GPS_GLOBAL_ORIGIN it reads (docs/gcs.md, "One team frame"); the same Scenario I figures as
     with one shared origin (the actuators-mode flight below keeps that)."""
     base = free_udp_port_block(4)
-    team = team_file(tmp_path, base, duration_s=32.0)
-    data = yaml.safe_load(team.read_text())
-    data["emulator"]["origin"] = "own"
-    for v, origin in zip(data["vehicles"], ORIGINS_ENU_M, strict=True):
-        v["emulator"] = {"origin_enu_m": origin}
-    team.write_text(yaml.safe_dump(data, sort_keys=False))
+    team = team_file(tmp_path, base, duration_s=32.0, origins_enu_m=ORIGINS_ENU_M)
     with emulators(team, base, tmp_path):
         gcs = Gcs(team, tmp_path / "run", "--mode", "rates", "--end-action", "hold")
         code, out = gcs.finish(180)

@@ -62,8 +62,14 @@ def test_ardupilot_profile_holds_the_spec_facts():
     assert not a.takeoff_altitude_amsl and a.takeoff_done_modes == {"GUIDED"}
     assert a.setpoint_modes == {"GUIDED", "GUIDED_NOGPS"} and a.hold_before_prime
     assert (a.force_arm_magic, a.force_disarm_magic) == (2989, 21196)
-    assert a.control_modes == {"rates", "attitude"}
+    assert a.control_modes == {"rates", "attitude", "position"}
     assert a.required_params == (GUID_OPTIONS_THRUST,) and GUID_OPTIONS_THRUST.mask == 8
+    # the formation's setpoints: SET_ATTITUDE_TARGET in GUIDED_NOGPS; position mode's
+    # SET_POSITION_TARGET_LOCAL_NED in GUIDED (GUIDED_NOGPS takes no position target)
+    assert a.flies_in("rates") == a.flies_in("attitude") == a.offboard
+    assert (a.flies_in("position").name, a.flies_in("position").number) == ("GUIDED", 4)
+    # GUID_OPTIONS bit 3 says how thrust is read: position mode sends none
+    assert a.params_for("rates") == (GUID_OPTIONS_THRUST,) and a.params_for("position") == ()
 
 
 def test_px4_profile_is_what_gcs_fly_did_before():
@@ -76,7 +82,8 @@ def test_px4_profile_is_what_gcs_fly_did_before():
     assert not p.arm_retryable("DENIED", "Arming denied: not landed")
     assert not p.arm_retryable("FAILED", "Arm: x") and not p.arm_retryable("TIMEOUT", "")
     assert not p.hold_before_prime and not p.required_params
-    assert p.control_modes == {"rates", "actuators", "attitude"}
+    assert p.control_modes == {"rates", "actuators", "attitude", "position"}
+    assert p.flies_in("position") == p.flies_in("rates") == p.offboard  # OFFBOARD either way
     assert (p.force_arm_magic, p.force_disarm_magic) == (21196, 21196)
 
 
@@ -185,6 +192,7 @@ class World:
         self.ignore: set[tuple[int, Cmd]] = set()  # acknowledged, without effect
         self.silent: set[int] = set()
         self.acted_before_formation: list[int] = []
+        self.modes: dict[int, list[str]] = {}  # per vehicle, each mode a command put it in
 
     def cmds(self, vid: int | None = None) -> list[Cmd]:
         return [c.cmd for c in self.sent if vid is None or c.vehicle_id == vid]
@@ -210,8 +218,8 @@ class World:
                                        landed_state=2,
                                        position_enu_m=(s.position_enu_m[0], 0.0, c.altitude_m)
                                        ), True, ()
-        if c.cmd is Cmd.OFFBOARD:
-            return dataclasses.replace(s, mode="GUIDED_NOGPS" if ardu else "OFFBOARD"), True, ()
+        if c.cmd is Cmd.OFFBOARD:  # the mode the app commands for it (Flight._execute)
+            return dataclasses.replace(s, mode=self.m.offboard_mode(c.vehicle_id).name), True, ()
         if c.cmd is Cmd.HOLD:
             return dataclasses.replace(s, mode="BRAKE" if ardu else "AUTO_LOITER"), True, ()
         if c.cmd is Cmd.LAND:
@@ -226,6 +234,8 @@ class World:
         for c in cmds:
             self.sent.append(c)
             s, ok, values = self._obey(c, self.v[c.vehicle_id])
+            if s.mode != self.v[c.vehicle_id].mode:
+                self.modes.setdefault(c.vehicle_id, []).append(s.mode)
             self.v[c.vehicle_id] = s
             result = CommandResult(c.vehicle_id, c.cmd, ok, "" if ok else "no", values)
             self.apply(self.m.on_result(result))
@@ -236,11 +246,13 @@ class World:
                 for vid, s in self.v.items()]
         self.apply(self.m.on_tick(self.t, team))
         for vid, s in self.v.items():
-            # THE invariant: a vehicle in its offboard mode with its link up gets setpoints
-            offboard = self.m.profile(vid).offboard.name
+            # THE invariant: a vehicle the GCS put in its offboard mode (position mode:
+            # ArduPilot GUIDED, where its takeoff also leaves it) with its link up gets setpoints
+            offboard = self.m.offboard_mode(vid).name
+            commanded = {Cmd.OFFBOARD, Cmd.POSITION_MODE} & set(self.cmds(vid))
             # (law setpoints, or the go-to-start's position setpoints; never both at once)
             assert not self.m.streaming & set(self.m.position_targets)
-            if s.mode == offboard and vid not in self.silent and not self.m.done:
+            if s.mode == offboard and commanded and vid not in self.silent and not self.m.done:
                 assert vid in self.m.streaming or vid in self.m.position_targets, \
                     f"vehicle {vid} in {offboard} without setpoints"
             # and priming is inert: before the formation no streamed setpoint is acted on
@@ -310,6 +322,40 @@ def test_ardupilot_team_on_the_ground_takes_off_in_guided_brakes_flies_guided_no
         "phase preflight", "phase arm", "phase takeoff", "phase hold", "phase prime",
         "phase formation", "phase stopping", "phase done"]
     assert w.acted_before_formation == []
+
+
+def test_position_mode_flies_ardupilot_in_guided_and_needs_no_guid_options():
+    # GIVEN two ArduPilot Copters on the ground with GUID_OPTIONS bit 3 clear (thrust read as a
+    # climb rate: the law's modes refuse them), flown in position mode
+    m = machine(takeoff_altitude_m=3.0, control_mode="position")
+    w = World(m, {1: 3, 2: 3}, on_ground=True, guid_options=0.0)
+    # WHEN the mission runs to its end
+    w.run(40.0)
+    # THEN it completes: no parameter read (position setpoints carry no thrust), take off in
+    # GUIDED, BRAKE while priming, the formation in GUIDED (not GUIDED_NOGPS, which takes no
+    # position target), LAND
+    assert m.outcome.exit_code == EXIT_OK, m.outcome
+    for vid in (1, 2):
+        assert w.cmds(vid) == [Cmd.CONFIGURE, Cmd.ARM_MODE, Cmd.ARM, Cmd.TAKEOFF, Cmd.HOLD,
+                               Cmd.OFFBOARD, Cmd.LAND]
+        assert w.modes[vid] == ["GUIDED", "BRAKE", "GUIDED", "LAND"]
+    assert w.acted_before_formation == []
+
+
+def test_position_mode_stops_an_ardupilot_vehicle_that_leaves_guided():
+    # GIVEN an ArduPilot Copter and a PX4 vehicle in the formation of position mode
+    m = machine(duration_s=60.0, control_mode="position")
+    w = World(m, {1: 3, 2: 12})
+    while m.phase is not Phase.FORMATION:
+        w.tick()
+    w.run(1.0)
+    assert (w.v[1].mode, w.v[2].mode) == ("GUIDED", "OFFBOARD")
+    # WHEN the copter switches to GUIDED_NOGPS on its own (the law's mode, not this one)
+    w.v[1] = dataclasses.replace(w.v[1], mode="GUIDED_NOGPS")
+    w.run(10.0)
+    # THEN the flight stops naming the mode it left
+    assert m.outcome.exit_code == EXIT_ABORTED
+    assert "vehicle 1 (sysid 1): left GUIDED (now GUIDED_NOGPS)" in m.outcome.reason
 
 
 def test_guid_options_without_bit_3_refuses_to_fly_naming_vehicle_and_fix():

@@ -530,7 +530,7 @@ ERRORS = [
         r"faults\[0\]\.x: unknown key; allowed keys: kind, vehicle, at_s, fraction",
     ),
     ("faults", {"kind": "mass_drop"}, r"faults: expected a list of faults, got a mapping"),
-    ("fly", [1], r"^<dict>: fly: expected a mapping with keys mode, rates, actuators, attitude, heading, start, "),
+    ("fly", [1], r"^<dict>: fly: expected a mapping with keys mode, rates, actuators, attitude, position, heading, start, "),
     ("fly.rates.tick_hz", 100, r"fly\.rates\.tick_hz: unknown key; did you mean 'tick_rate_hz'"),
     ("fly.rates.tick_rate_hz", 0, r"fly\.rates\.tick_rate_hz: expected a value in \(0, 1000\], "
      r"got 0\.0$"),
@@ -564,7 +564,14 @@ ERRORS = [
     ("fly.scheduling", "fast", r"fly\.scheduling: expected one of 'auto', 'realtime', 'raised', "
      r"'normal', got string 'fast'"),
     ("fly.mode", "torque", r"fly\.mode: expected one of 'auto', 'rates', 'actuators', 'attitude', "
-     r"got string 'torque'"),
+     r"'position', got string 'torque'"),
+    # position mode runs no law: its block has a tick rate and nothing else
+    ("fly.position", {"alpha_p": 1.0}, r"fly\.position\.alpha_p: unknown key; allowed keys: "
+     r"tick_rate_hz$"),
+    ("fly.position.tick_rate_hz", 0, r"fly\.position\.tick_rate_hz: expected a value in "
+     r"\(0, 1000\], got 0\.0$"),
+    ("fly.position.tick_rate_hz", 30, r"fly\.log_rate_hz: must divide "
+     r"fly\.position\.tick_rate_hz 30 \(a whole number of ticks per sample\), got 50$"),
 ]
 
 
@@ -1004,6 +1011,34 @@ def test_fly_heading_and_the_attitude_mode_load_and_round_trip(heading):
     # the defaults: hold the heading, yaw rate limited on its own to 0.5 rad/s
     default = team_from_dict(base()).fly
     assert default.heading == "hold" and default.rates.max_yaw_rate_radps == 0.5
+
+
+def test_fly_position_block_defaults_loads_and_round_trips():
+    # GIVEN no fly.position THEN position mode ticks at 50 Hz (the log rate's multiple)
+    default = team_from_dict(base()).fly
+    assert default.position.tick_rate_hz == 50.0 and default.tick_rate_hz("position") == 50.0
+    assert default.tick_rate_hz("rates") == default.rates.tick_rate_hz
+    # WHEN the file chooses position mode and a rate THEN both are read and written back
+    data = edit(edit(base(), "fly.mode", "position"), "fly.position.tick_rate_hz", 100)
+    team = team_from_dict(data)
+    assert (team.fly.control_mode, team.fly.position.tick_rate_hz) == ("position", 100.0)
+    text = team_to_yaml(team)
+    assert "\n  position:\n    tick_rate_hz: 100.0\n" in text
+    assert team_from_yaml(text, "<rt>").fly == team.fly
+    # AND gcs check says what the mode does
+    assert "position 100 Hz (the baseline, only by fly.mode or --mode: " in describe(team)
+
+
+def test_a_bad_position_block_in_a_file_names_its_line(tmp_path):
+    # GIVEN square4.yaml with a position block whose rate is negative
+    text = SQUARE4.read_text().replace(
+        "  attitude: {tick_rate_hz: 100, alpha_p: 1.5, c_p: 0.6}\n",
+        "  attitude: {tick_rate_hz: 100, alpha_p: 1.5, c_p: 0.6}\n  position: {tick_rate_hz: -5}\n")
+    line = 1 + text.split("position: {tick_rate_hz: -5}")[0].count("\n")
+    # WHEN loaded THEN file, key path, problem and line
+    with pytest.raises(ConfigError, match=rf"team\.yaml: fly\.position\.tick_rate_hz: expected a "
+                       rf"value in \(0, 1000\], got -5\.0 \(line {line}\)$"):
+        load_team(write(tmp_path, text))
 
 
 def test_mhat_from_hover_needs_a_mass_and_round_trips():

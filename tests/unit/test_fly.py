@@ -4,6 +4,7 @@ tick statistics, and the distributed structure of the team computation."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 
 import numpy as np
@@ -479,3 +480,71 @@ def test_the_flight_integrates_jhat_only_where_it_sends_the_torque(tmp_path, mod
     assert log.extra["mode"] == mode
     assert log.extra["estimates"] == {"mass_from": ["hover"] * n, "inertia_from": "team",
                                       "inertia_kgm2": j0.tolist(), "inertia_estimated": estimated}
+
+
+# --- position mode: the baseline (gcs/control/slots.py) ---------------------------------------
+
+
+def test_position_mode_is_prepared_without_law_criterion_or_hover_estimate():
+    # GIVEN Scenario I (fly.initial_mass from_hover, a delay compensation, the law's gains)
+    team = load_team(CONFIGS / "square4.yaml")
+    setup = prepare(team, FlyOptions(out_dir=OUT, mode="position"))
+    # THEN it flies position mode at fly.position's rate, with no law ("autopilot")
+    assert (setup.mode, setup.law, setup.tick_rate_hz) == ("position", "autopilot", 50.0)
+    assert setup.mode_choice == "mode position (--mode)" and setup.log_every == 1
+    # AND asks only for what the slots and the safety rules read: no IMU (no u', u''), no
+    # ATTITUDE_TARGET (no mhat(0) from the hover), hence no longer PRIME for it
+    assert setup.requested_rates_hz == {"ATTITUDE_QUATERNION": 50.0, "LOCAL_POSITION_NED": 50.0,
+                                        "EXTENDED_SYS_STATE": 5.0}
+    assert setup.plan.prime_s == 1.5 and setup.plan.control_mode == "position"
+    assert not any(v.estimates.from_hover for v in setup.team.vehicles)
+    # AND no loop criterion refuses a vehicle or judges its link delay
+    assert setup.plan.rules.loop_refusals == {} and setup.delay_judge is None
+    assert setup.stability.startswith("position mode: no law runs on the ground station")
+    # AND the file's fly.mode may choose it too; a --controller makes no sense with it
+    chosen = prepare(_with_fly(team, control_mode="position"), FlyOptions(out_dir=OUT))
+    assert (chosen.mode, chosen.mode_choice) == ("position", "mode position (fly.mode)")
+    with pytest.raises(FlightSetupError, match=r"^--controller baseline: position mode runs no "
+                                               r"law"):
+        prepare(team, FlyOptions(out_dir=OUT, mode="position", law="baseline"))
+
+
+@pytest.mark.parametrize("config", ["square4.yaml", "square4_massdrop.yaml", "grid16.yaml"])
+@pytest.mark.parametrize("delay_s", [0.0, 0.01, 0.05, 0.1, 0.2, 1.0])
+def test_fly_mode_auto_never_picks_position(config, delay_s):
+    # GIVEN a shipped team at a declared link delay from none to one where no law mode passes
+    team = _with_fly(load_team(CONFIGS / config), link_delay_s=delay_s)
+    # THEN auto flies one of the law's modes, never the baseline
+    setup = prepare(team, FlyOptions(out_dir=OUT))
+    assert setup.mode in ("rates", "attitude") and setup.law != "autopilot"
+    assert "position" not in setup.mode_choice
+
+
+def test_position_mode_records_no_law_and_no_estimates(tmp_path):
+    # GIVEN a position-mode flight of Scenario I
+    team = load_team(CONFIGS / "square4.yaml")
+    options = FlyOptions(out_dir=tmp_path, mode="position")
+    flight = Flight(prepare(team, options), options)
+    # WHEN a record sample is taken without a law command
+    from gcs.fly.measure import TeamSample
+
+    n = team.n
+    sample = TeamSample(np.asarray(team.initial_positions_enu_m(), dtype=float),
+                        np.zeros((n, 3)), np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1)),
+                        np.zeros((n, 3)), np.zeros(n), np.zeros(n), np.ones(n, dtype=bool),
+                        np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n))
+    flight._log(0.0, sample, np.array([0.3, 0.3, 0.2]), None)
+    log = flight.builder.build()
+    # THEN the records say position mode, no law, nothing estimated (not estimates held at
+    # their initial values), and the law's figures are unknown, not zero
+    assert (log.controller, log.extra["mode"]) == ("autopilot", "position")
+    assert log.extra["estimates"] == {"mass_from": ["none"] * n, "inertia_from": "none",
+                                      "inertia_kgm2": None, "inertia_estimated": False}
+    assert log.extra["gains"] is None and log.extra["derivative"] is None
+    for series in (log.mass_estimate_kg, log.thrust_n, log.attitude_error,
+                   log.inertia_estimate_kgm2, log.force_enu_n):
+        assert np.isnan(series).all()
+    # AND the formation error is still measured: 7.07 m at the starts, between p - theta of
+    # vehicles 1 and 3, (2, 2, 9) and (-3, -2, 12)
+    assert flight.formation_error_m == pytest.approx(math.sqrt(50.0), abs=1e-9)
+    np.testing.assert_array_equal(log.mass_true_kg[0], team.true_masses_kg())

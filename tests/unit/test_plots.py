@@ -152,6 +152,51 @@ def test_a_run_that_does_not_command_the_torque_has_no_fig7(tmp_path: Path, mode
     assert "fig6_mass_estimates.png" in names and len(names) == 6
 
 
+def position_mode_log() -> FlightLog:
+    """The synthetic flight as gcs fly's position mode records it: no law ran, so no attitude
+    errors, estimates, thrust or force (NaN), controller "autopilot", nothing estimated."""
+    log = synthetic_log()
+    n, k = log.n_vehicles, log.n_samples
+    return FlightLog.from_arrays(
+        t_s=log.t_s, position_enu_m=log.position_enu_m, velocity_enu_mps=log.velocity_enu_mps,
+        reference_velocity_enu_mps=log.reference_velocity_enu_mps,
+        attitude_error=np.full((k, n), np.nan), omega_error_radps=np.full((k, n), np.nan),
+        mass_estimate_kg=np.full((k, n), np.nan), mass_true_kg=log.mass_true_kg,
+        inertia_estimate_kgm2=np.full((k, n, 3), np.nan), thrust_n=np.full((k, n), np.nan),
+        force_enu_n=np.full((k, n, 3), np.nan), vehicle_ids=[1, 2, 3, 4], offsets_enu_m=OFFSETS,
+        source="fly", controller="autopilot", team="configs/square4.yaml", name="square4",
+        extra={"mode": "position", "estimates": estimates_record(
+            mass_from=["none"] * 4, inertia_from="none", inertia_kgm2=None,
+            inertia_estimated=False)})
+
+
+def test_a_position_mode_run_has_the_formation_figures_and_no_estimate_figures(
+        tmp_path: Path) -> None:
+    # GIVEN a position-mode flight and the law's figures left in the directory by an earlier run
+    stale = [tmp_path / name for name in ("fig5_attitude_errors.png", "fig6_mass_estimates.png",
+                                          "fig7_inertia_estimates.png")]
+    for path in stale:
+        path.write_bytes(PNG_MAGIC)
+    # WHEN its figures are written there
+    paths = plots.write_figures(position_mode_log(), tmp_path)
+    # THEN the formation figures are written, and no figure of estimates or attitude errors: no
+    # law ran, and none of an earlier run can be read as this run's
+    assert_pngs(paths, ["fig2_formation.png", "fig3_position_offsets.png",
+                        "fig4_velocity_errors.png", "errors_semilogy.png"])
+    assert not any(path.exists() for path in stale)
+    # AND every title says what flew and that nothing was estimated
+    for fig in (plots.fig2_formation(position_mode_log()),
+                plots.errors_semilogy(position_mode_log())):
+        title = fig.get_suptitle()
+        assert "square4: fly, no law, position mode (formation slots as position setpoints)" \
+            in title, title
+        assert "the autopilots' own loops fly the slots; no mass or inertia estimation" in title
+        assert "hat" not in title, title  # no mhat(0) / Jhat(0) line
+    # AND the log-scale figure draws no attitude error
+    (ax,) = plots.errors_semilogy(position_mode_log()).axes
+    assert [line.get_label().split()[0] for line in ax.get_lines()] == ["formation", "velocity"]
+
+
 def test_actuators_mode_and_a_log_without_a_mode_keep_fig7(tmp_path: Path) -> None:
     # GIVEN a run that flew the torque (26) (Jhat in use) and an older log that recorded no mode
     for log, out in (
