@@ -83,31 +83,6 @@ def received(emu, since: int = 0) -> list[tuple[str, float, str]]:
     return out
 
 
-def test_ardupilot_waits_for_its_ekf_and_flies_twice_without_restarting(tmp_path: Path) -> None:
-    # GIVEN two copters straight after boot: no LOCAL_POSITION_NED and "Arm: ..." pre-arm
-    # failures until the EKF uses GPS, ~10.4 s here (41.6 s after a real boot)
-    with copters(tmp_path) as emus:
-        team = ardupilot_team(tmp_path, emus)
-        code1, out1, err1 = ardupilot_fly(team, tmp_path / "first")
-        # THEN gcs fly waits for them (not a refusal), arms once each, and the flight completes
-        assert code1 == 0, err1[-3000:]
-        assert "gcs fly: done: formation complete (exit 0)" in out1
-        assert ("mission: waiting for the vehicles to be ready: vehicle 1 (sysid 1): "
-                "LOCAL_POSITION_NED at 0.0 Hz") in err1
-        assert "EKF3 IMU0 is using GPS" in err1  # the vehicles' STATUSTEXT, logged
-        for emu in emus:
-            assert [r for c, _, r in received(emu) if c == "arm"] == ["ACCEPTED"]
-        mark = [len(e.log_text()) for e in emus]
-        # WHEN flown again: the copters sit in LAND, disarmed (LAND is not armable)
-        code2, out2, err2 = ardupilot_fly(team, tmp_path / "second")
-        # THEN GUIDED first, one arming, the same flight: exit 0
-        assert code2 == 0, err2[-3000:]
-        for emu, since in zip(emus, mark, strict=True):
-            seq = [(c, v) for c, v, _ in received(emu, since)]
-            assert seq == [("mode", 4.0), ("arm", 0.0), ("takeoff", 2.5), ("mode", 17.0),
-                           ("mode", 20.0), ("mode", 9.0)], seq
-
-
 def test_ardupilot_that_is_not_ready_in_time_fails_quoting_its_statustext(tmp_path: Path) -> None:
     # GIVEN a copter at the real boot timeline (a position estimate only after 41.6 s) and a 5 s
     # fly.arm_timeout_s

@@ -341,7 +341,8 @@ def test_scenario_two_over_the_link_adaptive_holds_baseline_climbs(tmp_path):
     vz = {}
     for law in ("adaptive", "baseline"):
         base = free_udp_port_block(4)
-        team = team_file(tmp_path, base, duration_s=31.0, faults=drop, massdrop=True)
+        team = team_file(tmp_path, base, duration_s=31.0, faults=drop, massdrop=True,
+                         loaded_links=True)
         with emulators(team, base, tmp_path):
             gcs = Gcs(
                 team, tmp_path / law, "--mode", "rates", "--controller", law, "--end-action", "hold"
