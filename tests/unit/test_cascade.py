@@ -113,8 +113,8 @@ def test_more_link_delay_never_helps():
 
 
 def test_bundled_gains_pass_on_both_autopilots():
-    from gcs.app import FlyOptions, prepare
     from gcs.config import load_team
+    from gcs.fly.setup import FlyOptions, prepare
 
     for name in ("square4.yaml", "square4_massdrop.yaml", "grid16.yaml"):
         team = load_team(ROOT / "configs" / name)

@@ -14,8 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_autopilots import ARDUPILOT_FROM_THE_GROUND, RULES, World, fly_with_failures
 
-from gcs.app import go_to_start_plan
 from gcs.config import ConfigError, check_go_to_start, team_from_dict
+from gcs.fly.setup import go_to_start_plan
 from gcs.mission.goto import (
     GoToStart,
     GoToStartPlan,
