@@ -24,7 +24,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-# what gcs/app.py asks each vehicle for (msgid: Hz; 0: off); bench_fleet_sockets.py sends these
+# what gcs fly asks each vehicle for (gcs/fly/setup.py, gcs/fly/commander.py; msgid: Hz; 0: off);
+# bench_fleet_sockets.py sends these
 GCS_RATES_HZ = {31: 100.0, 32: 100.0, 105: 100.0, 245: 5.0, 83: 10.0, 33: 5.0, 30: 0.0, 331: 0.0}
 
 _CHILD = r'''

@@ -80,6 +80,16 @@ def flu_from_frd(v_frd: ArrayLike) -> FloatArray:
     return v @ F_FRD_FLU.T
 
 
+# --- headings ------------------------------------------------------------------------------------
+
+
+def yaw_ned_from_enu(yaw_enu_rad: ArrayLike) -> FloatArray:
+    """World yaw(s) ENU -> NED [rad]: from east, anticlockwise -> from north, clockwise
+    (pi/2 - yaw), wrapped to [-pi, pi)."""
+    yaw = np.asarray(yaw_enu_rad, dtype=float)
+    return np.remainder(np.pi / 2.0 - yaw + np.pi, 2.0 * np.pi) - np.pi
+
+
 # --- rotation matrices ---------------------------------------------------------------------------
 
 

@@ -76,7 +76,8 @@ def _team(law: str, derivative: str):  # -> TeamConfig
 def compile_law(prog: str = "gcs", force: bool = True) -> None:
     """Compile the law as `gcs fly` runs it (its warm-up in `Flight`), every law and method;
     with force=False, only when the cache does not hold it yet."""
-    from gcs.app import Flight, FlyOptions, prepare
+    from gcs.fly.flight import Flight
+    from gcs.fly.setup import FlyOptions, prepare
 
     if not force and is_compiled("law"):
         return

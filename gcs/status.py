@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, TextIO
 from gcs.mission.machine import Phase
 
 if TYPE_CHECKING:
-    from gcs.app import Flight
+    from gcs.fly.flight import Flight
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,13 +63,14 @@ class _Rate:
 def snapshot(flight: Flight, rates: _Rate, now_s: float) -> StatusSnapshot:
     m = flight.machine
     streaming = m.streaming | frozenset(m.position_targets)
-    cmd = flight.last_command
+    tick = flight.tick
+    cmd = tick.last_command
     lines = []
     for i, p in enumerate(flight.proxies):
         vid = flight.ids[i]
         s = p.state()
         count = p.stats().proxy.messages_accepted
-        sample = flight.last_sample
+        sample = tick.last_sample
         lines.append(VehicleLine(
             vehicle_id=vid, sysid=p.config.sysid, mode=s.mode or "-", armed=s.armed,
             link=p.link_state().value, rate_hz=rates.update(vid, now_s, count),
@@ -80,8 +81,9 @@ def snapshot(flight: Flight, rates: _Rate, now_s: float) -> StatusSnapshot:
             streaming=vid in streaming,
         ))
     return StatusSnapshot(
-        phase=m.phase.value, t_s=flight.formation_t_s, duration_s=flight.setup.plan.duration_s,
-        formation_error_m=flight.formation_error_m, late_pct=100.0 * flight.ticks.late_fraction(),
+        phase=m.phase.value, t_s=tick.formation_t_s, duration_s=flight.setup.plan.duration_s,
+        formation_error_m=tick.formation_error_m,
+        late_pct=100.0 * flight.figures.ticks.late_fraction(),
         vehicles=tuple(lines), note=m.notes[-1] if m.notes else "",
         connecting=m.connect_progress() if m.phase is Phase.CONNECT else "",
     )

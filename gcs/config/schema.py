@@ -25,7 +25,7 @@ MODES = ("rates", "actuators", "attitude")  # attitude: gcs fly only (the autopi
 POSITION_MODE = "position"
 FLY_CONTROL_MODES = (*MODES, POSITION_MODE)  # what gcs fly can fly (fly.<mode> blocks)
 FLY_MODES = ("auto", *FLY_CONTROL_MODES)  # fly.mode / gcs fly --mode
-AUTO_MODES = ("rates", "attitude")  # what fly.mode auto chooses from, in order (gcs/app.py)
+AUTO_MODES = ("rates", "attitude")  # what fly.mode auto chooses from, in order (gcs/fly/setup.py)
 #: the modes whose setpoint is the law's torque (26): the only ones in which the inertia estimate
 #: rhohat of (27) acts on the vehicle, so the only ones that integrate it (in rates and attitude
 #: mode the autopilot's own loops turn the setpoint into torque; rhohat stays at its initial value)
@@ -441,7 +441,7 @@ class FlyConfig:
     """The `fly:` section: flight sequence, safety rules and link timing of `gcs fly`."""
 
     # fly.mode: the control mode gcs fly flies (controller.mode is gcs sim's); "auto": rates, or
-    # attitude where rates' loops fail the cascade criterion at link_delay_s (gcs/app.py)
+    # attitude where rates' loops fail the cascade criterion at link_delay_s (gcs/fly/setup.py)
     control_mode: str = "auto"
     rates: FlyModeConfig = FlyModeConfig(100.0)
     actuators: FlyModeConfig = FlyModeConfig(250.0)

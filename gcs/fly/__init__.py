@@ -1,1 +1,1 @@
-"""`gcs fly`: the team's telemetry -> the law -> setpoints, with its records (see gcs/app.py)."""
+"""`gcs fly`: the team's telemetry -> the law -> setpoints, with its records (fly/flight.py)."""

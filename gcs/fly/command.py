@@ -14,9 +14,10 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TextIO
 
-from gcs.app import Flight, FlightSetupError, FlyOptions, prepare
 from gcs.config import FLY_MODES, TeamConfig, load_team
+from gcs.fly.flight import Flight
 from gcs.fly.sched import SchedulingError, apply_scheduling
+from gcs.fly.setup import FlightSetupError, FlyOptions, prepare
 from gcs.mission.machine import EXIT_ABORTED, EXIT_INTERRUPTED, EXIT_OK
 from gcs.precompile import compile_law
 from gcs.report import summary_table

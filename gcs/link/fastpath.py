@@ -346,7 +346,7 @@ def encode_set_attitude_target(seq, src_sys, src_comp, time_boot_ms, target_sys,
 
 def warm_up() -> None:
     """Compile (or load from numba's cache) both kernels on a throwaway frame, so the first
-    batch of a flight does not stall the event loop (gcs.app's warm-up calls this)."""
+    batch of a flight does not stall the event loop (gcs.fly.tick's warm-up calls this)."""
     n = 1
     out = np.zeros((n, 12 + SET_ATTITUDE_TARGET_LEN), dtype=np.uint8)
     lengths = np.zeros(n, dtype=np.int64)

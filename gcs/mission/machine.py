@@ -9,7 +9,7 @@ HEARTBEAT.autopilot and fixed at preflight): "offboard" below means the profile'
 baseline: position setpoints, no law), its position mode (PX4 OFFBOARD, ArduPilot GUIDED;
 `offboard_mode`); "hold" its hold mode (PX4 AUTO_LOITER, ArduPilot BRAKE).
 
-The machine never touches a socket or a clock. The composition root (gcs/app.py) feeds it
+The machine never touches a socket or a clock. The composition root (gcs/fly/flight.py) feeds it
 `on_tick(now_s, team)` with every vehicle's `VehicleStatus` as received, `on_result(...)` when a
 command it asked for finished, and `request_abort(...)` for Ctrl-C or the abort key; it executes the
 `Command`s the machine returns, streams setpoints to the vehicles in `streaming`, and runs the law

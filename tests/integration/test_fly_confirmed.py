@@ -143,7 +143,7 @@ def test_px4_takeoff_is_judged_by_height_above_home_not_the_ekf_origin_z(tmp_pat
     # booted once gcs fly waits for them (PX4 v1.16.0 refuses arming for ~3 s after boot;
     # started the other way round, a slow ground-station start-up may come after the 3 s)
     gcs = Gcs(team, tmp_path / "run", "--mode", "rates")
-    gcs.wait_for("INFO gcs.app: rates mode with", 120)
+    gcs.wait_for("INFO gcs.fly: rates mode with", 120)
     with emulators(team, 0, tmp_path):
         code, _ = gcs.finish(200)
     log = gcs.log_path.read_text()

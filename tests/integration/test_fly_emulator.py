@@ -235,8 +235,8 @@ def test_scenario_one_rates_mode_at_100_hz_with_origins_50_m_apart(tmp_path):
     report = gcs.report()
     check_scenario_one(report, code, out)
     # AND its normal end is logged at INFO: no mission event of the flight is a WARNING
-    assert " INFO gcs.app: mission: stopping (hold): formation complete" in log, log[-3000:]
-    assert [x for x in log.splitlines() if " WARNING gcs.app: mission: " in x] == []
+    assert " INFO gcs.fly: mission: stopping (hold): formation complete" in log, log[-3000:]
+    assert [x for x in log.splitlines() if " WARNING gcs.fly: mission: " in x] == []
     assert report["source"] == "fly" and report["tick"]["rate_hz"] == 100.0
     assert report["tick"]["late_pct"] < 10.0
     assert all(report["link"][str(i)]["setpoints_sent"] > 2500 for i in range(1, 5))

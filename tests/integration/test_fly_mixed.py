@@ -68,7 +68,7 @@ def test_mixed_px4_and_ardupilot_team_flies_from_the_ground_twice(tmp_path: Path
     # checks is test_fly_confirmed.py's takeoff test: here ArduPilot's EKF is the longer wait)
     team = mixed_team(tmp_path, duration_s=3.0, z_shift=-5.0)
     first = Gcs(team, tmp_path / "first", "--mode", "rates")
-    first.wait_for("INFO gcs.app: rates mode with", 120)
+    first.wait_for("INFO gcs.fly: rates mode with", 120)
     fleet = subprocess.Popen(
         [sys.executable, "-m", "vehicle_emulator.cli", "--fleet", "--team", str(team),
          "--param", "GUID_OPTIONS=8", "--param", "EMU_BOOT_SCALE=0.25", "--log-level", "WARNING"],

@@ -218,7 +218,7 @@ class World:
                                        landed_state=2,
                                        position_enu_m=(s.position_enu_m[0], 0.0, c.altitude_m)
                                        ), True, ()
-        if c.cmd is Cmd.OFFBOARD:  # the mode the app commands for it (Flight._execute)
+        if c.cmd is Cmd.OFFBOARD:  # the mode the app commands for it (Commander.execute)
             return dataclasses.replace(s, mode=self.m.offboard_mode(c.vehicle_id).name), True, ()
         if c.cmd is Cmd.HOLD:
             return dataclasses.replace(s, mode="BRAKE" if ardu else "AUTO_LOITER"), True, ()

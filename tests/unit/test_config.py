@@ -591,7 +591,7 @@ def test_fly_section_is_optional_and_defaults_are_documented():
     assert fly.link_timeout_s == 3.0  # tolerates a 1 Hz HEARTBEAT-only vehicle
     assert fly.predict is True  # delay compensation on (gcs/fly/predict.py)
     assert fly.scheduling == "auto"  # the best the OS permits (gcs/fly/sched.py)
-    assert fly.control_mode == "auto"  # gcs fly picks rates or attitude (gcs/app.py)
+    assert fly.control_mode == "auto"  # gcs fly picks rates or attitude (gcs/fly/setup.py)
     assert team_from_dict(edit(base(), "fly.mode", "attitude")).fly.control_mode == "attitude"
     assert team_from_dict(edit(base(), "fly.predict", False)).fly.predict is False
     # AND the shipped file flies the criterion's torque gains

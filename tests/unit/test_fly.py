@@ -10,12 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gcs.app import Flight, FlightSetupError, FlyOptions, prepare, true_mass_kg
 from gcs.config import load_team
 from gcs.config.schema import ResponseConfig
 from gcs.control.formation import edge_list, reference_velocity
 from gcs.control.geometry import rotation_from_rpy
 from gcs.control.law import TeamLaw, TeamMeasurement
+from gcs.fly.flight import Flight
 from gcs.fly.measure import (
     command_heading_rad,
     desaturate_torque,
@@ -26,6 +26,7 @@ from gcs.fly.measure import (
     torque_max_nm,
     yaw_rad,
 )
+from gcs.fly.setup import FlightSetupError, FlyOptions, prepare, true_mass_kg
 from gcs.fly.stats import (
     AgeStats,
     TickStats,
@@ -409,7 +410,8 @@ _KERNELS_AFTER_SETUP = """
 import sys, tempfile
 from pathlib import Path
 import numpy as np
-from gcs.app import Flight, FlyOptions, prepare
+from gcs.fly.flight import Flight
+from gcs.fly.setup import FlyOptions, prepare
 from gcs.config import load_team
 from gcs.fly import predict
 from gcs import metrics
@@ -426,8 +428,8 @@ with tempfile.TemporaryDirectory() as tmp:
     r, w = np.tile(np.eye(3), (n, 1, 1)), np.zeros((n, 3))
     audit = predict.PredictionAudit(n)
     audit.observe(p, v, t, r, w, t)
-    metrics.formation_error_m(p, flight._offsets_m)
-    metrics.formation_error(rng.normal(size=(30, n, 3)), flight._offsets_m)
+    metrics.formation_error_m(p, flight.tick.offsets_m)
+    metrics.formation_error(rng.normal(size=(30, n, 3)), flight.tick.offsets_m)
     print(before, [len(k.signatures) for k in kernels])
 """
 
@@ -471,12 +473,12 @@ def test_the_flight_integrates_jhat_only_where_it_sends_the_torque(tmp_path, mod
         np.testing.assert_array_equal(command.inertia_estimate_kgm2, j0)
     # AND the records say where each estimate started and whether Jhat was estimated
     n = team.n
-    flight.builder.append(t_s=0.0, position_enu_m=meas.position_m, velocity_enu_mps=np.zeros((n, 3)),
+    flight.figures.builder.append(t_s=0.0, position_enu_m=meas.position_m, velocity_enu_mps=np.zeros((n, 3)),
                           reference_velocity_enu_mps=np.zeros(3), attitude_error=np.zeros(n),
                           omega_error_radps=np.zeros(n), mass_estimate_kg=np.ones(n),
                           inertia_estimate_kgm2=j0, thrust_n=np.ones(n),
                           force_enu_n=np.zeros((n, 3)))
-    log = flight.builder.build()
+    log = flight.figures.builder.build()
     assert log.extra["mode"] == mode
     assert log.extra["estimates"] == {"mass_from": ["hover"] * n, "inertia_from": "team",
                                       "inertia_kgm2": j0.tolist(), "inertia_estimated": estimated}
@@ -533,8 +535,8 @@ def test_position_mode_records_no_law_and_no_estimates(tmp_path):
                         np.zeros((n, 3)), np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1)),
                         np.zeros((n, 3)), np.zeros(n), np.zeros(n), np.ones(n, dtype=bool),
                         np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(n))
-    flight._log(0.0, sample, np.array([0.3, 0.3, 0.2]), None)
-    log = flight.builder.build()
+    flight.tick.log(0.0, sample, np.array([0.3, 0.3, 0.2]), None)
+    log = flight.figures.builder.build()
     # THEN the records say position mode, no law, nothing estimated (not estimates held at
     # their initial values), and the law's figures are unknown, not zero
     assert (log.controller, log.extra["mode"]) == ("autopilot", "position")
@@ -546,5 +548,5 @@ def test_position_mode_records_no_law_and_no_estimates(tmp_path):
         assert np.isnan(series).all()
     # AND the formation error is still measured: 7.07 m at the starts, between p - theta of
     # vehicles 1 and 3, (2, 2, 9) and (-3, -2, 12)
-    assert flight.formation_error_m == pytest.approx(math.sqrt(50.0), abs=1e-9)
+    assert flight.tick.formation_error_m == pytest.approx(math.sqrt(50.0), abs=1e-9)
     np.testing.assert_array_equal(log.mass_true_kg[0], team.true_masses_kg())

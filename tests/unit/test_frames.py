@@ -120,6 +120,13 @@ def test_is_rotation() -> None:
                                   [True, False])
 
 
+def test_yaw_ned_from_enu_turns_east_anticlockwise_into_north_clockwise() -> None:
+    # GIVEN headings east, north, west and south as ENU yaws (from east, anticlockwise)
+    yaw_enu = np.array([0.0, math.pi / 2, math.pi, -math.pi / 2])
+    # THEN their NED yaws (from north, clockwise) are 90, 0, -90 and 180 (= -180) deg
+    np.testing.assert_allclose(frames.yaw_ned_from_enu(yaw_enu),
+                               [math.pi / 2, 0.0, -math.pi / 2, -math.pi], atol=1e-15)
+
 # --- properties --------------------------------------------------------------------------------
 
 

@@ -8,14 +8,13 @@ import dataclasses
 import logging
 import math
 from pathlib import Path
-from types import SimpleNamespace
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_autopilots import fly_with_failures
 
-from gcs.app import Flight
+from gcs.fly.records import log_notes as log_mission_notes
 from gcs.mission.machine import (
     EXIT_ABORTED,
     EXIT_INTERRUPTED,
@@ -132,10 +131,10 @@ def test_airborne_team_flies_the_whole_sequence_and_lands():
 
 
 def log_notes(m: MissionMachine, caplog) -> list[tuple[int, str]]:
-    """(level, message) of what the app logs for the machine's notes (Flight._log_notes)."""
+    """(level, message) of what gcs fly logs for the machine's notes (gcs.fly.records)."""
     caplog.clear()
-    with caplog.at_level(logging.INFO, logger="gcs.app"):
-        Flight._log_notes(SimpleNamespace(machine=m, _notes_logged=0))  # type: ignore[arg-type]
+    with caplog.at_level(logging.INFO, logger="gcs.fly"):
+        log_mission_notes(m, 0)
     return [(r.levelno, r.getMessage()) for r in caplog.records]
 
 
