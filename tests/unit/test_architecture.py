@@ -38,6 +38,15 @@ def test_pure_layers_do_no_io(path):
     )
 
 
+def test_the_fly_set_up_policy_opens_nothing_and_imports_none_of_the_flight():
+    # GIVEN gcs fly's set-up policy, decided before any link is opened (gcs/fly/setup.py)
+    found = imported_roots(ROOT / "gcs" / "fly" / "setup.py")
+    # THEN it imports no I/O or clock, no link, and none of the modules that fly
+    flying = ("gcs.link", "gcs.fly.flight", "gcs.fly.tick", "gcs.fly.commander",
+              "gcs.fly.setpoints", "gcs.fly.records")
+    assert not found & IMPURE, sorted(found & IMPURE)
+    assert not [m for m in found if m.startswith(flying)]
+
 def test_emulator_never_imports_gcs():
     offenders = [
         str(p.relative_to(ROOT))
