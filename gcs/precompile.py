@@ -1,14 +1,14 @@
 """`gcs compile`: fill numba's on-disk cache before any flight (run by `make install`).
 
-The law, the in-process simulator and the emulator physics are numba-compiled. A cold cache costs
-about 20-30 s (law), 27 s (simulator alone; 10-15 s after the law) and 35-45 s (emulator physics,
-every personality) on a quiet 2-core machine, and several times that on a busy one
-(docs/benchmarks.md, "Start-up"). Compiling them here, once per source state, means neither `gcs
-fly` nor `vehicle-emu` nor `gcs sim` has to do it while a user, a link timeout or a vehicle waits.
-Each part is compiled through exactly the code path the programs run (a `Flight` of a small built-in
-team, a short `simulate`, `vehicle-emu --compile-only`), so what is cached is what they load. The
-emulator compiles in its own process, beside this one: it is an independent peer, and the two cores
-finish sooner that way.
+The law, the in-process simulator and the emulator physics are numba-compiled. A cold cache
+costs about 20-30 s (law), 27 s (simulator alone; 10-15 s after the law) and 35-45 s (emulator
+physics, every personality) on a quiet 2-core machine, and several times that on a busy one
+(docs/benchmarks.md, "Start-up"). Compiling them here, once per source state, means neither
+`gcs fly` nor `vehicle-emu` nor `gcs sim` has to do it while a user, a link timeout or a vehicle
+waits. Each part is compiled through exactly the code path the programs run (a `Flight` of a
+small built-in team, a short `simulate`, `vehicle-emu --compile-only`), so what is cached is what
+they load. The emulator compiles in its own process, beside this one: it is an independent peer,
+and the two cores finish sooner that way.
 """
 
 from __future__ import annotations
