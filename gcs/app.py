@@ -141,7 +141,12 @@ from gcs.mission.machine import (
     Phase,
 )
 from gcs.mission.safety import SafetyRules
-from gcs.mission.stability import MIN_DECAY_PER_S, describe_margins, torque_margins
+from gcs.mission.stability import (
+    MIN_DECAY_PER_S,
+    delays_ticks,
+    describe_margins,
+    torque_margins,
+)
 from gcs.report import build_report, write_report
 from vehicle_emulator.latecompile import watch_late_compiles
 
@@ -259,6 +264,8 @@ def _mode_gains(team: TeamConfig, mode: str) -> LawGains:
         alpha_eps=mode_cfg.alpha_eps if mode == "actuators" and mode_cfg.alpha_eps else g.alpha_eps,
         alpha_omega=(mode_cfg.alpha_omega if mode == "actuators" and mode_cfg.alpha_omega
                      else g.alpha_omega),
+        alpha_rho=(mode_cfg.alpha_rho if mode == "actuators" and mode_cfg.alpha_rho
+                   else g.alpha_rho),
         **flown,
     )
 
@@ -365,7 +372,8 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
                 f"alpha_omega {gains.alpha_omega:g}: vehicle {worst.vehicle_id} axis {worst.axis} "
                 f"(J {worst.inertia_kgm2:g} kg m^2) has spectral radius "
                 f"{worst.spectral_radius:.3f} (decay {worst.decay_per_s:.3g} /s, need >= "
-                f"{MIN_DECAY_PER_S:g} /s with 1-2 ticks of delay); set fly.actuators.alpha_eps/"
+                f"{MIN_DECAY_PER_S:g} /s with 1-{delays_ticks(1.0 / rate)[-1]} ticks of delay); "
+                f"set fly.actuators.alpha_eps/"
                 f"alpha_omega or tick_rate_hz (docs/gcs.md)")
     else:  # rates, attitude: the law's loops over each autopilot's own (cascade.py)
         stability, loop_refusals, judge = cascade_check(team, mode, gains, rate)
@@ -467,6 +475,7 @@ class Flight:
             levant_lipschitz=d.levant_lipschitz, levant_substep_s=d.levant_substep_s,
             estimate_inertia=inertia_estimated,
         )
+        self.law.inertia_step_max_s = self.period_s
         self.ref_arrays = tuple(np.ascontiguousarray(a, dtype=float)
                                 for a in team.reference_velocity.as_arrays())
         self._offsets_m = np.ascontiguousarray(team.offsets_enu_m(), dtype=float)

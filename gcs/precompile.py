@@ -44,7 +44,7 @@ reference_velocity:
   y: {{constant: 0.0}}
   z: {{constant: 0.2}}
 graph: {{edges: [[1, 2]]}}
-fly: {{actuators: {{tick_rate_hz: 250, alpha_eps: 24.0, alpha_omega: 3.0}}}}
+fly: {{actuators: {{tick_rate_hz: 250, alpha_eps: 2.0, alpha_omega: 2.0, alpha_rho: 0.03}}}}
 vehicles:
   - id: 1
     sysid: 1
