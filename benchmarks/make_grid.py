@@ -68,7 +68,7 @@ graph:
 fly:
   rates: {{tick_rate_hz: 100, max_rate_radps: 1.0, k_eps: 1.5, k_eps_yaw: 1.0, alpha_p: 1.0, c_p: 1.0}}
   attitude: {{tick_rate_hz: 100, alpha_p: 1.0, c_p: 0.4}}
-  actuators: {{tick_rate_hz: 250, alpha_eps: 24.0, alpha_omega: 3.0}}
+  actuators: {{tick_rate_hz: 250, alpha_eps: 2.0, alpha_omega: 2.0, alpha_rho: 0.03}}
   initial_mass: from_hover
   end_action: land
   abort_action: land

@@ -1,14 +1,14 @@
 """`gcs compile`: fill numba's on-disk cache before any flight (run by `make install`).
 
-The law, the in-process simulator and the emulator physics are numba-compiled. A cold cache costs
-about 25 s (law), 50 s (simulator alone, its verification mode included; 33 s after the law) and
-35-45 s (emulator physics, every personality) on a quiet 2-core machine, and several times that on a
-busy one (docs/benchmarks.md, "Start-up"). Compiling them here, once per source state, means neither
+The law, the in-process simulator and the emulator physics are numba-compiled. A cold cache
+costs about 20-30 s (law), 27 s (simulator alone; 10-15 s after the law) and 35-45 s (emulator
+physics, every personality) on a quiet 2-core machine, and several times that on a busy one
+(docs/benchmarks.md, "Start-up"). Compiling them here, once per source state, means neither
 `gcs fly` nor `vehicle-emu` nor `gcs sim` has to do it while a user, a link timeout or a vehicle
-waits. Each part is compiled through exactly the code path the programs run (a `Flight` of a small
-built-in team, a short `simulate`, `vehicle-emu --compile-only`), so what is cached is what they
-load. The emulator compiles in its own process, beside this one: it is an independent peer, and the
-two cores finish sooner that way.
+waits. Each part is compiled through exactly the code path the programs run (a `Flight` of a
+small built-in team, a short `simulate`, `vehicle-emu --compile-only`), so what is cached is what
+they load. The emulator compiles in its own process, beside this one: it is an independent peer,
+and the two cores finish sooner that way.
 """
 
 from __future__ import annotations
@@ -22,10 +22,11 @@ from pathlib import Path
 from vehicle_emulator.jitcache import compiling, is_compiled
 
 #: First-run compile times on a quiet 2-core machine (docs/benchmarks.md, "Start-up"), for the
-#: notice: measured 26.3 s law, 32.5 s simulator after it, 51.0 s simulator alone (2026-12-04).
+#: notice: measured 17.6-29.7 s law, 7.8-14.7 s simulator after it, 27 s simulator alone
+#: (2026-12-04).
 LAW_COMPILE_S = 25.0
-SIM_COMPILE_S = 50.0  # alone
-SIM_AFTER_LAW_S = 33.0  # when the law's kernels are cached already
+SIM_COMPILE_S = 27.0  # alone
+SIM_AFTER_LAW_S = 12.0  # when the law's kernels are cached already
 
 # Two vehicles are enough: numba specialises on array types, not sizes. Both laws and both
 # derivative methods are compiled (placeholders filled in by `_team`).
@@ -43,7 +44,7 @@ reference_velocity:
   y: {{constant: 0.0}}
   z: {{constant: 0.2}}
 graph: {{edges: [[1, 2]]}}
-fly: {{actuators: {{tick_rate_hz: 250, alpha_eps: 24.0, alpha_omega: 3.0}}}}
+fly: {{actuators: {{tick_rate_hz: 250, alpha_eps: 2.0, alpha_omega: 2.0, alpha_rho: 0.03}}}}
 vehicles:
   - id: 1
     sysid: 1
@@ -89,9 +90,8 @@ def compile_law(prog: str = "gcs", force: bool = True) -> None:
 
 
 def compile_sim(prog: str = "gcs", force: bool = True) -> None:
-    """Compile the in-process closed loop of `gcs sim` (both modes, laws and methods, and the
-    verification mode that reproduces the reference tables, docs/reproducing-the-paper.md);
-    with force=False, only when the cache does not hold it yet."""
+    """Compile the in-process closed loop of `gcs sim` (both modes, laws and methods); with
+    force=False, only when the cache does not hold it yet."""
     from gcs.sim.runner import SimOptions, simulate
 
     if not force and is_compiled("sim"):
@@ -101,9 +101,6 @@ def compile_sim(prog: str = "gcs", force: bool = True) -> None:
         for law, derivative in _VARIANTS:
             for mode in ("rates", "actuators"):
                 simulate(_team(law, derivative), SimOptions(duration_s=0.01, mode=mode))
-        for law in ("adaptive", "baseline"):
-            simulate(_team(law, "model"),
-                     SimOptions(duration_s=0.01, mode="actuators", oracle=True))
 
 
 def _font_cache() -> None:

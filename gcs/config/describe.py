@@ -91,6 +91,8 @@ def describe(team: TeamConfig) -> str:
         if m.alpha_eps is not None or m.alpha_omega is not None:
             a_eps, a_om = m.alpha_eps or g.alpha_eps, m.alpha_omega or g.alpha_omega
             gains = f", alpha_eps {a_eps:g}, alpha_omega {a_om:g}"
+        if m.alpha_rho is not None:
+            gains += f", alpha_rho {m.alpha_rho:g}"
         return f"{name} {m.tick_rate_hz:g} Hz{gains}"
 
     fence = (

@@ -647,7 +647,7 @@ def _fly_mode(node: _Node, default: FlyModeConfig) -> FlyModeConfig:
     if node.absent:
         return default
     node.keys("", "tick_rate_hz alpha_eps alpha_omega max_rate_radps max_yaw_rate_radps k_eps "
-                  "k_eps_yaw alpha_p c_p")
+                  "k_eps_yaw alpha_p c_p alpha_rho")
     return FlyModeConfig(
         node.child("tick_rate_hz").number(default.tick_rate_hz, gt=0.0, le=1000.0),
         node.child("alpha_eps").number(None, gt=0.0),
@@ -658,6 +658,7 @@ def _fly_mode(node: _Node, default: FlyModeConfig) -> FlyModeConfig:
         node.child("k_eps_yaw").number(None, gt=0.0),
         node.child("alpha_p").number(None, gt=0.0),
         node.child("c_p").number(None, gt=0.0),
+        node.child("alpha_rho").number(None, gt=0.0),
     )
 
 

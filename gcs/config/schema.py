@@ -370,6 +370,7 @@ class FlyModeConfig:
     k_eps_yaw: float | None = None  # rates mode
     alpha_p: float | None = None
     c_p: float | None = None
+    alpha_rho: float | None = None  # None: controller.gains.alpha_rho (actuators mode)
 
 
 @dataclass(frozen=True, slots=True)

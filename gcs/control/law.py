@@ -125,7 +125,8 @@ class TeamLaw:
 
     Row i of every computation uses only vehicle i's measurement and its graph neighbours'
     (a_ij != 0); the states mhat_i, rhohat_i, and the differentiator of vehicle i are vehicle
-    i's own. Estimator states are integrated by forward Euler over the tick.
+    i's own. Estimator states are integrated by forward Euler over the tick (rhohat over at most
+    `inertia_step_max_s`).
 
     `estimate_inertia=False` holds rhohat at rhohat0 for the whole flight: for a flight whose
     setpoint is not the torque (26) (thrust + body rates or attitude, gcs.config.TORQUE_MODES),
@@ -177,6 +178,10 @@ class TeamLaw:
         self._u_prev: np.ndarray | None = None
         #: per vehicle, the turn of R^c about its thrust axis [rad] (zeros: the paper's (14))
         self.heading_rad = np.zeros(n)
+        #: the longest step (27) is advanced by [s] (None: dt_s, whatever it is). A ground station
+        #: sets its tick: after ticks it skipped, the one sample it has is the rate error the
+        #: vehicle built on a held torque, not the integral of (27) over the gap.
+        self.inertia_step_max_s: float | None = None
 
     def step(
         self, meas: TeamMeasurement, reference_mps: np.ndarray, dt_s: float, adapt: bool = True
@@ -262,5 +267,6 @@ class TeamLaw:
         if adapt:
             self.mhat = self.mhat + dt_s * mhat_rate
             if self.estimate_inertia:
-                self.rhohat = self.rhohat + dt_s * rho_rate
+                cap = self.inertia_step_max_s
+                self.rhohat = self.rhohat + (dt_s if cap is None else min(dt_s, cap)) * rho_rate
         return command

@@ -41,7 +41,12 @@ from gcs.mission.cascade import (
 from gcs.mission.goto import GoToStartPlan
 from gcs.mission.machine import MissionPlan, Outcome
 from gcs.mission.safety import SafetyRules
-from gcs.mission.stability import MIN_DECAY_PER_S, describe_margins, torque_margins
+from gcs.mission.stability import (
+    MIN_DECAY_PER_S,
+    delays_ticks,
+    describe_margins,
+    torque_margins,
+)
 
 MAX_POSITION_RATE_HZ = 100.0
 #: EXTENDED_SYS_STATE (landed state: preflight, takeoff, stopping); ArduPilot sends it only when
@@ -143,6 +148,8 @@ def _mode_gains(team: TeamConfig, mode: str) -> LawGains:
         alpha_eps=mode_cfg.alpha_eps if mode == "actuators" and mode_cfg.alpha_eps else g.alpha_eps,
         alpha_omega=(mode_cfg.alpha_omega if mode == "actuators" and mode_cfg.alpha_omega
                      else g.alpha_omega),
+        alpha_rho=(mode_cfg.alpha_rho if mode == "actuators" and mode_cfg.alpha_rho
+                   else g.alpha_rho),
         **flown,
     )
 
@@ -249,7 +256,8 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
                 f"alpha_omega {gains.alpha_omega:g}: vehicle {worst.vehicle_id} axis {worst.axis} "
                 f"(J {worst.inertia_kgm2:g} kg m^2) has spectral radius "
                 f"{worst.spectral_radius:.3f} (decay {worst.decay_per_s:.3g} /s, need >= "
-                f"{MIN_DECAY_PER_S:g} /s with 1-2 ticks of delay); set fly.actuators.alpha_eps/"
+                f"{MIN_DECAY_PER_S:g} /s with 1-{delays_ticks(1.0 / rate)[-1]} ticks of delay); "
+                f"set fly.actuators.alpha_eps/"
                 f"alpha_omega or tick_rate_hz (docs/gcs.md)")
     else:  # rates, attitude: the law's loops over each autopilot's own (cascade.py)
         stability, loop_refusals, judge = cascade_check(team, mode, gains, rate)

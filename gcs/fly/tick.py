@@ -77,6 +77,7 @@ def build_law(setup: FlightSetup) -> tuple[TeamLaw, np.ndarray, bool]:
         levant_lipschitz=d.levant_lipschitz, levant_substep_s=d.levant_substep_s,
         estimate_inertia=inertia_estimated,
     )
+    law.inertia_step_max_s = 1.0 / setup.tick_rate_hz  # (27) never steps over a skipped gap
     return law, rhohat, inertia_estimated
 
 

@@ -258,32 +258,17 @@ def test_scenario_one_rates_mode_at_100_hz_with_origins_50_m_apart(tmp_path):
     assert plot.returncode == 0 and ".png" in plot.stdout
 
 
-#: a flight that skipped more than this share of its ticks ran on a machine that stalled
-STALLED_SKIP_SHARE = 0.005
-#: the actuators-mode bound from t = 30 s after such stalls [m]
-STALLED_BOUND_M = 0.5
-#: a tilt stop this soon after a stall is the stall's [s] (a record row is 0.1 s)
-STALL_TO_TILT_S = 1.0
-
-
 @pytest.mark.alone
 def test_scenario_one_actuators_mode_at_250_hz(tmp_path):
-    """Scenario I in actuators mode at 250 Hz: the paper's 0.05 m from t = 30 s while both ends
-    run their ticks. Run alone (make test): beside two other flights on 2 cores, UAV3, the
-    lightest, had its torque limit (51) applied in 7,300-7,700 of ~8,000 formation ticks (~500
-    alone), a saturated roll limit cycle that breaks 0.05 m.
+    """Scenario I in actuators mode at 250 Hz: the paper's 0.05 m from t = 30 s, the torque (26)
+    computed on the ground from telemetry 2-3 ticks old and held by the vehicle between ticks.
 
-    A torque held for a stall is a disturbance the law must ride out, not one it can prevent:
-    on a machine whose every core is busy the whole host stops now and then (~100 ms, a few
-    times in 10 s: every process, SCHED_FIFO ones included), the ground station skips the ticks
-    it missed (0.1 % alone; 3-4.5 % of them beside two busy loops) and the emulator integrates
-    the held torque over the lost time. The flight's own `skipped_ticks` says which machine it
-    was. With stalls the flight either finishes within STALLED_BOUND_M (0.03-0.33 m measured
-    beside two busy loops) or a stall early in the formation, when the torques are large, tips
-    a vehicle past fly.max_tilt_rad (62-71 deg in 2 of 4 such runs, at 2.7 s and 29 s) and the
-    tilt rule stops the flight and lands it (exit 1): the safe reaction to a loop that lost its
-    ticks, accepted only within STALL_TO_TILT_S of a stall the ground station logged. The law
-    itself is checked on every machine in-process (tests/unit/test_scenarios.py)."""
+    The torque gains (2, 2) are the stiffest the discrete-time criterion passes with 1-4 ticks
+    of delay (gcs/mission/stability.py); the gains it passed with 1-2 ticks, (24, 3), tipped a
+    vehicle past fly.max_tilt_rad in two CI runs, one of them on a quiet machine. Run alone (make
+    test): beside two busy loops the host stops every process for ~100 ms 10-28 times a flight,
+    the vehicles fly those stops on a held torque, and 1 of 8 such flights ended 1.2 m out
+    (docs/benchmarks.md, "Actuators mode beside two busy loops")."""
     base = free_udp_port_block(4)
     team = team_file(tmp_path, base, duration_s=32.0)
     with emulators(team, base, tmp_path):
@@ -291,25 +276,11 @@ def test_scenario_one_actuators_mode_at_250_hz(tmp_path):
         code, out = gcs.finish(180)
     report = gcs.report()
     tick = report["tick"]
-    stalled = tick["skipped_ticks"] > STALLED_SKIP_SHARE * tick["ticks"]
-    print(f"skipped ticks {tick['skipped_ticks']} of {tick['ticks']}: "
-          f"{'stalled' if stalled else 'ran its ticks'}; exit {code}")
-    if stalled and code != 0:
-        # a stall that tipped a vehicle past a safety limit: the flight stops by that rule
-        # within STALL_TO_TILT_S of a stall it logged, and lands
-        assert code == 1, out
-        log = gcs.log_path.read_text()
-        assert re.search(r"mission: stopping \(land\): vehicle \d \(sysid \d\): tilt \d+(\.\d)? "
-                         r"deg exceeds max_tilt_rad", log), log[-3000:]
-        assert "tick: the ground station stopped for" in log
-        assert "mission: done: exit 1" in log
-        t_stop = report["t_s"][-1]
-        assert any(0.0 <= t_stop - t <= STALL_TO_TILT_S for t, _ in tick["stalls_at_s_ms"]), (
-            t_stop, tick["stalls_at_s_ms"])
-        return
-    check_scenario_one(report, code, out, bound_m=STALLED_BOUND_M if stalled else 0.05)
-    assert report["tick"]["rate_hz"] == 250.0
-    assert report["extra"]["gains"]["alpha_omega"] == 3.0
+    print(f"skipped ticks {tick['skipped_ticks']} of {tick['ticks']}, {tick['stalls']} stalls")
+    check_scenario_one(report, code, out)
+    assert tick["rate_hz"] == 250.0
+    gains = report["extra"]["gains"]
+    assert (gains["alpha_eps"], gains["alpha_omega"], gains["alpha_rho"]) == (2.0, 2.0, 0.03)
 
 
 def test_actuators_mode_is_refused_in_preflight_against_px4_1_16(tmp_path):

@@ -24,6 +24,7 @@ from pathlib import Path
 import pytest
 import yaml
 from pymavlink import mavutil
+from test_fly_confirmed import write_team
 from test_fly_emulator import Gcs
 
 from vehicle_emulator.testing import free_udp_port_block
@@ -44,7 +45,8 @@ OFFBOARD_PX4 = 6
 
 def ground_team(tmp: Path, autopilot: str, duration_s: float) -> Path:
     """square4 (Scenario I) in rates mode, its vehicles booting on the ground at BOOT_ENU_M,
-    go-to-start on (auto) with its defaults; px4: fixed ports, ardupilot: learned addresses."""
+    go-to-start on (auto) with its defaults; px4: fixed ports, ardupilot: learned addresses; the
+    links of a loaded test machine (test_fly_confirmed.write_team)."""
     data = yaml.safe_load((ROOT / "configs" / "square4.yaml").read_text())
     gcs_base, bind_base = free_udp_port_block(4), free_udp_port_block(4)
     data["name"] = f"goto-{autopilot}"
@@ -56,9 +58,7 @@ def ground_team(tmp: Path, autopilot: str, duration_s: float) -> Path:
         v["link"] = ({"local_port": gcs_base + k, "learn_remote": True} if autopilot == "ardupilot"
                      else {"local_port": gcs_base + k, "remote_port": bind_base + k})
         v["emulator"] = {"boot_position_enu_m": BOOT_ENU_M[k]}
-    path = tmp / f"{autopilot}.yaml"
-    path.write_text(yaml.safe_dump(data, sort_keys=False))
-    return path
+    return write_team(tmp / f"{autopilot}.yaml", data)
 
 
 def fleet(team: Path, tmp: Path, *params: str) -> subprocess.Popen:

@@ -535,6 +535,7 @@ ERRORS = [
     ("fly.rates.tick_rate_hz", 0, r"fly\.rates\.tick_rate_hz: expected a value in \(0, 1000\], "
      r"got 0\.0$"),
     ("fly.actuators.alpha_omega", -3, r"fly\.actuators\.alpha_omega: expected > 0, got -3\.0"),
+    ("fly.actuators.alpha_rho", 0, r"fly\.actuators\.alpha_rho: expected > 0, got 0\.0"),
     ("fly.heading", "north", r"fly\.heading: expected 'hold', 'paper' or a compass heading in degrees, got 'north'"),
     ("fly.heading", 400, r"fly\.heading: expected a value in \[-360, 360\], got 400"),
     ("fly.rates.max_yaw_rate_radps", 0, r"fly\.rates\.max_yaw_rate_radps: expected > 0, got 0"),
@@ -596,7 +597,8 @@ def test_fly_section_is_optional_and_defaults_are_documented():
     assert team_from_dict(edit(base(), "fly.predict", False)).fly.predict is False
     # AND the shipped file flies the criterion's torque gains
     shipped = load_team(SQUARE4).fly
-    assert (shipped.actuators.alpha_eps, shipped.actuators.alpha_omega) == (24.0, 3.0)
+    assert (shipped.actuators.alpha_eps, shipped.actuators.alpha_omega) == (2.0, 2.0)
+    assert shipped.actuators.alpha_rho == 0.03 and shipped.rates.alpha_rho is None
     assert shipped.geofence is not None and shipped.mode("rates") is shipped.rates
 
 

@@ -105,7 +105,10 @@ def test_actuators_setup_flies_the_criterion_gains_at_250_hz():
     team = load_team(CONFIGS / "square4.yaml")
     setup = prepare(team, FlyOptions(out_dir=OUT, mode="actuators"))
     assert setup.mode == "actuators" and setup.tick_rate_hz == 250.0
-    assert (setup.gains.alpha_eps, setup.gains.alpha_omega) == (24.0, 3.0)
+    assert (setup.gains.alpha_eps, setup.gains.alpha_omega) == (2.0, 2.0)
+    # (27) adapts at the paper's alpha_rho scaled as alpha_omega was (0.5 * 2/32 ~ 0.03)
+    assert setup.gains.alpha_rho == 0.03 and team.controller.gains.alpha_rho == 0.5
+    assert prepare(team, FlyOptions(out_dir=OUT, mode="rates")).gains.alpha_rho == 0.5
     assert setup.requested_rates_hz["ATTITUDE_QUATERNION"] == 250.0
     assert setup.requested_rates_hz["LOCAL_POSITION_NED"] == 100.0
 

@@ -4,6 +4,7 @@ against the acceptance bounds. Reference numbers are copied from ../shared/spec/
 
 from __future__ import annotations
 
+import dataclasses
 from functools import cache
 from pathlib import Path
 
@@ -178,3 +179,24 @@ def test_slower_controller_rates_still_fly():
     # rates mode, whose rate loop runs at the plant rate (spec section 9)
     log = run("square4.yaml", mode="rates", controller_rate_hz=250.0, duration_s=30.0)
     assert formation_error(log)[at(log, 30)] < 5e-3
+
+
+def _actuators_mode_run(alpha_rho: float):
+    """Scenario I as `gcs fly --mode actuators` ticks it (250 Hz, the flown torque gains)."""
+    team = load_team(CONFIGS / "square4.yaml")
+    flown = team.fly.actuators
+    gains = team.controller.gains._replace(
+        alpha_eps=flown.alpha_eps, alpha_omega=flown.alpha_omega, alpha_rho=alpha_rho)
+    team = dataclasses.replace(team, controller=dataclasses.replace(team.controller, gains=gains))
+    return simulate(team, SimOptions(mode="actuators", controller_rate_hz=250.0,
+                                     duration_s=20.0)).log
+
+
+def test_actuators_mode_gains_fly_the_paper_formation_with_the_papers_inertia_excursion():
+    # GIVEN the torque gains actuators mode flies at 250 Hz ((2, 2), alpha_rho 0.03)
+    flown = _actuators_mode_run(load_team(CONFIGS / "square4.yaml").fly.actuators.alpha_rho)
+    # THEN the formation is the paper's, and Jhat stays positive and within twice the paper's
+    # largest (its own loop: 0.148 at 60 s)
+    assert formation_error(flown)[at(flown, 20)] < 1e-3
+    assert np.all(flown.inertia_estimate_kgm2 > 0.0)
+    assert np.max(flown.inertia_estimate_kgm2) < 2.0 * float(np.max(REFERENCE_JHAT_60))

@@ -151,6 +151,30 @@ def test_estimate_inertia_false_holds_rhohat_while_mhat_adapts():
     np.testing.assert_array_equal(a.rate_cmd_radps, b.rate_cmd_radps)
 
 
+def test_inertia_step_cap_advances_rhohat_by_one_tick_after_a_gap_and_mhat_by_the_gap():
+    # GIVEN two laws on the same team, one capped at a 4 ms tick (gcs fly's), the vehicles out
+    # of formation and turning (a state after a 100 ms stall on a held torque)
+    team = load_team(CONFIG)
+    args = (law_gains(team), team.adjacency(), team.offsets_enu_m(), team.initial_mhat(),
+            team.initial_inertia_estimates_kgm2())
+    capped, free = TeamLaw(*args), TeamLaw(*args)
+    capped.inertia_step_max_s = 0.004
+    rot = np.tile(rotation_from_rpy(0.1, -0.05, 0.2), (4, 1, 1))
+    meas = TeamMeasurement(team.initial_positions_enu_m(), np.full((4, 3), 0.3), np.zeros((4, 3)),
+                           rot, np.full((4, 3), 0.8))
+    ref = reference_velocity(0.0, *team.reference_velocity.as_arrays())
+    rho0 = team.initial_inertia_estimates_kgm2()
+    # WHEN both step over a 100 ms gap
+    capped.step(meas, ref, 0.1)
+    free.step(meas, ref, 0.1)
+    # THEN rhohat moved by a 4 ms step of the same rate, a 25th of the uncapped move; mhat, whose
+    # I&I invariant needs the elapsed time, moved by the whole gap in both
+    moved_free = free.rhohat - rho0
+    assert np.abs(moved_free).max() > 1e-4
+    np.testing.assert_allclose(capped.rhohat - rho0, moved_free / 25.0, rtol=1e-9, atol=1e-15)
+    np.testing.assert_array_equal(capped.mhat, free.mhat)
+
+
 @pytest.mark.parametrize(("mode", "estimated"), [("rates", False), ("actuators", True)])
 def test_gcs_sim_integrates_the_inertia_estimate_only_where_the_torque_is_flown(mode, estimated):
     # GIVEN Scenario I simulated for 3 s in `mode`
