@@ -27,6 +27,7 @@ duration_s on the emulator's clock (``FaultSchedule.restore_at``).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from enum import IntEnum
 
@@ -194,6 +195,18 @@ class FaultSchedule:
         if self.clock_zero_s is None:
             return None
         return now_s - self.clock_zero_s
+
+    def next_due_s(self) -> float:
+        """When the next scheduled fault falls due on the emulator's clock (physics time), or
+        inf: none is left, or the fault clock has not started (it starts on a tick, never
+        inside a run of physics steps)."""
+        if self.clock_zero_s is None:
+            return math.inf
+        times = [f.at_s for f in self.pending[:1]]
+        t_drop = self.params["EMU_MDROP_T"]
+        if not self.mass_drop_done and t_drop >= 0.0:
+            times.append(t_drop)
+        return self.clock_zero_s + min(times) if times else math.inf
 
     def due(self, clock_s: float | None) -> list[FaultSpec]:
         """Faults whose time has come (each returned once)."""

@@ -354,17 +354,25 @@ class Emulator:
         """``steps`` physics steps, stopping at each autopilot deadline that falls inside them
         to expire what is due: a late wake-up that catches up 20 ms at once must not fly an
         expired guided target for those 20 ms (ArduCopter drops it on the 400 Hz pass after
-        GUID_TIMEOUT, whatever its ground station's link does)."""
+        GUID_TIMEOUT, whatever its ground station's link does). It stops the same way at each
+        scheduled fault: a mass drop acts from the first step at or after its time, however
+        late the wake-up."""
         plant = self.plant
         while True:
+            fault_s = min((node.faults.next_due_s() for node in self._fault_nodes),
+                          default=math.inf)
+            stop_s = min(self._next_deadline_s, fault_s)
             run = steps
-            if self._next_deadline_s < math.inf:
-                due = math.ceil((self._next_deadline_s - plant.time_s) / plant.dt_s - 1e-9)
+            if stop_s < math.inf:
+                due = math.ceil((stop_s - plant.time_s) / plant.dt_s - 1e-9)
                 run = min(steps, max(due, 1))
             plant.step(run)
             steps -= run
             if steps == 0:
                 return
+            if plant.time_s >= fault_s - 1e-9:
+                for node in self._fault_nodes:
+                    node.apply_faults(plant.time_s)
             if plant.time_s >= self._next_deadline_s:
                 self._expire(plant.time_s)
 

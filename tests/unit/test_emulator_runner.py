@@ -82,6 +82,24 @@ def test_mass_drop_fires_on_the_fault_clock_at_the_first_tick_at_or_after_its_ti
     assert any(t.startswith("Fault: mass 0.850->0.595 kg at 3.000 s") for t in texts)
 
 
+def test_a_late_wake_up_still_drops_the_mass_at_the_first_step_at_or_after_its_time():
+    # GIVEN a mass drop at 3.0 s on the fault clock, started at 5.0 s (formation start)
+    emu, (link,) = _emu(faults=[FaultSpec("mass_drop", 1, 3.0, fraction=0.3)])
+    node = emu.nodes[0]
+    _run(emu, 5.0)
+    node.autopilot.first_offboard_s = 5.0
+    _run(emu, 7.9)
+    # WHEN a busy machine wakes the emulator 80 ms late and it catches up in one call
+    emu.advance_to(7.98)
+    assert emu.plant.mass_kg[0] == 0.85
+    emu.advance_to(8.06)
+    # THEN the mass dropped at the step at 8.0 s inside that catch-up, and the fault says it
+    # happened at 3.000 s on its clock, not at the wake-up (3.060)
+    assert emu.plant.mass_kg[0] == pytest.approx(0.595)
+    texts = [m.text for m in link.msgs if m.get_type() == "STATUSTEXT"]
+    assert any(t.startswith("Fault: mass 0.850->0.595 kg at 3.000 s") for t in texts), texts
+
+
 def test_fault_clock_from_boot_option():
     emu, _ = _emu(
         faults=[FaultSpec("mass_drop", 1, 1.0, fraction=0.5)], param_overrides={"EMU_FLT_T0": 1}
