@@ -1,4 +1,6 @@
-"""The cascade criterion at the link delay that exists: measured in preflight, judged per vehicle.
+"""The loop criteria at the link delay that exists: measured in preflight, judged per vehicle
+(`DelayJudge`: the cascade criterion of rates and attitude mode; `TorqueDelayJudge`: the torque
+loop's of actuators mode).
 
 `prepare` checks each control mode at the configured delay (`fly.link_delay_s`). In preflight the
 links' TIMESYNC round trips (gcs.link.clock) say what the delay is; where it exceeds the
@@ -40,6 +42,7 @@ import numpy as np
 
 from gcs.mission.autopilots import PROFILES
 from gcs.mission.cascade import AutopilotResponse, CascadeGains, cascade_margins, passes, verdict
+from gcs.mission.stability import MIN_DECAY_PER_S, delays_ticks, torque_margins
 
 #: Measured delays are rounded up to this step before the criterion is evaluated [s].
 DELAY_STEP_S = 0.005
@@ -90,9 +93,11 @@ class DelayJudge:
         self._passes: dict[tuple[int, float], bool] = {}
         self._lines: dict[tuple[int, float], str] = {}
 
-    def deferred(self, autopilot: int, clock: RoundTrips) -> Callable[[float], str | None]:
-        """`problem` for this vehicle, asked later (when a preflight decides, with the time
-        from which round trips count) with the round trips its clock holds then."""
+    def deferred(self, autopilot: int, clock: RoundTrips,
+                 index: int = 0) -> Callable[[float], str | None]:
+        """`problem` for this vehicle (of `autopilot`: the cascade is judged per autopilot, so
+        `index` is unused), asked later (when a preflight decides, with the time from which
+        round trips count) with the round trips its clock holds then."""
         return functools.partial(self._problem_of, autopilot, clock)
 
     def _problem_of(self, autopilot: int, clock: RoundTrips, since_s: float) -> str | None:
@@ -132,3 +137,63 @@ class DelayJudge:
         return (f"link delay measured {1e3 * delay:.0f} ms each way (TIMESYNC round trip lower "
                 f"quartile {2e3 * delay:.0f} ms), more than fly.link_delay_s "
                 f"{1e3 * self.configured_delay_s:.0f} ms: {self._lines[key]}")
+
+
+class TorqueDelayJudge:
+    """Actuators mode's discrete-time criterion (gcs/mission/stability.py) again at each link's
+    measured delay, per vehicle (its inertia sets how much delay its torque loop tolerates).
+
+    The criterion covers the ground station's own lag (MAX_LOOP_DELAY_S); a link whose round trip
+    (TIMESYNC lower quartile, rounded up to DELAY_STEP_S) exceeds DELAY_TOLERANCE_S adds its
+    round trip to that span: the torque is computed from telemetry that came down the link and
+    acts after it went up. A vehicle whose loop fails there is refused in preflight, one line."""
+
+    def __init__(self, vehicle_ids: Sequence[int], inertias_kgm2: Sequence[Sequence[float]],
+                 alpha_eps: float, alpha_omega: float, tick_rate_hz: float) -> None:
+        self.vehicle_ids = tuple(int(v) for v in vehicle_ids)
+        self.inertias_kgm2 = tuple(tuple(float(j) for j in row) for row in inertias_kgm2)
+        self.alpha_eps, self.alpha_omega, self.tick_rate_hz = alpha_eps, alpha_omega, tick_rate_hz
+        self._lines: dict[tuple[int, float], str | None] = {}
+
+    def deferred(self, autopilot: int, clock: RoundTrips,
+                 index: int = 0) -> Callable[[float], str | None]:
+        """`problem` for the vehicle of row `index`, asked when a preflight decides."""
+        return functools.partial(self._problem_of, index, clock)
+
+    def _problem_of(self, index: int, clock: RoundTrips, since_s: float) -> str | None:
+        trips = clock.round_trips_s(since_s)
+        if trips.size < MIN_SETTLED_ROUND_TRIPS:
+            trips = clock.round_trips_s()
+        return self.problem(index, trips[-JUDGED_ROUND_TRIPS:])
+
+    def problem(self, index: int, round_trips_s: np.ndarray) -> str | None:
+        """None when the vehicle's torque loop passes at its link's round trip (or the round trip
+        is within DELAY_TOLERANCE_S, or nothing was measured); otherwise the refusal line."""
+        delay = measured_delay_s(round_trips_s)
+        if not 2.0 * delay > DELAY_TOLERANCE_S:
+            return None
+        step = round(math.ceil(2.0 * delay / DELAY_STEP_S - 1e-9) * DELAY_STEP_S, 6)
+        key = (index, step)
+        if key not in self._lines:
+            self._lines[key] = self._verdict(index, step)
+        line = self._lines[key]
+        if line is None:
+            return None
+        return (f"link delay measured {1e3 * delay:.0f} ms each way (TIMESYNC round trip lower "
+                f"quartile {2e3 * delay:.0f} ms): {line}")
+
+    def _verdict(self, index: int, round_trip_s: float) -> str | None:
+        vid = self.vehicle_ids[index]
+        margins = torque_margins([vid], [self.inertias_kgm2[index]], self.alpha_eps,
+                                 self.alpha_omega, self.tick_rate_hz, round_trip_s)
+        bad = [m for m in margins if not m.ok()]
+        if not bad:
+            return None
+        worst = max(bad, key=lambda m: m.spectral_radius)
+        ticks = delays_ticks(1.0 / self.tick_rate_hz, round_trip_s)[-1]
+        return (f"actuators mode at {self.tick_rate_hz:g} Hz with alpha_eps {self.alpha_eps:g}, "
+                f"alpha_omega {self.alpha_omega:g} is not stable when the torque acts up to "
+                f"{ticks} ticks late: axis {worst.axis} (J {worst.inertia_kgm2:g} kg m^2) has "
+                f"spectral radius {worst.spectral_radius:.3f} (decay {worst.decay_per_s:.3g} /s, "
+                f"need >= {MIN_DECAY_PER_S:g} /s); fly rates mode, whose attitude loop the "
+                f"autopilot closes on board")

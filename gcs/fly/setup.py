@@ -27,7 +27,7 @@ from gcs.config import (
 )
 from gcs.control.gains import LawGains
 from gcs.flightlog import AUTOPILOT_CONTROLLER, FlightLog
-from gcs.fly.delay import DelayJudge
+from gcs.fly.delay import DelayJudge, TorqueDelayJudge
 from gcs.fly.measure import HOVER_RATE_HZ, HOVER_WINDOW_S
 from gcs.mission.autopilots import PROFILES
 from gcs.mission.cascade import (
@@ -87,8 +87,9 @@ class FlightSetup:
     requested_rates_hz: dict[str, float]
     log_every: int
     stability: str  # the discrete-time criterion, evaluated (for the log and the report)
-    # rates/attitude: the criterion again at each link's measured delay, in preflight
-    delay_judge: DelayJudge | None = None
+    # the criterion again at each link's measured delay, in preflight (the cascade's in rates
+    # and attitude mode, the torque loop's in actuators mode)
+    delay_judge: DelayJudge | TorqueDelayJudge | None = None
     mode_choice: str = ""  # which mode is flown and why (resolve_mode)
 
 
@@ -234,7 +235,7 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
     # position mode: the team file's gains only to build the (unused) law object
     gains = team.controller.gains if position else _mode_gains(team, mode)
     loop_refusals: dict[int, str] = {}
-    judge = None
+    judge: DelayJudge | TorqueDelayJudge | None = None
     if position:
         stability = ("position mode: no law runs on the ground station; each autopilot closes "
                      "every loop on board (no cascade or torque criterion applies)")
@@ -259,6 +260,7 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
                 f"{MIN_DECAY_PER_S:g} /s with 1-{delays_ticks(1.0 / rate)[-1]} ticks of delay); "
                 f"set fly.actuators.alpha_eps/"
                 f"alpha_omega or tick_rate_hz (docs/gcs.md)")
+        judge = TorqueDelayJudge(team.ids(), inertias, gains.alpha_eps, gains.alpha_omega, rate)
     else:  # rates, attitude: the law's loops over each autopilot's own (cascade.py)
         stability, loop_refusals, judge = cascade_check(team, mode, gains, rate)
     try:

@@ -21,7 +21,7 @@ from numba import njit
 
 from gcs import frames
 from gcs.control.gains import GRAVITY_MPS2
-from gcs.fly.delay import DelayJudge
+from gcs.fly.delay import DelayJudge, TorqueDelayJudge
 from gcs.fly.measure import TeamSample
 from gcs.fly.origins import WAITING, TeamTies
 from gcs.link import HotTable, VehicleProxy
@@ -253,7 +253,7 @@ def _listen_text(address: tuple[str, int]) -> str:
 
 def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample: TeamSample,
                      want_rates: Sequence[str], ties: TeamTies | None = None,
-                     judge: DelayJudge | None = None,
+                     judge: DelayJudge | TorqueDelayJudge | None = None,
                      table: HotTable | None = None,
                      rows: Sequence[int] | None = None) -> list[VehicleStatus]:
     """What the mission machine sees of each vehicle (see gcs.mission.safety.VehicleStatus);
@@ -321,7 +321,7 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
             listen=listen_label(p), landed_state=landed_state, prearm_ok=prearm_ok,
             status_text=text.quoted() if text is not None else "", height_above_home_m=height,
             frame_problem=problem, frame_pending=problem == WAITING,
-            loop_problem=judge.deferred(autopilot, p.clock) if judge is not None else None,
+            loop_problem=judge.deferred(autopilot, p.clock, i) if judge is not None else None,
         ))
     return out
 

@@ -32,10 +32,12 @@ MIN_DELAY_TICKS = 2
 MIN_DECAY_PER_S = 1.5
 
 
-def delays_ticks(period_s: float) -> range:
+def delays_ticks(period_s: float, link_round_trip_s: float = 0.0) -> range:
     """The delays the criterion covers at tick period `period_s`: 1 .. D ticks, D the ticks
-    MAX_LOOP_DELAY_S spans (at least MIN_DELAY_TICKS)."""
-    return range(1, max(MIN_DELAY_TICKS, math.ceil(MAX_LOOP_DELAY_S / period_s - 1e-9)) + 1)
+    MAX_LOOP_DELAY_S spans (at least MIN_DELAY_TICKS), plus those of a link's round trip
+    (telemetry down, torque up) where the link itself is slow."""
+    span_s = MAX_LOOP_DELAY_S + max(link_round_trip_s, 0.0)
+    return range(1, max(MIN_DELAY_TICKS, math.ceil(span_s / period_s - 1e-9)) + 1)
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,6 +87,7 @@ def torque_margins(
     alpha_eps: float,
     alpha_omega: float,
     tick_rate_hz: float,
+    link_round_trip_s: float = 0.0,
 ) -> list[AxisMargin]:
     """Worst-case (over `delays_ticks`) margin of every vehicle axis in actuators mode.
 
@@ -95,7 +98,8 @@ def torque_margins(
     out = []
     for vid, inertia in zip(vehicle_ids, inertias_kgm2, strict=True):
         for axis, j in zip("xyz", inertia, strict=True):
-            rho = max(torque_loop_radius(alpha_eps, alpha_omega, j, h, d) for d in delays_ticks(h))
+            rho = max(torque_loop_radius(alpha_eps, alpha_omega, j, h, d)
+                      for d in delays_ticks(h, link_round_trip_s))
             out.append(AxisMargin(int(vid), axis, float(j), rho, _decay(rho, h)))
     return out
 

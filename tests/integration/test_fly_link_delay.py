@@ -85,17 +85,24 @@ def delayed_team(tmp_path, base: int, latency_ms: float, *, probability: float =
     return team
 
 
+def fly_over_50_ms_links(tmp_path, mode: str) -> tuple[int, str, str]:
+    """`gcs fly --mode mode` over links with 50 ms (+ 0-10 ms jitter) each way from the vehicles'
+    boot, hovering 5 m lower than Scenario I's starts (3-7 m up: the abort action's landing is
+    shorter): (exit code, its log, its output)."""
+    base = free_udp_port_block(4)
+    team = delayed_team(tmp_path, base, 50.0, z_shift=-5.0)
+    with emulators(team, base, tmp_path, args=("--param", "EMU_FLT_T0=1")):
+        gcs = Gcs(team, tmp_path / "run", "--mode", mode)
+        code, out = gcs.finish(120)
+    return code, gcs.log_path.read_text(), out
+
+
 def test_a_mode_unstable_at_the_measured_delay_is_refused_before_anything_is_commanded(tmp_path):
     # GIVEN links with 50 ms (+ 0-10 ms jitter) each way from the vehicles' boot, and a team file
     # that declares 10 ms (fly.link_delay_s) with the paper's gains, stable only at that delay;
     # the vehicles hover 5 m lower than Scenario I's starts (3-7 m up: the abort action's
     # landing is shorter)
-    base = free_udp_port_block(4)
-    team = delayed_team(tmp_path, base, 50.0, z_shift=-5.0)
-    with emulators(team, base, tmp_path, args=("--param", "EMU_FLT_T0=1")):
-        gcs = Gcs(team, tmp_path / "run", "--mode", "rates")
-        code, out = gcs.finish(120)
-    log = gcs.log_path.read_text()
+    code, log, out = fly_over_50_ms_links(tmp_path, "rates")
     # THEN preflight measures the round trips and refuses rates mode, one line per vehicle,
     # naming the measured delay and the settings that are stable at it
     assert code == 1, log[-3000:]
@@ -114,6 +121,30 @@ def test_a_mode_unstable_at_the_measured_delay_is_refused_before_anything_is_com
     assert min(measured) >= 50.0 and 50.0 <= float(np.median(measured)) <= 62.0, measured
     # AND no vehicle was switched to offboard or armed (the hovering vehicles get the abort
     # action, fly.abort_action: land)
+    for k in range(1, 5):
+        sent = [c for c, _, _ in commands_sent(tmp_path / "run" / "flight.tlog", k)]
+        assert 176 not in sent and 400 not in sent, sent
+
+
+def test_actuators_mode_over_slow_links_is_refused_for_the_vehicles_it_would_tip(tmp_path):
+    # GIVEN the same 50 ms (+ 0-10 ms jitter) links, and actuators mode: the torque (26) is
+    # computed on the ground, so it acts a round trip (100-120 ms) plus the ground station's
+    # own lag after the attitude it answers
+    code, log, out = fly_over_50_ms_links(tmp_path, "actuators")
+    text = log + out
+    # THEN preflight refuses the vehicles whose torque loop the criterion fails at that delay,
+    # one line each naming the delay, the axis and the way out; UAV 4 (J 0.354-0.654 kg m^2)
+    # still passes at it and is not named
+    assert code == 1, text[-3000:]
+    for k in (1, 2, 3):
+        marker = f"vehicle {k} (sysid {k}): link delay measured "
+        assert marker in text, text[-3000:]
+        why = text[text.index(marker):].split("\n")[0].split("; vehicle ")[0]
+        assert re.search(r"actuators mode at 250 Hz with alpha_eps 2, alpha_omega 2 is not stable "
+                         r"when the torque acts up to \d+ ticks late: axis [xy] ", why), why
+        assert "fly rates mode" in why
+    assert "vehicle 4 (sysid 4): link delay measured" not in text
+    # AND nothing was commanded: no vehicle was switched to offboard or armed
     for k in range(1, 5):
         sent = [c for c, _, _ in commands_sent(tmp_path / "run" / "flight.tlog", k)]
         assert 176 not in sent and 400 not in sent, sent

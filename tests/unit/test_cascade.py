@@ -305,3 +305,29 @@ def test_a_link_whose_timesync_requests_got_no_reply_is_named_with_the_delay_ass
     # AND with the requests switched off, one line says no link was measured
     (line,) = unmeasured_delay_lines(links, 0.0, 0.02)
     assert line.startswith("link delays not measured") and "(20 ms)" in line
+
+
+def test_actuators_mode_is_judged_again_at_each_links_round_trip_per_vehicle_inertia():
+    from gcs.fly.delay import TorqueDelayJudge
+
+    # GIVEN Scenario I's inertias and the flown torque gains at 250 Hz
+    inertia = [(0.04856, 0.04856, 0.08801), (0.1522, 0.1522, 0.3), (0.0256, 0.0256, 0.052),
+               (0.354, 0.354, 0.654)]
+    judge = TorqueDelayJudge([1, 2, 3, 4], inertia, 2.0, 2.0, 250.0)
+    # localhost (round trips 0.4-0.8 ms, busy or not): the ground station's own 16 ms span
+    # covers it, and nothing measured says nothing
+    for i in range(4):
+        assert judge.problem(i, np.array([0.0004, 0.0006, 0.0008])) is None
+        assert judge.problem(i, np.array([])) is None
+    # a 10 ms round trip: UAV 3 (J 0.0256) fails from 5 ticks of delay, UAV 4 (J >= 0.354) not
+    line = judge.problem(2, np.array([0.010] * 8))
+    assert line is not None and line.startswith(
+        "link delay measured 5 ms each way (TIMESYNC round trip lower quartile 10 ms): "
+        "actuators mode at 250 Hz with alpha_eps 2, alpha_omega 2 is not stable when the torque "
+        "acts up to 7 ticks late: axis x (J 0.0256 kg m^2)")
+    assert line.endswith("fly rates mode, whose attitude loop the autopilot closes on board")
+    assert judge.problem(3, np.array([0.010] * 8)) is None
+    # 50 ms each way (the link test's): UAVs 1-3 are refused; UAV 4's slow loop (J 0.354-0.654)
+    # still decays at 1.5 /s with its torque 29 ticks late
+    assert [judge.problem(i, np.array([0.100] * 8)) is None for i in range(4)] == [
+        False, False, False, True]
