@@ -1,22 +1,26 @@
 """Discrete-time stability of the attitude loops as flown over a link (docs/gcs.md). Pure.
 
 The paper designs its attitude loop in continuous time. Over MAVLink the command is computed at a
-fixed tick of period h from telemetry that is up to about one tick old, and held (zero-order hold)
-until the next one. The criterion used by `gcs fly` linearises each body axis about R^e = I
-(eps ~ 2 theta, omega^e ~ theta'). In actuators mode, torque (26):
-J theta'' = -(2 alpha_eps + 1/2) theta - alpha_omega theta' (the 1/2 is -eps/(4 - tr(I - R^e)) at
-R^e = I); the Gamma rhohat feed-forward is not feedback. (The rates and attitude modes, whose
-innermost loops the autopilot closes, are checked by the cascade criterion of
-gcs/mission/cascade.py over each autopilot's measured response.)
+fixed tick of period h from telemetry that is some ticks old, and held (zero-order hold) until the
+next one. The criterion used by `gcs fly` linearises each body axis about R^e = I (eps ~ 2 theta,
+omega^e ~ theta'). In actuators mode, torque (26): J theta'' = -(2 alpha_eps + 1/2) theta -
+alpha_omega theta' (the 1/2 is -eps/(4 - tr(I - R^e)) at R^e = I). The Gamma rhohat feed-forward is
+left out: it is exact when rhohat = J, and its error feeds back only through rhohat - J, which
+actuators mode keeps small by adapting slowly (fly.actuators.alpha_rho; docs/control-law.md, "The
+torque loop over a link"). (The rates and attitude modes, whose innermost loops the autopilot
+closes, are checked by the cascade criterion of gcs/mission/cascade.py over each autopilot's
+measured response.)
 
 It is discretised exactly (ZOH) with a pure measurement delay of d = 1 .. D ticks, D the ticks in
 MAX_LOOP_DELAY_S (at least 2): the telemetry's age when the law reads it plus the vehicle's own
-sampling. Over localhost the emulator's ATTITUDE_QUATERNION was 6.5 ms old at the median and
-12.5 ms at p99 on a quiet machine (20 ms at p99 beside two busy loops), so 16 ms covers a quiet
-machine's p99 with a tick to spare at 250 Hz (D = 4). The criterion: for every vehicle, every
-axis and every delay, the spectral radius rho of the discrete closed loop is < 1, and its
-equivalent decay rate -ln(rho)/h is at least `min_decay_per_s` (default 1.5 /s; the paper's own
-continuous loop has a slowest attitude mode of about 2 (alpha_eps + 1/4)/alpha_omega = 2.0 /s).
+sampling. Over localhost the emulator's ATTITUDE_QUATERNION was 6.5 ms old at the median and 12.5
+ms at p99 on a quiet machine, so 16 ms covers a quiet machine's p99 with a tick to spare at 250 Hz
+(D = 4). (Beside two busy loops the p99 is 75-125 ms: the whole host stops for ~100 ms at a time,
+which no choice of gains covers; docs/benchmarks.md, "Actuators mode beside two busy loops".) The
+criterion: for every vehicle, every axis and every delay, the spectral radius rho of the discrete
+closed loop is < 1, and its equivalent decay rate -ln(rho)/h is at least `min_decay_per_s` (default
+1.5 /s; the paper's own continuous loop has a slowest attitude mode of about 2 (alpha_eps +
+1/4)/alpha_omega = 2.0 /s).
 """
 
 from __future__ import annotations
