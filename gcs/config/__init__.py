@@ -2,13 +2,14 @@
 
 Every problem raises ConfigError with one line "<file>: <key path>: <problem>" (plus "(line N)"
 when the value came from a YAML file). The schema is documented in docs/configuration.md; the
-paper's Scenario I is configs/square4.yaml. Modules: schema (the dataclasses), reader (YAML and
-checks), describe (what `gcs check` prints).
+paper's Scenario I is configs/square4.yaml. Modules: schema (the dataclasses), yamlnode (YAML with
+line numbers -> a node that checks values), fly_section (the `fly:` section), reader (the other
+sections and the entry points), describe (what `gcs check` prints).
 """
 
 from gcs.config.describe import describe
+from gcs.config.fly_section import check_go_to_start
 from gcs.config.reader import (
-    check_go_to_start,
     load_team,
     team_from_dict,
     team_from_yaml,

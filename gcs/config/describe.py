@@ -7,7 +7,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from gcs.config.reader import check_go_to_start
+from gcs.config.fly_section import check_go_to_start
 from gcs.config.schema import (
     GAIN_NAMES,
     GRAVITY_MPS2,
