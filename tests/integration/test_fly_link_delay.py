@@ -134,7 +134,8 @@ def test_actuators_mode_over_slow_links_is_refused_for_the_vehicles_it_would_tip
     text = log + out
     # THEN preflight refuses the vehicles whose torque loop the criterion fails at that delay,
     # one line each naming the delay, the axis and the way out; UAV 4 (J 0.354-0.654 kg m^2)
-    # still passes at it and is not named
+    # passes up to a 120 ms round trip, so it is named only where a busy machine lifted its
+    # measured round trip past that (tests/unit/test_cascade.py judges each vehicle exactly)
     assert code == 1, text[-3000:]
     for k in (1, 2, 3):
         marker = f"vehicle {k} (sysid {k}): link delay measured "
@@ -143,7 +144,9 @@ def test_actuators_mode_over_slow_links_is_refused_for_the_vehicles_it_would_tip
         assert re.search(r"actuators mode at 250 Hz with alpha_eps 2, alpha_omega 2 is not stable "
                          r"when the torque acts up to \d+ ticks late: axis [xy] ", why), why
         assert "fly rates mode" in why
-    assert "vehicle 4 (sysid 4): link delay measured" not in text
+    if (four := re.search(r"vehicle 4 \(sysid 4\): link delay measured \d+ ms each way "
+                          r"\(TIMESYNC round trip lower quartile (\d+) ms\)", text)) is not None:
+        assert int(four.group(1)) >= 120, four.group(0)
     # AND nothing was commanded: no vehicle was switched to offboard or armed
     for k in range(1, 5):
         sent = [c for c, _, _ in commands_sent(tmp_path / "run" / "flight.tlog", k)]
