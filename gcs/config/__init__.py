@@ -2,13 +2,36 @@
 
 Every problem raises ConfigError with one line "<file>: <key path>: <problem>" (plus "(line N)"
 when the value came from a YAML file). The schema is documented in docs/configuration.md; the
-paper's Scenario I is configs/square4.yaml. Modules: schema (the dataclasses), yamlnode (YAML with
-line numbers -> a node that checks values), fly_section (the `fly:` section), reader (the other
-sections and the entry points), describe (what `gcs check` prints).
+paper's Scenario I is configs/square4.yaml. Modules: modes (the named choices: control modes,
+stop actions), schema (the dataclasses), fly_schema (the `fly:` section's dataclasses), yamlnode
+(YAML with line numbers -> a node that checks values), fly_section (reading the `fly:` section),
+reader (the other sections and the entry points), describe (what `gcs check` prints).
 """
 
 from gcs.config.describe import describe
+from gcs.config.fly_schema import (
+    FlyConfig,
+    FlyModeConfig,
+    FormationCheckConfig,
+    GeofenceConfig,
+    GoToStartConfig,
+    PositionModeConfig,
+)
 from gcs.config.fly_section import check_go_to_start
+from gcs.config.modes import (
+    AUTO_MODES,
+    DERIVATIVE_METHODS,
+    FAULT_KINDS,
+    FLY_ACTIONS,
+    FLY_CONTROL_MODES,
+    FLY_MODES,
+    FLY_STARTS,
+    JITTER_KINDS,
+    LAWS,
+    MODES,
+    POSITION_MODE,
+    TORQUE_MODES,
+)
 from gcs.config.reader import (
     load_team,
     team_from_dict,
@@ -17,21 +40,9 @@ from gcs.config.reader import (
     team_to_yaml,
 )
 from gcs.config.schema import (
-    AUTO_MODES,
-    DERIVATIVE_METHODS,
-    FAULT_KINDS,
-    FLY_ACTIONS,
-    FLY_CONTROL_MODES,
-    FLY_MODES,
-    FLY_STARTS,
     GAIN_NAMES,
     GRAVITY_MPS2,
-    JITTER_KINDS,
-    LAWS,
-    MODES,
-    POSITION_MODE,
     THRUST_MARGIN,
-    TORQUE_MODES,
     Airframe,
     AxisReference,
     ConfigError,
@@ -42,13 +53,8 @@ from gcs.config.schema import (
     Estimates,
     Fault,
     FaultConfig,
-    FlyConfig,
-    FlyModeConfig,
-    FormationCheckConfig,
     FrameConfig,
     Gains,
-    GeofenceConfig,
-    GoToStartConfig,
     GraphConfig,
     InitialState,
     LinkConfig,
@@ -57,7 +63,6 @@ from gcs.config.schema import (
     MotorEfficiencyFault,
     PacketLossFault,
     PlantParams,
-    PositionModeConfig,
     ReferenceVelocity,
     SimConfig,
     TeamConfig,

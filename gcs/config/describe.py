@@ -7,6 +7,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from gcs.config.fly_schema import FlyModeConfig
 from gcs.config.fly_section import check_go_to_start
 from gcs.config.schema import (
     GAIN_NAMES,
@@ -14,7 +15,6 @@ from gcs.config.schema import (
     THRUST_MARGIN,
     ConfigError,
     FaultConfig,
-    FlyModeConfig,
     TeamConfig,
     VehicleConfig,
     initial_phi,

@@ -5,17 +5,9 @@ from __future__ import annotations
 
 import math
 
-from gcs.config.schema import (
-    FLY_ACTIONS,
-    FLY_CONTROL_MODES,
-    FLY_HEADINGS,
-    FLY_INITIAL_MASSES,
-    FLY_MODES,
-    FLY_SCHEDULING,
-    FLY_STARTS,
+from gcs.config.fly_schema import (
     GO_TO_START_ENABLED,
     RESPONSE_KEYS,
-    ConfigError,
     FlyConfig,
     FlyModeConfig,
     FormationCheckConfig,
@@ -23,8 +15,17 @@ from gcs.config.schema import (
     GoToStartConfig,
     PositionModeConfig,
     ResponseConfig,
-    TeamConfig,
 )
+from gcs.config.modes import (
+    FLY_ACTIONS,
+    FLY_CONTROL_MODES,
+    FLY_HEADINGS,
+    FLY_INITIAL_MASSES,
+    FLY_MODES,
+    FLY_SCHEDULING,
+    FLY_STARTS,
+)
+from gcs.config.schema import ConfigError, TeamConfig
 from gcs.config.yamlnode import Node
 
 

@@ -13,15 +13,11 @@ from typing import Any
 import yaml
 
 from gcs.config.fly_section import read_fly
+from gcs.config.modes import DERIVATIVE_METHODS, FAULT_KINDS, JITTER_KINDS, LAWS, MODES
 from gcs.config.schema import (
-    DERIVATIVE_METHODS,
-    FAULT_KINDS,
     FRAME_VEHICLES,
     GAIN_NAMES,
     GRAVITY_MPS2,
-    JITTER_KINDS,
-    LAWS,
-    MODES,
     THRUST_MARGIN,
     ZERO3,
     Airframe,

@@ -29,7 +29,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from gcs.config.schema import POSITION_MODE
+from gcs.config.modes import POSITION_MODE
 from gcs.link.enums import mode_name
 from gcs.mission.cascade import ARDUPILOT_RESPONSE, PX4_RESPONSE, AutopilotResponse
 
