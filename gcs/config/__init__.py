@@ -19,6 +19,7 @@ from gcs.config.fly_schema import (
 )
 from gcs.config.fly_section import check_go_to_start
 from gcs.config.modes import (
+    AUTO_MODE,
     AUTO_MODES,
     DERIVATIVE_METHODS,
     FAULT_KINDS,
@@ -31,6 +32,8 @@ from gcs.config.modes import (
     MODES,
     POSITION_MODE,
     TORQUE_MODES,
+    ControlMode,
+    FlyAction,
 )
 from gcs.config.reader import (
     load_team,
@@ -72,6 +75,7 @@ from gcs.config.schema import (
 )
 
 __all__ = [
+    "AUTO_MODE",
     "AUTO_MODES",
     "DERIVATIVE_METHODS",
     "FAULT_KINDS",
@@ -90,6 +94,7 @@ __all__ = [
     "Airframe",
     "AxisReference",
     "ConfigError",
+    "ControlMode",
     "ControllerConfig",
     "Cosine",
     "DerivativeConfig",
@@ -97,6 +102,7 @@ __all__ = [
     "Estimates",
     "Fault",
     "FaultConfig",
+    "FlyAction",
     "FlyConfig",
     "FrameConfig",
     "FlyModeConfig",

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from gcs.config.modes import POSITION_MODE
+from gcs.config.modes import AUTO_MODE, ControlMode, FlyAction
 
 Vec3 = tuple[float, float, float]
 
@@ -98,9 +98,9 @@ RESPONSE_KEYS = tuple(ResponseConfig.__dataclass_fields__)
 class FlyConfig:
     """The `fly:` section: flight sequence, safety rules and link timing of `gcs fly`."""
 
-    # fly.mode: the control mode gcs fly flies (controller.mode is gcs sim's); "auto": rates, or
+    # fly.mode: the control mode gcs fly flies (controller.mode is gcs sim's); AUTO_MODE: rates, or
     # attitude where rates' loops fail the cascade criterion at link_delay_s (gcs/fly/setup.py)
-    control_mode: str = "auto"
+    control_mode: ControlMode | str = AUTO_MODE
     rates: FlyModeConfig = FlyModeConfig(100.0)
     actuators: FlyModeConfig = FlyModeConfig(250.0)
     attitude: FlyModeConfig = FlyModeConfig(100.0)
@@ -111,9 +111,9 @@ class FlyConfig:
     heading: str | float = "hold"
     start: str = "auto"  # auto: take off the vehicles that report being on the ground
     takeoff_altitude_m: float = 2.5  # above home
-    end_action: str = "land"  # after the formation phase
-    abort_action: str = "land"  # Ctrl-C, abort key, geofence, failed check
-    link_loss_action: str = "hold"  # the other vehicles when one link is lost
+    end_action: FlyAction = FlyAction.LAND  # after the formation phase
+    abort_action: FlyAction = FlyAction.LAND  # Ctrl-C, abort key, geofence, failed check
+    link_loss_action: FlyAction = FlyAction.HOLD  # the other vehicles when one link is lost
     stale_after_s: float = 0.1  # telemetry older than this is stale (see docs/gcs.md)
     link_lost_after_s: float = 0.5  # in flight: position/attitude older than this -> lost
     # in flight: position/attitude arriving more than this long after the vehicle took them (its
@@ -145,10 +145,13 @@ class FlyConfig:
     link_delay_s: float = 0.01  # one-way link delay the cascade criterion assumes [s]
     go_to_start: GoToStartConfig = GoToStartConfig()
 
-    def mode(self, name: str) -> FlyModeConfig:
-        """The settings of law mode `name` ('rates', 'actuators' or 'attitude')."""
-        return {"rates": self.rates, "actuators": self.actuators, "attitude": self.attitude}[name]
+    def mode(self, name: ControlMode) -> FlyModeConfig:
+        """The settings of law mode `name` (rates, actuators or attitude)."""
+        return {ControlMode.RATES: self.rates, ControlMode.ACTUATORS: self.actuators,
+                ControlMode.ATTITUDE: self.attitude}[name]
 
-    def tick_rate_hz(self, name: str) -> float:
+    def tick_rate_hz(self, name: ControlMode) -> float:
         """The tick rate of control mode `name` (FLY_CONTROL_MODES: a law mode or position)."""
-        return self.position.tick_rate_hz if name == POSITION_MODE else self.mode(name).tick_rate_hz
+        if name == ControlMode.POSITION:
+            return self.position.tick_rate_hz
+        return self.mode(name).tick_rate_hz

@@ -45,6 +45,8 @@ from gcs.config.modes import (  # noqa: F401  (re-exported: this module's before
     POSITION_MODE,
     SIM_MODES,
     TORQUE_MODES,
+    ControlMode,
+    as_strings,
 )
 from gcs.control.gains import LawGains
 
@@ -55,7 +57,7 @@ ZERO3: Vec3 = (0.0, 0.0, 0.0)
 
 
 def _choices(options: Sequence[str]) -> str:
-    return ", ".join(repr(o) for o in options)
+    return ", ".join(repr(o) for o in as_strings(options))
 
 
 class ConfigError(ValueError):
@@ -101,8 +103,7 @@ class DerivativeConfig:
 @dataclass(frozen=True, slots=True)
 class ControllerConfig:
     law: str  # "adaptive" | "baseline"
-    mode: str  # "rates" (thrust + body rates) | "actuators" (thrust + torque, eq. 26) |
-    # "attitude" (thrust + the command attitude (14); gcs fly only)
+    mode: ControlMode  # one of MODES: rates, actuators or attitude (gcs fly only)
     gains: Gains
     derivative: DerivativeConfig
 
