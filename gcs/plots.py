@@ -50,7 +50,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from gcs import metrics
-from gcs.config import TORQUE_MODES
+from gcs.config import TORQUE_MODES, ControlMode
 from gcs.flightlog import AUTOPILOT_CONTROLLER, FlightLog
 
 logger = logging.getLogger(__name__)
@@ -61,10 +61,10 @@ AXES = ("x", "y", "z")
 FIG7_NAME = "fig7_inertia_estimates.png"
 #: what each control mode sends the vehicle (the title's words)
 MODE_SETPOINTS = {
-    "actuators": "thrust + torque (26)",
-    "rates": "thrust + body rates",
-    "attitude": "thrust + attitude",
-    "position": "formation slots as position setpoints",
+    ControlMode.ACTUATORS: "thrust + torque (26)",
+    ControlMode.RATES: "thrust + body rates",
+    ControlMode.ATTITUDE: "thrust + attitude",
+    ControlMode.POSITION: "formation slots as position setpoints",
 }
 #: the figures of the law's own states (attitude errors, estimates): not written for a run that
 #: ran no law (gcs fly's position mode), and one left from an earlier run in the directory is

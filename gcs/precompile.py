@@ -92,6 +92,7 @@ def compile_law(prog: str = "gcs", force: bool = True) -> None:
 def compile_sim(prog: str = "gcs", force: bool = True) -> None:
     """Compile the in-process closed loop of `gcs sim` (both modes, laws and methods); with
     force=False, only when the cache does not hold it yet."""
+    from gcs.config.modes import SIM_MODES
     from gcs.sim.runner import SimOptions, simulate
 
     if not force and is_compiled("sim"):
@@ -99,7 +100,7 @@ def compile_sim(prog: str = "gcs", force: bool = True) -> None:
     estimate = SIM_AFTER_LAW_S if is_compiled("law") else SIM_COMPILE_S
     with compiling("sim", "the simulator", estimate, prog):
         for law, derivative in _VARIANTS:
-            for mode in ("rates", "actuators"):
+            for mode in SIM_MODES:
                 simulate(_team(law, derivative), SimOptions(duration_s=0.01, mode=mode))
 
 

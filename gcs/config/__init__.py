@@ -2,13 +2,39 @@
 
 Every problem raises ConfigError with one line "<file>: <key path>: <problem>" (plus "(line N)"
 when the value came from a YAML file). The schema is documented in docs/configuration.md; the
-paper's Scenario I is configs/square4.yaml. Modules: schema (the dataclasses), yamlnode (YAML with
-line numbers -> a node that checks values), fly_section (the `fly:` section), reader (the other
-sections and the entry points), describe (what `gcs check` prints).
+paper's Scenario I is configs/square4.yaml. Modules: modes (the named choices: control modes,
+stop actions), schema (the dataclasses), fly_schema (the `fly:` section's dataclasses), yamlnode
+(YAML with line numbers -> a node that checks values), fly_section (reading the `fly:` section),
+reader (the other sections and the entry points), describe (what `gcs check` prints).
 """
 
 from gcs.config.describe import describe
+from gcs.config.fly_schema import (
+    FlyConfig,
+    FlyModeConfig,
+    FormationCheckConfig,
+    GeofenceConfig,
+    GoToStartConfig,
+    PositionModeConfig,
+)
 from gcs.config.fly_section import check_go_to_start
+from gcs.config.modes import (
+    AUTO_MODE,
+    AUTO_MODES,
+    DERIVATIVE_METHODS,
+    FAULT_KINDS,
+    FLY_ACTIONS,
+    FLY_CONTROL_MODES,
+    FLY_MODES,
+    FLY_STARTS,
+    JITTER_KINDS,
+    LAWS,
+    MODES,
+    POSITION_MODE,
+    TORQUE_MODES,
+    ControlMode,
+    FlyAction,
+)
 from gcs.config.reader import (
     load_team,
     team_from_dict,
@@ -17,21 +43,9 @@ from gcs.config.reader import (
     team_to_yaml,
 )
 from gcs.config.schema import (
-    AUTO_MODES,
-    DERIVATIVE_METHODS,
-    FAULT_KINDS,
-    FLY_ACTIONS,
-    FLY_CONTROL_MODES,
-    FLY_MODES,
-    FLY_STARTS,
     GAIN_NAMES,
     GRAVITY_MPS2,
-    JITTER_KINDS,
-    LAWS,
-    MODES,
-    POSITION_MODE,
     THRUST_MARGIN,
-    TORQUE_MODES,
     Airframe,
     AxisReference,
     ConfigError,
@@ -42,13 +56,8 @@ from gcs.config.schema import (
     Estimates,
     Fault,
     FaultConfig,
-    FlyConfig,
-    FlyModeConfig,
-    FormationCheckConfig,
     FrameConfig,
     Gains,
-    GeofenceConfig,
-    GoToStartConfig,
     GraphConfig,
     InitialState,
     LinkConfig,
@@ -57,7 +66,6 @@ from gcs.config.schema import (
     MotorEfficiencyFault,
     PacketLossFault,
     PlantParams,
-    PositionModeConfig,
     ReferenceVelocity,
     SimConfig,
     TeamConfig,
@@ -67,6 +75,7 @@ from gcs.config.schema import (
 )
 
 __all__ = [
+    "AUTO_MODE",
     "AUTO_MODES",
     "DERIVATIVE_METHODS",
     "FAULT_KINDS",
@@ -85,6 +94,7 @@ __all__ = [
     "Airframe",
     "AxisReference",
     "ConfigError",
+    "ControlMode",
     "ControllerConfig",
     "Cosine",
     "DerivativeConfig",
@@ -92,6 +102,7 @@ __all__ = [
     "Estimates",
     "Fault",
     "FaultConfig",
+    "FlyAction",
     "FlyConfig",
     "FrameConfig",
     "FlyModeConfig",

@@ -7,14 +7,15 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from gcs.config.fly_schema import FlyModeConfig
 from gcs.config.fly_section import check_go_to_start
+from gcs.config.modes import ControlMode
 from gcs.config.schema import (
     GAIN_NAMES,
     GRAVITY_MPS2,
     THRUST_MARGIN,
     ConfigError,
     FaultConfig,
-    FlyModeConfig,
     TeamConfig,
     VehicleConfig,
     initial_phi,
@@ -36,7 +37,8 @@ def _ok(ok: bool) -> str:
 def describe(team: TeamConfig) -> str:
     """Multi-line summary of what the config says, with the sufficient conditions evaluated."""
     c, g, sim = team.controller, team.controller.gains, team.sim
-    mode = {"rates": "thrust + body rates", "actuators": "thrust + torque (26)"}[c.mode]
+    mode = {ControlMode.RATES: "thrust + body rates",
+            ControlMode.ACTUATORS: "thrust + torque (26)"}[c.mode]
     deriv = c.derivative.method + (
         f" (L = {c.derivative.levant_lipschitz:g}, substep {c.derivative.levant_substep_s:g} s)"
         if c.derivative.method == "levant"
@@ -181,7 +183,7 @@ def describe(team: TeamConfig) -> str:
             f"    vehicle {v.id} (Jbar {jbar:g}): {g.c_eps:g} < min{_v3(round(x, 4) for x in b)}"
             f" = {min(b):.4g}: {_ok(g.c_eps < min(b))}"
         )
-    if c.mode == "actuators":
+    if c.mode == ControlMode.ACTUATORS:
         out.append(
             f"  torque held 1/{sim.controller_rate_hz:g} s: |1 - alpha_omega h / J_min| < 1"
             " (rough discrete-time stability of the rate loop):"

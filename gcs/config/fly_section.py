@@ -5,17 +5,9 @@ from __future__ import annotations
 
 import math
 
-from gcs.config.schema import (
-    FLY_ACTIONS,
-    FLY_CONTROL_MODES,
-    FLY_HEADINGS,
-    FLY_INITIAL_MASSES,
-    FLY_MODES,
-    FLY_SCHEDULING,
-    FLY_STARTS,
+from gcs.config.fly_schema import (
     GO_TO_START_ENABLED,
     RESPONSE_KEYS,
-    ConfigError,
     FlyConfig,
     FlyModeConfig,
     FormationCheckConfig,
@@ -23,8 +15,19 @@ from gcs.config.schema import (
     GoToStartConfig,
     PositionModeConfig,
     ResponseConfig,
-    TeamConfig,
 )
+from gcs.config.modes import (
+    FLY_ACTIONS,
+    FLY_CONTROL_MODES,
+    FLY_HEADINGS,
+    FLY_INITIAL_MASSES,
+    FLY_MODES,
+    FLY_SCHEDULING,
+    FLY_STARTS,
+    FlyAction,
+    fly_mode,
+)
+from gcs.config.schema import ConfigError, TeamConfig
 from gcs.config.yamlnode import Node
 
 
@@ -164,7 +167,7 @@ def read_fly(node: Node) -> FlyConfig:
                     f"{geofence.min_enu_m[k]!r} >= max {geofence.max_enu_m[k]!r}"
                 )
     fly = FlyConfig(
-        control_mode=node.child("mode").string(d.control_mode, FLY_MODES),
+        control_mode=fly_mode(node.child("mode").string(d.control_mode, FLY_MODES)),
         rates=_fly_mode(node.child("rates"), d.rates),
         actuators=_fly_mode(node.child("actuators"), d.actuators),
         attitude=_fly_mode(node.child("attitude"), d.attitude),
@@ -174,9 +177,10 @@ def read_fly(node: Node) -> FlyConfig:
         takeoff_altitude_m=node.child("takeoff_altitude_m").number(
             d.takeoff_altitude_m, ge=0.5, le=1000.0
         ),
-        end_action=node.child("end_action").string(d.end_action, FLY_ACTIONS),
-        abort_action=node.child("abort_action").string(d.abort_action, FLY_ACTIONS),
-        link_loss_action=node.child("link_loss_action").string(d.link_loss_action, FLY_ACTIONS),
+        end_action=FlyAction(node.child("end_action").string(d.end_action, FLY_ACTIONS)),
+        abort_action=FlyAction(node.child("abort_action").string(d.abort_action, FLY_ACTIONS)),
+        link_loss_action=FlyAction(
+            node.child("link_loss_action").string(d.link_loss_action, FLY_ACTIONS)),
         stale_after_s=node.child("stale_after_s").number(d.stale_after_s, gt=0.0),
         link_lost_after_s=node.child("link_lost_after_s").number(d.link_lost_after_s, gt=0.0),
         link_timeout_s=node.child("link_timeout_s").number(d.link_timeout_s, gt=0.0),

@@ -5,6 +5,7 @@ value checks are in yamlnode, the `fly:` section in fly_section."""
 from __future__ import annotations
 
 import dataclasses
+import enum
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -13,15 +14,11 @@ from typing import Any
 import yaml
 
 from gcs.config.fly_section import read_fly
+from gcs.config.modes import DERIVATIVE_METHODS, FAULT_KINDS, JITTER_KINDS, LAWS, MODES, ControlMode
 from gcs.config.schema import (
-    DERIVATIVE_METHODS,
-    FAULT_KINDS,
     FRAME_VEHICLES,
     GAIN_NAMES,
     GRAVITY_MPS2,
-    JITTER_KINDS,
-    LAWS,
-    MODES,
     THRUST_MARGIN,
     ZERO3,
     Airframe,
@@ -74,7 +71,7 @@ def _controller(node: Node) -> ControllerConfig:
     )
     return ControllerConfig(
         node.child("law").string(choices=LAWS),
-        node.child("mode").string(choices=MODES),
+        ControlMode(node.child("mode").string(choices=MODES)),
         gains,
         derivative,
     )
@@ -496,9 +493,12 @@ def load_team(path: str | os.PathLike[str]) -> TeamConfig:
 
 
 def team_to_dict(team: TeamConfig) -> dict[str, Any]:
-    """Plain data that team_from_dict reads back to an equal TeamConfig (None fields left out)."""
+    """Plain data that team_from_dict reads back to an equal TeamConfig (None fields left out;
+    a mode or an action as its string)."""
 
     def plain(x: Any) -> Any:
+        if isinstance(x, enum.Enum):
+            return x.value
         if isinstance(x, LawGains):
             return {name: getattr(x, name) for name in GAIN_NAMES}
         if isinstance(x, Estimates):

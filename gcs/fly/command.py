@@ -14,7 +14,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TextIO
 
-from gcs.config import FLY_MODES, TeamConfig, load_team
+from gcs.config import TeamConfig, load_team
+from gcs.config.modes import FLY_ACTIONS, FLY_MODES, as_strings
 from gcs.fly.flight import Flight
 from gcs.fly.sched import SchedulingError, apply_scheduling
 from gcs.fly.setup import FlightSetupError, FlyOptions, prepare
@@ -74,7 +75,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        description=FLY_DESCRIPTION, epilog=fly_epilog(),
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--team", required=True, type=Path, metavar="FILE", help="team config (YAML)")
-    p.add_argument("--mode", choices=FLY_MODES, default=None,
+    p.add_argument("--mode", choices=as_strings(FLY_MODES), default=None,
                    help="setpoints sent to the vehicles: thrust + body rates, thrust + torque, "
                         "thrust + attitude, each vehicle's formation slot as a position "
                         "setpoint (position: no law, the autopilot's loops), or auto: rates, or "
@@ -86,7 +87,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="control tick (default: the file's fly.<mode>.tick_rate_hz)")
     p.add_argument("--duration-s", type=float, default=None,
                    help="formation phase length (default: the file's mission.duration_s)")
-    p.add_argument("--end-action", choices=("land", "hold"), default=None,
+    p.add_argument("--end-action", choices=as_strings(FLY_ACTIONS), default=None,
                    help="after the formation phase (default: the file's fly.end_action, land)")
     p.add_argument("--out", type=Path, default=None, metavar="DIR",
                    help="output directory (default: runs/<name>-fly)")

@@ -40,6 +40,7 @@ from typing import Protocol
 
 import numpy as np
 
+from gcs.config.modes import ControlMode
 from gcs.mission.autopilots import PROFILES
 from gcs.mission.cascade import AutopilotResponse, CascadeGains, cascade_margins, passes, verdict
 from gcs.mission.stability import MIN_DECAY_PER_S, delays_ticks, torque_margins
@@ -83,7 +84,7 @@ def unmeasured_delay_lines(links: Sequence[tuple[str, int, int]], timesync_perio
 class DelayJudge:
     """The criterion of one flight's mode and gains, re-evaluated at measured delays."""
 
-    def __init__(self, mode: str, gains: CascadeGains, eigenvalues: Sequence[float],
+    def __init__(self, mode: ControlMode, gains: CascadeGains, eigenvalues: Sequence[float],
                  tick_rate_hz: float, configured_delay_s: float,
                  response: AutopilotResponse | None = None, predicted: bool = False) -> None:
         self.mode, self.gains, self.eigenvalues = mode, gains, tuple(eigenvalues)

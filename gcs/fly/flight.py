@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from gcs.config import POSITION_MODE, TeamConfig
+from gcs.config import ControlMode, FlyAction, TeamConfig
 from gcs.fly.commander import Commander
 from gcs.fly.origins import (
     TeamTies,
@@ -84,7 +84,7 @@ class Flight:
         self.period_s = 1.0 / setup.tick_rate_hz
         self.machine = MissionMachine(setup.plan, self.ids)
         # position mode (law "autopilot") runs no law: the one built here is never stepped
-        position_mode = setup.mode == POSITION_MODE
+        position_mode = setup.mode == ControlMode.POSITION
         self.law, rhohat, inertia_estimated = build_law(setup)
         warm_up(self.law, team, self.period_s)
         vehicles = team.vehicles
@@ -231,7 +231,7 @@ class Flight:
 
     async def _emergency_stop(self) -> None:
         """Best effort after a failure of the flight code: abort action to every vehicle."""
-        land = self.setup.plan.abort_action == "land"
+        land = self.setup.plan.abort_action == FlyAction.LAND
 
         async def one(vehicle_id: int, p: VehicleProxy) -> None:
             profile = self.machine.profile(vehicle_id)

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from gcs.config import POSITION_MODE
+from gcs.config import ControlMode
 from gcs.flightlog import FlightLogBuilder, estimates_record, save_timeseries
 from gcs.fly.measure import HoverEstimate
 from gcs.fly.predict import PredictionAudit
@@ -52,7 +52,7 @@ def flight_log_builder(setup: FlightSetup, rhohat: np.ndarray,
     """The flight log of `setup`, empty: the team, the mode and why, the gains, the criterion,
     where each estimate starts (`rhohat`: Jhat(0), held or estimated)."""
     team = setup.team
-    position_mode = setup.mode == POSITION_MODE
+    position_mode = setup.mode == ControlMode.POSITION
     adaptive = setup.law == "adaptive"
     d = team.controller.derivative
     return FlightLogBuilder(

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from gcs import frames
-from gcs.config import TeamConfig
+from gcs.config import ControlMode, TeamConfig
 from gcs.control.law import TeamCommand
 from gcs.control.slots import SlotTargets
 from gcs.fly.measure import (
@@ -31,7 +31,7 @@ class Setpoints:
     """Sends each streaming vehicle its setpoint; a setpoint the link refuses stops the flight
     (`MissionMachine.request_abort`). Sends return at once (UDP)."""
 
-    def __init__(self, team: TeamConfig, mode: str, machine: MissionMachine, ties: TeamTies,
+    def __init__(self, team: TeamConfig, mode: ControlMode, machine: MissionMachine, ties: TeamTies,
                  proxies: list[VehicleProxy], limited_ticks: np.ndarray) -> None:
         vehicles = team.vehicles
         self.mode = mode
@@ -60,11 +60,11 @@ class Setpoints:
         """Thrust / max thrust; actuators: thrust-preserving torque limit of (51), then torque /
         torque scale; rates: body-rate norm limit (docs/gcs.md)."""
         thrust = normalised_thrust(c.thrust_n, self.max_thrust_n)
-        if self.mode == "actuators":
+        if self.mode == ControlMode.ACTUATORS:
             torque, limited = desaturate_torque(c.thrust_n, c.torque_nm, self.arm_m,
                                                 self.anti_torque_m, self.rotor_max_n)
             vec = normalised_torque(torque, self.torque_max)
-        elif self.mode == "attitude":  # R^c itself; the autopilot limits its own tilt
+        elif self.mode == ControlMode.ATTITUDE:  # R^c itself; the autopilot limits its own tilt
             vec = self.ties.rotations_to_local(c.command_rotation)
             limited = np.zeros(self.n, dtype=bool)
         else:
@@ -82,7 +82,8 @@ class Setpoints:
             picked = [i for i in range(self.n) if self.ids[i] in streaming]
             self._streaming_rows = (streaming, picked, np.asarray(picked, dtype=np.intp))
         _, rows, at = self._streaming_rows
-        if self.mode == "rates":  # the team at once (gcs.link.fastpath), bad rows one by one
+        # rates mode: the team at once (gcs.link.fastpath), bad rows one by one
+        if self.mode == ControlMode.RATES:
             if self._team_setpoints is None:
                 self._team_setpoints = TeamSetpoints(self.proxies)
                 self._batchable = np.array([p.batch_sendable for p in self.proxies], dtype=bool)
@@ -94,9 +95,9 @@ class Setpoints:
 
     def _send_one(self, i: int, p: VehicleProxy, vec: np.ndarray, thrust_norm: float) -> None:
         try:
-            if self.mode == "actuators":
+            if self.mode == ControlMode.ACTUATORS:
                 p.send_actuator_controls(vec, thrust_norm)
-            elif self.mode == "attitude":
+            elif self.mode == ControlMode.ATTITUDE:
                 p.send_attitude_thrust(vec, thrust_norm)
             else:
                 p.send_rates_thrust(vec, thrust_norm)

@@ -15,15 +15,17 @@ from typing import Any
 
 import numpy as np
 
-from gcs.config import (
+from gcs.config import ConfigError, TeamConfig, check_go_to_start
+from gcs.config.modes import (
+    AUTO_MODE,
     AUTO_MODES,
     FLY_ACTIONS,
     FLY_CONTROL_MODES,
     FLY_MODES,
-    POSITION_MODE,
-    ConfigError,
-    TeamConfig,
-    check_go_to_start,
+    ControlMode,
+    FlyAction,
+    as_strings,
+    fly_mode,
 )
 from gcs.control.gains import LawGains
 from gcs.flightlog import AUTOPILOT_CONTROLLER, FlightLog
@@ -63,11 +65,11 @@ class FlyOptions:
     """Command-line overrides of the team file for one flight (None: the file's value)."""
 
     out_dir: Path
-    mode: str | None = None
+    mode: str | None = None  # one of FLY_MODES
     law: str | None = None
     tick_rate_hz: float | None = None
     duration_s: float | None = None
-    end_action: str | None = None
+    end_action: str | None = None  # one of FLY_ACTIONS
     figures: bool = True
     status: str = "auto"  # auto | rich | plain | off
     abort_key: bool = True
@@ -79,7 +81,7 @@ class FlightSetup:
     """Everything derived from the team file before flying (pure; see `prepare`)."""
 
     team: TeamConfig
-    mode: str
+    mode: ControlMode
     law: str
     tick_rate_hz: float
     gains: LawGains
@@ -101,7 +103,7 @@ class FlyResult:
     report: dict[str, Any] | None
 
 
-def cascade_check(team: TeamConfig, mode: str, gains: LawGains,
+def cascade_check(team: TeamConfig, mode: ControlMode, gains: LawGains,
                   rate_hz: float) -> tuple[str, dict[int, str], DelayJudge]:
     """The cascade criterion of `mode` for every autopilot gcs fly flies (gcs/mission/cascade.py).
 
@@ -140,23 +142,22 @@ def _declared_response(team: TeamConfig) -> AutopilotResponse | None:
             AutopilotResponse(**dataclasses.asdict(r), source="the team file's fly.response"))
 
 
-def _mode_gains(team: TeamConfig, mode: str) -> LawGains:
+def _mode_gains(team: TeamConfig, mode: ControlMode) -> LawGains:
     """The law's gains as flown in `mode`: fly.<mode>'s over controller.gains."""
     mode_cfg, g = team.fly.mode(mode), team.controller.gains
     flown = {name: getattr(mode_cfg, name) for name in ("k_eps", "k_eps_yaw", "alpha_p", "c_p")
              if getattr(mode_cfg, name) is not None}
+    torque = mode == ControlMode.ACTUATORS
     return g._replace(
-        alpha_eps=mode_cfg.alpha_eps if mode == "actuators" and mode_cfg.alpha_eps else g.alpha_eps,
-        alpha_omega=(mode_cfg.alpha_omega if mode == "actuators" and mode_cfg.alpha_omega
-                     else g.alpha_omega),
-        alpha_rho=(mode_cfg.alpha_rho if mode == "actuators" and mode_cfg.alpha_rho
-                   else g.alpha_rho),
+        alpha_eps=mode_cfg.alpha_eps if torque and mode_cfg.alpha_eps else g.alpha_eps,
+        alpha_omega=mode_cfg.alpha_omega if torque and mode_cfg.alpha_omega else g.alpha_omega,
+        alpha_rho=mode_cfg.alpha_rho if torque and mode_cfg.alpha_rho else g.alpha_rho,
         **flown,
     )
 
 
 def resolve_mode(team: TeamConfig, requested: str | None,
-                 tick_rate_hz: float | None = None) -> tuple[str, str]:
+                 tick_rate_hz: float | None = None) -> tuple[ControlMode, str]:
     """(the control mode to fly, one line saying why) for `--mode` (None: the file's fly.mode).
 
     `auto` flies the first of AUTO_MODES (rates, then attitude) whose loops pass the cascade
@@ -168,15 +169,15 @@ def resolve_mode(team: TeamConfig, requested: str | None,
     autopilot it fails on, naming gains that pass.
     """
     fly = team.fly
-    mode = requested or fly.control_mode
-    if mode != "auto":
+    mode = fly_mode(requested) if requested else fly.control_mode
+    if mode != AUTO_MODE:
         source = "--mode" if requested else "fly.mode"
         return mode, f"mode {mode} ({source})"
     eigenvalues = laplacian_eigenvalues(team.laplacian())
     declared = _declared_response(team)
     responses = ([("every vehicle", declared)] if declared is not None else
                  [(p.name, p.response) for p in PROFILES.values()])
-    failed: dict[str, list[str]] = {}
+    failed: dict[ControlMode, list[str]] = {}
     for mode in AUTO_MODES:
         g = _mode_gains(team, mode)
         rate = tick_rate_hz or fly.mode(mode).tick_rate_hz
@@ -205,11 +206,12 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
     """
     fly = team.fly
     if options.mode is not None and options.mode not in FLY_MODES:
-        raise FlightSetupError(f"mode {options.mode!r}: expected one of {FLY_MODES}")
+        raise FlightSetupError(f"mode {options.mode!r}: expected one of {as_strings(FLY_MODES)}")
     mode, mode_choice = resolve_mode(team, options.mode, options.tick_rate_hz)
     if mode not in FLY_CONTROL_MODES:
-        raise FlightSetupError(f"mode {mode!r}: expected one of {FLY_CONTROL_MODES}")
-    position = mode == POSITION_MODE
+        raise FlightSetupError(
+            f"mode {str(mode)!r}: expected one of {as_strings(FLY_CONTROL_MODES)}")
+    position = mode == ControlMode.POSITION
     if position and options.law is not None:
         raise FlightSetupError(f"--controller {options.law}: position mode runs no law (the "
                                "autopilots fly their formation slots); leave --controller out")
@@ -239,7 +241,7 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
     if position:
         stability = ("position mode: no law runs on the ground station; each autopilot closes "
                      "every loop on board (no cascade or torque criterion applies)")
-    elif mode == "actuators":
+    elif mode == ControlMode.ACTUATORS:
         # The criterion needs an inertia per vehicle: the nominal one where the file gives it,
         # else the initial estimate (never the plant's true value: the GCS does not know it).
         inertias = [
@@ -269,7 +271,9 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
         raise FlightSetupError(f"config error: {exc}") from None
     end_action = options.end_action or fly.end_action
     if end_action not in FLY_ACTIONS:
-        raise FlightSetupError(f"end action {end_action!r}: expected one of {FLY_ACTIONS}")
+        raise FlightSetupError(
+            f"end action {end_action!r}: expected one of {as_strings(FLY_ACTIONS)}")
+    end_action = FlyAction(end_action)
     gf = fly.geofence
     # Attitude at the tick rate (the torque loop needs it fresh); position and IMU at most at
     # MAX_POSITION_RATE_HZ (the position loop is slow, and every message costs CPU on both ends).

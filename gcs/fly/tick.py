@@ -17,7 +17,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from gcs.config import POSITION_MODE, TORQUE_MODES, TeamConfig
+from gcs.config import TORQUE_MODES, ControlMode, TeamConfig
 from gcs.control.formation import reference_velocity
 from gcs.control.gains import GRAVITY_MPS2
 from gcs.control.law import SingularCommandError, TeamCommand, TeamLaw, TeamMeasurement
@@ -200,7 +200,7 @@ class Tick:
         self.period_s = 1.0 / setup.tick_rate_hz
         self.machine = machine
         self.law = law
-        self.position_mode = setup.mode == POSITION_MODE
+        self.position_mode = setup.mode == ControlMode.POSITION
         self.ref_arrays, self.offsets_m = law_arrays(team)
         self.ties = ties
         self._tie_arrays = (None if team.frame.vehicles == "shared"
@@ -267,7 +267,7 @@ class Tick:
         elif m.phase is Phase.PRIME:
             # level and still: zero rates or torque; in attitude mode, level at the heading
             level = (self.ties.rotations_to_local(level_rotations(sample.rotation))
-                     if self.setup.mode == "attitude" else np.zeros((self.n, 3)))
+                     if self.setup.mode == ControlMode.ATTITUDE else np.zeros((self.n, 3)))
             self.setpoints.send_vectors(level, np.asarray(self.prime_thrust_norm, dtype=float),
                                         streaming)
 

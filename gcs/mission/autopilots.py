@@ -29,7 +29,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from gcs.config.schema import POSITION_MODE
+from gcs.config.modes import ControlMode
 from gcs.link.enums import mode_name
 from gcs.mission.cascade import ARDUPILOT_RESPONSE, PX4_RESPONSE, AutopilotResponse
 
@@ -60,9 +60,9 @@ class ParamRequirement:
     name: str
     mask: int
     fix: str
-    control_modes: frozenset[str] = frozenset()
+    control_modes: frozenset[ControlMode] = frozenset()
 
-    def needed_for(self, control_mode: str) -> bool:
+    def needed_for(self, control_mode: ControlMode) -> bool:
         return not self.control_modes or control_mode in self.control_modes
 
     def problem(self, vehicle: str, value: float | None) -> str | None:
@@ -90,7 +90,7 @@ class AutopilotProfile:
     takeoff_altitude_amsl: bool  # NAV_TAKEOFF param7 AMSL (PX4) or above home (ArduPilot)
     setpoint_modes: frozenset[str]  # modes in which the autopilot acts on SET_ATTITUDE_TARGET
     hold_before_prime: bool  # airborne vehicles in setpoint_modes go to `hold` before priming
-    control_modes: frozenset[str]  # `gcs fly --mode` values whose setpoints it acts on
+    control_modes: frozenset[ControlMode]  # `gcs fly --mode` values whose setpoints it acts on
     # go-to-start: the mode that flies SET_POSITION_TARGET_LOCAL_NED (PX4 OFFBOARD, ArduPilot
     # GUIDED), and whether the vehicle needs the setpoint stream in it (PX4: OFFBOARD is refused
     # without a recent setpoint and left by a failsafe COM_OF_LOSS_T after the last one;
@@ -131,21 +131,21 @@ class AutopilotProfile:
         """Name of a HEARTBEAT custom_mode, e.g. 'OFFBOARD', 'AUTO_LOITER', 'GUIDED_NOGPS'."""
         return mode_name(self.autopilot, custom_mode)
 
-    def flies_in(self, control_mode: str) -> ModeSpec:
+    def flies_in(self, control_mode: ControlMode) -> ModeSpec:
         """The mode the vehicle flies `control_mode`'s setpoints in: position mode's position
         setpoints in `position_mode` (PX4 OFFBOARD, ArduPilot GUIDED), the law's attitude, rate
         or actuator setpoints in `offboard` (PX4 OFFBOARD, ArduPilot GUIDED_NOGPS)."""
-        return self.position_mode if control_mode == POSITION_MODE else self.offboard
+        return self.position_mode if control_mode == ControlMode.POSITION else self.offboard
 
-    def params_for(self, control_mode: str) -> tuple[ParamRequirement, ...]:
+    def params_for(self, control_mode: ControlMode) -> tuple[ParamRequirement, ...]:
         """The required parameters that flying `control_mode` depends on."""
         return tuple(r for r in self.required_params if r.needed_for(control_mode))
 
-    def needs_version(self, control_mode: str) -> bool:
+    def needs_version(self, control_mode: ControlMode) -> bool:
         """True when flying `control_mode` depends on the firmware version (AUTOPILOT_VERSION)."""
-        return control_mode == "actuators" and self.actuators_until is not None
+        return control_mode == ControlMode.ACTUATORS and self.actuators_until is not None
 
-    def preflight_problems(self, vehicle: str, control_mode: str,
+    def preflight_problems(self, vehicle: str, control_mode: ControlMode,
                            params: Mapping[str, float] | None,
                            version: int | None = None) -> list[str]:
         """What this autopilot needs before flying `control_mode`, given the parameters read from
@@ -154,7 +154,7 @@ class AutopilotProfile:
         out: list[str] = []
         if control_mode not in self.control_modes:
             # the law's modes it flies (position mode is the baseline, not a fix for the law)
-            allowed = " or ".join(sorted(self.control_modes - {POSITION_MODE}))
+            allowed = " or ".join(sorted(self.control_modes - {ControlMode.POSITION}))
             out.append(f"{vehicle}: {self.name} does not act on {control_mode} setpoints; fly "
                        f"it with --mode {allowed}")
         elif self.needs_version(control_mode):
@@ -186,7 +186,7 @@ PX4 = AutopilotProfile(
     setpoint_modes=frozenset({"OFFBOARD"}),
     hold_before_prime=False,
     # actuators: PX4 <= 1.13; position: SET_POSITION_TARGET_LOCAL_NED in OFFBOARD
-    control_modes=frozenset({"rates", "actuators", "attitude", POSITION_MODE}),
+    control_modes=frozenset(ControlMode),  # every mode
     actuators_until=(1, 13),  # PX4 1.14 moved actuator control to its ROS 2 bridge
     prearm_bit_reliable=True,
     response=PX4_RESPONSE,
@@ -198,7 +198,7 @@ PX4 = AutopilotProfile(
 GUID_OPTIONS_THRUST = ParamRequirement(
     "GUID_OPTIONS", 8,
     "set GUID_OPTIONS bit 3 (8): otherwise ArduPilot reads thrust as a climb rate",
-    frozenset({"rates", "attitude"}))  # position mode sends no thrust
+    frozenset({ControlMode.RATES, ControlMode.ATTITUDE}))  # position mode sends no thrust
 
 ARDUPILOT = AutopilotProfile(
     name="ArduPilot Copter", autopilot=ARDUPILOT_AUTOPILOT, family="ardupilot",
@@ -211,7 +211,7 @@ ARDUPILOT = AutopilotProfile(
     setpoint_modes=frozenset({"GUIDED", "GUIDED_NOGPS"}),
     hold_before_prime=True,
     # SET_ATTITUDE_TARGET in GUIDED_NOGPS; position: SET_POSITION_TARGET_LOCAL_NED in GUIDED
-    control_modes=frozenset({"rates", "attitude", POSITION_MODE}),
+    control_modes=frozenset({ControlMode.RATES, ControlMode.ATTITUDE, ControlMode.POSITION}),
     position_mode=ModeSpec("GUIDED", 4),  # where it is after NAV_TAKEOFF
     position_needs_stream=False,
     required_params=(GUID_OPTIONS_THRUST,),

@@ -52,8 +52,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gcs.config.modes import ControlMode
+
 MIN_MODULUS_MARGIN = 0.4
 MAX_EIGENVALUES = 16  # distinct Laplacian eigenvalues checked (large teams: a spread of them)
+#: the modes the criterion covers (the law's setpoint goes through the autopilot's own loops), in
+#: the order `verdict` names gains that pass
+CASCADE_MODES = (ControlMode.RATES, ControlMode.ATTITUDE)
 _FREQ_RADPS = np.logspace(-2, 3, 4000)
 _S = 1j * _FREQ_RADPS  # the grid every loop's frequency response is evaluated on
 
@@ -108,9 +113,9 @@ class CascadeGains:
     k_eps: float
     k_eps_yaw: float
 
-    def describe(self, mode: str) -> str:
+    def describe(self, mode: ControlMode) -> str:
         position = f"alpha_p {self.alpha_p:g}, c_p {self.c_p:g}"
-        if mode == "rates":
+        if mode == ControlMode.RATES:
             return f"k_eps {self.k_eps:g}, k_eps_yaw {self.k_eps_yaw:g}, {position}"
         return position
 
@@ -315,26 +320,26 @@ def prediction_horizon_s(tick_rate_hz: float, link_delay_s: float, predicted: bo
     return 2.0 * link_delay_s + 0.5 / tick_rate_hz if predicted else 0.0
 
 
-def cascade_margins(mode: str, gains: CascadeGains, response: AutopilotResponse,
+def cascade_margins(mode: ControlMode, gains: CascadeGains, response: AutopilotResponse,
                     eigenvalues: Sequence[float], tick_rate_hz: float,
                     link_delay_s: float, predicted: bool = False) -> list[LoopMargin]:
-    """Every loop of `mode` ('rates' or 'attitude') on this autopilot over this link;
+    """Every loop of `mode` (CASCADE_MODES: rates or attitude) on this autopilot over this link;
     `predicted`: the law reads predicted states (fly.predict)."""
     h = 1.0 / tick_rate_hz
     d_up = link_delay_s + h / 2.0
     d_down = link_delay_s + h / 2.0
     tau = prediction_horizon_s(tick_rate_hz, link_delay_s, predicted)
     out: list[LoopMargin] = []
-    if mode == "rates":
+    if mode == ControlMode.RATES:
         out.append(_attitude_loop(gains.k_eps, _rate_loop(response), d_up + d_down, tau)
                    .margin("ground-station attitude loop, roll/pitch"))
         out.append(_attitude_loop(gains.k_eps_yaw, _yaw_loop(response), d_up + d_down, tau)
                    .margin("ground-station attitude loop, yaw"))
         tilt = _tilt_rates(gains.k_eps, response, d_up, d_down, tau)
-    elif mode == "attitude":
+    elif mode == ControlMode.ATTITUDE:
         tilt = _tilt_attitude(response, d_up)
     else:
-        raise ValueError(f"no cascade criterion for mode {mode!r}")
+        raise ValueError(f"no cascade criterion for mode {str(mode)!r}")
     inner_ok = all(m.ok() for m in out)
     thrust = _thrust(response, d_up)
     tilt, thrust = (tilt[0], _on_grid(tilt[1])), (thrust[0], _on_grid(thrust[1]))
@@ -366,7 +371,7 @@ _K_YAW = (4.0, 2.0, 1.0, 0.5, 0.25)
 _SCALES = (1.0, 0.75, 0.5, 0.35, 0.25, 0.15, 0.1)
 
 
-def stable_gains(mode: str, gains: CascadeGains, response: AutopilotResponse,
+def stable_gains(mode: ControlMode, gains: CascadeGains, response: AutopilotResponse,
                  eigenvalues: Sequence[float], tick_rate_hz: float,
                  link_delay_s: float, predicted: bool = False) -> CascadeGains | None:
     """The passing candidate with the stiffest position loop (largest alpha_p c_p, the loop's
@@ -377,7 +382,7 @@ def stable_gains(mode: str, gains: CascadeGains, response: AutopilotResponse,
                                       link_delay_s, predicted))
 
     inner = [(gains.k_eps, gains.k_eps_yaw)]
-    if mode == "rates":  # the two attitude loops first: each depends on its own gain only
+    if mode == ControlMode.RATES:  # the two attitude loops first: each depends on its own gain only
         loop = 2.0 * (link_delay_s + 0.5 / tick_rate_hz)
         tau = prediction_horizon_s(tick_rate_hz, link_delay_s, predicted)
 
@@ -404,7 +409,7 @@ def stable_gains(mode: str, gains: CascadeGains, response: AutopilotResponse,
     return best
 
 
-def verdict(mode: str, gains: CascadeGains, response: AutopilotResponse,
+def verdict(mode: ControlMode, gains: CascadeGains, response: AutopilotResponse,
             eigenvalues: Sequence[float], tick_rate_hz: float, link_delay_s: float,
             autopilot: str, predicted: bool = False) -> tuple[bool, str]:
     """(passes, one line) for `mode` with `gains` on `autopilot` (its `response`); `predicted`:
@@ -421,12 +426,12 @@ def verdict(mode: str, gains: CascadeGains, response: AutopilotResponse,
     line = (f"{where} is not stable enough: {w.describe()} (need stable and >= "
             f"{MIN_MODULUS_MARGIN:g})")
     fixes = []
-    for other in ("rates", "attitude"):
+    for other in CASCADE_MODES:
         g = stable_gains(other, gains, response, eigenvalues, tick_rate_hz, link_delay_s,
                          predicted)
         if g is not None:
             fixes.append(f"{other} mode with {g.describe(other)} (fly.{other})")
-    for other in ("rates", "attitude") if not fixes else ():  # the other fly.predict
+    for other in CASCADE_MODES if not fixes else ():  # the other fly.predict
         g = stable_gains(other, gains, response, eigenvalues, tick_rate_hz, link_delay_s,
                          not predicted)
         if g is not None:

@@ -57,6 +57,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 
+from gcs.config.modes import ControlMode, FlyAction
 from gcs.link.enums import LandedState
 from gcs.mission.autopilots import PX4, AutopilotProfile, ModeSpec, profile_for
 from gcs.mission.goto import (
@@ -160,13 +161,14 @@ class MissionPlan:
 
     duration_s: float
     rules: SafetyRules = SafetyRules()
-    control_mode: str = "rates"  # rates | actuators | attitude | position: which setpoints the
-    # vehicles will get, and so the mode they fly them in (AutopilotProfile.flies_in)
+    # which setpoints the vehicles will get, and so the autopilot mode they fly them in
+    # (AutopilotProfile.flies_in: position mode's in the profile's position mode)
+    control_mode: ControlMode = ControlMode.RATES
     start: str = "auto"  # auto | in_air | takeoff
     takeoff_altitude_m: float = 2.5
-    end_action: str = "land"
-    abort_action: str = "land"
-    link_loss_action: str = "hold"
+    end_action: FlyAction = FlyAction.LAND
+    abort_action: FlyAction = FlyAction.LAND
+    link_loss_action: FlyAction = FlyAction.HOLD
     connect_timeout_s: float = 60.0  # emulators compiling, autopilots booting (PX4 SITL 10-25 s)
     # after CONFIGURE, before the rates and the link delay are judged (from what was measured
     # since: not the ground station's own load while it configured the team)
@@ -195,7 +197,7 @@ class MissionPlan:
 class _Stop:
     """Progress of one vehicle while STOPPING."""
 
-    action: str | None  # land | hold | None (lost: nothing to do)
+    action: FlyAction | None  # None: lost, nothing to do
     attempts: int = 0
     last_attempt_s: float = -math.inf
     acked: bool = False
@@ -956,14 +958,14 @@ class MissionMachine:
                     out.append(self._send(vid, Cmd.DISARM))
                     st.landed_since_s = now
                 continue
-            if st.action == "hold" and st.acked and s.mode == self.profile(vid).hold.name:
+            if st.action == FlyAction.HOLD and st.acked and s.mode == self.profile(vid).hold.name:
                 st.done = True
                 continue
             if (not st.acked and st.attempts < self.plan.command_attempts
                     and now - st.last_attempt_s >= self.plan.command_retry_s):
                 st.attempts += 1
                 st.last_attempt_s = now
-                out.append(self._send(vid, Cmd.LAND if st.action == "land" else Cmd.HOLD))
+                out.append(self._send(vid, Cmd.LAND if st.action == FlyAction.LAND else Cmd.HOLD))
             if now - self._stopping_since_s > self.plan.land_timeout_s:
                 st.done = True
                 st.failure = f"not {st.action}ed within {self.plan.land_timeout_s:g} s"

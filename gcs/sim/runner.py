@@ -9,7 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gcs.config import TORQUE_MODES, ConfigError, TeamConfig
+from gcs.config import TORQUE_MODES, ConfigError, ControlMode, TeamConfig
+from gcs.config.modes import as_strings
 from gcs.control.formation import edge_list, reference_velocity
 from gcs.control.gains import LawGains
 from gcs.control.geometry import rotation_from_rpy
@@ -17,7 +18,7 @@ from gcs.control.law import DERIVATIVE_METHODS
 from gcs.flightlog import FlightLog, estimates_record
 from gcs.sim.loop import LOG_FIELDS, MODE_ACTUATORS, MODE_RATES, N_LOG, run_oracle, run_sampled
 
-_MODES = {"actuators": MODE_ACTUATORS, "rates": MODE_RATES}
+_MODES = {ControlMode.ACTUATORS: MODE_ACTUATORS, ControlMode.RATES: MODE_RATES}
 _COL = {name: i for i, name in enumerate(LOG_FIELDS)}
 
 
@@ -31,7 +32,7 @@ class SimOptions:
     """
 
     law: str | None = None
-    mode: str | None = None
+    mode: str | None = None  # one of SIM_MODES
     derivative: str | None = None
     controller_rate_hz: float | None = None
     plant_rate_hz: float | None = None
@@ -79,18 +80,19 @@ def simulate(
     derivative = options.derivative or team.controller.derivative.method
     if law not in ("adaptive", "baseline"):
         raise ConfigError(f"controller law {law!r}: expected adaptive or baseline")
-    if mode == "attitude":
+    if mode == ControlMode.ATTITUDE:
         raise ConfigError(
             "controller mode 'attitude': the vehicle's autopilot closes the attitude loop, which "
             "gcs sim does not model; simulate with --mode rates or actuators, or fly the attitude "
             "mode against vehicle-emu (gcs fly --emulators)")
     if mode not in _MODES:
-        raise ConfigError(f"controller mode {mode!r}: expected one of {sorted(_MODES)}")
+        raise ConfigError(
+            f"controller mode {mode!r}: expected one of {sorted(as_strings(_MODES))}")
     if derivative not in DERIVATIVE_METHODS:
         raise ConfigError(
             f"derivative method {derivative!r}: expected one of {sorted(DERIVATIVE_METHODS)}"
         )
-    if options.oracle and mode != "actuators":
+    if options.oracle and mode != ControlMode.ACTUATORS:
         raise ConfigError(
             "the verification (oracle) mode runs the paper's torque law: use mode actuators"
         )

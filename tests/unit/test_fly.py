@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from gcs.config import load_team
-from gcs.config.schema import ResponseConfig
+from gcs.config.fly_schema import ResponseConfig
 from gcs.control.formation import edge_list, reference_velocity
 from gcs.control.geometry import rotation_from_rpy
 from gcs.control.law import TeamLaw, TeamMeasurement

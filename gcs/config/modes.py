@@ -1,0 +1,65 @@
+"""The team file's named choices: control modes, stop actions and the other keys' option lists.
+
+ControlMode and FlyAction are StrEnums whose values are the team file's strings, so a member
+formats, compares, hashes and serialises (json) as its string. Where a message or the command line
+lists choices, `as_strings` gives the plain strings (a member's repr names its class). No imports
+from the rest of gcs: the config schema, the mission logic and the flight read their modes here.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Iterable
+
+
+class ControlMode(enum.StrEnum):
+    """What the ground station sends each vehicle, and so which of its loops the law closes."""
+
+    RATES = "rates"  # thrust + body rates (the autopilot's rate loop)
+    ACTUATORS = "actuators"  # thrust + the law's torque (26)
+    ATTITUDE = "attitude"  # thrust + the command attitude (14); gcs fly only
+    #: gcs fly's baseline: no law, each vehicle gets its slot of the moving formation as a
+    #: position setpoint and the autopilot closes every loop (gcs/control/slots.py; never chosen
+    #: by auto)
+    POSITION = "position"
+
+
+class FlyAction(enum.StrEnum):
+    """What `gcs fly` tells a vehicle to do when it stops flying it."""
+
+    LAND = "land"
+    HOLD = "hold"  # the autopilot's hold mode (PX4 AUTO_LOITER, ArduPilot BRAKE)
+
+
+LAWS = ("adaptive", "baseline")
+MODES = (ControlMode.RATES, ControlMode.ACTUATORS, ControlMode.ATTITUDE)  # controller.mode
+POSITION_MODE = ControlMode.POSITION
+FLY_CONTROL_MODES = (*MODES, POSITION_MODE)  # what gcs fly can fly (fly.<mode> blocks)
+AUTO_MODE = "auto"  # fly.mode / gcs fly --mode: gcs fly picks the first of AUTO_MODES that passes
+FLY_MODES = (AUTO_MODE, *FLY_CONTROL_MODES)  # fly.mode / gcs fly --mode
+#: what fly.mode auto chooses from, in order (gcs/fly/setup.py)
+AUTO_MODES = (ControlMode.RATES, ControlMode.ATTITUDE)
+#: the modes whose setpoint is the law's torque (26): the only ones in which the inertia estimate
+#: rhohat of (27) acts on the vehicle, so the only ones that integrate it (in rates and attitude
+#: mode the autopilot's own loops turn the setpoint into torque; rhohat stays at its initial value)
+TORQUE_MODES = (ControlMode.ACTUATORS,)
+SIM_MODES = (ControlMode.RATES, ControlMode.ACTUATORS)  # what gcs sim models
+DERIVATIVE_METHODS = ("model", "levant")
+FAULT_KINDS = ("mass_drop", "link_loss", "packet_loss", "motor_efficiency")
+JITTER_KINDS = ("uniform", "normal")  # packet_loss jitter distributions (as the emulator's)
+FLY_ACTIONS = (FlyAction.LAND, FlyAction.HOLD)
+FLY_STARTS = ("auto", "in_air", "takeoff")
+FLY_HEADINGS = ("hold", "paper")  # or a compass heading in degrees
+#: fly.initial_mass: the vehicles' `estimates.mhat`, or every one from its hover thrust
+FLY_INITIAL_MASSES = ("team", "from_hover")
+FLY_SCHEDULING = ("auto", "realtime", "raised", "normal")  # gcs/fly/sched.py
+
+
+def as_strings(options: Iterable[str]) -> tuple[str, ...]:
+    """`options` as plain strings: how messages and the command line list choices."""
+    return tuple(str(option) for option in options)
+
+
+def fly_mode(name: str) -> ControlMode | str:
+    """fly.mode or `gcs fly --mode` `name` (one of FLY_MODES): its ControlMode, or AUTO_MODE."""
+    return AUTO_MODE if name == AUTO_MODE else ControlMode(name)
