@@ -557,16 +557,19 @@ async def _spread_notices() -> None:
         base = time.monotonic()
 
         stopped = [0.0, 0]  # time and count of the machine's stops of this process
+        last_turn = [time.monotonic()]  # one watch over every stream, the gaps between them too
 
-        async def stream(seconds: float) -> None:
-            start = last = time.monotonic()
+        async def stream(seconds: float, send: bool = True) -> None:
+            """Turns of 5 ms for `seconds`, each sending every vehicle's sample (`send`), and
+            watching for the machine's stops all the while (the last datagrams' batches too)."""
+            start = time.monotonic()
             while (now := time.monotonic()) - start < seconds:
-                if now - last > STOP_S:  # a turn of 5 ms that took longer: the machine stopped
-                    stopped[0] += now - last - 0.005
+                if now - last_turn[0] > STOP_S:  # a turn of 5 ms took longer: a stop
+                    stopped[0] += now - last_turn[0] - 0.005
                     stopped[1] += 1
-                last = now
+                last_turn[0] = now
                 stamp_ms = int((now - base) * 1e3) + 1  # each sample newer
-                for mav in senders:
+                for mav in senders if send else ():
                     a.send(_pack(mav, mavlink.MAVLink_local_position_ned_message(
                         stamp_ms, 1.0, 0, 0, 0, 0, 0)))
                 await asyncio.sleep(0.005)
@@ -578,7 +581,7 @@ async def _spread_notices() -> None:
         stopped[:] = [0.0, 0]
         t0 = time.monotonic()
         await stream(0.4)
-        await asyncio.sleep(0.02)
+        await stream(0.02, send=False)  # the last samples' batches, still watched for stops
         elapsed = time.monotonic() - t0
     # THEN each proxy was told about every HOT_NOTICE_S (not at every batch) while samples
     # flowed (a machine whose every core is busy stops now and then for ~100 ms: no samples
