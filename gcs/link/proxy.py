@@ -6,8 +6,6 @@ import asyncio
 import contextlib
 import logging
 import math
-import struct
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
 from types import TracebackType
@@ -15,13 +13,11 @@ from types import TracebackType
 import numpy as np
 from numpy.typing import ArrayLike
 
-from gcs import frames
 from gcs.link.clock import VehicleClock
 from gcs.link.codec import (
     CodecStats,
     MavlinkCodec,
     MAVLinkMessage,
-    SeqBlock,
     mavlink,
     message_name,
 )
@@ -46,12 +42,11 @@ from gcs.link.enums import (
 )
 from gcs.link.fastpath import (
     ANY_ADDRESS,
-    SET_ATTITUDE_TARGET_LEN,
     TABLE_NAMES,
     UNLEARNED,
-    encode_set_attitude_target,
 )
 from gcs.link.port import MavlinkPort, PortStats
+from gcs.link.setpoints import SETPOINT_COUNTERS, VehicleSetpoints
 from gcs.link.statustext import StatusTextLog
 from gcs.link.telemetry import (
     Clock,
@@ -70,23 +65,12 @@ from gcs.link.udp import Address, LinkClosedError, UdpStats
 
 logger = logging.getLogger(__name__)
 
-TYPE_MASK_RATES_THRUST = 128  # ATTITUDE_IGNORE: body rates + thrust
-TYPE_MASK_ATTITUDE_THRUST = 7  # roll/pitch/yaw rates ignored: attitude + thrust
-#: SET_POSITION_TARGET_LOCAL_NED: acceleration (64, 128, 256) and yaw rate (2048) ignored:
-#: position, velocity (the position loop's feed-forward) and yaw
-TYPE_MASK_POSITION_VELOCITY_YAW = 64 | 128 | 256 | 2048
-#: ... and with the acceleration as feed-forward too (position mode's slots): yaw rate ignored
-TYPE_MASK_POSITION_VELOCITY_ACCELERATION_YAW = 2048
-MAV_FRAME_LOCAL_NED = 1
 AUTOPILOT_VERSION_ID = 148  # REQUEST_MESSAGE param1
 FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 forcing arm/disarm (PX4; ArduPilot disarm)
 #: The golden ratio's fraction: slot k's periodic tasks run at phase k x this (mod 1).
 _GOLDEN = 0.6180339887498949
 #: Stranger addresses logged per vehicle (all are counted); a flood does not flood the log.
 MAX_STRANGERS_LOGGED = 8
-#: q of rate setpoints: ignored (type_mask 128), but ArduPilot drops a non-unit one, so unit.
-_IDENTITY_Q = (1.0, 0.0, 0.0, 0.0)
-_TLOG_STAMP = struct.Struct(">Q")  # a tlog record's Unix time [us] (gcs.link.tlog)
 #: Messages whose time_boot_ms stamps the sample they carry (the clock filter's input).
 STAMPED_TYPES = frozenset({"LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "ATTITUDE"})
 #: Round trips kept for the flight report (at 2 Hz: over five hours).
@@ -99,10 +83,6 @@ BUNCHED = 0.25
 #: CONFIRM_LOSSY_FACTOR x the timeout (command_confirmed).
 CONFIRM_DENIALS = 2
 CONFIRM_LOSSY_FACTOR = 3.0
-
-
-class SetpointError(ValueError):
-    """A setpoint with NaN/inf or the wrong shape; nothing was sent."""
 
 
 class ParamTimeoutError(TimeoutError):
@@ -180,9 +160,12 @@ class VehicleProxy:
         self._strangers: set[Address] = set()
         self._cache = TelemetryCache()
         self._seq = SequenceTracker()
-        self._n: dict[str, int] = {f.name: 0 for f in fields(ProxyCounters)}
+        self._n: dict[str, int] = {f.name: 0 for f in fields(ProxyCounters)
+                                   if f.name not in SETPOINT_COUNTERS}  # those: self.setpoints
         self._commands = CommandChannel(self.name, config.gcs_sysid, self._send_command,
                                         liveness=self, silent_wait_s=config.silent_wait_s)
+        self.setpoints = VehicleSetpoints(self.name, config, self._codec, self._send,
+                                          self._time_boot_ms)
         self.statustexts = StatusTextLog(self.name)  # every STATUSTEXT of the vehicle
         self._waiters: list[tuple[str, Callable[[MAVLinkMessage], bool], asyncio.Future[Received]]]
         self._waiters = []
@@ -393,7 +376,8 @@ class VehicleProxy:
 
     def stats(self) -> LinkStats:
         """Every counter of the link; the hot path's counts (gcs.link.fastpath) included."""
-        counters, seq, by_type = dict(self._n), self._seq.stats(), self._cache.type_stats()
+        counters, seq, by_type = self._n | self.setpoints.counts(), self._seq.stats(), \
+            self._cache.type_stats()
         table = self._port.table
         if self._slot is not None and table is not None:
             i = self._slot
@@ -798,17 +782,33 @@ class VehicleProxy:
                 self._restart_rate(msg_type.msgname)
         return result
 
-    # --- setpoints (each returns immediately; NaN/inf raise SetpointError, range is clamped) -----
+    # --- setpoints (each returns immediately; gcs.link.setpoints) ---------------------------------
 
     def send_rates_thrust(self, rates_flu_radps: ArrayLike, thrust_norm: float) -> None:
-        """SET_ATTITUDE_TARGET, type_mask 128: body rates (FLU, rad/s -> sent as FRD) and
-        collective thrust (0..1, clamped and counted); returns immediately."""
-        rates_frd = frames.frd_from_flu(self._finite(rates_flu_radps, (3,), "rates_flu_radps"))
-        thrust = self._clamp(thrust_norm, 0.0, 1.0, "thrust_norm", "thrust_clamped")
-        self._send(self._codec.mav.set_attitude_target_encode(
-            self._time_boot_ms(), self.config.sysid, self.config.compid, TYPE_MASK_RATES_THRUST,
-            _IDENTITY_Q, *(float(x) for x in rates_frd), thrust))
-        self._n["setpoints_sent"] += 1
+        """SET_ATTITUDE_TARGET: body rates [rad/s, FLU; sent as FRD] and collective thrust
+        [0..1]; returns immediately (checks, clamps, counts: `VehicleSetpoints`)."""
+        self.setpoints.send_rates_thrust(rates_flu_radps, thrust_norm)
+
+    def send_attitude_thrust(self, rotation_enu_flu: ArrayLike, thrust_norm: float) -> None:
+        """SET_ATTITUDE_TARGET: attitude R_enu_flu (FLU body in the ENU world; sent as NED/FRD)
+        and collective thrust [0..1]; returns immediately (details: `VehicleSetpoints`)."""
+        self.setpoints.send_attitude_thrust(rotation_enu_flu, thrust_norm)
+
+    def send_position_target(self, position_ned_m: ArrayLike, velocity_ned_mps: ArrayLike,
+                             yaw_ned_rad: float,
+                             acceleration_ned_mps2: ArrayLike | None = None) -> None:
+        """SET_POSITION_TARGET_LOCAL_NED: position [m], velocity [m/s], yaw [rad, from north]
+        and optional acceleration [m/s^2], all in the vehicle's local NED frame, as sent (not
+        ENU, unlike the other setpoints); returns immediately (details: `VehicleSetpoints`)."""
+        self.setpoints.send_position_target(position_ned_m, velocity_ned_mps, yaw_ned_rad,
+                                            acceleration_ned_mps2)
+
+    def send_actuator_controls(self, torque_flu_norm: ArrayLike, thrust_norm: float) -> None:
+        """SET_ACTUATOR_CONTROL_TARGET: torque [-1..1, FLU; sent as FRD] and thrust [0..1];
+        returns immediately (details: `VehicleSetpoints`)."""
+        self.setpoints.send_actuator_controls(torque_flu_norm, thrust_norm)
+
+    # --- what a team batch uses (setpoints.TeamSetpoints) ----------------------------------------
 
     @property
     def batch_sendable(self) -> bool:
@@ -816,72 +816,25 @@ class VehicleProxy:
         unsigned link."""
         return not self._codec.signing_enabled
 
-    def send_attitude_thrust(self, rotation_enu_flu: ArrayLike, thrust_norm: float) -> None:
-        """SET_ATTITUDE_TARGET, type_mask 7: attitude R_enu_flu (sent as the quaternion of
-        R_ned_frd) and collective thrust (0..1, clamped and counted); returns immediately."""
-        r = self._finite(rotation_enu_flu, (3, 3), "rotation_enu_flu")
-        if not bool(frames.is_rotation(r, tol=1e-4)):
-            self._n["setpoints_rejected"] += 1
-            raise SetpointError(f"{self.name}: rotation_enu_flu is not a rotation matrix: {r}")
-        q = frames.mavlink_quat_from_rotation_enu_flu(r)
-        thrust = self._clamp(thrust_norm, 0.0, 1.0, "thrust_norm", "thrust_clamped")
-        self._send(self._codec.mav.set_attitude_target_encode(
-            self._time_boot_ms(), self.config.sysid, self.config.compid,
-            TYPE_MASK_ATTITUDE_THRUST, [float(x) for x in q], 0.0, 0.0, 0.0, thrust))
-        self._n["setpoints_sent"] += 1
+    @property
+    def codec(self) -> MavlinkCodec:
+        """This link's codec (its outgoing sequence numbers, the ground station's ids)."""
+        return self._codec
 
-    def send_position_target(self, position_ned_m: ArrayLike, velocity_ned_mps: ArrayLike,
-                             yaw_ned_rad: float,
-                             acceleration_ned_mps2: ArrayLike | None = None) -> None:
-        """SET_POSITION_TARGET_LOCAL_NED, MAV_FRAME_LOCAL_NED (the vehicle's own local frame:
-        PX4's and ArduPilot's EKF origin): position [m, NED], velocity feed-forward [m/s, NED],
-        yaw [rad, from north, clockwise] and, when given, acceleration feed-forward [m/s^2, NED]
-        (type_mask 2048: yaw rate ignored), else accelerations ignored too (type_mask 2496);
-        returns immediately."""
-        pos = self._finite(position_ned_m, (3,), "position_ned_m")
-        vel = self._finite(velocity_ned_mps, (3,), "velocity_ned_mps")
-        yaw = self._finite(yaw_ned_rad, (), "yaw_ned_rad")
-        if acceleration_ned_mps2 is None:
-            mask, acc = TYPE_MASK_POSITION_VELOCITY_YAW, np.zeros(3)
-        else:
-            mask = TYPE_MASK_POSITION_VELOCITY_ACCELERATION_YAW
-            acc = self._finite(acceleration_ned_mps2, (3,), "acceleration_ned_mps2")
-        self._send(self._codec.mav.set_position_target_local_ned_encode(
-            self._time_boot_ms(), self.config.sysid, self.config.compid, MAV_FRAME_LOCAL_NED,
-            mask, *(float(x) for x in pos), *(float(x) for x in vel),
-            *(float(x) for x in acc), float(yaw), 0.0))
-        self._n["setpoints_sent"] += 1
+    @property
+    def port(self) -> MavlinkPort:
+        return self._port
 
-    def send_actuator_controls(self, torque_flu_norm: ArrayLike, thrust_norm: float) -> None:
-        """SET_ACTUATOR_CONTROL_TARGET group 0: roll/pitch/yaw torque (FLU, -1..1 -> sent as FRD)
-        and thrust (0..1), each clamped and counted; returns immediately. PX4 >= 1.14 ignores it."""
-        torque = self._finite(torque_flu_norm, (3,), "torque_flu_norm")
-        clipped = np.clip(torque, -1.0, 1.0)
-        if np.any(clipped != torque):
-            self._n["torque_clamped"] += 1
-        torque_frd = frames.frd_from_flu(clipped)
-        thrust = self._clamp(thrust_norm, 0.0, 1.0, "thrust_norm", "thrust_clamped")
-        controls = [float(x) for x in torque_frd] + [thrust, 0.0, 0.0, 0.0, 0.0]
-        self._send(self._codec.mav.set_actuator_control_target_encode(
-            self._time_boot_ms() * 1000, 0, self.config.sysid, self.config.compid, controls))
-        self._n["setpoints_sent"] += 1
+    @property
+    def tlog(self) -> TlogWriter | None:
+        return self._tlog
 
-    def _finite(self, value: ArrayLike, shape: tuple[int, ...], what: str) -> np.ndarray:
-        arr = np.asarray(value, dtype=np.float64)
-        if arr.shape != shape or not np.all(np.isfinite(arr)):
-            self._n["setpoints_rejected"] += 1
-            raise SetpointError(f"{self.name}: {what}: expected finite shape {shape}, got {arr!r}")
-        return arr
-
-    def _clamp(self, value: float, low: float, high: float, what: str, counter: str) -> float:
-        v = float(value)
-        if not math.isfinite(v):
-            self._n["setpoints_rejected"] += 1
-            raise SetpointError(f"{self.name}: {what}: expected finite, got {v}")
-        if v < low or v > high:
-            self._n[counter] += 1
-            return min(max(v, low), high)
-        return v
+    def batch_address(self) -> Address | None:
+        """Where a packet sent for this vehicle outside `_send` goes now (a learned address may
+        change); None, not known yet, is counted as ``send_no_remote`` (the port drops it)."""
+        if self._remote is None:
+            self._n["send_no_remote"] += 1
+        return self._remote
 
     # --- send path and owned tasks ---------------------------------------------------------------
 
@@ -943,101 +896,3 @@ class VehicleProxy:
                                    "arrive; armed state and mode are those of the last one",
                                    self.name, self.config.heartbeat_timeout_s)
             await asyncio.sleep(period)
-
-
-@dataclass(slots=True)
-class _SendPlan:
-    """What `TeamSetpoints` works out once per set of rows."""
-
-    rows: list[int]
-    idx: np.ndarray
-    proxies: list[VehicleProxy]
-    block: SeqBlock | None  # the links' shared sequence numbers (None: each its own)
-    seq_rows: np.ndarray  # the links' rows in it
-    tlog: TlogWriter | None  # the one tlog all of them write (None: each its own, or none)
-    ports: list[tuple[MavlinkPort, list[int], list[VehicleProxy]]]  # positions in rows, proxies
-
-
-class TeamSetpoints:
-    """`VehicleProxy.send_rates_thrust` for many vehicles at once: one encode call
-    (gcs.link.fastpath.encode_set_attitude_target), the sequence numbers in one numpy call when
-    the links keep theirs in one block (the app's: its HotTable's), one ``sendto`` each. What does
-    not change from tick to tick (ids, boot times, tlogs, who is sent what on which port) is
-    worked out once per set of rows; every proxy must be `batch_sendable` (unsigned)."""
-
-    def __init__(self, proxies: Sequence[VehicleProxy]) -> None:
-        self.proxies = list(proxies)
-        n = len(self.proxies)
-        self._target_sys = np.array([p.config.sysid for p in self.proxies], dtype=np.int64)
-        self._target_comp = np.array([p.config.compid for p in self.proxies], dtype=np.int64)
-        self._t0_s = np.array([p._t0_s for p in self.proxies])  # each link's boot, for time_boot_ms
-        self._q = np.tile(np.array(_IDENTITY_Q), (n, 1))
-        self._out = np.empty((n, 12 + SET_ATTITUDE_TARGET_LEN), dtype=np.uint8)
-        self._lengths = np.empty(n, dtype=np.int64)
-        self._plan: _SendPlan | None = None
-
-    def _plan_for(self, rows: Sequence[int]) -> _SendPlan:
-        plan = self._plan
-        if plan is not None and plan.rows == rows:
-            return plan
-        rows = list(rows)
-        if len(set(rows)) != len(rows):
-            raise ValueError(f"TeamSetpoints: a row twice in {rows}")
-        proxies = [self.proxies[i] for i in rows]
-        blocks = [p._codec.seq_block for p in proxies]
-        block = blocks[0][0]
-        shared = all(b is block for b, _ in blocks)
-        tlog = proxies[0]._tlog
-        by_port: dict[int, tuple[MavlinkPort, list[int]]] = {}
-        for k, p in enumerate(proxies):
-            by_port.setdefault(id(p._port), (p._port, []))[1].append(k)
-        self._plan = plan = _SendPlan(
-            rows, np.asarray(rows, dtype=np.int64), proxies,
-            block if shared else None,
-            np.array([r for _, r in blocks], dtype=np.int64),
-            tlog if tlog is not None and all(p._tlog is tlog for p in proxies) else None,
-            [(port, ks, [proxies[k] for k in ks]) for port, ks in by_port.values()])
-        return plan
-
-    def send_rates_thrust(self, rows: Sequence[int], rates_flu_radps: np.ndarray,
-                          thrust_norm: np.ndarray) -> None:
-        """Rows ``rows`` of rates (n, 3) FLU rad/s and thrust (n,) 0..1 (clamped and counted per
-        vehicle) to those vehicles; returns immediately. Rows with NaN/inf must not be passed
-        (send them one by one: `send_rates_thrust` raises `SetpointError` for each)."""
-        if not rows:
-            return
-        plan = self._plan_for(rows)
-        idx, proxies = plan.idx, plan.proxies
-        rates_frd = frames.frd_from_flu(np.asarray(rates_flu_radps, dtype=np.float64)[idx])
-        thrust = np.asarray(thrust_norm, dtype=np.float64)[idx]
-        for k in np.flatnonzero((thrust < 0.0) | (thrust > 1.0)).tolist():
-            proxies[k]._n["thrust_clamped"] += 1
-        thrust = np.clip(thrust, 0.0, 1.0)
-        if plan.block is not None:
-            seq = plan.block.take(plan.seq_rows).astype(np.uint8)
-        else:
-            seq = np.array([p._codec.take_seq() for p in proxies], dtype=np.uint8)
-        now_s = proxies[0]._clock.now_s()  # one clock for the team (the app's proxies share one)
-        boot_ms = ((now_s - self._t0_s[idx]) * 1000.0).astype(np.int64) & 0xFFFFFFFF
-        first = proxies[0]._codec
-        m = len(idx)
-        out, lengths = self._out[:m], self._lengths[:m]
-        encode_set_attitude_target(seq, first.src_system, first.src_component, boot_ms,
-                                   self._target_sys[idx], self._target_comp[idx],
-                                   TYPE_MASK_RATES_THRUST, self._q[:m], rates_frd, thrust, out,
-                                   lengths)
-        datagrams = [out[k, :size].tobytes() for k, size in enumerate(lengths.tolist())]
-        if plan.tlog is not None:  # one block for the team
-            stamp = _TLOG_STAMP.pack(int(time.time() * 1e6))
-            plan.tlog.write_records(b"".join(stamp + d for d in datagrams), m)
-        else:
-            for p, data in zip(proxies, datagrams, strict=True):
-                if p._tlog is not None:
-                    p._tlog.write(data)
-        for port, ks, members in plan.ports:
-            addrs = [p._remote for p in members]  # learned addresses may change
-            for p, addr in zip(members, addrs, strict=True):
-                p._n["setpoints_sent"] += 1
-                if addr is None:
-                    p._n["send_no_remote"] += 1
-            port.send_many([datagrams[k] for k in ks], addrs)

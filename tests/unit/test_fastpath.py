@@ -39,7 +39,7 @@ from gcs.link.fastpath import (
     warm_up,
 )
 from gcs.link.port import HOT_NOTICE_S
-from gcs.link.proxy import TeamSetpoints
+from gcs.link.setpoints import TeamSetpoints
 from gcs.link.telemetry import SequenceTracker
 
 
