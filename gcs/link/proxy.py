@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import math
 from collections.abc import Callable, Sequence
@@ -19,17 +18,8 @@ from gcs.link.codec import (
     MavlinkCodec,
     MAVLinkMessage,
     mavlink,
-    message_name,
 )
-from gcs.link.commands import (
-    AckLog,
-    CommandChannel,
-    CommandNotConfirmedError,
-    CommandRejectedError,
-    CommandStats,
-    CommandTimeoutError,
-    command_label,
-)
+from gcs.link.commands import CommandStats
 from gcs.link.config import VehicleLinkConfig
 from gcs.link.enums import (
     LinkState,
@@ -61,11 +51,11 @@ from gcs.link.telemetry import (
     rate_of,
 )
 from gcs.link.tlog import TlogWriter
-from gcs.link.udp import Address, LinkClosedError, UdpStats
+from gcs.link.udp import Address, UdpStats
+from gcs.link.vehicle_commands import MessageWaiters, VehicleCommands
 
 logger = logging.getLogger(__name__)
 
-AUTOPILOT_VERSION_ID = 148  # REQUEST_MESSAGE param1
 FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 forcing arm/disarm (PX4; ArduPilot disarm)
 #: The golden ratio's fraction: slot k's periodic tasks run at phase k x this (mod 1).
 _GOLDEN = 0.6180339887498949
@@ -78,15 +68,6 @@ MAX_ROUND_TRIPS = 40_000
 #: Two TIMESYNC replies whose arrivals are closer than this fraction of their requests' spacing
 #: came bunched: held, then released together (see `_on_timesync_reply`).
 BUNCHED = 0.25
-#: A command is not confirmed once its timeout has passed AND this many HEARTBEATs received
-#: after its ACK did not show the effect; with fewer heard (a lossy link), the wait goes on up to
-#: CONFIRM_LOSSY_FACTOR x the timeout (command_confirmed).
-CONFIRM_DENIALS = 2
-CONFIRM_LOSSY_FACTOR = 3.0
-
-
-class ParamTimeoutError(TimeoutError):
-    """No PARAM_VALUE answered a PARAM_REQUEST_READ after all attempts."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -162,13 +143,13 @@ class VehicleProxy:
         self._seq = SequenceTracker()
         self._n: dict[str, int] = {f.name: 0 for f in fields(ProxyCounters)
                                    if f.name not in SETPOINT_COUNTERS}  # those: self.setpoints
-        self._commands = CommandChannel(self.name, config.gcs_sysid, self._send_command,
-                                        liveness=self, silent_wait_s=config.silent_wait_s)
         self.setpoints = VehicleSetpoints(self.name, config, self._codec, self._send,
                                           self._time_boot_ms)
         self.statustexts = StatusTextLog(self.name)  # every STATUSTEXT of the vehicle
-        self._waiters: list[tuple[str, Callable[[MAVLinkMessage], bool], asyncio.Future[Received]]]
-        self._waiters = []
+        self._waiters = MessageWaiters(self.name)
+        self._commands = VehicleCommands(self.name, config, self._codec, self._send,
+                                         liveness=self, waiters=self._waiters,
+                                         statustexts=self.statustexts, latest=self.latest)
         self._tasks: list[asyncio.Task[None]] = []
         self._t0_s = self._clock.now_s()
         self._link_state = LinkState.WAITING
@@ -215,10 +196,7 @@ class VehicleProxy:
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
         self._tasks = []
-        for _, _, fut in self._waiters:
-            if not fut.done():
-                fut.set_exception(LinkClosedError(f"{self.name}: link closed while waiting"))
-        self._waiters.clear()
+        self._waiters.close()
         self._port.detach(self.config.sysid)
         if self._owns_port:
             self._port.close()
@@ -403,17 +381,7 @@ class VehicleProxy:
                            predicate: Callable[[MAVLinkMessage], bool] | None = None) -> Received:
         """Wait for the next accepted message of type ``kind`` matching ``predicate``; returns when
         it arrives, raises TimeoutError naming the vehicle after ``timeout_s``."""
-        fut: asyncio.Future[Received] = asyncio.get_running_loop().create_future()
-        entry = (kind, predicate or (lambda _m: True), fut)
-        self._waiters.append(entry)
-        try:
-            async with asyncio.timeout(timeout_s):
-                return await fut
-        except TimeoutError:
-            raise TimeoutError(f"{self.name}: no {kind} within {timeout_s} s") from None
-        finally:
-            if entry in self._waiters:
-                self._waiters.remove(entry)
+        return await self._waiters.wait(kind, timeout_s, predicate)
 
     async def wait_heartbeat(self, timeout_s: float) -> Received:
         """Latest HEARTBEAT if any, else wait for one (TimeoutError after timeout_s)."""
@@ -428,8 +396,7 @@ class VehicleProxy:
         batch). A wait for another message (a HEARTBEAT with the new mode, a PARAM_VALUE) comes
         through the slow path: 240 vehicles confirming their mode made every batch tell every
         vehicle, a burst of tens of milliseconds at the formation's start."""
-        waiters = self._waiters  # asked for every vehicle at every batch: none is the rule
-        return bool(waiters) and any(w[0] in TABLE_NAMES for w in waiters)
+        return self._waiters.wants_any(TABLE_NAMES)
 
     def _on_hot(self) -> None:
         """The port's hot path stored new messages of this vehicle: feed the clock filter the
@@ -443,10 +410,10 @@ class VehicleProxy:
             self.clock.on_sample(newest_t, newest_rx)
         if self._waiters:
             for k, kind in enumerate(TABLE_NAMES):
-                if any(w[0] == kind for w in self._waiters):
+                if self._waiters.wants(kind):
                     got = self._hot_latest(k)
                     if got is not None:
-                        self._wake_waiters(got.msg, got.rx_time_s)
+                        self._waiters.wake(got.msg, got.rx_time_s)
 
     def _on_datagram(self, data: bytes, addr: Address, seq_counted: bool = False,
                      rx_s: float | None = None) -> None:
@@ -484,7 +451,7 @@ class VehicleProxy:
             elif kind == "TIMESYNC" and msg.tc1 != 0:
                 self._on_timesync_reply(msg.ts1, now_s)
             if self._waiters:
-                self._wake_waiters(msg, now_s)
+                self._waiters.wake(msg, now_s)
 
     def _on_timesync_reply(self, ts1: int, now_s: float) -> None:
         """A TIMESYNC reply: its round trip, if the request was one of this port's. The vehicle's
@@ -543,15 +510,7 @@ class VehicleProxy:
                 addr[0], addr[1], self.config.sysid, src_sys)
         self._mismatch = src_sys
 
-    def _wake_waiters(self, msg: MAVLinkMessage, now_s: float) -> None:
-        kind = msg.get_type()
-        for entry in list(self._waiters):
-            want, pred, fut = entry
-            if want == kind and not fut.done() and pred(msg):
-                fut.set_result(Received(msg, now_s))
-                self._waiters.remove(entry)
-
-    # --- commands --------------------------------------------------------------------------------
+    # --- commands (gcs.link.vehicle_commands; each returns when done) --------------------------
 
     async def command_long(self, command: int, params: Sequence[float] = (), *,
                            timeout_s: float = 0.5, retries: int = 2) -> MavResult:
@@ -568,108 +527,28 @@ class VehicleProxy:
                                 reported: Callable[[MAVLinkMessage | None], str],
                                 timeout_s: float = 3.0, ack_timeout_s: float = 0.5,
                                 retries: int = 2) -> tuple[MavResult, ...]:
-        """Send COMMAND_LONG and return when the vehicle's HEARTBEAT shows its effect; returns
-        every MAV_RESULT read for it.
-
-        The ACK is registered before sending (resends as in ``command_long``). Every ACK that
-        arrives until the confirmation is read, and a refusal among them wins over an earlier
-        ACCEPTED (PX4 v1.16.0 sends ACCEPTED, then the real answer): CommandRejectedError. The
-        effect counts only in a HEARTBEAT received after the first final ACK for which
-        ``shows(heartbeat)`` is true. It is not confirmed (CommandNotConfirmedError) once
-        ``timeout_s`` has passed since that ACK and at least CONFIRM_DENIALS HEARTBEATs since it
-        did not show the effect: what the vehicle said, not what the link lost. With fewer heard
-        the wait goes on, up to CONFIRM_LOSSY_FACTOR x ``timeout_s`` (at 20 % loss all three of
-        PX4's 1 Hz HEARTBEATs in 3 s are lost 0.8 % of the time; all nine in 9 s, 5e-7). Both
-        messages name the vehicle, ``want`` (e.g. 'mode OFFBOARD'), what the latest HEARTBEAT
-        reports (``reported``), the ACKs seen, and the vehicle's latest STATUSTEXT since the
-        command was sent."""
-        loop = asyncio.get_running_loop()
-        sent_s = self._clock.now_s()
-        label = command_label(command)
-        async with self._commands.exchange(command) as log:
-            await self._commands.send_until_acked(log, params, timeout_s=ack_timeout_s,
-                                                  retries=retries)
-            acked_at = loop.time()
-            deadline = acked_at + CONFIRM_LOSSY_FACTOR * timeout_s
-            denials = 0  # HEARTBEATs after the ACK that did not show the effect
-            while True:
-                result = log.result
-                if result is not None and result != MavResult.ACCEPTED:
-                    await self._settle_text(sent_s)
-                    raise CommandRejectedError(
-                        self._unconfirmed_text(f"{label} for {want} refused", log, reported,
-                                               sent_s), command, result, tuple(log.results),
-                        self._text_since(sent_s))
-                now = loop.time()
-                if (now >= acked_at + timeout_s and denials >= CONFIRM_DENIALS) or now >= deadline:
-                    why = (f"{want} not confirmed within {timeout_s:g} s" if denials >=
-                           CONFIRM_DENIALS else f"{want} not confirmed within "
-                           f"{CONFIRM_LOSSY_FACTOR * timeout_s:g} s ({denials} HEARTBEAT"
-                           f"{'' if denials == 1 else 's'} heard after the ACK)")
-                    raise CommandNotConfirmedError(
-                        self._unconfirmed_text(why, log, reported, sent_s),
-                        command, tuple(log.results), self._text_since(sent_s))
-                remaining = (deadline if denials < CONFIRM_DENIALS else
-                             max(acked_at + timeout_s, now + 1e-3)) - now
-                log.changed.clear()
-                heartbeat = asyncio.ensure_future(
-                    self.wait_message("HEARTBEAT", remaining))
-                acked = asyncio.ensure_future(log.changed.wait())
-                try:
-                    await asyncio.wait({heartbeat, acked}, timeout=remaining,
-                                       return_when=asyncio.FIRST_COMPLETED)
-                finally:
-                    for fut in (heartbeat, acked):
-                        if not fut.done():
-                            fut.cancel()
-                    await asyncio.gather(heartbeat, acked, return_exceptions=True)
-                if heartbeat.done() and not heartbeat.cancelled() and heartbeat.exception() is None:
-                    if shows(heartbeat.result().msg) and log.result == MavResult.ACCEPTED:
-                        return tuple(log.results)
-                    denials += 1
-
-    def _text_since(self, since_s: float) -> str:
-        text = self.statustexts.latest(since_s)
-        return text.text if text is not None else ""
-
-    async def _settle_text(self, since_s: float, timeout_s: float = 0.2) -> None:
-        """A refusal's STATUSTEXT may follow its ACK (PX4, ArduPilot): wait briefly for it."""
-        if self.statustexts.latest(since_s) is None:
-            with contextlib.suppress(TimeoutError):
-                await self.wait_message("STATUSTEXT", timeout_s)
-
-    def _unconfirmed_text(self, what: str, log: AckLog,
-                          reported: Callable[[MAVLinkMessage | None], str], since_s: float) -> str:
-        hb = self._cache.latest("HEARTBEAT")
-        text = self.statustexts.latest(since_s)
-        said = f"; the vehicle said {text.quoted()}" if text is not None else ""
-        return (f"{self.name}: {what}: HEARTBEAT reports {reported(hb.msg if hb else None)}; "
-                f"COMMAND_ACKs seen: {log.summary()}{said}")
-
-    def _send_command(self, command: int, confirmation: int, params: Sequence[float]) -> None:
-        self._send(self._codec.mav.command_long_encode(
-            self.config.sysid, self.config.compid, command, confirmation, *params))
-
-    async def _checked(self, command: MavCmd, params: Sequence[float], check: bool,
-                       timeout_s: float, retries: int) -> MavResult:
-        result = await self.command_long(command, params, timeout_s=timeout_s, retries=retries)
-        if check and result != MavResult.ACCEPTED:
-            raise CommandRejectedError(
-                f"{self.name}: {command_label(command)} answered {result.name}", command, result)
-        return result
+        """Send COMMAND_LONG; return every MAV_RESULT read for it when the vehicle's HEARTBEAT
+        shows its effect (``shows``), raise CommandRejectedError or CommandNotConfirmedError
+        naming vehicle, ``want`` and what the HEARTBEAT ``reported`` otherwise (details:
+        VehicleCommands.command_confirmed)."""
+        return await self._commands.command_confirmed(
+            command, params, want=want, shows=shows, reported=reported, timeout_s=timeout_s,
+            ack_timeout_s=ack_timeout_s, retries=retries)
 
     async def arm(self, *, force: bool = False, check: bool = True, timeout_s: float = 0.5,
                   retries: int = 2) -> MavResult:
         """Arm (COMPONENT_ARM_DISARM 400); returns when acknowledged. ``check``: raise
         CommandRejectedError unless ACCEPTED (same for every helper below)."""
-        return await self._checked(MavCmd.COMPONENT_ARM_DISARM,
-                                   [1.0, FORCE_MAGIC if force else 0.0], check, timeout_s, retries)
+        return await self._commands.checked(MavCmd.COMPONENT_ARM_DISARM,
+                                            [1.0, FORCE_MAGIC if force else 0.0], check,
+                                            timeout_s, retries)
 
     async def disarm(self, *, force: bool = False, check: bool = True, timeout_s: float = 0.5,
                      retries: int = 2) -> MavResult:
         """Disarm (force: also in the air, param2 = 21196); returns when acknowledged."""
-        return await self._checked(MavCmd.COMPONENT_ARM_DISARM,
-                                   [0.0, FORCE_MAGIC if force else 0.0], check, timeout_s, retries)
+        return await self._commands.checked(MavCmd.COMPONENT_ARM_DISARM,
+                                            [0.0, FORCE_MAGIC if force else 0.0], check,
+                                            timeout_s, retries)
 
     async def set_mode_px4(self, main_mode: int, sub_mode: int = 0, *, check: bool = True,
                            timeout_s: float = 0.5, retries: int = 2) -> MavResult:
@@ -677,105 +556,48 @@ class VehicleProxy:
         latest HEARTBEAT says armed), param2 = main mode, param3 = sub mode; returns when acked."""
         base = MavModeFlag.CUSTOM_MODE_ENABLED | (MavModeFlag.SAFETY_ARMED if self.state().armed
                                                   else 0)
-        return await self._checked(MavCmd.DO_SET_MODE, [float(base), main_mode, sub_mode], check,
-                                   timeout_s, retries)
+        return await self._commands.checked(MavCmd.DO_SET_MODE,
+                                            [float(base), main_mode, sub_mode], check,
+                                            timeout_s, retries)
 
     async def set_mode_ardupilot(self, mode: int, *, check: bool = True, timeout_s: float = 0.5,
                                  retries: int = 2) -> MavResult:
         """ArduPilot mode number (e.g. GUIDED 4) via DO_SET_MODE; returns when acknowledged."""
-        return await self._checked(MavCmd.DO_SET_MODE,
-                                   [float(MavModeFlag.CUSTOM_MODE_ENABLED), mode], check,
-                                   timeout_s, retries)
+        return await self._commands.checked(MavCmd.DO_SET_MODE,
+                                            [float(MavModeFlag.CUSTOM_MODE_ENABLED), mode], check,
+                                            timeout_s, retries)
 
     async def takeoff(self, altitude_m: float = math.nan, *, check: bool = True,
                       timeout_s: float = 0.5, retries: int = 2) -> MavResult:
         """NAV_TAKEOFF (22) with param7 = altitude (PX4: AMSL, NaN = MIS_TAKEOFF_ALT; ArduPilot:
         relative to home); returns when acknowledged (not when the vehicle reached it)."""
-        return await self._checked(MavCmd.NAV_TAKEOFF, [0, 0, 0, math.nan, math.nan, math.nan,
-                                                        altitude_m], check, timeout_s, retries)
+        return await self._commands.checked(
+            MavCmd.NAV_TAKEOFF, [0, 0, 0, math.nan, math.nan, math.nan, altitude_m], check,
+            timeout_s, retries)
 
     async def land(self, *, check: bool = True, timeout_s: float = 0.5,
                    retries: int = 2) -> MavResult:
         """NAV_LAND (21) here (lat/lon/yaw NaN); returns when acknowledged, not when landed."""
-        return await self._checked(MavCmd.NAV_LAND, [0, 0, 0, math.nan, math.nan, math.nan, 0],
-                                   check, timeout_s, retries)
+        return await self._commands.checked(
+            MavCmd.NAV_LAND, [0, 0, 0, math.nan, math.nan, math.nan, 0], check, timeout_s,
+            retries)
 
     async def param_read(self, name: str, timeout_s: float = 0.5, retries: int = 2) -> float:
-        """Read one parameter: PARAM_REQUEST_READ by id (param_index -1), returns the value of the
-        matching PARAM_VALUE (as the autopilot sends it: ArduPilot casts integers to float).
-
-        The reply is awaited before the first send; an attempt without reply within ``timeout_s``
-        is resent, at most ``retries`` times (a late reply to an earlier attempt still counts);
-        then raises ParamTimeoutError (a TimeoutError) naming vehicle and parameter."""
-        if not 1 <= len(name) <= 16 or not name.isascii():
-            raise ValueError(f"{self.name}: parameter id: expected 1-16 ASCII characters, got "
-                             f"{name!r}")
-        if retries < 0 or not timeout_s > 0:
-            raise ValueError(f"{self.name}: need retries >= 0 and timeout_s > 0, "
-                             f"got {retries}, {timeout_s}")
-        fut: asyncio.Future[Received] = asyncio.get_running_loop().create_future()
-        entry = ("PARAM_VALUE", lambda m: str(m.param_id) == name, fut)
-        self._waiters.append(entry)
-        try:
-            for _ in range(retries + 1):
-                self._send(self._codec.mav.param_request_read_encode(
-                    self.config.sysid, self.config.compid, name.encode("ascii"), -1))
-                try:
-                    async with asyncio.timeout(timeout_s):
-                        received = await asyncio.shield(fut)
-                    return float(received.msg.param_value)
-                except TimeoutError:
-                    logger.debug("%s: PARAM_REQUEST_READ %s timed out", self.name, name)
-        finally:
-            if entry in self._waiters:
-                self._waiters.remove(entry)
-            if not fut.done():
-                fut.cancel()
-        raise ParamTimeoutError(f"{self.name}: PARAM_REQUEST_READ {name} got no PARAM_VALUE in "
-                                f"{retries + 1} attempts of {timeout_s} s")
+        """One parameter's value by PARAM_REQUEST_READ (returns when its PARAM_VALUE arrives;
+        ParamTimeoutError after ``retries`` resends: VehicleCommands.param_read)."""
+        return await self._commands.param_read(name, timeout_s, retries)
 
     async def autopilot_version(self, timeout_s: float = 1.0, retries: int = 2) -> int:
-        """AUTOPILOT_VERSION.flight_sw_version (major << 24 | minor << 16 | patch << 8 | type),
-        asked for with REQUEST_MESSAGE (148). The reply is awaited before the request is sent;
-        raises CommandRejectedError if the request is refused, TimeoutError naming the vehicle
-        if no AUTOPILOT_VERSION arrives."""
-        fut: asyncio.Future[Received] = asyncio.get_running_loop().create_future()
-        entry = ("AUTOPILOT_VERSION", lambda _m: True, fut)
-        self._waiters.append(entry)
-        try:
-            await self._checked(MavCmd.REQUEST_MESSAGE, (AUTOPILOT_VERSION_ID,), True, timeout_s,
-                                retries)
-            async with asyncio.timeout(timeout_s):
-                received = await fut
-            return int(received.msg.flight_sw_version)
-        except TimeoutError:
-            raise TimeoutError(f"{self.name}: no AUTOPILOT_VERSION within {timeout_s} s of an "
-                               "accepted REQUEST_MESSAGE") from None
-        finally:
-            if entry in self._waiters:
-                self._waiters.remove(entry)
-            if not fut.done():
-                fut.cancel()
+        """AUTOPILOT_VERSION.flight_sw_version, asked for with REQUEST_MESSAGE; returns when it
+        arrives (errors: VehicleCommands.autopilot_version)."""
+        return await self._commands.autopilot_version(timeout_s, retries)
 
     async def set_message_interval(self, msg_id: int, rate_hz: float, *, check: bool = True,
                                    timeout_s: float = 0.5, retries: int = 2) -> MavResult:
         """SET_MESSAGE_INTERVAL (511): rate_hz > 0 sets 1e6/rate_hz us, 0 disables the stream;
-        returns when acknowledged. A refusal (``check``) or no ACK raises an error naming the
-        vehicle, the message and the rate: `vehicle 2 (sysid 2): stream EXTENDED_SYS_STATE (245)
-        at 5 Hz: SET_MESSAGE_INTERVAL answered DENIED`."""
-        if not math.isfinite(rate_hz) or rate_hz < 0:
-            raise ValueError(f"{self.name}: message {msg_id} rate_hz: expected >= 0, got {rate_hz}")
-        interval_us = -1.0 if rate_hz == 0 else 1e6 / rate_hz
-        what = f"{self.name}: stream {message_name(msg_id)} at {rate_hz:g} Hz"
-        try:
-            result = await self.command_long(MavCmd.SET_MESSAGE_INTERVAL, [msg_id, interval_us],
-                                             timeout_s=timeout_s, retries=retries)
-        except CommandTimeoutError as exc:
-            raise CommandTimeoutError(f"{what}: SET_MESSAGE_INTERVAL {exc.reason}",
-                                      exc.reason) from None
-        if check and result != MavResult.ACCEPTED:
-            raise CommandRejectedError(f"{what}: SET_MESSAGE_INTERVAL answered {result.name}",
-                                       MavCmd.SET_MESSAGE_INTERVAL, result)
+        returns when acknowledged (errors: VehicleCommands.set_message_interval)."""
+        result = await self._commands.set_message_interval(msg_id, rate_hz, check=check,
+                                                           timeout_s=timeout_s, retries=retries)
         if result == MavResult.ACCEPTED:  # the rate asked for is measured from here on
             msg_type = mavlink.mavlink_map.get(msg_id)
             if msg_type is not None:
