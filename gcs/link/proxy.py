@@ -12,6 +12,7 @@ from types import TracebackType
 import numpy as np
 from numpy.typing import ArrayLike
 
+from gcs.link.address import ADDRESS_COUNTERS, VehicleAddress
 from gcs.link.clock import VehicleClock
 from gcs.link.codec import (
     CodecStats,
@@ -59,8 +60,6 @@ logger = logging.getLogger(__name__)
 FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 forcing arm/disarm (PX4; ArduPilot disarm)
 #: The golden ratio's fraction: slot k's periodic tasks run at phase k x this (mod 1).
 _GOLDEN = 0.6180339887498949
-#: Stranger addresses logged per vehicle (all are counted); a flood does not flood the log.
-MAX_STRANGERS_LOGGED = 8
 #: Messages whose time_boot_ms stamps the sample they carry (the clock filter's input).
 STAMPED_TYPES = frozenset({"LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "ATTITUDE"})
 #: Round trips kept for the flight report (at 2 Hz: over five hours).
@@ -136,13 +135,15 @@ class VehicleProxy:
         if config.signing_key is not None:
             self._codec.setup_signing(config.signing_key, link_id=config.signing_link_id,
                                       allow_unsigned=config.allow_unsigned)
-        self._remote: Address | None = config.remote
-        self._remote_learned = False
-        self._strangers: set[Address] = set()
+        self._slot = slot if table is not None else None  # its row in the port's table, if any
+        self._address = VehicleAddress(  # a learned address goes into the hot path's row too
+            self.name, config.sysid, config.remote, learn_remote=config.learn_remote,
+            on_learn=self._learned_address if self._slot is not None else None)
         self._cache = TelemetryCache()
         self._seq = SequenceTracker()
-        self._n: dict[str, int] = {f.name: 0 for f in fields(ProxyCounters)
-                                   if f.name not in SETPOINT_COUNTERS}  # those: self.setpoints
+        self._n: dict[str, int] = {  # the others: self.setpoints, self._address
+            f.name: 0 for f in fields(ProxyCounters)
+            if f.name not in SETPOINT_COUNTERS and f.name not in ADDRESS_COUNTERS}
         self.setpoints = VehicleSetpoints(self.name, config, self._codec, self._send,
                                           self._time_boot_ms)
         self.statustexts = StatusTextLog(self.name)  # every STATUSTEXT of the vehicle
@@ -155,12 +156,10 @@ class VehicleProxy:
         self._link_state = LinkState.WAITING
         #: when the monitor last saw the link come alive (HEARTBEAT staleness counts from there)
         self._alive_since_s = self._t0_s
-        self._mismatch: int | None = None  # sysid of a foreign vehicle HEARTBEAT, if any
         self.clock = VehicleClock()  # the vehicle's clock: true sample times (gcs.link.clock)
         self._round_trips: list[float] = []
         self._last_reply = (-math.inf, -math.inf, False)  # request and reply time, recorded
-        # the hot path (gcs.link.fastpath): this vehicle's row in its port's table, if it has one
-        self._slot = slot if table is not None else None
+        # the hot path (gcs.link.fastpath): this vehicle's row in its port's table
         self._hot_decoded: dict[int, tuple[int, Received]] = {}
         self._hot_parser = mavlink.MAVLink(None)
         if table is not None and slot is not None:
@@ -216,19 +215,20 @@ class VehicleProxy:
     def remote(self) -> Address | None:
         """Where commands and setpoints go: the configured address, or the learned one (None
         until the vehicle's first valid message on a link without a configured one)."""
-        return self._remote
+        return self._address.remote
 
     @property
     def remote_learned(self) -> bool:
-        return self._remote_learned
+        return self._address.learned
 
     @property
     def sysid_mismatch(self) -> int | None:
         """Another vehicle's sysid heard where this one was expected: on its own port, a
         HEARTBEAT of another vehicle (preflight refuses); on a shared port, while nothing of this
         vehicle has arrived, a sysid no vehicle of the port has (for the connect diagnostics)."""
-        if self._mismatch is not None or not self._port.shared or self._accepted():
-            return self._mismatch
+        mismatch = self._address.mismatch
+        if mismatch is not None or not self._port.shared or self._accepted():
+            return mismatch
         unknown = self._port.unknown_sysids()
         return min(unknown) if unknown else None
 
@@ -354,8 +354,8 @@ class VehicleProxy:
 
     def stats(self) -> LinkStats:
         """Every counter of the link; the hot path's counts (gcs.link.fastpath) included."""
-        counters, seq, by_type = self._n | self.setpoints.counts(), self._seq.stats(), \
-            self._cache.type_stats()
+        counters = self._n | self.setpoints.counts() | self._address.counts()
+        seq, by_type = self._seq.stats(), self._cache.type_stats()
         table = self._port.table
         if self._slot is not None and table is not None:
             i = self._slot
@@ -424,19 +424,13 @@ class VehicleProxy:
                 self._tlog.write(bytes(msg.get_msgbuf()))
             src_sys, src_comp = msg.get_srcSystem(), msg.get_srcComponent()
             if src_sys != cfg.sysid:
-                self._n["foreign_sysid"] += 1
-                if msg.get_type() == "HEARTBEAT" and msg.type != MavType.GCS:
-                    self._report_mismatch(src_sys, src_comp, addr)
+                self._address.foreign(msg, addr)
                 continue
             if src_comp != cfg.compid:
                 self._n["other_component"] += 1
                 continue
-            if self._remote_learned:
-                if addr != self._remote:
-                    self._stranger(addr)
-                    continue
-            elif cfg.learn_remote:
-                self._learn(addr)
+            if not self._address.accepts(addr):
+                continue
             if not seq_counted:  # else the hot path has counted it
                 self._n["messages_accepted"] += 1
                 self._seq.update(msg.get_seq())
@@ -479,36 +473,13 @@ class VehicleProxy:
 
     def _on_foreign(self, msg: MAVLinkMessage, addr: Address) -> None:
         """Called by a port serving only this vehicle: a valid message from another sysid."""
-        self._n["foreign_sysid"] += 1
-        if msg.get_type() == "HEARTBEAT" and msg.type != MavType.GCS:
-            self._report_mismatch(msg.get_srcSystem(), msg.get_srcComponent(), addr)
+        self._address.foreign(msg, addr)
 
-    def _learn(self, addr: Address) -> None:
-        same = " (the configured one)" if addr == self._remote else ""
-        logger.info("%s: address learned from its first message: %s:%d%s", self.name, *addr, same)
-        self._remote = addr
-        self._remote_learned = True
+    def _learned_address(self, addr: Address) -> None:
+        """The vehicle's address is learned: the hot path accepts its frames from there on."""
         table = self._port.table
-        if self._slot is not None and table is not None:
-            table.addr_of_slot[self._slot] = self._port.address_code(addr)
-
-    def _stranger(self, addr: Address) -> None:
-        self._n["stranger_address"] += 1
-        if addr not in self._strangers and len(self._strangers) < MAX_STRANGERS_LOGGED:
-            self._strangers.add(addr)
-            assert self._remote is not None
-            logger.warning(
-                "%s: messages with its sysid %d from %s:%d, but its address is %s:%d (learned "
-                "from its first message); ignored and counted (stranger_address)", self.name,
-                self.config.sysid, addr[0], addr[1], self._remote[0], self._remote[1])
-
-    def _report_mismatch(self, src_sys: int, src_comp: int, addr: Address) -> None:
-        if self._mismatch != src_sys:
-            logger.error(
-                "%s: HEARTBEAT from sysid %d (compid %d) at %s:%d, expected sysid %d; check the "
-                "team file. Messages from sysid %d are ignored.", self.name, src_sys, src_comp,
-                addr[0], addr[1], self.config.sysid, src_sys)
-        self._mismatch = src_sys
+        assert self._slot is not None and table is not None
+        table.addr_of_slot[self._slot] = self._port.address_code(addr)
 
     # --- commands (gcs.link.vehicle_commands; each returns when done) --------------------------
 
@@ -654,9 +625,10 @@ class VehicleProxy:
     def batch_address(self) -> Address | None:
         """Where a packet sent for this vehicle outside `_send` goes now (a learned address may
         change); None, not known yet, is counted as ``send_no_remote`` (the port drops it)."""
-        if self._remote is None:
+        remote = self._address.remote
+        if remote is None:
             self._n["send_no_remote"] += 1
-        return self._remote
+        return remote
 
     # --- send path and owned tasks ---------------------------------------------------------------
 
@@ -667,9 +639,10 @@ class VehicleProxy:
         data = self._codec.encode(msg)
         if self._tlog is not None:
             self._tlog.write(data)
-        if self._remote is None:
+        remote = self._address.remote
+        if remote is None:
             self._n["send_no_remote"] += 1
-        return self._port.send_to(data, self._remote)
+        return self._port.send_to(data, remote)
 
     @property
     def _phase(self) -> float:
@@ -691,8 +664,9 @@ class VehicleProxy:
         period = self.config.timesync_period_s
         await asyncio.sleep(self._phase * period)
         while True:
-            if self._remote is not None:
-                ts1 = self._port.claim_timesync(self._remote, self._clock.now_s(), period)
+            remote = self._address.remote
+            if remote is not None:
+                ts1 = self._port.claim_timesync(remote, self._clock.now_s(), period)
                 if ts1 is not None:
                     self._send(self._codec.mav.timesync_encode(0, ts1))
                     self._n["timesync_sent"] += 1
