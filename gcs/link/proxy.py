@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from gcs.link.address import ADDRESS_COUNTERS, VehicleAddress
-from gcs.link.clock import VehicleClock
+from gcs.link.clock import ROUND_TRIP_COUNTERS, LinkRoundTrips, VehicleClock
 from gcs.link.codec import (
     CodecStats,
     MavlinkCodec,
@@ -62,11 +62,6 @@ FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 forcing arm/disarm (PX4; Ardu
 _GOLDEN = 0.6180339887498949
 #: Messages whose time_boot_ms stamps the sample they carry (the clock filter's input).
 STAMPED_TYPES = frozenset({"LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "ATTITUDE"})
-#: Round trips kept for the flight report (at 2 Hz: over five hours).
-MAX_ROUND_TRIPS = 40_000
-#: Two TIMESYNC replies whose arrivals are closer than this fraction of their requests' spacing
-#: came bunched: held, then released together (see `_on_timesync_reply`).
-BUNCHED = 0.25
 
 
 @dataclass(frozen=True, slots=True)
@@ -141,9 +136,9 @@ class VehicleProxy:
             on_learn=self._learned_address if self._slot is not None else None)
         self._cache = TelemetryCache()
         self._seq = SequenceTracker()
-        self._n: dict[str, int] = {  # the others: self.setpoints, self._address
+        self._n: dict[str, int] = {  # the others: setpoints, _address, _round_trips
             f.name: 0 for f in fields(ProxyCounters)
-            if f.name not in SETPOINT_COUNTERS and f.name not in ADDRESS_COUNTERS}
+            if f.name not in (*SETPOINT_COUNTERS, *ADDRESS_COUNTERS, *ROUND_TRIP_COUNTERS)}
         self.setpoints = VehicleSetpoints(self.name, config, self._codec, self._send,
                                           self._time_boot_ms)
         self.statustexts = StatusTextLog(self.name)  # every STATUSTEXT of the vehicle
@@ -157,8 +152,7 @@ class VehicleProxy:
         #: when the monitor last saw the link come alive (HEARTBEAT staleness counts from there)
         self._alive_since_s = self._t0_s
         self.clock = VehicleClock()  # the vehicle's clock: true sample times (gcs.link.clock)
-        self._round_trips: list[float] = []
-        self._last_reply = (-math.inf, -math.inf, False)  # request and reply time, recorded
+        self._round_trips = LinkRoundTrips(self.clock)  # TIMESYNC replies, for the report
         # the hot path (gcs.link.fastpath): this vehicle's row in its port's table
         self._hot_decoded: dict[int, tuple[int, Received]] = {}
         self._hot_parser = mavlink.MAVLink(None)
@@ -298,7 +292,7 @@ class VehicleProxy:
 
     def round_trips_s(self) -> np.ndarray:
         """Every TIMESYNC round trip measured on this link [s], oldest first."""
-        return np.asarray(self._round_trips, dtype=float)
+        return self._round_trips.round_trips_s()
 
     def link_state(self) -> LinkState:
         """WAITING before the first message, LOST when nothing at all arrived for
@@ -354,7 +348,8 @@ class VehicleProxy:
 
     def stats(self) -> LinkStats:
         """Every counter of the link; the hot path's counts (gcs.link.fastpath) included."""
-        counters = self._n | self.setpoints.counts() | self._address.counts()
+        counters = (self._n | self.setpoints.counts() | self._address.counts()
+                    | self._round_trips.counts())
         seq, by_type = self._seq.stats(), self._cache.type_stats()
         table = self._port.table
         if self._slot is not None and table is not None:
@@ -451,25 +446,8 @@ class VehicleProxy:
         """A TIMESYNC reply: its round trip, if the request was one of this port's. The vehicle's
         own requests (tc1 = 0) are not answered: the ground station does not steer its clock."""
         sent = self._port.timesync_sent_s(int(ts1))
-        if sent is None or now_s < sent:
-            return
-        self._n["timesync_replies"] += 1
-        # A link delays replies; it does not bunch them. Replies to requests a period apart that
-        # arrive together were held by a vehicle (or host) that stopped for a while: their round
-        # trips measure that stop, not the link, and both leave the link's record.
-        last_sent, last_rx, last_kept = self._last_reply
-        bunched = now_s - last_rx < BUNCHED * (sent - last_sent)
-        if bunched:
-            self._n["timesync_bunched"] += 1
-            if last_kept:  # the reply before this one was the bunch's first
-                self._n["timesync_bunched"] += 1
-                self.clock.disown_last_round_trip()
-                if self._round_trips:
-                    self._round_trips.pop()
-        elif len(self._round_trips) < MAX_ROUND_TRIPS:
-            self._round_trips.append(now_s - sent)
-        self.clock.on_round_trip(now_s - sent, sent, of_link=not bunched)
-        self._last_reply = (sent, now_s, not bunched)
+        if sent is not None:
+            self._round_trips.on_reply(sent, now_s)
 
     def _on_foreign(self, msg: MAVLinkMessage, addr: Address) -> None:
         """Called by a port serving only this vehicle: a valid message from another sysid."""
