@@ -31,11 +31,7 @@ from gcs.link.enums import (
     MavState,
     MavType,
 )
-from gcs.link.fastpath import (
-    ANY_ADDRESS,
-    TABLE_NAMES,
-    UNLEARNED,
-)
+from gcs.link.fastpath import TABLE_NAMES, HotRow
 from gcs.link.port import MavlinkPort, PortStats
 from gcs.link.setpoints import SETPOINT_COUNTERS, VehicleSetpoints
 from gcs.link.statustext import StatusTextLog
@@ -49,7 +45,6 @@ from gcs.link.telemetry import (
     TypeStats,
     VehicleState,
     build_state,
-    rate_of,
 )
 from gcs.link.tlog import TlogWriter
 from gcs.link.udp import Address, UdpStats
@@ -130,10 +125,19 @@ class VehicleProxy:
         if config.signing_key is not None:
             self._codec.setup_signing(config.signing_key, link_id=config.signing_link_id,
                                       allow_unsigned=config.allow_unsigned)
-        self._slot = slot if table is not None else None  # its row in the port's table, if any
+        self.clock = VehicleClock()  # the vehicle's clock: true sample times (gcs.link.clock)
+        self._round_trips = LinkRoundTrips(self.clock)  # TIMESYNC replies, for the report
+        self._slot = slot if table is not None else None
+        # the hot path (gcs.link.fastpath): this vehicle's row in its port's table, if it has one
+        self._hot: HotRow | None = None
+        if table is not None and slot is not None:
+            signed = config.signing_key is not None  # the codec checks signatures: no hot path
+            self._hot = HotRow(table, slot, compid=-1 if signed else config.compid,
+                               learn_remote=config.learn_remote)
+            self.clock.bind_line(table.clock_line[slot])
         self._address = VehicleAddress(  # a learned address goes into the hot path's row too
             self.name, config.sysid, config.remote, learn_remote=config.learn_remote,
-            on_learn=self._learned_address if self._slot is not None else None)
+            on_learn=self._learned_address if self._hot is not None else None)
         self._cache = TelemetryCache()
         self._seq = SequenceTracker()
         self._n: dict[str, int] = {  # the others: setpoints, _address, _round_trips
@@ -151,16 +155,6 @@ class VehicleProxy:
         self._link_state = LinkState.WAITING
         #: when the monitor last saw the link come alive (HEARTBEAT staleness counts from there)
         self._alive_since_s = self._t0_s
-        self.clock = VehicleClock()  # the vehicle's clock: true sample times (gcs.link.clock)
-        self._round_trips = LinkRoundTrips(self.clock)  # TIMESYNC replies, for the report
-        # the hot path (gcs.link.fastpath): this vehicle's row in its port's table
-        self._hot_decoded: dict[int, tuple[int, Received]] = {}
-        self._hot_parser = mavlink.MAVLink(None)
-        if table is not None and slot is not None:
-            signed = config.signing_key is not None  # the codec checks signatures: no hot path
-            table.compid_of_slot[slot] = -1 if signed else config.compid
-            table.addr_of_slot[slot] = UNLEARNED if config.learn_remote else ANY_ADDRESS
-            self.clock.bind_line(table.clock_line[slot])
 
     # --- lifetime --------------------------------------------------------------------------------
 
@@ -234,9 +228,9 @@ class VehicleProxy:
     def latest(self, kind: str) -> Received | None:
         """Latest accepted message of type ``kind`` (e.g. 'ATTITUDE') with its receive time."""
         cached = self._cache.latest(kind)
-        if self._slot is None or kind not in TABLE_NAMES:
+        if self._hot is None:
             return cached
-        hot = self._hot_latest(TABLE_NAMES.index(kind))
+        hot = self._hot.latest(kind)
         if hot is None or (cached is not None and cached.rx_time_s > hot.rx_time_s):
             return cached
         return hot
@@ -246,27 +240,10 @@ class VehicleProxy:
         """This vehicle's row in its port's `HotTable` (None: no hot path)."""
         return self._slot
 
-    def _hot_latest(self, kind: int) -> Received | None:
-        table = self._port.table
-        assert table is not None and self._slot is not None
-        count = int(table.count[self._slot, kind])
-        if count == 0:
-            return None
-        done = self._hot_decoded.get(kind)
-        if done is not None and done[0] == count:
-            return done[1]
-        frame = table.frame(self._slot, kind)
-        assert frame is not None
-        got = Received(self._hot_parser.decode(bytearray(frame)),
-                       float(table.rx_s[self._slot, kind]))
-        self._hot_decoded[kind] = (count, got)
-        return got
-
     def _last_any_rx_s(self) -> float:
-        table = self._port.table
-        if self._slot is None or table is None:
+        if self._hot is None:
             return self._cache.last_any_rx_s
-        return max(self._cache.last_any_rx_s, float(table.last_any_rx_s[self._slot]))
+        return max(self._cache.last_any_rx_s, self._hot.last_any_rx_s())
 
     # the commands' view of liveness (gcs.link.commands.Liveness)
 
@@ -282,9 +259,8 @@ class VehicleProxy:
         return self._t0_s
 
     def _accepted(self) -> int:
-        table = self._port.table
         own = self._n["messages_accepted"]
-        return own if self._slot is None or table is None else own + int(table.accepted[self._slot])
+        return own if self._hot is None else own + self._hot.accepted()
 
     def state(self) -> VehicleState:
         """Snapshot of the latest telemetry in ENU/FLU with receive times; returns immediately."""
@@ -332,43 +308,23 @@ class VehicleProxy:
     def rate_hz(self, kind: str) -> float:
         """Receive rate of one message type (EWMA of its intervals; NaN before three arrived,
         0 if never); cheaper than `stats` for the few a check needs."""
-        table = self._port.table
-        if self._slot is not None and table is not None and kind in TABLE_NAMES:
-            k = TABLE_NAMES.index(kind)
-            if table.count[self._slot, k] > 0:
-                return rate_of(float(table.interval_s[self._slot, k]))
-        return self._cache.rate_hz(kind)
+        hot = self._hot.rate_hz(kind) if self._hot is not None else None
+        return hot if hot is not None else self._cache.rate_hz(kind)
 
     def _restart_rate(self, kind: str) -> None:
         """Measure ``kind``'s receive rate afresh (telemetry.TelemetryCache.restart_rate)."""
         self._cache.restart_rate(kind)
-        table = self._port.table
-        if self._slot is not None and table is not None and kind in TABLE_NAMES:
-            table.interval_s[self._slot, TABLE_NAMES.index(kind)] = math.nan
+        if self._hot is not None:
+            self._hot.restart_rate(kind)
 
     def stats(self) -> LinkStats:
         """Every counter of the link; the hot path's counts (gcs.link.fastpath) included."""
         counters = (self._n | self.setpoints.counts() | self._address.counts()
                     | self._round_trips.counts())
         seq, by_type = self._seq.stats(), self._cache.type_stats()
-        table = self._port.table
-        if self._slot is not None and table is not None:
-            i = self._slot
+        if self._hot is not None:
             counters["messages_accepted"] = self._accepted()
-            hot = table.seq[i]
-            seq = SequenceStats(seq.received + int(hot[0]), seq.lost + int(hot[1]),
-                                seq.duplicates + int(hot[2]), seq.reordered + int(hot[3]))
-            for k, kind in enumerate(TABLE_NAMES):
-                count = int(table.count[i, k])
-                if count == 0:
-                    continue
-                slow = by_type.get(kind)
-                rate = rate_of(float(table.interval_s[i, k]))
-                last = float(table.rx_s[i, k])
-                if slow is not None:
-                    last = max(last, slow.last_rx_s)
-                    count += slow.count
-                by_type[kind] = TypeStats(count, last, rate)
+            seq, by_type = self._hot.sequence_stats(seq), self._hot.type_stats(by_type)
         return LinkStats(ProxyCounters(**counters), self._codec.stats(), self._port.udp_stats(),
                          self._commands.stats(), seq, by_type, self._port.stats())
 
@@ -396,17 +352,12 @@ class VehicleProxy:
     def _on_hot(self) -> None:
         """The port's hot path stored new messages of this vehicle: feed the clock filter the
         batch's least-delayed and newest stamps (in time order), wake waiters for them."""
-        table = self._port.table
-        assert table is not None and self._slot is not None
-        least_o, least_t, newest_t, newest_rx, samples = table.clock[self._slot].tolist()
-        if samples > 0:
-            if least_t < newest_t:
-                self.clock.on_sample(least_t, least_t + least_o)
-            self.clock.on_sample(newest_t, newest_rx)
+        assert self._hot is not None
+        self._hot.feed_clock(self.clock.on_sample)
         if self._waiters:
-            for k, kind in enumerate(TABLE_NAMES):
+            for kind in TABLE_NAMES:
                 if self._waiters.wants(kind):
-                    got = self._hot_latest(k)
+                    got = self._hot.latest(kind)
                     if got is not None:
                         self._waiters.wake(got.msg, got.rx_time_s)
 
@@ -455,9 +406,8 @@ class VehicleProxy:
 
     def _learned_address(self, addr: Address) -> None:
         """The vehicle's address is learned: the hot path accepts its frames from there on."""
-        table = self._port.table
-        assert self._slot is not None and table is not None
-        table.addr_of_slot[self._slot] = self._port.address_code(addr)
+        assert self._hot is not None
+        self._hot.learned(self._port.address_code(addr))
 
     # --- commands (gcs.link.vehicle_commands; each returns when done) --------------------------
 
