@@ -23,7 +23,7 @@ from gcs.fly.measure import (
 )
 from gcs.fly.origins import TeamTies
 from gcs.link import SetpointError, VehicleProxy
-from gcs.link.proxy import TeamSetpoints
+from gcs.link.setpoints import TeamSetpoints
 from gcs.mission.machine import MissionMachine, Phase
 
 

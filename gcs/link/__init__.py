@@ -6,7 +6,8 @@ from gcs.link.config import VehicleLinkConfig, check_unique_sysids
 from gcs.link.enums import LinkState, MavResult
 from gcs.link.fastpath import HotTable
 from gcs.link.port import MavlinkPort, PortStats
-from gcs.link.proxy import LinkStats, SetpointError, VehicleProxy
+from gcs.link.proxy import LinkStats, VehicleProxy
+from gcs.link.setpoints import SetpointError
 from gcs.link.telemetry import Clock, MonotonicClock, VehicleState
 from gcs.link.tlog import TlogWriter
 from gcs.link.udp import LinkClosedError, UdpEndpoint

@@ -24,8 +24,11 @@ The time a sample was taken, on the ground station's clock, is
 
 never later than its receive time; its *true age* at ``now`` is ``now - t_gcs``. A vehicle clock
 that jumps back by more than `RESET_S` (a reboot; reordered packets step back far less)
-restarts the filter. Pure: times are
-arguments, nothing reads a clock.
+restarts the filter.
+
+`LinkRoundTrips` keeps a link's round trips for the flight report and feeds them to the filter,
+leaving out replies that a stopped vehicle (or host) held and released together (`BUNCHED`).
+Pure: times are arguments, nothing reads a clock.
 """
 
 from __future__ import annotations
@@ -50,6 +53,13 @@ RTT_WINDOW = 20
 #: TIMESYNC replies whose median is the link's recent round trip (the delay rule's): a lasting
 #: delay shows in every reply, one reply a loaded machine holds up does not move the median.
 RECENT_ROUND_TRIPS = 3
+#: Round trips kept for the flight report (at 2 Hz: over five hours).
+MAX_ROUND_TRIPS = 40_000
+#: Two TIMESYNC replies whose arrivals are closer than this fraction of their requests' spacing
+#: came bunched: held, then released together (see `LinkRoundTrips.on_reply`).
+BUNCHED = 0.25
+#: The counters `LinkRoundTrips.counts` returns (fields of the proxy's ProxyCounters).
+ROUND_TRIP_COUNTERS = ("timesync_replies", "timesync_bunched")
 
 
 @dataclass(frozen=True, slots=True)
@@ -225,3 +235,46 @@ class VehicleClock:
                   if self.synced else math.nan)
         return ClockEstimate(self.synced, offset, 1e6 * self._b, self._least_delay_s,
                              self._rtt_total, self.resets)
+
+
+class LinkRoundTrips:
+    """Every TIMESYNC round trip of one link (up to `MAX_ROUND_TRIPS`, for the flight report),
+    each also given to the link's `VehicleClock`; counts the replies (``timesync_replies``) and
+    those that came bunched (``timesync_bunched``)."""
+
+    def __init__(self, clock: VehicleClock) -> None:
+        self._clock = clock
+        self._round_trips: list[float] = []
+        self._last_reply = (-math.inf, -math.inf, False)  # request and reply time, recorded
+        self._n = dict.fromkeys(ROUND_TRIP_COUNTERS, 0)
+
+    def counts(self) -> dict[str, int]:
+        """The counters of `ROUND_TRIP_COUNTERS`, by name."""
+        return dict(self._n)
+
+    def round_trips_s(self) -> np.ndarray:
+        """Every round trip of the link [s], oldest first (bunched replies left out)."""
+        return np.asarray(self._round_trips, dtype=float)
+
+    def on_reply(self, sent_s: float, rx_s: float) -> None:
+        """The reply to a request sent at ``sent_s`` arrived at ``rx_s`` (one clock; a reply
+        before its request is ignored)."""
+        if rx_s < sent_s:
+            return
+        self._n["timesync_replies"] += 1
+        # A link delays replies; it does not bunch them. Replies to requests a period apart that
+        # arrive together were held by a vehicle (or host) that stopped for a while: their round
+        # trips measure that stop, not the link, and both leave the link's record.
+        last_sent, last_rx, last_kept = self._last_reply
+        bunched = rx_s - last_rx < BUNCHED * (sent_s - last_sent)
+        if bunched:
+            self._n["timesync_bunched"] += 1
+            if last_kept:  # the reply before this one was the bunch's first
+                self._n["timesync_bunched"] += 1
+                self._clock.disown_last_round_trip()
+                if self._round_trips:
+                    self._round_trips.pop()
+        elif len(self._round_trips) < MAX_ROUND_TRIPS:
+            self._round_trips.append(rx_s - sent_s)
+        self._clock.on_round_trip(rx_s - sent_s, sent_s, of_link=not bunched)
+        self._last_reply = (sent_s, rx_s, not bunched)

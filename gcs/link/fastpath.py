@@ -18,6 +18,8 @@ the codec), the vehicle's sysid and compid, and its address once learned (or any
 fixed remote). The sequence numbers of every frame the kernel accepts, hot or not, are counted in
 the table (`SequenceTracker` semantics), so the slow path skips them for those frames.
 
+A `HotRow` reads one vehicle's row as telemetry (its proxy merges that with the slow path's).
+
 Encoding: :func:`encode_set_attitude_target` packs SET_ATTITUDE_TARGET for the whole team into one
 array (MAVLink 2, payload zeros trimmed as pymavlink does), each row with its own sequence number.
 """
@@ -25,6 +27,7 @@ array (MAVLink 2, payload zeros trimmed as pymavlink does), each row with its ow
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 from numba import njit
@@ -34,6 +37,10 @@ from gcs.link.codec import SeqBlock
 from gcs.link.telemetry import (  # the rate estimate: the cache's, per message
     RATE_CLIP,
     RATE_EWMA_ALPHA,
+    Received,
+    SequenceStats,
+    TypeStats,
+    rate_of,
 )
 
 #: The hot messages, decoded into the table's value arrays, in table order (columns of the
@@ -47,6 +54,7 @@ LPN, ATTQ, IMU = 0, 1, 2
 LAZY_NAMES = ("ATTITUDE_TARGET", "GLOBAL_POSITION_INT", "SYS_STATUS", "EXTENDED_SYS_STATE",
               "BATTERY_STATUS", "TIMESYNC")
 TABLE_NAMES = HOT_NAMES + LAZY_NAMES
+_COLUMN = {name: k for k, name in enumerate(TABLE_NAMES)}
 ATTITUDE_TARGET, GLOBAL_POSITION_INT, SYS_STATUS, EXTENDED_SYS_STATE = 3, 4, 5, 6
 _TIMESYNC = len(TABLE_NAMES) - 1
 #: The few fields of the lazy messages the mission machine reads at every check (`misc`
@@ -300,6 +308,99 @@ class HotTable:
         if self.count[slot, kind] == 0:
             return None
         return bytes(self.raw[slot, kind, : self.rawlen[slot, kind]])
+
+
+class HotRow:
+    """One vehicle's row (``slot``) of its port's `HotTable`, read as telemetry: the latest
+    message of a table kind (decoded by pymavlink once per new frame), receive times, counts,
+    rates and sequence statistics; the vehicle's proxy merges them with its own cache's.
+    Binds the row to the vehicle: ``compid`` (-1: no hot path) and, with ``learn_remote``,
+    no address until `learned`, else any address."""
+
+    def __init__(self, table: HotTable, slot: int, *, compid: int, learn_remote: bool) -> None:
+        self._table = table
+        self._slot = slot
+        self._decoded: dict[int, tuple[int, Received]] = {}
+        self._parser = mavlink.MAVLink(None)
+        table.compid_of_slot[slot] = compid
+        table.addr_of_slot[slot] = UNLEARNED if learn_remote else ANY_ADDRESS
+
+    def learned(self, addr_code: int) -> None:
+        """The vehicle's address is learned (its code on the port): accept its frames from it."""
+        self._table.addr_of_slot[self._slot] = addr_code
+
+    def latest(self, kind: str) -> Received | None:
+        """Latest message of type ``kind`` in the row (None: not a table kind, or none yet)."""
+        k = _COLUMN.get(kind)
+        if k is None:
+            return None
+        count = int(self._table.count[self._slot, k])
+        if count == 0:
+            return None
+        done = self._decoded.get(k)
+        if done is not None and done[0] == count:
+            return done[1]
+        frame = self._table.frame(self._slot, k)
+        assert frame is not None
+        got = Received(self._parser.decode(bytearray(frame)),
+                       float(self._table.rx_s[self._slot, k]))
+        self._decoded[k] = (count, got)
+        return got
+
+    def last_any_rx_s(self) -> float:
+        return float(self._table.last_any_rx_s[self._slot])
+
+    def accepted(self) -> int:
+        """Messages the hot path accepted (hot or handed back)."""
+        return int(self._table.accepted[self._slot])
+
+    def rate_hz(self, kind: str) -> float | None:
+        """Receive rate of ``kind`` in the row (None: not a table kind, or none yet)."""
+        k = _COLUMN.get(kind)
+        if k is None or self._table.count[self._slot, k] == 0:
+            return None
+        return rate_of(float(self._table.interval_s[self._slot, k]))
+
+    def restart_rate(self, kind: str) -> None:
+        """Measure ``kind``'s rate afresh (nothing for a kind not in the table)."""
+        k = _COLUMN.get(kind)
+        if k is not None:
+            self._table.interval_s[self._slot, k] = math.nan
+
+    def sequence_stats(self, slow: SequenceStats) -> SequenceStats:
+        """``slow`` (the proxy's own tracker) plus the row's sequence counts."""
+        hot = self._table.seq[self._slot]
+        return SequenceStats(slow.received + int(hot[SEQ_RECEIVED]), slow.lost + int(hot[SEQ_LOST]),
+                             slow.duplicates + int(hot[SEQ_DUPLICATES]),
+                             slow.reordered + int(hot[SEQ_REORDERED]))
+
+    def type_stats(self, slow: dict[str, TypeStats]) -> dict[str, TypeStats]:
+        """``slow`` (the proxy's cache's) with the row's kinds merged in: counts added, the later
+        receive time, the row's rate."""
+        out = dict(slow)
+        i, table = self._slot, self._table
+        for k, kind in enumerate(TABLE_NAMES):
+            count = int(table.count[i, k])
+            if count == 0:
+                continue
+            rate = rate_of(float(table.interval_s[i, k]))
+            last = float(table.rx_s[i, k])
+            cached = slow.get(kind)
+            if cached is not None:
+                last = max(last, cached.last_rx_s)
+                count += cached.count
+            out[kind] = TypeStats(count, last, rate)
+        return out
+
+    def feed_clock(self, on_sample: Callable[[float, float], None]) -> None:
+        """Give ``on_sample(t_vehicle_s, rx_s)`` the least-delayed and the newest stamp of the
+        messages stored since the port's last notice (the table's clock reduction), in time
+        order."""
+        least_o, least_t, newest_t, newest_rx, samples = self._table.clock[self._slot].tolist()
+        if samples > 0:
+            if least_t < newest_t:
+                on_sample(least_t, least_t + least_o)
+            on_sample(newest_t, newest_rx)
 
 
 @njit(cache=True)

@@ -3,11 +3,8 @@
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import math
-import struct
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, fields
 from types import TracebackType
@@ -15,25 +12,15 @@ from types import TracebackType
 import numpy as np
 from numpy.typing import ArrayLike
 
-from gcs import frames
-from gcs.link.clock import VehicleClock
+from gcs.link.address import ADDRESS_COUNTERS, VehicleAddress
+from gcs.link.clock import ROUND_TRIP_COUNTERS, LinkRoundTrips, VehicleClock
 from gcs.link.codec import (
     CodecStats,
     MavlinkCodec,
     MAVLinkMessage,
-    SeqBlock,
     mavlink,
-    message_name,
 )
-from gcs.link.commands import (
-    AckLog,
-    CommandChannel,
-    CommandNotConfirmedError,
-    CommandRejectedError,
-    CommandStats,
-    CommandTimeoutError,
-    command_label,
-)
+from gcs.link.commands import CommandStats
 from gcs.link.config import VehicleLinkConfig
 from gcs.link.enums import (
     LinkState,
@@ -44,14 +31,9 @@ from gcs.link.enums import (
     MavState,
     MavType,
 )
-from gcs.link.fastpath import (
-    ANY_ADDRESS,
-    SET_ATTITUDE_TARGET_LEN,
-    TABLE_NAMES,
-    UNLEARNED,
-    encode_set_attitude_target,
-)
+from gcs.link.fastpath import TABLE_NAMES, HotRow
 from gcs.link.port import MavlinkPort, PortStats
+from gcs.link.setpoints import SETPOINT_COUNTERS, VehicleSetpoints
 from gcs.link.statustext import StatusTextLog
 from gcs.link.telemetry import (
     Clock,
@@ -63,50 +45,18 @@ from gcs.link.telemetry import (
     TypeStats,
     VehicleState,
     build_state,
-    rate_of,
 )
 from gcs.link.tlog import TlogWriter
-from gcs.link.udp import Address, LinkClosedError, UdpStats
+from gcs.link.udp import Address, UdpStats
+from gcs.link.vehicle_commands import MessageWaiters, VehicleCommands
 
 logger = logging.getLogger(__name__)
 
-TYPE_MASK_RATES_THRUST = 128  # ATTITUDE_IGNORE: body rates + thrust
-TYPE_MASK_ATTITUDE_THRUST = 7  # roll/pitch/yaw rates ignored: attitude + thrust
-#: SET_POSITION_TARGET_LOCAL_NED: acceleration (64, 128, 256) and yaw rate (2048) ignored:
-#: position, velocity (the position loop's feed-forward) and yaw
-TYPE_MASK_POSITION_VELOCITY_YAW = 64 | 128 | 256 | 2048
-#: ... and with the acceleration as feed-forward too (position mode's slots): yaw rate ignored
-TYPE_MASK_POSITION_VELOCITY_ACCELERATION_YAW = 2048
-MAV_FRAME_LOCAL_NED = 1
-AUTOPILOT_VERSION_ID = 148  # REQUEST_MESSAGE param1
 FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 forcing arm/disarm (PX4; ArduPilot disarm)
 #: The golden ratio's fraction: slot k's periodic tasks run at phase k x this (mod 1).
 _GOLDEN = 0.6180339887498949
-#: Stranger addresses logged per vehicle (all are counted); a flood does not flood the log.
-MAX_STRANGERS_LOGGED = 8
-#: q of rate setpoints: ignored (type_mask 128), but ArduPilot drops a non-unit one, so unit.
-_IDENTITY_Q = (1.0, 0.0, 0.0, 0.0)
-_TLOG_STAMP = struct.Struct(">Q")  # a tlog record's Unix time [us] (gcs.link.tlog)
 #: Messages whose time_boot_ms stamps the sample they carry (the clock filter's input).
 STAMPED_TYPES = frozenset({"LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "ATTITUDE"})
-#: Round trips kept for the flight report (at 2 Hz: over five hours).
-MAX_ROUND_TRIPS = 40_000
-#: Two TIMESYNC replies whose arrivals are closer than this fraction of their requests' spacing
-#: came bunched: held, then released together (see `_on_timesync_reply`).
-BUNCHED = 0.25
-#: A command is not confirmed once its timeout has passed AND this many HEARTBEATs received
-#: after its ACK did not show the effect; with fewer heard (a lossy link), the wait goes on up to
-#: CONFIRM_LOSSY_FACTOR x the timeout (command_confirmed).
-CONFIRM_DENIALS = 2
-CONFIRM_LOSSY_FACTOR = 3.0
-
-
-class SetpointError(ValueError):
-    """A setpoint with NaN/inf or the wrong shape; nothing was sent."""
-
-
-class ParamTimeoutError(TimeoutError):
-    """No PARAM_VALUE answered a PARAM_REQUEST_READ after all attempts."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -175,35 +125,36 @@ class VehicleProxy:
         if config.signing_key is not None:
             self._codec.setup_signing(config.signing_key, link_id=config.signing_link_id,
                                       allow_unsigned=config.allow_unsigned)
-        self._remote: Address | None = config.remote
-        self._remote_learned = False
-        self._strangers: set[Address] = set()
+        self.clock = VehicleClock()  # the vehicle's clock: true sample times (gcs.link.clock)
+        self._round_trips = LinkRoundTrips(self.clock)  # TIMESYNC replies, for the report
+        self._slot = slot if table is not None else None
+        # the hot path (gcs.link.fastpath): this vehicle's row in its port's table, if it has one
+        self._hot: HotRow | None = None
+        if table is not None and slot is not None:
+            signed = config.signing_key is not None  # the codec checks signatures: no hot path
+            self._hot = HotRow(table, slot, compid=-1 if signed else config.compid,
+                               learn_remote=config.learn_remote)
+            self.clock.bind_line(table.clock_line[slot])
+        self._address = VehicleAddress(  # a learned address goes into the hot path's row too
+            self.name, config.sysid, config.remote, learn_remote=config.learn_remote,
+            on_learn=self._learned_address if self._hot is not None else None)
         self._cache = TelemetryCache()
         self._seq = SequenceTracker()
-        self._n: dict[str, int] = {f.name: 0 for f in fields(ProxyCounters)}
-        self._commands = CommandChannel(self.name, config.gcs_sysid, self._send_command,
-                                        liveness=self, silent_wait_s=config.silent_wait_s)
+        self._n: dict[str, int] = {  # the others: setpoints, _address, _round_trips
+            f.name: 0 for f in fields(ProxyCounters)
+            if f.name not in (*SETPOINT_COUNTERS, *ADDRESS_COUNTERS, *ROUND_TRIP_COUNTERS)}
+        self.setpoints = VehicleSetpoints(self.name, config, self._codec, self._send,
+                                          self._time_boot_ms)
         self.statustexts = StatusTextLog(self.name)  # every STATUSTEXT of the vehicle
-        self._waiters: list[tuple[str, Callable[[MAVLinkMessage], bool], asyncio.Future[Received]]]
-        self._waiters = []
+        self._waiters = MessageWaiters(self.name)
+        self._commands = VehicleCommands(self.name, config, self._codec, self._send,
+                                         liveness=self, waiters=self._waiters,
+                                         statustexts=self.statustexts, latest=self.latest)
         self._tasks: list[asyncio.Task[None]] = []
         self._t0_s = self._clock.now_s()
         self._link_state = LinkState.WAITING
         #: when the monitor last saw the link come alive (HEARTBEAT staleness counts from there)
         self._alive_since_s = self._t0_s
-        self._mismatch: int | None = None  # sysid of a foreign vehicle HEARTBEAT, if any
-        self.clock = VehicleClock()  # the vehicle's clock: true sample times (gcs.link.clock)
-        self._round_trips: list[float] = []
-        self._last_reply = (-math.inf, -math.inf, False)  # request and reply time, recorded
-        # the hot path (gcs.link.fastpath): this vehicle's row in its port's table, if it has one
-        self._slot = slot if table is not None else None
-        self._hot_decoded: dict[int, tuple[int, Received]] = {}
-        self._hot_parser = mavlink.MAVLink(None)
-        if table is not None and slot is not None:
-            signed = config.signing_key is not None  # the codec checks signatures: no hot path
-            table.compid_of_slot[slot] = -1 if signed else config.compid
-            table.addr_of_slot[slot] = UNLEARNED if config.learn_remote else ANY_ADDRESS
-            self.clock.bind_line(table.clock_line[slot])
 
     # --- lifetime --------------------------------------------------------------------------------
 
@@ -232,10 +183,7 @@ class VehicleProxy:
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
         self._tasks = []
-        for _, _, fut in self._waiters:
-            if not fut.done():
-                fut.set_exception(LinkClosedError(f"{self.name}: link closed while waiting"))
-        self._waiters.clear()
+        self._waiters.close()
         self._port.detach(self.config.sysid)
         if self._owns_port:
             self._port.close()
@@ -255,19 +203,20 @@ class VehicleProxy:
     def remote(self) -> Address | None:
         """Where commands and setpoints go: the configured address, or the learned one (None
         until the vehicle's first valid message on a link without a configured one)."""
-        return self._remote
+        return self._address.remote
 
     @property
     def remote_learned(self) -> bool:
-        return self._remote_learned
+        return self._address.learned
 
     @property
     def sysid_mismatch(self) -> int | None:
         """Another vehicle's sysid heard where this one was expected: on its own port, a
         HEARTBEAT of another vehicle (preflight refuses); on a shared port, while nothing of this
         vehicle has arrived, a sysid no vehicle of the port has (for the connect diagnostics)."""
-        if self._mismatch is not None or not self._port.shared or self._accepted():
-            return self._mismatch
+        mismatch = self._address.mismatch
+        if mismatch is not None or not self._port.shared or self._accepted():
+            return mismatch
         unknown = self._port.unknown_sysids()
         return min(unknown) if unknown else None
 
@@ -279,9 +228,9 @@ class VehicleProxy:
     def latest(self, kind: str) -> Received | None:
         """Latest accepted message of type ``kind`` (e.g. 'ATTITUDE') with its receive time."""
         cached = self._cache.latest(kind)
-        if self._slot is None or kind not in TABLE_NAMES:
+        if self._hot is None:
             return cached
-        hot = self._hot_latest(TABLE_NAMES.index(kind))
+        hot = self._hot.latest(kind)
         if hot is None or (cached is not None and cached.rx_time_s > hot.rx_time_s):
             return cached
         return hot
@@ -291,27 +240,10 @@ class VehicleProxy:
         """This vehicle's row in its port's `HotTable` (None: no hot path)."""
         return self._slot
 
-    def _hot_latest(self, kind: int) -> Received | None:
-        table = self._port.table
-        assert table is not None and self._slot is not None
-        count = int(table.count[self._slot, kind])
-        if count == 0:
-            return None
-        done = self._hot_decoded.get(kind)
-        if done is not None and done[0] == count:
-            return done[1]
-        frame = table.frame(self._slot, kind)
-        assert frame is not None
-        got = Received(self._hot_parser.decode(bytearray(frame)),
-                       float(table.rx_s[self._slot, kind]))
-        self._hot_decoded[kind] = (count, got)
-        return got
-
     def _last_any_rx_s(self) -> float:
-        table = self._port.table
-        if self._slot is None or table is None:
+        if self._hot is None:
             return self._cache.last_any_rx_s
-        return max(self._cache.last_any_rx_s, float(table.last_any_rx_s[self._slot]))
+        return max(self._cache.last_any_rx_s, self._hot.last_any_rx_s())
 
     # the commands' view of liveness (gcs.link.commands.Liveness)
 
@@ -327,9 +259,8 @@ class VehicleProxy:
         return self._t0_s
 
     def _accepted(self) -> int:
-        table = self._port.table
         own = self._n["messages_accepted"]
-        return own if self._slot is None or table is None else own + int(table.accepted[self._slot])
+        return own if self._hot is None else own + self._hot.accepted()
 
     def state(self) -> VehicleState:
         """Snapshot of the latest telemetry in ENU/FLU with receive times; returns immediately."""
@@ -337,7 +268,7 @@ class VehicleProxy:
 
     def round_trips_s(self) -> np.ndarray:
         """Every TIMESYNC round trip measured on this link [s], oldest first."""
-        return np.asarray(self._round_trips, dtype=float)
+        return self._round_trips.round_trips_s()
 
     def link_state(self) -> LinkState:
         """WAITING before the first message, LOST when nothing at all arrived for
@@ -377,41 +308,23 @@ class VehicleProxy:
     def rate_hz(self, kind: str) -> float:
         """Receive rate of one message type (EWMA of its intervals; NaN before three arrived,
         0 if never); cheaper than `stats` for the few a check needs."""
-        table = self._port.table
-        if self._slot is not None and table is not None and kind in TABLE_NAMES:
-            k = TABLE_NAMES.index(kind)
-            if table.count[self._slot, k] > 0:
-                return rate_of(float(table.interval_s[self._slot, k]))
-        return self._cache.rate_hz(kind)
+        hot = self._hot.rate_hz(kind) if self._hot is not None else None
+        return hot if hot is not None else self._cache.rate_hz(kind)
 
     def _restart_rate(self, kind: str) -> None:
         """Measure ``kind``'s receive rate afresh (telemetry.TelemetryCache.restart_rate)."""
         self._cache.restart_rate(kind)
-        table = self._port.table
-        if self._slot is not None and table is not None and kind in TABLE_NAMES:
-            table.interval_s[self._slot, TABLE_NAMES.index(kind)] = math.nan
+        if self._hot is not None:
+            self._hot.restart_rate(kind)
 
     def stats(self) -> LinkStats:
         """Every counter of the link; the hot path's counts (gcs.link.fastpath) included."""
-        counters, seq, by_type = dict(self._n), self._seq.stats(), self._cache.type_stats()
-        table = self._port.table
-        if self._slot is not None and table is not None:
-            i = self._slot
+        counters = (self._n | self.setpoints.counts() | self._address.counts()
+                    | self._round_trips.counts())
+        seq, by_type = self._seq.stats(), self._cache.type_stats()
+        if self._hot is not None:
             counters["messages_accepted"] = self._accepted()
-            hot = table.seq[i]
-            seq = SequenceStats(seq.received + int(hot[0]), seq.lost + int(hot[1]),
-                                seq.duplicates + int(hot[2]), seq.reordered + int(hot[3]))
-            for k, kind in enumerate(TABLE_NAMES):
-                count = int(table.count[i, k])
-                if count == 0:
-                    continue
-                slow = by_type.get(kind)
-                rate = rate_of(float(table.interval_s[i, k]))
-                last = float(table.rx_s[i, k])
-                if slow is not None:
-                    last = max(last, slow.last_rx_s)
-                    count += slow.count
-                by_type[kind] = TypeStats(count, last, rate)
+            seq, by_type = self._hot.sequence_stats(seq), self._hot.type_stats(by_type)
         return LinkStats(ProxyCounters(**counters), self._codec.stats(), self._port.udp_stats(),
                          self._commands.stats(), seq, by_type, self._port.stats())
 
@@ -419,17 +332,7 @@ class VehicleProxy:
                            predicate: Callable[[MAVLinkMessage], bool] | None = None) -> Received:
         """Wait for the next accepted message of type ``kind`` matching ``predicate``; returns when
         it arrives, raises TimeoutError naming the vehicle after ``timeout_s``."""
-        fut: asyncio.Future[Received] = asyncio.get_running_loop().create_future()
-        entry = (kind, predicate or (lambda _m: True), fut)
-        self._waiters.append(entry)
-        try:
-            async with asyncio.timeout(timeout_s):
-                return await fut
-        except TimeoutError:
-            raise TimeoutError(f"{self.name}: no {kind} within {timeout_s} s") from None
-        finally:
-            if entry in self._waiters:
-                self._waiters.remove(entry)
+        return await self._waiters.wait(kind, timeout_s, predicate)
 
     async def wait_heartbeat(self, timeout_s: float) -> Received:
         """Latest HEARTBEAT if any, else wait for one (TimeoutError after timeout_s)."""
@@ -444,25 +347,19 @@ class VehicleProxy:
         batch). A wait for another message (a HEARTBEAT with the new mode, a PARAM_VALUE) comes
         through the slow path: 240 vehicles confirming their mode made every batch tell every
         vehicle, a burst of tens of milliseconds at the formation's start."""
-        waiters = self._waiters  # asked for every vehicle at every batch: none is the rule
-        return bool(waiters) and any(w[0] in TABLE_NAMES for w in waiters)
+        return self._waiters.wants_any(TABLE_NAMES)
 
     def _on_hot(self) -> None:
         """The port's hot path stored new messages of this vehicle: feed the clock filter the
         batch's least-delayed and newest stamps (in time order), wake waiters for them."""
-        table = self._port.table
-        assert table is not None and self._slot is not None
-        least_o, least_t, newest_t, newest_rx, samples = table.clock[self._slot].tolist()
-        if samples > 0:
-            if least_t < newest_t:
-                self.clock.on_sample(least_t, least_t + least_o)
-            self.clock.on_sample(newest_t, newest_rx)
+        assert self._hot is not None
+        self._hot.feed_clock(self.clock.on_sample)
         if self._waiters:
-            for k, kind in enumerate(TABLE_NAMES):
-                if any(w[0] == kind for w in self._waiters):
-                    got = self._hot_latest(k)
+            for kind in TABLE_NAMES:
+                if self._waiters.wants(kind):
+                    got = self._hot.latest(kind)
                     if got is not None:
-                        self._wake_waiters(got.msg, got.rx_time_s)
+                        self._waiters.wake(got.msg, got.rx_time_s)
 
     def _on_datagram(self, data: bytes, addr: Address, seq_counted: bool = False,
                      rx_s: float | None = None) -> None:
@@ -473,19 +370,13 @@ class VehicleProxy:
                 self._tlog.write(bytes(msg.get_msgbuf()))
             src_sys, src_comp = msg.get_srcSystem(), msg.get_srcComponent()
             if src_sys != cfg.sysid:
-                self._n["foreign_sysid"] += 1
-                if msg.get_type() == "HEARTBEAT" and msg.type != MavType.GCS:
-                    self._report_mismatch(src_sys, src_comp, addr)
+                self._address.foreign(msg, addr)
                 continue
             if src_comp != cfg.compid:
                 self._n["other_component"] += 1
                 continue
-            if self._remote_learned:
-                if addr != self._remote:
-                    self._stranger(addr)
-                    continue
-            elif cfg.learn_remote:
-                self._learn(addr)
+            if not self._address.accepts(addr):
+                continue
             if not seq_counted:  # else the hot path has counted it
                 self._n["messages_accepted"] += 1
                 self._seq.update(msg.get_seq())
@@ -500,74 +391,25 @@ class VehicleProxy:
             elif kind == "TIMESYNC" and msg.tc1 != 0:
                 self._on_timesync_reply(msg.ts1, now_s)
             if self._waiters:
-                self._wake_waiters(msg, now_s)
+                self._waiters.wake(msg, now_s)
 
     def _on_timesync_reply(self, ts1: int, now_s: float) -> None:
         """A TIMESYNC reply: its round trip, if the request was one of this port's. The vehicle's
         own requests (tc1 = 0) are not answered: the ground station does not steer its clock."""
         sent = self._port.timesync_sent_s(int(ts1))
-        if sent is None or now_s < sent:
-            return
-        self._n["timesync_replies"] += 1
-        # A link delays replies; it does not bunch them. Replies to requests a period apart that
-        # arrive together were held by a vehicle (or host) that stopped for a while: their round
-        # trips measure that stop, not the link, and both leave the link's record.
-        last_sent, last_rx, last_kept = self._last_reply
-        bunched = now_s - last_rx < BUNCHED * (sent - last_sent)
-        if bunched:
-            self._n["timesync_bunched"] += 1
-            if last_kept:  # the reply before this one was the bunch's first
-                self._n["timesync_bunched"] += 1
-                self.clock.disown_last_round_trip()
-                if self._round_trips:
-                    self._round_trips.pop()
-        elif len(self._round_trips) < MAX_ROUND_TRIPS:
-            self._round_trips.append(now_s - sent)
-        self.clock.on_round_trip(now_s - sent, sent, of_link=not bunched)
-        self._last_reply = (sent, now_s, not bunched)
+        if sent is not None:
+            self._round_trips.on_reply(sent, now_s)
 
     def _on_foreign(self, msg: MAVLinkMessage, addr: Address) -> None:
         """Called by a port serving only this vehicle: a valid message from another sysid."""
-        self._n["foreign_sysid"] += 1
-        if msg.get_type() == "HEARTBEAT" and msg.type != MavType.GCS:
-            self._report_mismatch(msg.get_srcSystem(), msg.get_srcComponent(), addr)
+        self._address.foreign(msg, addr)
 
-    def _learn(self, addr: Address) -> None:
-        same = " (the configured one)" if addr == self._remote else ""
-        logger.info("%s: address learned from its first message: %s:%d%s", self.name, *addr, same)
-        self._remote = addr
-        self._remote_learned = True
-        table = self._port.table
-        if self._slot is not None and table is not None:
-            table.addr_of_slot[self._slot] = self._port.address_code(addr)
+    def _learned_address(self, addr: Address) -> None:
+        """The vehicle's address is learned: the hot path accepts its frames from there on."""
+        assert self._hot is not None
+        self._hot.learned(self._port.address_code(addr))
 
-    def _stranger(self, addr: Address) -> None:
-        self._n["stranger_address"] += 1
-        if addr not in self._strangers and len(self._strangers) < MAX_STRANGERS_LOGGED:
-            self._strangers.add(addr)
-            assert self._remote is not None
-            logger.warning(
-                "%s: messages with its sysid %d from %s:%d, but its address is %s:%d (learned "
-                "from its first message); ignored and counted (stranger_address)", self.name,
-                self.config.sysid, addr[0], addr[1], self._remote[0], self._remote[1])
-
-    def _report_mismatch(self, src_sys: int, src_comp: int, addr: Address) -> None:
-        if self._mismatch != src_sys:
-            logger.error(
-                "%s: HEARTBEAT from sysid %d (compid %d) at %s:%d, expected sysid %d; check the "
-                "team file. Messages from sysid %d are ignored.", self.name, src_sys, src_comp,
-                addr[0], addr[1], self.config.sysid, src_sys)
-        self._mismatch = src_sys
-
-    def _wake_waiters(self, msg: MAVLinkMessage, now_s: float) -> None:
-        kind = msg.get_type()
-        for entry in list(self._waiters):
-            want, pred, fut = entry
-            if want == kind and not fut.done() and pred(msg):
-                fut.set_result(Received(msg, now_s))
-                self._waiters.remove(entry)
-
-    # --- commands --------------------------------------------------------------------------------
+    # --- commands (gcs.link.vehicle_commands; each returns when done) --------------------------
 
     async def command_long(self, command: int, params: Sequence[float] = (), *,
                            timeout_s: float = 0.5, retries: int = 2) -> MavResult:
@@ -584,108 +426,28 @@ class VehicleProxy:
                                 reported: Callable[[MAVLinkMessage | None], str],
                                 timeout_s: float = 3.0, ack_timeout_s: float = 0.5,
                                 retries: int = 2) -> tuple[MavResult, ...]:
-        """Send COMMAND_LONG and return when the vehicle's HEARTBEAT shows its effect; returns
-        every MAV_RESULT read for it.
-
-        The ACK is registered before sending (resends as in ``command_long``). Every ACK that
-        arrives until the confirmation is read, and a refusal among them wins over an earlier
-        ACCEPTED (PX4 v1.16.0 sends ACCEPTED, then the real answer): CommandRejectedError. The
-        effect counts only in a HEARTBEAT received after the first final ACK for which
-        ``shows(heartbeat)`` is true. It is not confirmed (CommandNotConfirmedError) once
-        ``timeout_s`` has passed since that ACK and at least CONFIRM_DENIALS HEARTBEATs since it
-        did not show the effect: what the vehicle said, not what the link lost. With fewer heard
-        the wait goes on, up to CONFIRM_LOSSY_FACTOR x ``timeout_s`` (at 20 % loss all three of
-        PX4's 1 Hz HEARTBEATs in 3 s are lost 0.8 % of the time; all nine in 9 s, 5e-7). Both
-        messages name the vehicle, ``want`` (e.g. 'mode OFFBOARD'), what the latest HEARTBEAT
-        reports (``reported``), the ACKs seen, and the vehicle's latest STATUSTEXT since the
-        command was sent."""
-        loop = asyncio.get_running_loop()
-        sent_s = self._clock.now_s()
-        label = command_label(command)
-        async with self._commands.exchange(command) as log:
-            await self._commands.send_until_acked(log, params, timeout_s=ack_timeout_s,
-                                                  retries=retries)
-            acked_at = loop.time()
-            deadline = acked_at + CONFIRM_LOSSY_FACTOR * timeout_s
-            denials = 0  # HEARTBEATs after the ACK that did not show the effect
-            while True:
-                result = log.result
-                if result is not None and result != MavResult.ACCEPTED:
-                    await self._settle_text(sent_s)
-                    raise CommandRejectedError(
-                        self._unconfirmed_text(f"{label} for {want} refused", log, reported,
-                                               sent_s), command, result, tuple(log.results),
-                        self._text_since(sent_s))
-                now = loop.time()
-                if (now >= acked_at + timeout_s and denials >= CONFIRM_DENIALS) or now >= deadline:
-                    why = (f"{want} not confirmed within {timeout_s:g} s" if denials >=
-                           CONFIRM_DENIALS else f"{want} not confirmed within "
-                           f"{CONFIRM_LOSSY_FACTOR * timeout_s:g} s ({denials} HEARTBEAT"
-                           f"{'' if denials == 1 else 's'} heard after the ACK)")
-                    raise CommandNotConfirmedError(
-                        self._unconfirmed_text(why, log, reported, sent_s),
-                        command, tuple(log.results), self._text_since(sent_s))
-                remaining = (deadline if denials < CONFIRM_DENIALS else
-                             max(acked_at + timeout_s, now + 1e-3)) - now
-                log.changed.clear()
-                heartbeat = asyncio.ensure_future(
-                    self.wait_message("HEARTBEAT", remaining))
-                acked = asyncio.ensure_future(log.changed.wait())
-                try:
-                    await asyncio.wait({heartbeat, acked}, timeout=remaining,
-                                       return_when=asyncio.FIRST_COMPLETED)
-                finally:
-                    for fut in (heartbeat, acked):
-                        if not fut.done():
-                            fut.cancel()
-                    await asyncio.gather(heartbeat, acked, return_exceptions=True)
-                if heartbeat.done() and not heartbeat.cancelled() and heartbeat.exception() is None:
-                    if shows(heartbeat.result().msg) and log.result == MavResult.ACCEPTED:
-                        return tuple(log.results)
-                    denials += 1
-
-    def _text_since(self, since_s: float) -> str:
-        text = self.statustexts.latest(since_s)
-        return text.text if text is not None else ""
-
-    async def _settle_text(self, since_s: float, timeout_s: float = 0.2) -> None:
-        """A refusal's STATUSTEXT may follow its ACK (PX4, ArduPilot): wait briefly for it."""
-        if self.statustexts.latest(since_s) is None:
-            with contextlib.suppress(TimeoutError):
-                await self.wait_message("STATUSTEXT", timeout_s)
-
-    def _unconfirmed_text(self, what: str, log: AckLog,
-                          reported: Callable[[MAVLinkMessage | None], str], since_s: float) -> str:
-        hb = self._cache.latest("HEARTBEAT")
-        text = self.statustexts.latest(since_s)
-        said = f"; the vehicle said {text.quoted()}" if text is not None else ""
-        return (f"{self.name}: {what}: HEARTBEAT reports {reported(hb.msg if hb else None)}; "
-                f"COMMAND_ACKs seen: {log.summary()}{said}")
-
-    def _send_command(self, command: int, confirmation: int, params: Sequence[float]) -> None:
-        self._send(self._codec.mav.command_long_encode(
-            self.config.sysid, self.config.compid, command, confirmation, *params))
-
-    async def _checked(self, command: MavCmd, params: Sequence[float], check: bool,
-                       timeout_s: float, retries: int) -> MavResult:
-        result = await self.command_long(command, params, timeout_s=timeout_s, retries=retries)
-        if check and result != MavResult.ACCEPTED:
-            raise CommandRejectedError(
-                f"{self.name}: {command_label(command)} answered {result.name}", command, result)
-        return result
+        """Send COMMAND_LONG; return every MAV_RESULT read for it when the vehicle's HEARTBEAT
+        shows its effect (``shows``), raise CommandRejectedError or CommandNotConfirmedError
+        naming vehicle, ``want`` and what the HEARTBEAT ``reported`` otherwise (details:
+        VehicleCommands.command_confirmed)."""
+        return await self._commands.command_confirmed(
+            command, params, want=want, shows=shows, reported=reported, timeout_s=timeout_s,
+            ack_timeout_s=ack_timeout_s, retries=retries)
 
     async def arm(self, *, force: bool = False, check: bool = True, timeout_s: float = 0.5,
                   retries: int = 2) -> MavResult:
         """Arm (COMPONENT_ARM_DISARM 400); returns when acknowledged. ``check``: raise
         CommandRejectedError unless ACCEPTED (same for every helper below)."""
-        return await self._checked(MavCmd.COMPONENT_ARM_DISARM,
-                                   [1.0, FORCE_MAGIC if force else 0.0], check, timeout_s, retries)
+        return await self._commands.checked(MavCmd.COMPONENT_ARM_DISARM,
+                                            [1.0, FORCE_MAGIC if force else 0.0], check,
+                                            timeout_s, retries)
 
     async def disarm(self, *, force: bool = False, check: bool = True, timeout_s: float = 0.5,
                      retries: int = 2) -> MavResult:
         """Disarm (force: also in the air, param2 = 21196); returns when acknowledged."""
-        return await self._checked(MavCmd.COMPONENT_ARM_DISARM,
-                                   [0.0, FORCE_MAGIC if force else 0.0], check, timeout_s, retries)
+        return await self._commands.checked(MavCmd.COMPONENT_ARM_DISARM,
+                                            [0.0, FORCE_MAGIC if force else 0.0], check,
+                                            timeout_s, retries)
 
     async def set_mode_px4(self, main_mode: int, sub_mode: int = 0, *, check: bool = True,
                            timeout_s: float = 0.5, retries: int = 2) -> MavResult:
@@ -693,122 +455,81 @@ class VehicleProxy:
         latest HEARTBEAT says armed), param2 = main mode, param3 = sub mode; returns when acked."""
         base = MavModeFlag.CUSTOM_MODE_ENABLED | (MavModeFlag.SAFETY_ARMED if self.state().armed
                                                   else 0)
-        return await self._checked(MavCmd.DO_SET_MODE, [float(base), main_mode, sub_mode], check,
-                                   timeout_s, retries)
+        return await self._commands.checked(MavCmd.DO_SET_MODE,
+                                            [float(base), main_mode, sub_mode], check,
+                                            timeout_s, retries)
 
     async def set_mode_ardupilot(self, mode: int, *, check: bool = True, timeout_s: float = 0.5,
                                  retries: int = 2) -> MavResult:
         """ArduPilot mode number (e.g. GUIDED 4) via DO_SET_MODE; returns when acknowledged."""
-        return await self._checked(MavCmd.DO_SET_MODE,
-                                   [float(MavModeFlag.CUSTOM_MODE_ENABLED), mode], check,
-                                   timeout_s, retries)
+        return await self._commands.checked(MavCmd.DO_SET_MODE,
+                                            [float(MavModeFlag.CUSTOM_MODE_ENABLED), mode], check,
+                                            timeout_s, retries)
 
     async def takeoff(self, altitude_m: float = math.nan, *, check: bool = True,
                       timeout_s: float = 0.5, retries: int = 2) -> MavResult:
         """NAV_TAKEOFF (22) with param7 = altitude (PX4: AMSL, NaN = MIS_TAKEOFF_ALT; ArduPilot:
         relative to home); returns when acknowledged (not when the vehicle reached it)."""
-        return await self._checked(MavCmd.NAV_TAKEOFF, [0, 0, 0, math.nan, math.nan, math.nan,
-                                                        altitude_m], check, timeout_s, retries)
+        return await self._commands.checked(
+            MavCmd.NAV_TAKEOFF, [0, 0, 0, math.nan, math.nan, math.nan, altitude_m], check,
+            timeout_s, retries)
 
     async def land(self, *, check: bool = True, timeout_s: float = 0.5,
                    retries: int = 2) -> MavResult:
         """NAV_LAND (21) here (lat/lon/yaw NaN); returns when acknowledged, not when landed."""
-        return await self._checked(MavCmd.NAV_LAND, [0, 0, 0, math.nan, math.nan, math.nan, 0],
-                                   check, timeout_s, retries)
+        return await self._commands.checked(
+            MavCmd.NAV_LAND, [0, 0, 0, math.nan, math.nan, math.nan, 0], check, timeout_s,
+            retries)
 
     async def param_read(self, name: str, timeout_s: float = 0.5, retries: int = 2) -> float:
-        """Read one parameter: PARAM_REQUEST_READ by id (param_index -1), returns the value of the
-        matching PARAM_VALUE (as the autopilot sends it: ArduPilot casts integers to float).
-
-        The reply is awaited before the first send; an attempt without reply within ``timeout_s``
-        is resent, at most ``retries`` times (a late reply to an earlier attempt still counts);
-        then raises ParamTimeoutError (a TimeoutError) naming vehicle and parameter."""
-        if not 1 <= len(name) <= 16 or not name.isascii():
-            raise ValueError(f"{self.name}: parameter id: expected 1-16 ASCII characters, got "
-                             f"{name!r}")
-        if retries < 0 or not timeout_s > 0:
-            raise ValueError(f"{self.name}: need retries >= 0 and timeout_s > 0, "
-                             f"got {retries}, {timeout_s}")
-        fut: asyncio.Future[Received] = asyncio.get_running_loop().create_future()
-        entry = ("PARAM_VALUE", lambda m: str(m.param_id) == name, fut)
-        self._waiters.append(entry)
-        try:
-            for _ in range(retries + 1):
-                self._send(self._codec.mav.param_request_read_encode(
-                    self.config.sysid, self.config.compid, name.encode("ascii"), -1))
-                try:
-                    async with asyncio.timeout(timeout_s):
-                        received = await asyncio.shield(fut)
-                    return float(received.msg.param_value)
-                except TimeoutError:
-                    logger.debug("%s: PARAM_REQUEST_READ %s timed out", self.name, name)
-        finally:
-            if entry in self._waiters:
-                self._waiters.remove(entry)
-            if not fut.done():
-                fut.cancel()
-        raise ParamTimeoutError(f"{self.name}: PARAM_REQUEST_READ {name} got no PARAM_VALUE in "
-                                f"{retries + 1} attempts of {timeout_s} s")
+        """One parameter's value by PARAM_REQUEST_READ (returns when its PARAM_VALUE arrives;
+        ParamTimeoutError after ``retries`` resends: VehicleCommands.param_read)."""
+        return await self._commands.param_read(name, timeout_s, retries)
 
     async def autopilot_version(self, timeout_s: float = 1.0, retries: int = 2) -> int:
-        """AUTOPILOT_VERSION.flight_sw_version (major << 24 | minor << 16 | patch << 8 | type),
-        asked for with REQUEST_MESSAGE (148). The reply is awaited before the request is sent;
-        raises CommandRejectedError if the request is refused, TimeoutError naming the vehicle
-        if no AUTOPILOT_VERSION arrives."""
-        fut: asyncio.Future[Received] = asyncio.get_running_loop().create_future()
-        entry = ("AUTOPILOT_VERSION", lambda _m: True, fut)
-        self._waiters.append(entry)
-        try:
-            await self._checked(MavCmd.REQUEST_MESSAGE, (AUTOPILOT_VERSION_ID,), True, timeout_s,
-                                retries)
-            async with asyncio.timeout(timeout_s):
-                received = await fut
-            return int(received.msg.flight_sw_version)
-        except TimeoutError:
-            raise TimeoutError(f"{self.name}: no AUTOPILOT_VERSION within {timeout_s} s of an "
-                               "accepted REQUEST_MESSAGE") from None
-        finally:
-            if entry in self._waiters:
-                self._waiters.remove(entry)
-            if not fut.done():
-                fut.cancel()
+        """AUTOPILOT_VERSION.flight_sw_version, asked for with REQUEST_MESSAGE; returns when it
+        arrives (errors: VehicleCommands.autopilot_version)."""
+        return await self._commands.autopilot_version(timeout_s, retries)
 
     async def set_message_interval(self, msg_id: int, rate_hz: float, *, check: bool = True,
                                    timeout_s: float = 0.5, retries: int = 2) -> MavResult:
         """SET_MESSAGE_INTERVAL (511): rate_hz > 0 sets 1e6/rate_hz us, 0 disables the stream;
-        returns when acknowledged. A refusal (``check``) or no ACK raises an error naming the
-        vehicle, the message and the rate: `vehicle 2 (sysid 2): stream EXTENDED_SYS_STATE (245)
-        at 5 Hz: SET_MESSAGE_INTERVAL answered DENIED`."""
-        if not math.isfinite(rate_hz) or rate_hz < 0:
-            raise ValueError(f"{self.name}: message {msg_id} rate_hz: expected >= 0, got {rate_hz}")
-        interval_us = -1.0 if rate_hz == 0 else 1e6 / rate_hz
-        what = f"{self.name}: stream {message_name(msg_id)} at {rate_hz:g} Hz"
-        try:
-            result = await self.command_long(MavCmd.SET_MESSAGE_INTERVAL, [msg_id, interval_us],
-                                             timeout_s=timeout_s, retries=retries)
-        except CommandTimeoutError as exc:
-            raise CommandTimeoutError(f"{what}: SET_MESSAGE_INTERVAL {exc.reason}",
-                                      exc.reason) from None
-        if check and result != MavResult.ACCEPTED:
-            raise CommandRejectedError(f"{what}: SET_MESSAGE_INTERVAL answered {result.name}",
-                                       MavCmd.SET_MESSAGE_INTERVAL, result)
+        returns when acknowledged (errors: VehicleCommands.set_message_interval)."""
+        result = await self._commands.set_message_interval(msg_id, rate_hz, check=check,
+                                                           timeout_s=timeout_s, retries=retries)
         if result == MavResult.ACCEPTED:  # the rate asked for is measured from here on
             msg_type = mavlink.mavlink_map.get(msg_id)
             if msg_type is not None:
                 self._restart_rate(msg_type.msgname)
         return result
 
-    # --- setpoints (each returns immediately; NaN/inf raise SetpointError, range is clamped) -----
+    # --- setpoints (each returns immediately; gcs.link.setpoints) ---------------------------------
 
     def send_rates_thrust(self, rates_flu_radps: ArrayLike, thrust_norm: float) -> None:
-        """SET_ATTITUDE_TARGET, type_mask 128: body rates (FLU, rad/s -> sent as FRD) and
-        collective thrust (0..1, clamped and counted); returns immediately."""
-        rates_frd = frames.frd_from_flu(self._finite(rates_flu_radps, (3,), "rates_flu_radps"))
-        thrust = self._clamp(thrust_norm, 0.0, 1.0, "thrust_norm", "thrust_clamped")
-        self._send(self._codec.mav.set_attitude_target_encode(
-            self._time_boot_ms(), self.config.sysid, self.config.compid, TYPE_MASK_RATES_THRUST,
-            _IDENTITY_Q, *(float(x) for x in rates_frd), thrust))
-        self._n["setpoints_sent"] += 1
+        """SET_ATTITUDE_TARGET: body rates [rad/s, FLU; sent as FRD] and collective thrust
+        [0..1]; returns immediately (checks, clamps, counts: `VehicleSetpoints`)."""
+        self.setpoints.send_rates_thrust(rates_flu_radps, thrust_norm)
+
+    def send_attitude_thrust(self, rotation_enu_flu: ArrayLike, thrust_norm: float) -> None:
+        """SET_ATTITUDE_TARGET: attitude R_enu_flu (FLU body in the ENU world; sent as NED/FRD)
+        and collective thrust [0..1]; returns immediately (details: `VehicleSetpoints`)."""
+        self.setpoints.send_attitude_thrust(rotation_enu_flu, thrust_norm)
+
+    def send_position_target(self, position_ned_m: ArrayLike, velocity_ned_mps: ArrayLike,
+                             yaw_ned_rad: float,
+                             acceleration_ned_mps2: ArrayLike | None = None) -> None:
+        """SET_POSITION_TARGET_LOCAL_NED: position [m], velocity [m/s], yaw [rad, from north]
+        and optional acceleration [m/s^2], all in the vehicle's local NED frame, as sent (not
+        ENU, unlike the other setpoints); returns immediately (details: `VehicleSetpoints`)."""
+        self.setpoints.send_position_target(position_ned_m, velocity_ned_mps, yaw_ned_rad,
+                                            acceleration_ned_mps2)
+
+    def send_actuator_controls(self, torque_flu_norm: ArrayLike, thrust_norm: float) -> None:
+        """SET_ACTUATOR_CONTROL_TARGET: torque [-1..1, FLU; sent as FRD] and thrust [0..1];
+        returns immediately (details: `VehicleSetpoints`)."""
+        self.setpoints.send_actuator_controls(torque_flu_norm, thrust_norm)
+
+    # --- what a team batch uses (setpoints.TeamSetpoints) ----------------------------------------
 
     @property
     def batch_sendable(self) -> bool:
@@ -816,72 +537,26 @@ class VehicleProxy:
         unsigned link."""
         return not self._codec.signing_enabled
 
-    def send_attitude_thrust(self, rotation_enu_flu: ArrayLike, thrust_norm: float) -> None:
-        """SET_ATTITUDE_TARGET, type_mask 7: attitude R_enu_flu (sent as the quaternion of
-        R_ned_frd) and collective thrust (0..1, clamped and counted); returns immediately."""
-        r = self._finite(rotation_enu_flu, (3, 3), "rotation_enu_flu")
-        if not bool(frames.is_rotation(r, tol=1e-4)):
-            self._n["setpoints_rejected"] += 1
-            raise SetpointError(f"{self.name}: rotation_enu_flu is not a rotation matrix: {r}")
-        q = frames.mavlink_quat_from_rotation_enu_flu(r)
-        thrust = self._clamp(thrust_norm, 0.0, 1.0, "thrust_norm", "thrust_clamped")
-        self._send(self._codec.mav.set_attitude_target_encode(
-            self._time_boot_ms(), self.config.sysid, self.config.compid,
-            TYPE_MASK_ATTITUDE_THRUST, [float(x) for x in q], 0.0, 0.0, 0.0, thrust))
-        self._n["setpoints_sent"] += 1
+    @property
+    def codec(self) -> MavlinkCodec:
+        """This link's codec (its outgoing sequence numbers, the ground station's ids)."""
+        return self._codec
 
-    def send_position_target(self, position_ned_m: ArrayLike, velocity_ned_mps: ArrayLike,
-                             yaw_ned_rad: float,
-                             acceleration_ned_mps2: ArrayLike | None = None) -> None:
-        """SET_POSITION_TARGET_LOCAL_NED, MAV_FRAME_LOCAL_NED (the vehicle's own local frame:
-        PX4's and ArduPilot's EKF origin): position [m, NED], velocity feed-forward [m/s, NED],
-        yaw [rad, from north, clockwise] and, when given, acceleration feed-forward [m/s^2, NED]
-        (type_mask 2048: yaw rate ignored), else accelerations ignored too (type_mask 2496);
-        returns immediately."""
-        pos = self._finite(position_ned_m, (3,), "position_ned_m")
-        vel = self._finite(velocity_ned_mps, (3,), "velocity_ned_mps")
-        yaw = self._finite(yaw_ned_rad, (), "yaw_ned_rad")
-        if acceleration_ned_mps2 is None:
-            mask, acc = TYPE_MASK_POSITION_VELOCITY_YAW, np.zeros(3)
-        else:
-            mask = TYPE_MASK_POSITION_VELOCITY_ACCELERATION_YAW
-            acc = self._finite(acceleration_ned_mps2, (3,), "acceleration_ned_mps2")
-        self._send(self._codec.mav.set_position_target_local_ned_encode(
-            self._time_boot_ms(), self.config.sysid, self.config.compid, MAV_FRAME_LOCAL_NED,
-            mask, *(float(x) for x in pos), *(float(x) for x in vel),
-            *(float(x) for x in acc), float(yaw), 0.0))
-        self._n["setpoints_sent"] += 1
+    @property
+    def port(self) -> MavlinkPort:
+        return self._port
 
-    def send_actuator_controls(self, torque_flu_norm: ArrayLike, thrust_norm: float) -> None:
-        """SET_ACTUATOR_CONTROL_TARGET group 0: roll/pitch/yaw torque (FLU, -1..1 -> sent as FRD)
-        and thrust (0..1), each clamped and counted; returns immediately. PX4 >= 1.14 ignores it."""
-        torque = self._finite(torque_flu_norm, (3,), "torque_flu_norm")
-        clipped = np.clip(torque, -1.0, 1.0)
-        if np.any(clipped != torque):
-            self._n["torque_clamped"] += 1
-        torque_frd = frames.frd_from_flu(clipped)
-        thrust = self._clamp(thrust_norm, 0.0, 1.0, "thrust_norm", "thrust_clamped")
-        controls = [float(x) for x in torque_frd] + [thrust, 0.0, 0.0, 0.0, 0.0]
-        self._send(self._codec.mav.set_actuator_control_target_encode(
-            self._time_boot_ms() * 1000, 0, self.config.sysid, self.config.compid, controls))
-        self._n["setpoints_sent"] += 1
+    @property
+    def tlog(self) -> TlogWriter | None:
+        return self._tlog
 
-    def _finite(self, value: ArrayLike, shape: tuple[int, ...], what: str) -> np.ndarray:
-        arr = np.asarray(value, dtype=np.float64)
-        if arr.shape != shape or not np.all(np.isfinite(arr)):
-            self._n["setpoints_rejected"] += 1
-            raise SetpointError(f"{self.name}: {what}: expected finite shape {shape}, got {arr!r}")
-        return arr
-
-    def _clamp(self, value: float, low: float, high: float, what: str, counter: str) -> float:
-        v = float(value)
-        if not math.isfinite(v):
-            self._n["setpoints_rejected"] += 1
-            raise SetpointError(f"{self.name}: {what}: expected finite, got {v}")
-        if v < low or v > high:
-            self._n[counter] += 1
-            return min(max(v, low), high)
-        return v
+    def batch_address(self) -> Address | None:
+        """Where a packet sent for this vehicle outside `_send` goes now (a learned address may
+        change); None, not known yet, is counted as ``send_no_remote`` (the port drops it)."""
+        remote = self._address.remote
+        if remote is None:
+            self._n["send_no_remote"] += 1
+        return remote
 
     # --- send path and owned tasks ---------------------------------------------------------------
 
@@ -892,9 +567,10 @@ class VehicleProxy:
         data = self._codec.encode(msg)
         if self._tlog is not None:
             self._tlog.write(data)
-        if self._remote is None:
+        remote = self._address.remote
+        if remote is None:
             self._n["send_no_remote"] += 1
-        return self._port.send_to(data, self._remote)
+        return self._port.send_to(data, remote)
 
     @property
     def _phase(self) -> float:
@@ -916,8 +592,9 @@ class VehicleProxy:
         period = self.config.timesync_period_s
         await asyncio.sleep(self._phase * period)
         while True:
-            if self._remote is not None:
-                ts1 = self._port.claim_timesync(self._remote, self._clock.now_s(), period)
+            remote = self._address.remote
+            if remote is not None:
+                ts1 = self._port.claim_timesync(remote, self._clock.now_s(), period)
                 if ts1 is not None:
                     self._send(self._codec.mav.timesync_encode(0, ts1))
                     self._n["timesync_sent"] += 1
@@ -943,101 +620,3 @@ class VehicleProxy:
                                    "arrive; armed state and mode are those of the last one",
                                    self.name, self.config.heartbeat_timeout_s)
             await asyncio.sleep(period)
-
-
-@dataclass(slots=True)
-class _SendPlan:
-    """What `TeamSetpoints` works out once per set of rows."""
-
-    rows: list[int]
-    idx: np.ndarray
-    proxies: list[VehicleProxy]
-    block: SeqBlock | None  # the links' shared sequence numbers (None: each its own)
-    seq_rows: np.ndarray  # the links' rows in it
-    tlog: TlogWriter | None  # the one tlog all of them write (None: each its own, or none)
-    ports: list[tuple[MavlinkPort, list[int], list[VehicleProxy]]]  # positions in rows, proxies
-
-
-class TeamSetpoints:
-    """`VehicleProxy.send_rates_thrust` for many vehicles at once: one encode call
-    (gcs.link.fastpath.encode_set_attitude_target), the sequence numbers in one numpy call when
-    the links keep theirs in one block (the app's: its HotTable's), one ``sendto`` each. What does
-    not change from tick to tick (ids, boot times, tlogs, who is sent what on which port) is
-    worked out once per set of rows; every proxy must be `batch_sendable` (unsigned)."""
-
-    def __init__(self, proxies: Sequence[VehicleProxy]) -> None:
-        self.proxies = list(proxies)
-        n = len(self.proxies)
-        self._target_sys = np.array([p.config.sysid for p in self.proxies], dtype=np.int64)
-        self._target_comp = np.array([p.config.compid for p in self.proxies], dtype=np.int64)
-        self._t0_s = np.array([p._t0_s for p in self.proxies])  # each link's boot, for time_boot_ms
-        self._q = np.tile(np.array(_IDENTITY_Q), (n, 1))
-        self._out = np.empty((n, 12 + SET_ATTITUDE_TARGET_LEN), dtype=np.uint8)
-        self._lengths = np.empty(n, dtype=np.int64)
-        self._plan: _SendPlan | None = None
-
-    def _plan_for(self, rows: Sequence[int]) -> _SendPlan:
-        plan = self._plan
-        if plan is not None and plan.rows == rows:
-            return plan
-        rows = list(rows)
-        if len(set(rows)) != len(rows):
-            raise ValueError(f"TeamSetpoints: a row twice in {rows}")
-        proxies = [self.proxies[i] for i in rows]
-        blocks = [p._codec.seq_block for p in proxies]
-        block = blocks[0][0]
-        shared = all(b is block for b, _ in blocks)
-        tlog = proxies[0]._tlog
-        by_port: dict[int, tuple[MavlinkPort, list[int]]] = {}
-        for k, p in enumerate(proxies):
-            by_port.setdefault(id(p._port), (p._port, []))[1].append(k)
-        self._plan = plan = _SendPlan(
-            rows, np.asarray(rows, dtype=np.int64), proxies,
-            block if shared else None,
-            np.array([r for _, r in blocks], dtype=np.int64),
-            tlog if tlog is not None and all(p._tlog is tlog for p in proxies) else None,
-            [(port, ks, [proxies[k] for k in ks]) for port, ks in by_port.values()])
-        return plan
-
-    def send_rates_thrust(self, rows: Sequence[int], rates_flu_radps: np.ndarray,
-                          thrust_norm: np.ndarray) -> None:
-        """Rows ``rows`` of rates (n, 3) FLU rad/s and thrust (n,) 0..1 (clamped and counted per
-        vehicle) to those vehicles; returns immediately. Rows with NaN/inf must not be passed
-        (send them one by one: `send_rates_thrust` raises `SetpointError` for each)."""
-        if not rows:
-            return
-        plan = self._plan_for(rows)
-        idx, proxies = plan.idx, plan.proxies
-        rates_frd = frames.frd_from_flu(np.asarray(rates_flu_radps, dtype=np.float64)[idx])
-        thrust = np.asarray(thrust_norm, dtype=np.float64)[idx]
-        for k in np.flatnonzero((thrust < 0.0) | (thrust > 1.0)).tolist():
-            proxies[k]._n["thrust_clamped"] += 1
-        thrust = np.clip(thrust, 0.0, 1.0)
-        if plan.block is not None:
-            seq = plan.block.take(plan.seq_rows).astype(np.uint8)
-        else:
-            seq = np.array([p._codec.take_seq() for p in proxies], dtype=np.uint8)
-        now_s = proxies[0]._clock.now_s()  # one clock for the team (the app's proxies share one)
-        boot_ms = ((now_s - self._t0_s[idx]) * 1000.0).astype(np.int64) & 0xFFFFFFFF
-        first = proxies[0]._codec
-        m = len(idx)
-        out, lengths = self._out[:m], self._lengths[:m]
-        encode_set_attitude_target(seq, first.src_system, first.src_component, boot_ms,
-                                   self._target_sys[idx], self._target_comp[idx],
-                                   TYPE_MASK_RATES_THRUST, self._q[:m], rates_frd, thrust, out,
-                                   lengths)
-        datagrams = [out[k, :size].tobytes() for k, size in enumerate(lengths.tolist())]
-        if plan.tlog is not None:  # one block for the team
-            stamp = _TLOG_STAMP.pack(int(time.time() * 1e6))
-            plan.tlog.write_records(b"".join(stamp + d for d in datagrams), m)
-        else:
-            for p, data in zip(proxies, datagrams, strict=True):
-                if p._tlog is not None:
-                    p._tlog.write(data)
-        for port, ks, members in plan.ports:
-            addrs = [p._remote for p in members]  # learned addresses may change
-            for p, addr in zip(members, addrs, strict=True):
-                p._n["setpoints_sent"] += 1
-                if addr is None:
-                    p._n["send_no_remote"] += 1
-            port.send_many([datagrams[k] for k in ks], addrs)

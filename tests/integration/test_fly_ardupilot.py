@@ -41,7 +41,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from test_fly_confirmed import write_team
 
 from gcs.link import VehicleLinkConfig, VehicleProxy
-from gcs.link.proxy import ParamTimeoutError
+from gcs.link.vehicle_commands import ParamTimeoutError
 from vehicle_emulator.testing import EmulatorProcess, free_udp_port, run_emulator
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(150)]

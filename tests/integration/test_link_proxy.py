@@ -18,7 +18,8 @@ from pymavlink.dialects.v20 import common as mavlink
 from gcs.link.commands import CommandRejectedError, CommandTimeoutError
 from gcs.link.config import VehicleLinkConfig
 from gcs.link.enums import LandedState, LinkState, MavCmd, MavResult, Px4MainMode, px4_custom_mode
-from gcs.link.proxy import SetpointError, VehicleProxy
+from gcs.link.proxy import VehicleProxy
+from gcs.link.setpoints import SetpointError
 from gcs.link.tlog import TlogWriter
 from gcs.link.udp import Address, LinkClosedError
 from vehicle_emulator.testing import UdpPeer, wait_until

@@ -32,6 +32,7 @@ from gcs.link.fastpath import (
     TABLE_NAMES,
     TARGET_THRUST,
     UNLEARNED,
+    HotRow,
     crc_extra_table,
     encode_set_attitude_target,
     kind_table,
@@ -39,8 +40,8 @@ from gcs.link.fastpath import (
     warm_up,
 )
 from gcs.link.port import HOT_NOTICE_S
-from gcs.link.proxy import TeamSetpoints
-from gcs.link.telemetry import SequenceTracker
+from gcs.link.setpoints import TeamSetpoints
+from gcs.link.telemetry import SequenceStats, SequenceTracker, TypeStats
 
 
 def _sender(sysid: int = 3, compid: int = 1) -> mavlink.MAVLink:
@@ -128,6 +129,50 @@ def test_the_hot_messages_decode_as_pymavlink_decodes_them() -> None:
             assert t.frame(2, k) == f
     assert t.count[2, :7].tolist() == [20] * 7
     assert t.count[[0, 1, 3]].sum() == 0
+
+
+def test_a_row_reads_as_its_vehicles_telemetry_once_its_address_is_learned() -> None:
+    scanner, mav = _Scanner(), _sender()
+    row = HotRow(scanner.t, 2, compid=1, learn_remote=True)
+
+    def position(x_m: float, rx_s: float) -> bytes:
+        frame = _pack(mav, mavlink.MAVLink_local_position_ned_message(int(rx_s * 1e3), x_m, 0,
+                                                                      0, 0, 0, 0))
+        slow, _ = scanner([frame], rx_s=rx_s)
+        return frame if not slow else b""
+
+    # GIVEN a row bound to a vehicle whose address is to be learned: nothing is held for it
+    assert position(1.0, 10.0) == b""
+    assert row.latest("LOCAL_POSITION_NED") is None and row.accepted() == 0
+    assert row.rate_hz("LOCAL_POSITION_NED") is None and row.last_any_rx_s() == -math.inf
+    # WHEN its address is learned and three positions arrive 0.1 s apart
+    row.learned(0)
+    frames = [position(x, 10.1 + 0.1 * x) for x in (1.0, 2.0, 3.0)]
+    # THEN the latest is the last frame decoded, with its receive time, decoded once
+    got = row.latest("LOCAL_POSITION_NED")
+    assert got is not None and got.rx_time_s == pytest.approx(10.4) and got.msg.x == 3.0
+    assert bytes(got.msg.get_msgbuf()) == frames[-1]
+    assert row.latest("LOCAL_POSITION_NED") is got
+    # AND a kind the table does not hold, or one not arrived, is for the proxy's cache
+    assert row.latest("HEARTBEAT") is None and row.latest("SYS_STATUS") is None
+    assert row.rate_hz("HEARTBEAT") is None
+    assert row.rate_hz("LOCAL_POSITION_NED") == pytest.approx(10.0)
+    assert row.accepted() == 3 and row.last_any_rx_s() == pytest.approx(10.4)
+    # AND its counts add to the slow path's
+    assert row.sequence_stats(SequenceStats(2, 1, 0, 0)) == SequenceStats(5, 1, 0, 0)
+    slow = {"LOCAL_POSITION_NED": TypeStats(1, 11.0, 1.0), "HEARTBEAT": TypeStats(2, 9.0, 1.0)}
+    merged = row.type_stats(slow)
+    assert merged["HEARTBEAT"] == slow["HEARTBEAT"]
+    assert merged["LOCAL_POSITION_NED"].count == 4
+    assert merged["LOCAL_POSITION_NED"].last_rx_s == 11.0
+    assert merged["LOCAL_POSITION_NED"].rate_hz == pytest.approx(10.0)
+    # AND the clock filter is given the stamps of the messages since the last notice
+    samples: list[tuple[float, float]] = []
+    row.feed_clock(lambda t_s, rx_s: samples.append((t_s, rx_s)))
+    assert samples[-1] == pytest.approx((10.4, 10.4))
+    # WHEN its rate is restarted, THEN it is unknown until measured again
+    row.restart_rate("LOCAL_POSITION_NED")
+    assert math.isnan(row.rate_hz("LOCAL_POSITION_NED"))
 
 
 def test_frames_it_does_not_accept_go_to_the_slow_path_whole_and_untouched() -> None:

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from gcs.link.clock import VehicleClock
+from gcs.link.clock import BUNCHED, LinkRoundTrips, VehicleClock
 
 RATE_HZ = 50.0
 
@@ -172,3 +172,35 @@ def test_a_round_trip_that_measured_a_stop_leaves_the_links_record_but_bounds_th
     assert list(clock.round_trips_s(3.0)) == []
     # AND the recent round trip (the uplink delay rule's) is the link's too
     assert clock.recent_round_trip_s == 0.011
+
+
+def test_replies_that_come_bunched_leave_the_links_round_trips_both_of_them():
+    clock = VehicleClock()
+    trips = LinkRoundTrips(clock)
+    # GIVEN three replies of a link of 4 ms round trips, requests 0.5 s apart
+    for k in range(3):
+        trips.on_reply(10.0 + 0.5 * k, 10.004 + 0.5 * k)
+    # WHEN the next two requests' replies arrive 2 ms apart, well under BUNCHED of their spacing
+    trips.on_reply(11.5, 13.000)
+    trips.on_reply(12.0, 13.002)
+    assert BUNCHED * 0.5 > 0.002
+    # AND the link answers as before
+    trips.on_reply(13.5, 13.505)
+    # THEN both bunched round trips are out of the record and the clock's, and counted
+    assert list(trips.round_trips_s()) == pytest.approx([0.004] * 3 + [0.005])
+    assert list(clock.round_trips_s()) == pytest.approx([0.004] * 3 + [0.005])
+    assert trips.counts() == {"timesync_replies": 6, "timesync_bunched": 2}
+    # AND the clock still saw every reply (a held one bounds the offset all the same)
+    assert clock.estimate().rtt_samples == 6
+
+
+def test_replies_spaced_like_their_requests_are_kept_and_one_before_its_request_is_ignored():
+    trips = LinkRoundTrips(VehicleClock())
+    # GIVEN replies whose arrivals are spaced as their requests, with a varying delay
+    for k, rtt_s in enumerate([0.004, 0.030, 0.006]):
+        trips.on_reply(20.0 + 0.5 * k, 20.0 + 0.5 * k + rtt_s)
+    # WHEN a reply claims to arrive before its request went out
+    trips.on_reply(22.0, 21.9)
+    # THEN the three are the link's, none bunched, and the impossible one is not counted
+    assert list(trips.round_trips_s()) == pytest.approx([0.004, 0.030, 0.006])
+    assert trips.counts() == {"timesync_replies": 3, "timesync_bunched": 0}
