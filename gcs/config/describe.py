@@ -38,7 +38,8 @@ def describe(team: TeamConfig) -> str:
     """Multi-line summary of what the config says, with the sufficient conditions evaluated."""
     c, g, sim = team.controller, team.controller.gains, team.sim
     mode = {ControlMode.RATES: "thrust + body rates",
-            ControlMode.ACTUATORS: "thrust + torque (26)"}[c.mode]
+            ControlMode.ACTUATORS: "thrust + torque (26)",
+            ControlMode.ATTITUDE: "thrust + attitude; gcs fly only, gcs sim refuses it"}[c.mode]
     deriv = c.derivative.method + (
         f" (L = {c.derivative.levant_lipschitz:g}, substep {c.derivative.levant_substep_s:g} s)"
         if c.derivative.method == "levant"

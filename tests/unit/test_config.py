@@ -209,6 +209,9 @@ def test_describe_reports_what_it_understood_and_the_sufficient_conditions():
     assert "vehicle 1: 1 >= (2 - 1) * 0.85 / 1 = 0.85: OK, margin 0.15" in text
     assert "vehicle 4: 80 N >= 40.02 N: OK" in text
     assert "vehicle 4 (Jbar 0.654): 0.5 < min(4.9462, 14.1248, 3.1172) = 3.117: OK" in text
+    # GIVEN controller.mode attitude (a gcs fly mode) THEN it is described, not a crash
+    text = describe(team_from_dict(edit(base(), "controller.mode", "attitude")))
+    assert "adaptive law, attitude mode (thrust + attitude; gcs fly only" in text
     # GIVEN a vehicle without plant THEN masses are not shown and the mass checks are skipped
     data = edit(base(), "vehicles.0.plant", DELETE)
     text = describe(team_from_dict(data))
