@@ -1,20 +1,20 @@
 """Team configuration reader: the team-level sections (controller, reference velocity, vehicles,
-graph, faults, frame) -> the schema's dataclasses; the public entry points. The YAML layer and the
-value checks are in yamlnode, the `fly:` section in fly_section."""
+graph, frame) -> the schema's dataclasses; the public entry points. The YAML layer and the
+value checks are in yamlnode, the `fly:` section in fly_section, `faults:` in fault_section."""
 
 from __future__ import annotations
 
 import dataclasses
 import enum
 import os
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import yaml
 
+from gcs.config.fault_section import read_fault
 from gcs.config.fly_section import read_fly
-from gcs.config.modes import DERIVATIVE_METHODS, FAULT_KINDS, JITTER_KINDS, LAWS, MODES, ControlMode
+from gcs.config.modes import DERIVATIVE_METHODS, LAWS, MODES, ControlMode
 from gcs.config.schema import (
     FRAME_VEHICLES,
     GAIN_NAMES,
@@ -29,17 +29,12 @@ from gcs.config.schema import (
     DerivativeConfig,
     Edge,
     Estimates,
-    Fault,
-    FaultConfig,
     FrameConfig,
     Gains,
     GraphConfig,
     InitialState,
     LinkConfig,
-    LinkLossFault,
     MissionConfig,
-    MotorEfficiencyFault,
-    PacketLossFault,
     PlantParams,
     ReferenceVelocity,
     SimConfig,
@@ -284,65 +279,6 @@ def _graph(node: Node, ids: list[int]) -> GraphConfig:
     return GraphConfig(tuple(edges))
 
 
-def _fault(node: Node, ids: list[int], duration_s: float) -> Fault:
-    """Common keys kind, vehicle, at_s, then the kind's own keys (table below)."""
-    if not isinstance(node.value, dict):
-        node.fail(
-            f"expected a mapping with keys kind, vehicle, at_s, ..., got {kind_of(node.value)}"
-        )
-    kind = node.child("kind").string(choices=FAULT_KINDS)
-    cls, required, optional, read = _FAULT_KINDS[kind]
-    node.keys("kind vehicle at_s " + required, optional)
-    vehicle = node.child("vehicle").integer()
-    if vehicle not in ids:
-        node.child("vehicle").fail(
-            f"unknown vehicle id {vehicle}; ids are {', '.join(map(str, ids))}"
-        )
-    at_s = node.child("at_s").number(ge=0.0, le=duration_s)
-    return cls(kind, vehicle, at_s, *read(node))
-
-
-# kind -> (dataclass, required keys, optional keys, reader of the kind's own fields). A new kind
-# adds its dataclass to Fault, a row here and its name to FAULT_KINDS.
-_FAULT_KINDS: dict[str, tuple[type, str, str, Callable[[Node], tuple[Any, ...]]]] = {
-    "mass_drop": (
-        FaultConfig,
-        "fraction",
-        "",
-        lambda n: (n.child("fraction").number(gt=0.0, lt=1.0),),
-    ),
-    "link_loss": (
-        LinkLossFault,
-        "duration_s",
-        "",
-        lambda n: (n.child("duration_s").number(gt=0.0),),
-    ),
-    "packet_loss": (
-        PacketLossFault,
-        "",
-        "probability latency_ms jitter_ms jitter reorder_probability duration_s",
-        lambda n: (
-            n.child("probability").number(0.0, ge=0.0, le=1.0),
-            n.child("latency_ms").number(0.0, ge=0.0, le=10000.0),
-            n.child("jitter_ms").number(0.0, ge=0.0, le=10000.0),
-            n.child("jitter").string("uniform", choices=JITTER_KINDS),
-            n.child("reorder_probability").number(0.0, ge=0.0, le=1.0),
-            n.child("duration_s").number(0.0, ge=0.0, le=1e6),
-        ),
-    ),
-    "motor_efficiency": (
-        MotorEfficiencyFault,
-        "motor efficiency",
-        "",
-        lambda n: (
-            n.child("motor").integer(ge=1, le=4),
-            n.child("efficiency").number(ge=0.0, le=1.0),
-        ),
-    ),
-}
-
-
-
 def _frame(node: Node) -> FrameConfig:
     """The optional `frame:` section (docs/configuration.md)."""
     d = FrameConfig()
@@ -446,7 +382,7 @@ def _team(root: Node) -> TeamConfig:
     ids = [v.id for v in vehicles]
     graph = _graph(root.child("graph"), ids)
 
-    faults = [_fault(f, ids, mission.duration_s) for f in root.child("faults").items("faults")]
+    faults = [read_fault(f, ids, mission.duration_s) for f in root.child("faults").items("faults")]
     fly = read_fly(root.child("fly"))
     frame = _frame(root.child("frame"))
     return TeamConfig(
