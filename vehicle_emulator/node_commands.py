@@ -13,14 +13,12 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from vehicle_emulator.autopilot import MavResult, Severity, not_emulated
 from vehicle_emulator.codec import mavlink
+from vehicle_emulator.node_output import Link
 from vehicle_emulator.team import FaultSpec
-
-if TYPE_CHECKING:
-    from vehicle_emulator.vehicle import Link
 
 log = logging.getLogger(__name__)
 

@@ -7,18 +7,16 @@ PARAM_VALUE; a refused read or write is counted and reported by a rate-limited S
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from vehicle_emulator.autopilot import Severity
 from vehicle_emulator.codec import mavlink
 from vehicle_emulator.faults import LINK_PARAMS
+from vehicle_emulator.node_output import Link
 from vehicle_emulator.params import ParamError, decode_value, encode_value
 from vehicle_emulator.team import FaultSpec
-
-if TYPE_CHECKING:
-    from vehicle_emulator.vehicle import Link
 
 __all__ = ["NodeParams"]
 

@@ -1,10 +1,11 @@
-"""One emulated vehicle's MAVLink behaviour: message handlers, commands, parameters, faults.
+"""One emulated vehicle: its state, status and faults, and the dispatch of its MAVLink input.
 
 ``VehicleNode`` glues the pure parts of vehicle ``index`` (autopilot, params, fault schedule,
 link impairment) to the fleet arrays (plant, telemetry status) and to its links. Handlers get
 decoded pymavlink messages and answer through ``Link.send`` (bytes out); they never block, never
 raise on bad input (it is counted, logged and reported by STATUSTEXT), and never see sockets.
-Commands and their ACKs are in node_commands.py, the parameter protocol in node_params.py.
+Outgoing messages are in node_output.py, commands and their ACKs in node_commands.py, the
+parameter protocol in node_params.py.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 from vehicle_emulator.autopilot import (
     ActuatorSetpoint,
@@ -37,6 +38,7 @@ from vehicle_emulator.faults import (
 )
 from vehicle_emulator.node_commands import DeferredAck, NodeCommands
 from vehicle_emulator.node_commands import _int as _int  # ardupilot_node imports it from here
+from vehicle_emulator.node_output import REPORT_PERIOD_S, Link, NodeOutput
 from vehicle_emulator.node_params import NodeParams
 from vehicle_emulator.params import ParamStore
 from vehicle_emulator.personality import Personality
@@ -48,18 +50,13 @@ from vehicle_emulator.setpoints import (
     from_position_target_local_ned,
 )
 from vehicle_emulator.team import FaultSpec, VehicleSpec
-from vehicle_emulator.telemetry import FleetStatus, Telemetry, geodetic_of_ned
+from vehicle_emulator.telemetry import FleetStatus, Telemetry
 
 log = logging.getLogger(__name__)
 
 __all__ = ["DeferredAck", "Link", "VehicleNode", "InputCounters"]
 
 COMPID = 1
-ORIGIN_ANNOUNCE_S = 0.1  # PX4 v1.16.0 sent GPS_GLOBAL_ORIGIN once, 0.1 s after its first HEARTBEAT
-REPORT_PERIOD_S = 5.0
-LIMITED_TEXT_PERIOD_S = 1.0
-LIMITED_TEXT_BURST = 5
-STATUSTEXT_MAX_BYTES = 200  # 4 chunks
 
 # PX4 base_mode flags per nav state (besides CUSTOM_MODE_ENABLED and SAFETY_ARMED).
 _BASE_FLAGS = {
@@ -67,16 +64,6 @@ _BASE_FLAGS = {
     NavState.POSCTL: 64 | 16,  # PX4 v1.16.0 recorded base_mode 209 armed
     NavState.OFFBOARD: 0,  # PX4 v1.16.0 recorded base_mode 1 disarmed, 129 armed
 }
-
-
-class Link(Protocol):
-    """Where a vehicle's bytes go: one UDP endpoint (server.py) or a test double."""
-
-    name: str
-
-    def send(self, data: bytes, addr: Any = None) -> None:
-        """Queue bytes to ``addr`` (None: the link's current remote). Never blocks."""
-
 
 
 @dataclass(slots=True)
@@ -106,9 +93,10 @@ class InputCounters:
 
 
 @dataclass(slots=True)
-class VehicleNode(NodeCommands, NodeParams):
-    """Vehicle ``index`` of the fleet; see module docstring. Commands are ``NodeCommands``'s
-    (node_commands.py), the parameter protocol ``NodeParams``'s (node_params.py)."""
+class VehicleNode(NodeOutput, NodeCommands, NodeParams):
+    """Vehicle ``index`` of the fleet; see module docstring. Outgoing messages are
+    ``NodeOutput``'s (node_output.py), commands ``NodeCommands``'s (node_commands.py), the
+    parameter protocol ``NodeParams``'s (node_params.py)."""
 
     index: int
     spec: VehicleSpec
@@ -266,98 +254,6 @@ class VehicleNode(NodeCommands, NodeParams):
             t = self.params["EMU_MDROP_T"]
             plan = f", mass drop at {t:.1f} s" if t >= 0 else ""
             self.statustext(Severity.INFO, f"Fault clock started{plan}")
-
-    # --- outputs -------------------------------------------------------------------------------
-
-    def send_all(self, data: bytes) -> None:
-        """Bytes to every link's current remote."""
-        for link in self.links:
-            link.send(data)
-
-    def send_msg(self, msg: Any, link: Link | None = None, addr: Any = None) -> None:
-        """Pack a pymavlink message; to (link, addr) or to all links."""
-        data = self.encoder.pack(msg)
-        if link is None:
-            self.send_all(data)
-        else:
-            link.send(data, addr)
-
-    def statustext(self, severity: Severity, text: str) -> None:
-        """STATUSTEXT to all links, and the log. Up to 50 bytes: one message (id 0); longer
-        (up to STATUSTEXT_MAX_BYTES): MAVLink 2 chunks of 50 bytes with one id != 0 and chunk_seq
-        0, 1, ..., as PX4 sends "Arming denied: Resolve system health failures first". The
-        personality's ending follows the text (px4: a TAB, as PX4 v1.16.0 sent every text)."""
-        log.info("vehicle %d (sysid %d): %s", self.spec.vehicle_id, self.sysid, text)
-        data = (text + self.personality.protocol.statustext_end).encode()[:STATUSTEXT_MAX_BYTES]
-        if len(data) <= 50:
-            self.send_msg(mavlink.MAVLink_statustext_message(int(severity), data, 0, 0))
-            return
-        self._text_id = self._text_id % 65535 + 1
-        chunks = [data[k : k + 50] for k in range(0, len(data), 50)]
-        if len(data) % 50 == 0:
-            chunks.append(b"")  # the last chunk must end with a NUL: an empty one
-        for seq, chunk in enumerate(chunks):
-            msg = mavlink.MAVLink_statustext_message(int(severity), chunk, self._text_id, seq)
-            self.send_msg(msg)
-
-    def statustext_limited(self, now_s: float, severity: Severity, text: str) -> bool:
-        """STATUSTEXT for rejected input: the same text at most once per
-        LIMITED_TEXT_PERIOD_S and at most LIMITED_TEXT_BURST texts per period overall (hostile
-        input must not become a flood of replies); the rest go into the periodic report.
-        Returns whether it was sent."""
-        if now_s >= self._limited_window_end_s:
-            self._limited_window_end_s = now_s + LIMITED_TEXT_PERIOD_S
-            self._limited_in_window = 0
-            self._limited_last = {k: t for k, t in self._limited_last.items() if t > now_s - 1.0}
-        last = self._limited_last.get(text)
-        if (last is not None and now_s - last < LIMITED_TEXT_PERIOD_S) or (
-            self._limited_in_window >= LIMITED_TEXT_BURST
-        ):
-            log.debug("vehicle %d: %s", self.spec.vehicle_id, text)
-            return False
-        self._limited_last[text] = now_s
-        self._limited_in_window += 1
-        self.statustext(severity, text)
-        return True
-
-    def drain_events(self, now_s: float | None = None) -> None:
-        """Autopilot events -> STATUSTEXT (rate limited when ``now_s`` is given: replies to
-        commands, which a flood could repeat)."""
-        events, self.autopilot.events[:] = list(self.autopilot.events), []
-        for severity, text in events:
-            if now_s is None:
-                self.statustext(severity, text)
-            else:
-                self.statustext_limited(now_s, severity, text)
-
-    def origin_message(self, now_s: float) -> Any:
-        """GPS_GLOBAL_ORIGIN: where this vehicle's LOCAL_POSITION_NED is zero."""
-        lat, lon, alt = geodetic_of_ned(self.status.origin_ned_m[self.index],
-                                        self.telemetry.origin_lla)
-        return mavlink.MAVLink_gps_global_origin_message(
-            int(round(float(lat) * 1e7)),
-            int(round(float(lon) * 1e7)),
-            int(round(float(alt) * 1e3)),
-            int(now_s * 1e6),
-        )
-
-    def announce_origin(self, now_s: float) -> None:
-        """GPS_GLOBAL_ORIGIN once, shortly after boot (as PX4 does when its EKF sets it)."""
-        if not self._origin_announced and now_s >= ORIGIN_ANNOUNCE_S:
-            self._origin_announced = True
-            self.send_msg(self.origin_message(now_s))
-
-    def report_input(self, now_s: float) -> None:
-        """Every REPORT_PERIOD_S: one STATUSTEXT if rejected/clamped input grew."""
-        if now_s < self._next_report_s:
-            return
-        self._next_report_s = now_s + REPORT_PERIOD_S
-        total = self.counters.total(self.decode_rejected)
-        if total > self.counters.reported_total:
-            new = total - self.counters.reported_total
-            self.counters.reported_total = total
-            why = self.counters.last_reject_reason
-            self.statustext(Severity.WARNING, f"Bad input: {new} msgs ({why})"[:50])
 
     # --- faults ------------------------------------------------------------------------------
 
