@@ -1,13 +1,11 @@
-"""One emulated vehicle's MAVLink behaviour: message handlers, commands, parameters, faults.
+"""One emulated vehicle: its state, status and faults, and the dispatch of its MAVLink input.
 
 ``VehicleNode`` glues the pure parts of vehicle ``index`` (autopilot, params, fault schedule,
 link impairment) to the fleet arrays (plant, telemetry status) and to its links. Handlers get
 decoded pymavlink messages and answer through ``Link.send`` (bytes out); they never block, never
 raise on bad input (it is counted, logged and reported by STATUSTEXT), and never see sockets.
-
-With EMU_ACK_TWICE = 1 (default) a DO_SET_MODE COMMAND_LONG/INT is answered as PX4 v1.16.0 does:
-COMMAND_ACK ACCEPTED at once (its MAVLink receiver), then the real result (its commander) queued
-in ``deferred_acks``, which the runner sends on its next tick with the command's STATUSTEXTs.
+Outgoing messages are in node_output.py, commands and their ACKs in node_commands.py, the
+parameter protocol in node_params.py.
 """
 
 from __future__ import annotations
@@ -15,9 +13,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import Any, Protocol
-
-import numpy as np
+from typing import Any
 
 from vehicle_emulator.autopilot import (
     ActuatorSetpoint,
@@ -25,14 +21,12 @@ from vehicle_emulator.autopilot import (
     Autopilot,
     Demand,
     Idle,
-    MavResult,
     MotorsOff,
     NavState,
     Observation,
     PositionTarget,
     RatesSetpoint,
     Severity,
-    not_emulated,
 )
 from vehicle_emulator.codec import GenericEncoder, mavlink
 from vehicle_emulator.faults import (
@@ -42,7 +36,11 @@ from vehicle_emulator.faults import (
     link_param_values,
     link_text,
 )
-from vehicle_emulator.params import ParamError, ParamStore, decode_value, encode_value
+from vehicle_emulator.node_commands import DeferredAck, NodeCommands
+from vehicle_emulator.node_commands import _int as _int  # ardupilot_node imports it from here
+from vehicle_emulator.node_output import REPORT_PERIOD_S, Link, NodeOutput
+from vehicle_emulator.node_params import NodeParams
+from vehicle_emulator.params import ParamStore
 from vehicle_emulator.personality import Personality
 from vehicle_emulator.plant import ControlMode, FleetPlant
 from vehicle_emulator.setpoints import (
@@ -52,26 +50,13 @@ from vehicle_emulator.setpoints import (
     from_position_target_local_ned,
 )
 from vehicle_emulator.team import FaultSpec, VehicleSpec
-from vehicle_emulator.telemetry import FleetStatus, Telemetry, geodetic_of_ned
+from vehicle_emulator.telemetry import FleetStatus, Telemetry
 
 log = logging.getLogger(__name__)
 
 __all__ = ["DeferredAck", "Link", "VehicleNode", "InputCounters"]
 
 COMPID = 1
-CMD_DO_SET_MODE = 176
-GPS_GLOBAL_ORIGIN_MSGID = 49
-ORIGIN_ANNOUNCE_S = 0.1  # PX4 v1.16.0 sent GPS_GLOBAL_ORIGIN once, 0.1 s after its first HEARTBEAT
-HEARTBEAT_MSGID = 0  # PX4: its interval cannot be changed (SET_MESSAGE_INTERVAL -> FAILED)
-REPORT_PERIOD_S = 5.0
-LIMITED_TEXT_PERIOD_S = 1.0
-LIMITED_TEXT_BURST = 5
-STATUSTEXT_MAX_BYTES = 200  # 4 chunks
-# What is emulated: COMMAND_INT | PARAM_ENCODE_BYTEWISE | SET_ATTITUDE_TARGET |
-# SET_POSITION_TARGET_LOCAL_NED | MAVLINK2 (+ SET_ACTUATOR_TARGET where the personality honours
-# it). Not claimed: missions, fence, rally, FTP, SET_POSITION_TARGET_GLOBAL_INT, terrain.
-CAPABILITIES = 0x8 | 0x10 | 0x40 | 0x80 | 0x2000
-CAP_SET_ACTUATOR_TARGET = 0x400
 
 # PX4 base_mode flags per nav state (besides CUSTOM_MODE_ENABLED and SAFETY_ARMED).
 _BASE_FLAGS = {
@@ -79,27 +64,6 @@ _BASE_FLAGS = {
     NavState.POSCTL: 64 | 16,  # PX4 v1.16.0 recorded base_mode 209 armed
     NavState.OFFBOARD: 0,  # PX4 v1.16.0 recorded base_mode 1 disarmed, 129 armed
 }
-
-
-class Link(Protocol):
-    """Where a vehicle's bytes go: one UDP endpoint (server.py) or a test double."""
-
-    name: str
-
-    def send(self, data: bytes, addr: Any = None) -> None:
-        """Queue bytes to ``addr`` (None: the link's current remote). Never blocks."""
-
-
-@dataclass(frozen=True, slots=True)
-class DeferredAck:
-    """A COMMAND_ACK to send on the next tick: PX4's commander answering after its receiver."""
-
-    command: int
-    result: MavResult
-    link: Link
-    addr: Any
-    target_system: int
-    target_component: int
 
 
 @dataclass(slots=True)
@@ -129,8 +93,10 @@ class InputCounters:
 
 
 @dataclass(slots=True)
-class VehicleNode:
-    """Vehicle ``index`` of the fleet; see module docstring."""
+class VehicleNode(NodeOutput, NodeCommands, NodeParams):
+    """Vehicle ``index`` of the fleet; see module docstring. Outgoing messages are
+    ``NodeOutput``'s (node_output.py), commands ``NodeCommands``'s (node_commands.py), the
+    parameter protocol ``NodeParams``'s (node_params.py)."""
 
     index: int
     spec: VehicleSpec
@@ -289,110 +255,6 @@ class VehicleNode:
             plan = f", mass drop at {t:.1f} s" if t >= 0 else ""
             self.statustext(Severity.INFO, f"Fault clock started{plan}")
 
-    # --- outputs -------------------------------------------------------------------------------
-
-    def send_all(self, data: bytes) -> None:
-        """Bytes to every link's current remote."""
-        for link in self.links:
-            link.send(data)
-
-    def send_msg(self, msg: Any, link: Link | None = None, addr: Any = None) -> None:
-        """Pack a pymavlink message; to (link, addr) or to all links."""
-        data = self.encoder.pack(msg)
-        if link is None:
-            self.send_all(data)
-        else:
-            link.send(data, addr)
-
-    def statustext(self, severity: Severity, text: str) -> None:
-        """STATUSTEXT to all links, and the log. Up to 50 bytes: one message (id 0); longer
-        (up to STATUSTEXT_MAX_BYTES): MAVLink 2 chunks of 50 bytes with one id != 0 and chunk_seq
-        0, 1, ..., as PX4 sends "Arming denied: Resolve system health failures first". The
-        personality's ending follows the text (px4: a TAB, as PX4 v1.16.0 sent every text)."""
-        log.info("vehicle %d (sysid %d): %s", self.spec.vehicle_id, self.sysid, text)
-        data = (text + self.personality.protocol.statustext_end).encode()[:STATUSTEXT_MAX_BYTES]
-        if len(data) <= 50:
-            self.send_msg(mavlink.MAVLink_statustext_message(int(severity), data, 0, 0))
-            return
-        self._text_id = self._text_id % 65535 + 1
-        chunks = [data[k : k + 50] for k in range(0, len(data), 50)]
-        if len(data) % 50 == 0:
-            chunks.append(b"")  # the last chunk must end with a NUL: an empty one
-        for seq, chunk in enumerate(chunks):
-            msg = mavlink.MAVLink_statustext_message(int(severity), chunk, self._text_id, seq)
-            self.send_msg(msg)
-
-    def statustext_limited(self, now_s: float, severity: Severity, text: str) -> bool:
-        """STATUSTEXT for rejected input: the same text at most once per
-        LIMITED_TEXT_PERIOD_S and at most LIMITED_TEXT_BURST texts per period overall (hostile
-        input must not become a flood of replies); the rest go into the periodic report.
-        Returns whether it was sent."""
-        if now_s >= self._limited_window_end_s:
-            self._limited_window_end_s = now_s + LIMITED_TEXT_PERIOD_S
-            self._limited_in_window = 0
-            self._limited_last = {k: t for k, t in self._limited_last.items() if t > now_s - 1.0}
-        last = self._limited_last.get(text)
-        if (last is not None and now_s - last < LIMITED_TEXT_PERIOD_S) or (
-            self._limited_in_window >= LIMITED_TEXT_BURST
-        ):
-            log.debug("vehicle %d: %s", self.spec.vehicle_id, text)
-            return False
-        self._limited_last[text] = now_s
-        self._limited_in_window += 1
-        self.statustext(severity, text)
-        return True
-
-    def drain_events(self, now_s: float | None = None) -> None:
-        """Autopilot events -> STATUSTEXT (rate limited when ``now_s`` is given: replies to
-        commands, which a flood could repeat)."""
-        events, self.autopilot.events[:] = list(self.autopilot.events), []
-        for severity, text in events:
-            if now_s is None:
-                self.statustext(severity, text)
-            else:
-                self.statustext_limited(now_s, severity, text)
-
-    def send_deferred_acks(self, now_s: float) -> None:
-        """The queued second COMMAND_ACKs (see module docstring), then the STATUSTEXTs of those
-        commands (PX4 v1.16.0 sent "Switching to Offboard is currently not available" right
-        after its TEMPORARILY_REJECTED)."""
-        acks, self.deferred_acks = self.deferred_acks, []
-        for a in acks:
-            msg = mavlink.MAVLink_command_ack_message(
-                a.command, int(a.result), 0, 0, a.target_system, a.target_component
-            )
-            self.send_msg(msg, a.link, a.addr)
-        self.drain_events(now_s)
-
-    def origin_message(self, now_s: float) -> Any:
-        """GPS_GLOBAL_ORIGIN: where this vehicle's LOCAL_POSITION_NED is zero."""
-        lat, lon, alt = geodetic_of_ned(self.status.origin_ned_m[self.index],
-                                        self.telemetry.origin_lla)
-        return mavlink.MAVLink_gps_global_origin_message(
-            int(round(float(lat) * 1e7)),
-            int(round(float(lon) * 1e7)),
-            int(round(float(alt) * 1e3)),
-            int(now_s * 1e6),
-        )
-
-    def announce_origin(self, now_s: float) -> None:
-        """GPS_GLOBAL_ORIGIN once, shortly after boot (as PX4 does when its EKF sets it)."""
-        if not self._origin_announced and now_s >= ORIGIN_ANNOUNCE_S:
-            self._origin_announced = True
-            self.send_msg(self.origin_message(now_s))
-
-    def report_input(self, now_s: float) -> None:
-        """Every REPORT_PERIOD_S: one STATUSTEXT if rejected/clamped input grew."""
-        if now_s < self._next_report_s:
-            return
-        self._next_report_s = now_s + REPORT_PERIOD_S
-        total = self.counters.total(self.decode_rejected)
-        if total > self.counters.reported_total:
-            new = total - self.counters.reported_total
-            self.counters.reported_total = total
-            why = self.counters.last_reject_reason
-            self.statustext(Severity.WARNING, f"Bad input: {new} msgs ({why})"[:50])
-
     # --- faults ------------------------------------------------------------------------------
 
     def apply_faults(self, now_s: float) -> None:
@@ -438,32 +300,6 @@ class VehicleNode:
         """Write the link parameters (``LINK_PARAMS`` order) and apply them."""
         for name, value in zip(LINK_PARAMS, values, strict=True):
             self.params.set(name, value)
-            self._sync_param(name)
-
-    def _sync_param(self, name: str) -> None:
-        """Side effects of a parameter value on the arrays and the link."""
-        i, v = self.index, self.params[name]
-        if name.startswith("EMU_MOT") and name.endswith("_EFF"):
-            self.plant.rotor_efficiency[i, int(name[7]) - 1] = v
-        elif name == "EMU_MOT_TAU":
-            self.plant.motor_time_constant_s[i] = v
-        elif name == "MC_AIRMODE":
-            self.plant.airmode[i] = float(v)
-        elif name == "EMU_NOISE":  # the sensor model's noise, or telemetry noise (nominal)
-            self.status.noise[i] = self.plant.set_noise(i, bool(v))
-        elif name in LINK_PARAMS:
-            self.impairment.set_param(name, v)
-        elif name == "EMU_SEED":
-            self.impairment.rng = np.random.default_rng(int(v) + self.index)
-            self.plant.seed_noise(i, int(v))
-        elif name in ("MPC_THR_HOVER", "MOT_THST_HOVER"):
-            self.plant.hover_thrust_norm[i] = v
-        elif name in ("EMU_MDROP_T", "EMU_MDROP_FRAC"):
-            self.faults.mass_drop_done = False
-
-    def sync_all_params(self) -> None:
-        """Push every parameter's side effect (after start-up overrides)."""
-        for name in self.params.names():
             self._sync_param(name)
 
     # --- input ---------------------------------------------------------------------------------
@@ -551,146 +387,6 @@ class VehicleNode:
         """REQUEST_DATA_STREAM (deprecated): PX4 does not handle it; an ArduPilot node does."""
         self.counters.unhandled += 1
 
-    def _on_set_mode(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
-        if msg.target_system not in (0, self.sysid):
-            self.counters.other_target += 1
-            return
-        if not msg.base_mode & 1:
-            self.counters.unhandled += 1
-            self.statustext_limited(now_s, Severity.ERROR, "SET_MODE without custom mode")
-            return
-        main, sub = (msg.custom_mode >> 16) & 0xFF, (msg.custom_mode >> 24) & 0xFF
-        result = self.autopilot.set_mode(now_s, self.observe(), main, sub)
-        self._ack(176, result, link, addr, msg)
-        self.drain_events(now_s)
-
-    def _on_command(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
-        if not self._for_me(msg):
-            return
-        p = [msg.param1, msg.param2, msg.param3, msg.param4]
-        if msg.get_msgId() == 75:  # COMMAND_INT: x, y are scaled integers, z a float
-            p += [msg.x * 1e-7, msg.y * 1e-7, msg.z]
-        else:
-            p += [msg.param5, msg.param6, msg.param7]
-        # a mode the emulator does not fly gets one ACK, UNSUPPORTED, not ACCEPTED first
-        twice = msg.command == CMD_DO_SET_MODE and self._ack_twice() and not _not_emulated(p)
-        if twice:  # PX4 v1.16.0's MAVLink receiver ACKs before its commander has looked
-            self._ack(CMD_DO_SET_MODE, MavResult.ACCEPTED, link, addr, msg)
-        try:
-            result = self.command(now_s, int(msg.command), p, link, addr)
-        except Exception:  # never leave a command unanswered
-            log.exception("vehicle %d: command %d failed", self.spec.vehicle_id, msg.command)
-            result = MavResult.FAILED
-        log.info("vehicle %d (sysid %d): command %d (%s) -> %s", self.spec.vehicle_id,
-                 self.sysid, msg.command, ", ".join(f"{x:g}" for x in p), result.name)
-        if twice:
-            self.deferred_acks.append(
-                DeferredAck(
-                    CMD_DO_SET_MODE, result, link, addr, msg.get_srcSystem(), msg.get_srcComponent()
-                )
-            )
-            return  # the commander's ACK and its STATUSTEXTs go out on the next tick
-        self._ack(int(msg.command), result, link, addr, msg)
-        self.drain_events(now_s)
-
-    def _ack_twice(self) -> bool:
-        """DO_SET_MODE answered twice (PX4 v1.16.0, EMU_ACK_TWICE = 1)."""
-        return self.params.get_int("EMU_ACK_TWICE") == 1
-
-    def _ack(self, command: int, result: MavResult, link: Link, addr: Any, msg: Any) -> None:
-        ack = mavlink.MAVLink_command_ack_message(
-            command, int(result), 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
-        )
-        self.send_msg(ack, link, addr)
-
-    def command(self, now_s: float, cmd: int, p: list[float], link: Link, addr: Any) -> MavResult:
-        """Execute a COMMAND_LONG / COMMAND_INT; returns the MAV_RESULT to acknowledge."""
-        ap, obs = self.autopilot, self.observe()
-        if cmd == 400:  # COMPONENT_ARM_DISARM
-            if p[0] not in (0.0, 1.0):
-                return MavResult.DENIED
-            return ap.arm(now_s, obs, p[0] == 1.0, force=_int(p[1]) in (21196, 2989))
-        if cmd == 176:  # DO_SET_MODE
-            if not _int(p[0]) & 1 or not math.isfinite(p[1]):
-                return MavResult.DENIED
-            return ap.set_mode(now_s, obs, _int(p[1]), _int(p[2]))
-        if cmd == 22:  # NAV_TAKEOFF: param7 altitude AMSL (PX4)
-            home_ned_m = self.status.home_ned_m[self.index]
-            home_amsl_m = self.telemetry.origin_lla[2] - float(home_ned_m[2])
-            alt = p[6] - home_amsl_m if math.isfinite(p[6]) else math.nan
-            return ap.takeoff(now_s, obs, alt)
-        if cmd == 21:  # NAV_LAND
-            return ap.land(now_s, obs)
-        if cmd in (20, 192):  # NAV_RETURN_TO_LAUNCH, DO_REPOSITION: not emulated (as AUTO_RTL)
-            return MavResult.UNSUPPORTED
-        if cmd == 511:  # SET_MESSAGE_INTERVAL
-            if not (math.isfinite(p[0]) and math.isfinite(p[1])):
-                return MavResult.DENIED
-            if _int(p[0], -1) == HEARTBEAT_MSGID:
-                return MavResult.FAILED  # PX4 v1.16.0: recorded FAILED, stays at 1 Hz
-            ok = self.telemetry.set_interval(self.index, _int(p[0], -1), p[1], now_s)
-            return MavResult.ACCEPTED if ok else MavResult.UNSUPPORTED
-        if cmd == 510:  # GET_MESSAGE_INTERVAL
-            msgid = _int(p[0], -1)
-            us = (
-                self.telemetry.interval_us(self.index, msgid)
-                if msgid in self.telemetry.msgids
-                else 0
-            )
-            self.send_msg(mavlink.MAVLink_message_interval_message(msgid & 0xFFFF, us), link, addr)
-            return MavResult.ACCEPTED
-        if cmd in (512, 520):  # REQUEST_MESSAGE, REQUEST_AUTOPILOT_CAPABILITIES
-            msgid = 148 if cmd == 520 else _int(p[0], -1)
-            return self._send_requested(now_s, msgid, link, addr)
-        if cmd == 420:  # INJECT_FAILURE
-            return self._inject_failure(now_s, p)
-        return MavResult.UNSUPPORTED
-
-    def _send_requested(self, now_s: float, msgid: int, link: Link, addr: Any) -> MavResult:
-        if msgid == 148:
-            protocol = self.personality.protocol
-            caps = CAPABILITIES | (CAP_SET_ACTUATOR_TARGET if protocol.actuator_setpoints else 0)
-            msg = mavlink.MAVLink_autopilot_version_message(
-                caps,
-                protocol.version_word,
-                0,
-                0,
-                0,
-                [0] * 8,
-                [0] * 8,
-                [0] * 8,
-                0,
-                0,
-                self.sysid,
-                [0] * 18,
-            )
-        elif msgid == GPS_GLOBAL_ORIGIN_MSGID:
-            msg = self.origin_message(now_s)
-        elif msgid in self.telemetry.msgids:
-            k = self.telemetry.msgids[msgid]
-            self.telemetry.next_due_s[self.index, k] = now_s  # sent on the next tick
-            return MavResult.ACCEPTED
-        else:
-            return MavResult.UNSUPPORTED
-        self.send_msg(msg, link, addr)
-        return MavResult.ACCEPTED
-
-    def _inject_failure(self, now_s: float, p: list[float]) -> MavResult:
-        """MAV_CMD_INJECT_FAILURE: unit 101 motor (instance 1-4, 0 all), 302 MAVLink signal.
-        Types: 0 OK, 1 OFF, 3 SLOW (50% efficiency)."""
-        unit, ftype, inst = _int(p[0], -1), _int(p[1], -1), _int(p[2], 0)
-        if unit == 101 and ftype in (0, 1, 3) and 0 <= inst <= 4:
-            eff = {0: 1.0, 1: 0.0, 3: 0.5}[ftype]
-            for m in [inst] if inst else [1, 2, 3, 4]:
-                self.apply_fault(
-                    now_s, FaultSpec("motor_efficiency", 0, 0.0, motor=m, efficiency=eff), None
-                )
-            return MavResult.ACCEPTED
-        if unit == 302 and ftype in (0, 1):
-            self.impairment.down_until_s = now_s + 3600.0 if ftype == 1 else -1.0
-            return MavResult.ACCEPTED
-        return MavResult.UNSUPPORTED
-
     def _on_heartbeat(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
         """A GCS heartbeat: nothing to do."""
 
@@ -700,90 +396,6 @@ class VehicleNode:
             targets = self.personality.protocol.timesync_reply_targets
             link.send(self.encoder.pack_newer(reply, targets) if targets
                       else self.encoder.pack(reply), addr)
-
-    # --- parameters ----------------------------------------------------------------------------
-
-    def _param_msg(self, name: str) -> Any:
-        if name == "EMU_FLT_CLK":  # the fault clock now, on the emulator's (simulated) clock
-            clock = self.faults.clock_s(self.plant.time_s, self.autopilot.first_offboard_s)
-            self.params.set(name, -1.0 if clock is None else min(clock, 1e9), force=True)
-        d = self.params.definition(name)
-        names = self.params.names()
-        return mavlink.MAVLink_param_value_message(
-            name.encode(),
-            encode_value(d.ptype, self.params[name], self.params.bytewise_ints),
-            int(d.ptype),
-            len(names),
-            names.index(name),
-        )
-
-    def _on_param_request_list(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
-        if not self._for_me(msg):
-            return
-        for name in self.params.names():
-            self.send_msg(self._param_msg(name), link, addr)
-
-    @staticmethod
-    def _param_name(raw: Any) -> str:
-        if isinstance(raw, bytes):
-            raw = raw.decode("ascii", errors="replace")
-        return str(raw).split("\x00", 1)[0]
-
-    def _on_param_request_read(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
-        if not self._for_me(msg):
-            return
-        names = self.params.names()
-        if msg.param_index >= 0:
-            if msg.param_index >= len(names):
-                self._param_refused(now_s, f"no parameter index {msg.param_index}")
-                return
-            name = names[msg.param_index]
-        else:
-            name = self._param_name(msg.param_id)
-            if name not in names:
-                self._param_refused(now_s, f"unknown parameter {name}")
-                return
-        self.send_msg(self._param_msg(name), link, addr)
-
-    def _on_param_set(self, now_s: float, msg: Any, link: Link, addr: Any) -> None:
-        if not self._for_me(msg):
-            return
-        name = self._param_name(msg.param_id)
-        try:
-            d = self.params.definition(name)
-            value = decode_value(d.ptype, msg.param_value, msg.param_type,
-                                 self.params.bytewise_ints)
-            self.params.set(name, value)
-        except ParamError as exc:
-            self._param_refused(now_s, str(exc))
-            if name in self.params.names():  # MAVLink: answer a refused write with the value
-                self.send_msg(self._param_msg(name))
-            return
-        self._sync_param(name)
-        self._param_triggers(now_s, name)
-        self.send_msg(self._param_msg(name))
-
-    def _param_refused(self, now_s: float, text: str) -> None:
-        self.counters.params_refused += 1
-        self.counters.last_reject_reason = text
-        self.statustext_limited(now_s, Severity.ERROR, text)
-
-    def _param_triggers(self, now_s: float, name: str) -> None:
-        v = self.params[name]
-        if name == "EMU_MASS_DROP" and v > 0.0:
-            self.apply_fault(now_s, FaultSpec("mass_drop", 0, 0.0, fraction=v), None)
-        elif name == "EMU_LINK_LOSS" and v > 0.0:
-            self.apply_fault(now_s, FaultSpec("link_loss", 0, 0.0, duration_s=v), None)
-
-
-def _not_emulated(p: list[float]) -> bool:
-    """DO_SET_MODE params name a PX4 mode the emulator does not fly (autopilot.not_emulated)."""
-    return not_emulated(_int(p[1], -1), _int(p[2], -1))
-
-
-def _int(x: float, default: int = 0) -> int:
-    """int of a command parameter; ``default`` for NaN/inf (MAVSDK sends NaN for unused)."""
-    return int(x) if math.isfinite(x) and abs(x) < 2**31 else default
 
 
 def write_demand(plant: FleetPlant, i: int, demand: Demand) -> None:
