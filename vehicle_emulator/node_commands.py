@@ -20,7 +20,7 @@ from vehicle_emulator.codec import mavlink
 from vehicle_emulator.node_output import Link
 from vehicle_emulator.team import FaultSpec
 
-log = logging.getLogger(__name__)
+log = logging.getLogger("vehicle_emulator.vehicle")  # the node's one logger, as before the split
 
 __all__ = ["DeferredAck", "NodeCommands"]
 

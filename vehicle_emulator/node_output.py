@@ -14,7 +14,7 @@ from vehicle_emulator.autopilot import Severity
 from vehicle_emulator.codec import mavlink
 from vehicle_emulator.telemetry import geodetic_of_ned
 
-log = logging.getLogger(__name__)
+log = logging.getLogger("vehicle_emulator.vehicle")  # the node's one logger, as before the split
 
 __all__ = ["Link", "NodeOutput", "REPORT_PERIOD_S"]
 
