@@ -55,200 +55,59 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from enum import Enum
 
-from gcs.config.modes import ControlMode, FlyAction
+from gcs.config.modes import FlyAction
 from gcs.link.enums import LandedState
 from gcs.mission.autopilots import PX4, AutopilotProfile, ModeSpec, profile_for
-from gcs.mission.goto import (
-    GotoResult,
-    GoToStart,
-    GoToStartPlan,
-    Vec3,
-    crossing_pairs,
-    going_line,
-)
+from gcs.mission.goto import GotoResult, GoToStart, Vec3, crossing_pairs, going_line
 from gcs.mission.landed import quiet_mode_cause, with_quiet_causes
+from gcs.mission.plan import (
+    EXIT_ABORTED,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    Cmd,
+    Command,
+    CommandResult,
+    MissionPlan,
+    NoteLevel,
+    Outcome,
+    Phase,
+)
+from gcs.mission.progress import ArmProgress, GotoProgress, StopProgress, VehicleProgress
 from gcs.mission.safety import (
     Problem,
-    SafetyRules,
     SustainedDelays,
     VehicleStatus,
     flight_problems,
     preflight_problems,
 )
 
-EXIT_OK = 0
-EXIT_ABORTED = 1
-EXIT_INTERRUPTED = 130
+__all__ = [
+    "CONNECT_SHOW_WAITING",
+    "EXIT_ABORTED",
+    "EXIT_INTERRUPTED",
+    "EXIT_OK",
+    "HOLD_MODE",
+    "OFFBOARD_MODE",
+    "Cmd",
+    "Command",
+    "CommandResult",
+    "MissionMachine",
+    "MissionPlan",
+    "NoteLevel",
+    "Outcome",
+    "Phase",
+    "connect_failure_line",
+    "connect_waiting_label",
+]
 
 # PX4's names, kept for callers; the machine reads each vehicle's own from its profile.
 HOLD_MODE = PX4.hold.name
 OFFBOARD_MODE = PX4.offboard.name
 
 
-class Phase(Enum):
-    CONNECT = "connect"
-    PREFLIGHT = "preflight"
-    ARM = "arm"
-    TAKEOFF = "takeoff"
-    GOTO = "goto"  # fly to the team file's start positions (position setpoints)
-    HOLD = "hold"  # only when needed: airborne vehicles that would act on priming setpoints
-    PRIME = "prime"
-    FORMATION = "formation"
-    STOPPING = "stopping"
-    DONE = "done"
-
-
-class NoteLevel(Enum):
-    """How much a note matters: INFO for the flight's normal course, its normal end included;
-    WARNING for an anomaly (a stop before the formation's end, start paths that cross)."""
-
-    INFO = "info"
-    WARNING = "warning"
-
-
-class Cmd(Enum):
-    """What the app must do to one vehicle (it maps these to proxy calls)."""
-
-    CONFIGURE = "configure"  # telemetry rates (SET_MESSAGE_INTERVAL)
-    READ_PARAMS = "read_params"  # the profile's required parameters (`names`), values in result
-    IDENTIFY = "identify"  # AUTOPILOT_VERSION; result values (("flight_sw_version", word),)
-    ARM_MODE = "arm_mode"  # the profile's arm_mode (PX4 Hold, ArduPilot GUIDED), confirmed
-    ARM = "arm"  # confirmed when HEARTBEAT shows armed
-    TAKEOFF = "takeoff"  # altitude_m above home
-    OFFBOARD = "offboard"  # the profile's offboard mode (PX4 OFFBOARD, ArduPilot GUIDED_NOGPS;
-    # in position mode its position mode: ArduPilot GUIDED), MissionMachine.offboard_mode
-    POSITION_MODE = "position_mode"  # the profile's position mode (PX4 OFFBOARD, ArduPilot
-    # GUIDED), for the go-to-start position setpoints; confirmed
-    HOLD = "hold"  # the profile's hold mode (PX4 AUTO_LOITER, ArduPilot BRAKE)
-    LAND = "land"  # PX4 NAV_LAND, ArduPilot LAND mode
-    DISARM = "disarm"
-
-
-@dataclass(frozen=True, slots=True)
-class Command:
-    vehicle_id: int
-    cmd: Cmd
-    altitude_m: float = math.nan
-    names: tuple[str, ...] = ()  # READ_PARAMS: parameter ids
-
-
-@dataclass(frozen=True, slots=True)
-class CommandResult:
-    vehicle_id: int
-    cmd: Cmd
-    ok: bool
-    detail: str = ""
-    values: tuple[tuple[str, float], ...] = ()  # READ_PARAMS: (parameter id, value)
-    result: str = ""  # MAV_RESULT name of a refusal, NOT_CONFIRMED, TIMEOUT; '' when ok
-    text: str = ""  # the vehicle's STATUSTEXT that came with the refusal, if any
-
-
-@dataclass(frozen=True, slots=True)
-class Outcome:
-    exit_code: int
-    reason: str
-
-
 #: While connecting, the status names at most this many of the vehicles not heard yet.
 CONNECT_SHOW_WAITING = 4
-
-
-@dataclass(frozen=True, slots=True)
-class MissionPlan:
-    """What to fly and the rules, from the team file's `mission:` and `fly:` sections."""
-
-    duration_s: float
-    rules: SafetyRules = SafetyRules()
-    # which setpoints the vehicles will get, and so the autopilot mode they fly them in
-    # (AutopilotProfile.flies_in: position mode's in the profile's position mode)
-    control_mode: ControlMode = ControlMode.RATES
-    start: str = "auto"  # auto | in_air | takeoff
-    takeoff_altitude_m: float = 2.5
-    end_action: FlyAction = FlyAction.LAND
-    abort_action: FlyAction = FlyAction.LAND
-    link_loss_action: FlyAction = FlyAction.HOLD
-    connect_timeout_s: float = 60.0  # emulators compiling, autopilots booting (PX4 SITL 10-25 s)
-    # after CONFIGURE, before the rates and the link delay are judged (from what was measured
-    # since: not the ground station's own load while it configured the team)
-    settle_s: float = 1.0
-    takeoff_timeout_s: float = 60.0
-    takeoff_tolerance_m: float = 0.3  # height above the takeoff point vs takeoff_altitude_m
-    arm_timeout_s: float = 60.0  # ARM phase: every ground vehicle armed and taking off
-    arm_retry_s: float = 1.0  # between two arming attempts of one vehicle
-    mode_timeout_s: float = 3.0  # a mode change shows in HEARTBEAT (PX4: 1 Hz) within this
-    formation_check_s: float = 10.0  # from this formation time on, the error rule applies
-    formation_max_error_m: float = 1.0
-    formation_max_fraction: float = 0.5
-    prime_s: float = 1.5  # setpoints stream before the offboard switch: good practice, not a
-    # PX4 requirement (PX4 only needs one setpoint younger than COM_OF_LOSS_T); it also proves
-    # the stream reaches every vehicle before any of them acts on it
-    hold_timeout_s: float = 10.0  # HOLD phase: vehicles reach their hold mode within this
-    origin_timeout_s: float = 10.0  # PREFLIGHT: every vehicle's origin (its frame tie) by then
-    land_timeout_s: float = 120.0
-    disarm_after_landed_s: float = 3.0  # PX4 auto-disarms after COM_DISARM_LAND (2 s)
-    command_attempts: int = 3  # per stop command (each has its own ack retries)
-    command_retry_s: float = 1.0  # between two attempts of a refused stop command
-    go_to_start: GoToStartPlan | None = None  # None: no go-to-start phase
-
-
-@dataclass(slots=True)
-class _Stop:
-    """Progress of one vehicle while STOPPING."""
-
-    action: FlyAction | None  # None: lost, nothing to do
-    attempts: int = 0
-    last_attempt_s: float = -math.inf
-    acked: bool = False
-    done: bool = False
-    landed_since_s: float | None = None
-    failure: str = ""
-
-
-@dataclass(slots=True)
-class _Arm:
-    """Progress of one ground vehicle through ARM (mode, readiness, attempts) and takeoff."""
-
-    mode_sent: bool = False
-    attempts: int = 0
-    last_attempt_s: float = -math.inf
-    last_result: str = ""
-    armed: bool = False
-    takeoff_sent: bool = False
-    z0_m: float = math.nan  # ENU z (its own frame) where it took off
-    waiting_noted: bool = False
-
-
-@dataclass(slots=True)
-class _Vehicle:
-    status: VehicleStatus | None = None
-    pending: Cmd | None = None
-    lost: bool = False
-    offboard_sent: bool = False
-    offboard_acked: bool = False
-    seen_offboard: bool = False
-    took_off: bool = False
-    stop: _Stop | None = None
-    profile: AutopilotProfile | None = None  # fixed at preflight
-    params: dict[str, float] | None = None  # READ_PARAMS result
-    params_asked: bool = False
-    version: int | None = None  # AUTOPILOT_VERSION.flight_sw_version (IDENTIFY result)
-    version_asked: bool = False
-    heard: bool = False  # a message has arrived since the flight started (CONNECT)
-    quiet_left: bool = False  # PREFLIGHT commanded its arm mode to leave a quiet mode
-    arm: _Arm | None = None  # vehicles that take off
-    goto: _Goto | None = None  # vehicles that go to their start position
-
-
-@dataclass(slots=True)
-class _Goto:
-    """One vehicle's part in GOTO: position setpoints stream to it until `released`."""
-
-    mode_sent: bool = False
-    seen_position_mode: bool = False
-    hold_acked: bool = False
-    released: bool = False  # acknowledged its hold/stop and left its position mode
 
 
 @dataclass(slots=True)
@@ -262,7 +121,7 @@ class MissionMachine:
     outcome: Outcome | None = None
     notes: list[str] = field(default_factory=list)  # human-readable events, newest last
     note_levels: list[NoteLevel] = field(default_factory=list)  # notes[k]'s level
-    _v: dict[int, _Vehicle] = field(default_factory=dict)
+    _v: dict[int, VehicleProgress] = field(default_factory=dict)
     _phase_since_s: float | None = None
     _configured_s: float | None = None  # PREFLIGHT: when the CONFIGURE commands had all ended
     _now_s: float = 0.0
@@ -279,7 +138,7 @@ class MissionMachine:
     _delays: SustainedDelays = field(default_factory=SustainedDelays)
 
     def __post_init__(self) -> None:
-        self._v = {vid: _Vehicle() for vid in self.vehicle_ids}
+        self._v = {vid: VehicleProgress() for vid in self.vehicle_ids}
 
     # --- queries ---------------------------------------------------------------------------------
 
@@ -575,7 +434,7 @@ class MissionMachine:
         if ground:
             self._arming = tuple(ground)
             for vid in ground:
-                self._v[vid].arm = _Arm()
+                self._v[vid].arm = ArmProgress()
             self._enter(Phase.ARM)
             return self._drive()
         return self._to_goto()
@@ -684,7 +543,7 @@ class MissionMachine:
         positions = {vid: self._v[vid].status.position_enu_m for vid in flown}
         self._goto = GoToStart.begin(plan, self._now_s, positions)
         for vid in flown:
-            self._v[vid].goto = _Goto()
+            self._v[vid].goto = GotoProgress()
         self._enter(Phase.GOTO)
         for vid in flown:
             self._note(going_line(self._v[vid].status.name, plan.start_of(vid), positions[vid]))
@@ -925,11 +784,11 @@ class MissionMachine:
         for vid, v in self._v.items():
             if vid in lost:
                 v.lost = True
-                v.stop = _Stop(None, done=True)
+                v.stop = StopProgress(None, done=True)
             elif v.status is None or v.status.link != "alive":
-                v.stop = _Stop(None, done=True, failure="no link")
+                v.stop = StopProgress(None, done=True, failure="no link")
             else:
-                v.stop = _Stop(action)
+                v.stop = StopProgress(action)
         self._stop_reason = Outcome(code, reason)
         self._stopping_since_s = self._now_s
         self._note(f"stopping ({action}): {reason}", NoteLevel.INFO if end else NoteLevel.WARNING)
