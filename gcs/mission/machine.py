@@ -61,6 +61,14 @@ from gcs.link.enums import LandedState
 from gcs.mission.autopilots import PX4, AutopilotProfile, ModeSpec, profile_for
 from gcs.mission.goto import GotoResult, GoToStart, Vec3, crossing_pairs, going_line
 from gcs.mission.landed import quiet_mode_cause, with_quiet_causes
+from gcs.mission.lines import (
+    CONNECT_SHOW_WAITING,
+    connect_failure_line,
+    connect_progress_line,
+    connect_waiting_label,
+    not_armed_line,
+    takeoff_line,
+)
 from gcs.mission.plan import (
     EXIT_ABORTED,
     EXIT_INTERRUPTED,
@@ -104,10 +112,6 @@ __all__ = [
 # PX4's names, kept for callers; the machine reads each vehicle's own from its profile.
 HOLD_MODE = PX4.hold.name
 OFFBOARD_MODE = PX4.offboard.name
-
-
-#: While connecting, the status names at most this many of the vehicles not heard yet.
-CONNECT_SHOW_WAITING = 4
 
 
 @dataclass(slots=True)
@@ -377,15 +381,8 @@ class MissionMachine:
         heard = [vid for vid, v in self._v.items() if v.heard]
         waiting = [connect_waiting_label(vid, v.status) for vid, v in self._v.items()
                    if not v.heard]
-        text = (f"connecting {self._elapsed():.0f}/{self.plan.connect_timeout_s:g} s: heard "
-                f"{len(heard)}/{len(self._v)}")
-        if heard:
-            text += f" ({', '.join(str(vid) for vid in heard)})"
-        if waiting:
-            shown = waiting[:CONNECT_SHOW_WAITING]
-            more = len(waiting) - len(shown)
-            text += "; waiting for " + ", ".join(shown) + (f" and {more} more" if more else "")
-        return text
+        return connect_progress_line(self._elapsed(), self.plan.connect_timeout_s, heard,
+                                     len(self._v), waiting)
 
     def _preflight(self) -> list[Command]:
         if self._configured_s is None:
@@ -635,7 +632,8 @@ class MissionMachine:
             self._enter(Phase.TAKEOFF)
             return out
         if self._elapsed() > self.plan.arm_timeout_s:
-            lines = [self._not_armed_line(vid) for vid in self._arming
+            lines = [not_armed_line(vid, self._v[vid].status, self._v[vid].arm)
+                     for vid in self._arming
                      if not self._v[vid].arm.armed]
             if lines:
                 self._begin_stop([Problem(None, "\n  ".join(
@@ -643,19 +641,6 @@ class MissionMachine:
                      "(fly.arm_timeout_s):", *lines]))], EXIT_ABORTED)
                 return self._drive()
         return out
-
-    def _not_armed_line(self, vid: int) -> str:
-        v = self._v[vid]
-        a, s = v.arm, v.status
-        name = s.name if s is not None else f"vehicle {vid}"
-        attempts = a.attempts if a is not None else 0
-        last = f", last answer {a.last_result}" if a is not None and a.last_result else ""
-        ready = (", pre-arm checks failing (SYS_STATUS)"
-                 if s is not None and s.prearm_ok is False else "")
-        text = s.status_text if s is not None and s.status_text else "none"
-        mode = s.mode if s is not None and s.mode else "?"
-        return (f"{name}: not armed after {attempts} attempts{last}{ready}, mode {mode}; "
-                f"latest STATUSTEXT: {text}")
 
     def _takeoff(self) -> list[Command]:
         if not self._idle():
@@ -665,7 +650,8 @@ class MissionMachine:
         if not waiting:
             return self._to_goto()
         if self._elapsed() > self.plan.takeoff_timeout_s:
-            lines = [self._takeoff_line(vid) for vid in waiting]
+            lines = [takeoff_line(vid, self._v[vid].status, self._height_m(vid),
+                                  self.profile(vid).takeoff_done_modes) for vid in waiting]
             self._begin_stop([Problem(None, "\n  ".join(
                 [f"vehicles {waiting} did not complete the takeoff to {alt:g} m (tolerance "
                  f"{tol:g} m) within {self.plan.takeoff_timeout_s:g} s:", *lines]))],
@@ -690,18 +676,6 @@ class MissionMachine:
         return (s is not None and s.landed_state == LandedState.IN_AIR
                 and s.mode in self.profile(vid).takeoff_done_modes
                 and self._height_m(vid) >= min_height_m)
-
-    def _takeoff_line(self, vid: int) -> str:
-        s = self._v[vid].status
-        if s is None:
-            return f"vehicle {vid}: no status"
-        try:
-            landed = LandedState(s.landed_state).name
-        except ValueError:
-            landed = str(s.landed_state)
-        done = " or ".join(sorted(self.profile(vid).takeoff_done_modes))
-        return (f"{s.name}: {self._height_m(vid):.2f} m above its takeoff point (home), "
-                f"landed state {landed} (need IN_AIR), mode {s.mode or '?'} (need {done})")
 
     def _prime(self) -> list[Command]:
         problems = self._flight_problems()
@@ -843,26 +817,3 @@ class MissionMachine:
         self.outcome = outcome
         self._note(f"done: exit {outcome.exit_code}: {outcome.reason}")
         self._enter(Phase.DONE)
-
-
-def connect_waiting_label(vehicle_id: int, status: VehicleStatus | None) -> str:
-    """'vehicle 2 (sysid 2) on udp 127.0.0.1:14541' (plus a foreign sysid heard there)."""
-    if status is None:
-        return f"vehicle {vehicle_id}"
-    text = f"{status.name} on {status.listen}" if status.listen else status.name
-    if status.sysid_mismatch is not None:
-        text += f" [heard sysid {status.sysid_mismatch} there instead]"
-    return text
-
-
-def connect_failure_line(vehicle_id: int, status: VehicleStatus | None, heard: bool) -> str:
-    """One line per vehicle never heard: where the ground station listened and what it got."""
-    if status is None:
-        return f"vehicle {vehicle_id}: no status"
-    where = f" on {status.listen}" if status.listen else ""
-    if status.sysid_mismatch is not None:
-        return (f"{status.name}: only sysid {status.sysid_mismatch} was heard{where}; "
-                f"check the team file's sysid and link for this vehicle")
-    if heard:
-        return f"{status.name}: heard{where}, then silent"
-    return f"{status.name}: nothing heard{where}; is it running, and does it send there?"
