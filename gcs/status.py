@@ -13,7 +13,7 @@ import sys
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, TextIO
 
-from gcs.mission.machine import Phase
+from gcs.mission.plan import Phase
 
 if TYPE_CHECKING:
     from gcs.fly.flight import Flight

@@ -18,7 +18,8 @@ from gcs.link import (
 )
 from gcs.link.enums import MSG_ID, MavCmd, MavModeFlag
 from gcs.mission.autopilots import AutopilotProfile, ModeSpec, version_text
-from gcs.mission.machine import Cmd, Command, CommandResult, MissionMachine
+from gcs.mission.machine import MissionMachine
+from gcs.mission.plan import Cmd, Command, CommandResult
 
 logger = logging.getLogger("gcs.fly")
 

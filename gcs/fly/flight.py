@@ -64,7 +64,8 @@ from gcs.link import (
 )
 from gcs.link.config import shared_ports
 from gcs.link.enums import MSG_ID, MavCmd
-from gcs.mission.machine import EXIT_ABORTED, MissionMachine, Outcome, Phase
+from gcs.mission.machine import MissionMachine
+from gcs.mission.plan import EXIT_ABORTED, Outcome, Phase
 from vehicle_emulator.latecompile import watch_late_compiles
 
 logger = logging.getLogger("gcs.fly")

@@ -26,7 +26,8 @@ from gcs.fly.stats import (
     round_trip_report,
 )
 from gcs.link import TlogWriter, VehicleProxy
-from gcs.mission.machine import MissionMachine, NoteLevel, Outcome
+from gcs.mission.machine import MissionMachine
+from gcs.mission.plan import NoteLevel, Outcome
 from gcs.report import build_report, write_report
 
 logger = logging.getLogger("gcs.fly")

@@ -24,7 +24,8 @@ from gcs.fly.measure import (
 from gcs.fly.origins import TeamTies
 from gcs.link import SetpointError, VehicleProxy
 from gcs.link.setpoints import TeamSetpoints
-from gcs.mission.machine import MissionMachine, Phase
+from gcs.mission.machine import MissionMachine
+from gcs.mission.plan import Phase
 
 
 class Setpoints:

@@ -41,7 +41,7 @@ from gcs.mission.cascade import (
     verdict,
 )
 from gcs.mission.goto import GoToStartPlan
-from gcs.mission.machine import MissionPlan, Outcome
+from gcs.mission.plan import MissionPlan, Outcome
 from gcs.mission.safety import SafetyRules
 from gcs.mission.stability import (
     MIN_DECAY_PER_S,

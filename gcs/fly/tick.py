@@ -48,7 +48,8 @@ from gcs.fly.telemetry import StatusSlices, team_sample, vehicle_statuses
 from gcs.fly.telemetry import warm_up as sample_warm_up
 from gcs.link import HotTable, VehicleProxy, fastpath
 from gcs.metrics import formation_error, formation_error_m
-from gcs.mission.machine import MissionMachine, Phase
+from gcs.mission.machine import MissionMachine
+from gcs.mission.plan import Phase
 
 logger = logging.getLogger("gcs.fly")
 

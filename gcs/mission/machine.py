@@ -48,207 +48,71 @@ while `law_active`. Rules (docs/gcs.md):
   STOPPING: the lost vehicles are left to their failsafe, the others get `abort_action` (or
   `link_loss_action` when the cause is a lost link), and the outcome is non-zero with the reason.
 * A second abort request while STOPPING ends at once (the autopilots' failsafes take over).
+
+`MissionMachine` alone owns the state; it takes the inputs, answers the queries and steps the
+CONNECT, PRIME and FORMATION phases itself. The other phases' steps are functions of the machine,
+one module per stage: gcs.mission.preflight (PREFLIGHT), gcs.mission.takeoff (ARM, TAKEOFF),
+gcs.mission.start (GOTO, HOLD), gcs.mission.stopping (STOPPING, DONE). Its interface types are in
+gcs.mission.plan, its per-vehicle records in gcs.mission.progress, its longer lines in
+gcs.mission.lines; this module re-exports the names callers import from it.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from enum import Enum
 
-from gcs.config.modes import ControlMode, FlyAction
-from gcs.link.enums import LandedState
 from gcs.mission.autopilots import PX4, AutopilotProfile, ModeSpec, profile_for
-from gcs.mission.goto import (
-    GotoResult,
-    GoToStart,
-    GoToStartPlan,
-    Vec3,
-    crossing_pairs,
-    going_line,
+from gcs.mission.goto import GotoResult, GoToStart, Vec3
+from gcs.mission.landed import quiet_mode_cause
+from gcs.mission.lines import (
+    CONNECT_SHOW_WAITING,
+    connect_failure_line,
+    connect_progress_line,
+    connect_waiting_label,
 )
-from gcs.mission.landed import quiet_mode_cause, with_quiet_causes
-from gcs.mission.safety import (
-    Problem,
-    SafetyRules,
-    SustainedDelays,
-    VehicleStatus,
-    flight_problems,
-    preflight_problems,
+from gcs.mission.plan import (
+    EXIT_ABORTED,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    Cmd,
+    Command,
+    CommandResult,
+    MissionPlan,
+    NoteLevel,
+    Outcome,
+    Phase,
 )
+from gcs.mission.preflight import preflight
+from gcs.mission.progress import VehicleProgress
+from gcs.mission.safety import Problem, SustainedDelays, VehicleStatus, flight_problems
+from gcs.mission.start import go_to_start, hold, update_goto_vehicle
+from gcs.mission.stopping import begin_stop, finish, stopping
+from gcs.mission.takeoff import arm_and_take_off, takeoff
 
-EXIT_OK = 0
-EXIT_ABORTED = 1
-EXIT_INTERRUPTED = 130
+__all__ = [
+    "CONNECT_SHOW_WAITING",
+    "EXIT_ABORTED",
+    "EXIT_INTERRUPTED",
+    "EXIT_OK",
+    "HOLD_MODE",
+    "OFFBOARD_MODE",
+    "Cmd",
+    "Command",
+    "CommandResult",
+    "MissionMachine",
+    "MissionPlan",
+    "NoteLevel",
+    "Outcome",
+    "Phase",
+    "connect_failure_line",
+    "connect_waiting_label",
+]
 
 # PX4's names, kept for callers; the machine reads each vehicle's own from its profile.
 HOLD_MODE = PX4.hold.name
 OFFBOARD_MODE = PX4.offboard.name
-
-
-class Phase(Enum):
-    CONNECT = "connect"
-    PREFLIGHT = "preflight"
-    ARM = "arm"
-    TAKEOFF = "takeoff"
-    GOTO = "goto"  # fly to the team file's start positions (position setpoints)
-    HOLD = "hold"  # only when needed: airborne vehicles that would act on priming setpoints
-    PRIME = "prime"
-    FORMATION = "formation"
-    STOPPING = "stopping"
-    DONE = "done"
-
-
-class NoteLevel(Enum):
-    """How much a note matters: INFO for the flight's normal course, its normal end included;
-    WARNING for an anomaly (a stop before the formation's end, start paths that cross)."""
-
-    INFO = "info"
-    WARNING = "warning"
-
-
-class Cmd(Enum):
-    """What the app must do to one vehicle (it maps these to proxy calls)."""
-
-    CONFIGURE = "configure"  # telemetry rates (SET_MESSAGE_INTERVAL)
-    READ_PARAMS = "read_params"  # the profile's required parameters (`names`), values in result
-    IDENTIFY = "identify"  # AUTOPILOT_VERSION; result values (("flight_sw_version", word),)
-    ARM_MODE = "arm_mode"  # the profile's arm_mode (PX4 Hold, ArduPilot GUIDED), confirmed
-    ARM = "arm"  # confirmed when HEARTBEAT shows armed
-    TAKEOFF = "takeoff"  # altitude_m above home
-    OFFBOARD = "offboard"  # the profile's offboard mode (PX4 OFFBOARD, ArduPilot GUIDED_NOGPS;
-    # in position mode its position mode: ArduPilot GUIDED), MissionMachine.offboard_mode
-    POSITION_MODE = "position_mode"  # the profile's position mode (PX4 OFFBOARD, ArduPilot
-    # GUIDED), for the go-to-start position setpoints; confirmed
-    HOLD = "hold"  # the profile's hold mode (PX4 AUTO_LOITER, ArduPilot BRAKE)
-    LAND = "land"  # PX4 NAV_LAND, ArduPilot LAND mode
-    DISARM = "disarm"
-
-
-@dataclass(frozen=True, slots=True)
-class Command:
-    vehicle_id: int
-    cmd: Cmd
-    altitude_m: float = math.nan
-    names: tuple[str, ...] = ()  # READ_PARAMS: parameter ids
-
-
-@dataclass(frozen=True, slots=True)
-class CommandResult:
-    vehicle_id: int
-    cmd: Cmd
-    ok: bool
-    detail: str = ""
-    values: tuple[tuple[str, float], ...] = ()  # READ_PARAMS: (parameter id, value)
-    result: str = ""  # MAV_RESULT name of a refusal, NOT_CONFIRMED, TIMEOUT; '' when ok
-    text: str = ""  # the vehicle's STATUSTEXT that came with the refusal, if any
-
-
-@dataclass(frozen=True, slots=True)
-class Outcome:
-    exit_code: int
-    reason: str
-
-
-#: While connecting, the status names at most this many of the vehicles not heard yet.
-CONNECT_SHOW_WAITING = 4
-
-
-@dataclass(frozen=True, slots=True)
-class MissionPlan:
-    """What to fly and the rules, from the team file's `mission:` and `fly:` sections."""
-
-    duration_s: float
-    rules: SafetyRules = SafetyRules()
-    # which setpoints the vehicles will get, and so the autopilot mode they fly them in
-    # (AutopilotProfile.flies_in: position mode's in the profile's position mode)
-    control_mode: ControlMode = ControlMode.RATES
-    start: str = "auto"  # auto | in_air | takeoff
-    takeoff_altitude_m: float = 2.5
-    end_action: FlyAction = FlyAction.LAND
-    abort_action: FlyAction = FlyAction.LAND
-    link_loss_action: FlyAction = FlyAction.HOLD
-    connect_timeout_s: float = 60.0  # emulators compiling, autopilots booting (PX4 SITL 10-25 s)
-    # after CONFIGURE, before the rates and the link delay are judged (from what was measured
-    # since: not the ground station's own load while it configured the team)
-    settle_s: float = 1.0
-    takeoff_timeout_s: float = 60.0
-    takeoff_tolerance_m: float = 0.3  # height above the takeoff point vs takeoff_altitude_m
-    arm_timeout_s: float = 60.0  # ARM phase: every ground vehicle armed and taking off
-    arm_retry_s: float = 1.0  # between two arming attempts of one vehicle
-    mode_timeout_s: float = 3.0  # a mode change shows in HEARTBEAT (PX4: 1 Hz) within this
-    formation_check_s: float = 10.0  # from this formation time on, the error rule applies
-    formation_max_error_m: float = 1.0
-    formation_max_fraction: float = 0.5
-    prime_s: float = 1.5  # setpoints stream before the offboard switch: good practice, not a
-    # PX4 requirement (PX4 only needs one setpoint younger than COM_OF_LOSS_T); it also proves
-    # the stream reaches every vehicle before any of them acts on it
-    hold_timeout_s: float = 10.0  # HOLD phase: vehicles reach their hold mode within this
-    origin_timeout_s: float = 10.0  # PREFLIGHT: every vehicle's origin (its frame tie) by then
-    land_timeout_s: float = 120.0
-    disarm_after_landed_s: float = 3.0  # PX4 auto-disarms after COM_DISARM_LAND (2 s)
-    command_attempts: int = 3  # per stop command (each has its own ack retries)
-    command_retry_s: float = 1.0  # between two attempts of a refused stop command
-    go_to_start: GoToStartPlan | None = None  # None: no go-to-start phase
-
-
-@dataclass(slots=True)
-class _Stop:
-    """Progress of one vehicle while STOPPING."""
-
-    action: FlyAction | None  # None: lost, nothing to do
-    attempts: int = 0
-    last_attempt_s: float = -math.inf
-    acked: bool = False
-    done: bool = False
-    landed_since_s: float | None = None
-    failure: str = ""
-
-
-@dataclass(slots=True)
-class _Arm:
-    """Progress of one ground vehicle through ARM (mode, readiness, attempts) and takeoff."""
-
-    mode_sent: bool = False
-    attempts: int = 0
-    last_attempt_s: float = -math.inf
-    last_result: str = ""
-    armed: bool = False
-    takeoff_sent: bool = False
-    z0_m: float = math.nan  # ENU z (its own frame) where it took off
-    waiting_noted: bool = False
-
-
-@dataclass(slots=True)
-class _Vehicle:
-    status: VehicleStatus | None = None
-    pending: Cmd | None = None
-    lost: bool = False
-    offboard_sent: bool = False
-    offboard_acked: bool = False
-    seen_offboard: bool = False
-    took_off: bool = False
-    stop: _Stop | None = None
-    profile: AutopilotProfile | None = None  # fixed at preflight
-    params: dict[str, float] | None = None  # READ_PARAMS result
-    params_asked: bool = False
-    version: int | None = None  # AUTOPILOT_VERSION.flight_sw_version (IDENTIFY result)
-    version_asked: bool = False
-    heard: bool = False  # a message has arrived since the flight started (CONNECT)
-    quiet_left: bool = False  # PREFLIGHT commanded its arm mode to leave a quiet mode
-    arm: _Arm | None = None  # vehicles that take off
-    goto: _Goto | None = None  # vehicles that go to their start position
-
-
-@dataclass(slots=True)
-class _Goto:
-    """One vehicle's part in GOTO: position setpoints stream to it until `released`."""
-
-    mode_sent: bool = False
-    seen_position_mode: bool = False
-    hold_acked: bool = False
-    released: bool = False  # acknowledged its hold/stop and left its position mode
 
 
 @dataclass(slots=True)
@@ -262,7 +126,7 @@ class MissionMachine:
     outcome: Outcome | None = None
     notes: list[str] = field(default_factory=list)  # human-readable events, newest last
     note_levels: list[NoteLevel] = field(default_factory=list)  # notes[k]'s level
-    _v: dict[int, _Vehicle] = field(default_factory=dict)
+    _v: dict[int, VehicleProgress] = field(default_factory=dict)
     _phase_since_s: float | None = None
     _configured_s: float | None = None  # PREFLIGHT: when the CONFIGURE commands had all ended
     _now_s: float = 0.0
@@ -279,7 +143,7 @@ class MissionMachine:
     _delays: SustainedDelays = field(default_factory=SustainedDelays)
 
     def __post_init__(self) -> None:
-        self._v = {vid: _Vehicle() for vid in self.vehicle_ids}
+        self._v = {vid: VehicleProgress() for vid in self.vehicle_ids}
 
     # --- queries ---------------------------------------------------------------------------------
 
@@ -382,16 +246,14 @@ class MissionMachine:
                 return self._drive()  # not ready yet: tried again after arm_retry_s
         if result.cmd in (Cmd.HOLD, Cmd.LAND) and result.ok and v.goto is not None:
             v.goto.hold_acked = True
-            self._update_goto_vehicle(result.vehicle_id)
+            update_goto_vehicle(self, result.vehicle_id)
         if result.cmd is Cmd.OFFBOARD:
             v.offboard_acked = result.ok
             if not result.ok and self.phase is Phase.FORMATION:
                 name = self.offboard_mode(result.vehicle_id).name
-                self._begin_stop(
-                    [Problem(result.vehicle_id, f"vehicle {result.vehicle_id}: {name} refused: "
-                                                f"{result.detail}")],
-                    EXIT_ABORTED,
-                )
+                begin_stop(self, [Problem(result.vehicle_id, f"vehicle {result.vehicle_id}: {name} "
+                                                             f"refused: {result.detail}")],
+                           EXIT_ABORTED)
         elif self.phase is Phase.STOPPING and v.stop is not None and result.cmd in (
             Cmd.LAND, Cmd.HOLD
         ):
@@ -404,12 +266,10 @@ class MissionMachine:
                                               Phase.TAKEOFF, Phase.GOTO, Phase.HOLD):
             cause = (quiet_mode_cause(v.profile, v.status) if result.cmd is Cmd.ARM_MODE
                      and v.profile is not None and v.status is not None else None)
-            self._begin_stop(
-                [Problem(result.vehicle_id, (f"{cause}; " if cause else "")
-                         + f"vehicle {result.vehicle_id}: {result.cmd.value} failed: "
-                           f"{result.detail}")],
-                EXIT_ABORTED,
-            )
+            begin_stop(self, [Problem(result.vehicle_id, (f"{cause}; " if cause else "")
+                                      + f"vehicle {result.vehicle_id}: {result.cmd.value} "
+                                        f"failed: {result.detail}")],
+                       EXIT_ABORTED)
         return self._drive()
 
     def on_tick(self, now_s: float, team: Sequence[VehicleStatus],
@@ -427,35 +287,26 @@ class MissionMachine:
             if v.offboard_sent and self._in_offboard(s.vehicle_id):
                 v.seen_offboard = True
             if v.goto is not None:
-                self._update_goto_vehicle(s.vehicle_id)
+                update_goto_vehicle(self, s.vehicle_id)
         if self._abort:
             reasons = [r for r, _ in self._abort]
             code = max(c for _, c in self._abort)
             self._abort.clear()
             if self.phase is Phase.STOPPING:
                 if self._interrupts:
-                    self._finish(Outcome(code, f"{'; '.join(reasons)} while stopping; the "
-                                               "autopilots' failsafes take over"))
+                    finish(self, Outcome(code, f"{'; '.join(reasons)} while stopping; the "
+                                                "autopilots' failsafes take over"))
                     return []
             elif self.phase is not Phase.DONE:
-                self._begin_stop([Problem(None, r) for r in reasons], code)
+                begin_stop(self, [Problem(None, r) for r in reasons], code)
         return self._drive()
 
     # --- the sequence ----------------------------------------------------------------------------
 
     def _drive(self) -> list[Command]:
-        handler = {
-            Phase.CONNECT: self._connect,
-            Phase.PREFLIGHT: self._preflight,
-            Phase.ARM: self._arm_and_take_off,
-            Phase.TAKEOFF: self._takeoff,
-            Phase.GOTO: self._go_to_start,
-            Phase.HOLD: self._hold,
-            Phase.PRIME: self._prime,
-            Phase.FORMATION: self._formation,
-            Phase.STOPPING: self._stopping,
-        }.get(self.phase)
-        return handler() if handler is not None else []
+        """Run the current phase's step (_PHASES); DONE has none."""
+        step = _PHASES.get(self.phase)
+        return step(self) if step is not None else []
 
     def _elapsed(self) -> float:
         since = self._phase_since_s if self._phase_since_s is not None else self._now_s
@@ -507,7 +358,7 @@ class MissionMachine:
                        if v.status is None or v.status.link != "alive"]
             lines = [connect_failure_line(vid, self._v[vid].status, self._v[vid].heard)
                      for vid in missing]
-            self._finish(Outcome(EXIT_ABORTED, (
+            finish(self, Outcome(EXIT_ABORTED, (
                 f"no link to {len(missing)} of {len(self._v)} vehicles within "
                 f"{self.plan.connect_timeout_s:g} s (nothing was commanded):\n"
                 + "\n".join(f"  {line}" for line in lines))))
@@ -518,336 +369,15 @@ class MissionMachine:
         heard = [vid for vid, v in self._v.items() if v.heard]
         waiting = [connect_waiting_label(vid, v.status) for vid, v in self._v.items()
                    if not v.heard]
-        text = (f"connecting {self._elapsed():.0f}/{self.plan.connect_timeout_s:g} s: heard "
-                f"{len(heard)}/{len(self._v)}")
-        if heard:
-            text += f" ({', '.join(str(vid) for vid in heard)})"
-        if waiting:
-            shown = waiting[:CONNECT_SHOW_WAITING]
-            more = len(waiting) - len(shown)
-            text += "; waiting for " + ", ".join(shown) + (f" and {more} more" if more else "")
-        return text
+        return connect_progress_line(self._elapsed(), self.plan.connect_timeout_s, heard,
+                                     len(self._v), waiting)
 
-    def _preflight(self) -> list[Command]:
-        if self._configured_s is None:
-            if not self._idle():
-                return []
-            self._configured_s = self._now_s
-        if not self._idle() or self._now_s - self._configured_s < self.plan.settle_s:
-            return []
-        team = self._statuses()
-        reads = self._read_params(team) or self._leave_quiet_modes(team)
-        if reads:
-            return reads
-        if self._elapsed() < self.plan.arm_timeout_s and any(
-                v.quiet_left and quiet_mode_cause(v.profile, v.status) is not None
-                for v in self._v.values()):
-            return []  # its arm mode was confirmed; its status shows it at a later tick
-        if any(s.frame_pending for s in team if s.link == "alive") and \
-                self._elapsed() < self.plan.origin_timeout_s:
-            return []  # the origins are asked for by the composition root; their answers wait
-        problems = with_quiet_causes(
-            preflight_problems(team, self.plan.rules, self._configured_s), team,
-            {vid: v.profile for vid, v in self._v.items() if v.profile is not None})
-        for s in team:
-            profile = self._v[s.vehicle_id].profile
-            if profile is not None:
-                v = self._v[s.vehicle_id]
-                problems += [Problem(s.vehicle_id, text) for text in profile.preflight_problems(
-                    s.name, self.plan.control_mode, v.params, v.version)]
-        ground = [s.vehicle_id for s in team if s.landed is True]
-        airborne = [s.vehicle_id for s in team if s.in_air]
-        if self.plan.start == "in_air" and ground:
-            problems.append(Problem(None, f"start: in_air, but vehicles {ground} are on the "
-                                          "ground"))
-        if self.plan.start == "takeoff" and airborne:
-            problems.append(Problem(None, f"start: takeoff, but vehicles {airborne} are "
-                                          "airborne"))
-        for s in team:
-            if s.in_air and not s.armed:
-                problems.append(Problem(s.vehicle_id, f"{s.name}: in the air but not armed"))
-        if problems and self._not_ready_yet(problems):
-            return []
-        if problems:
-            self._begin_stop(problems, EXIT_ABORTED)
-            return self._drive()
-        self._note("preflight checks passed")
-        if ground:
-            self._arming = tuple(ground)
-            for vid in ground:
-                self._v[vid].arm = _Arm()
-            self._enter(Phase.ARM)
-            return self._drive()
-        return self._to_goto()
-
-    def _not_ready_yet(self, problems: list[Problem]) -> bool:
-        """Wait (True) while every problem is a vehicle on the ground not ready yet (a stream or
-        its position estimate missing: ArduPilot sends LOCAL_POSITION_NED only once its EKF uses
-        GPS, ~41.6 s after boot), up to arm_timeout_s; then append, per vehicle, a problem
-        quoting its latest STATUSTEXT."""
-        ids = {p.vehicle_id for p in problems}
-        ground = all(p.kind == "ready" and p.vehicle_id is not None
-                     and self._v[p.vehicle_id].status is not None
-                     and self._v[p.vehicle_id].status.landed is True for p in problems)
-        if not ground:
-            return False
-        if self._elapsed() < self.plan.arm_timeout_s:
-            if not self._waiting_ready:
-                self._waiting_ready = True
-                self._note("waiting for the vehicles to be ready: "
-                           + "; ".join(p.text for p in problems))
-            return True
-        for vid in sorted(i for i in ids if i is not None):
-            s = self._v[vid].status
-            text = s.status_text if s is not None and s.status_text else "none"
-            problems.append(Problem(vid, f"{s.name if s else vid}: not ready within "
-                                         f"{self.plan.arm_timeout_s:g} s (fly.arm_timeout_s); "
-                                         f"latest STATUSTEXT: {text}"))
-        return False
-
-    def _read_params(self, team: Sequence[VehicleStatus]) -> list[Command]:
-        """Fix each live vehicle's profile from its HEARTBEAT; ask once for the parameters the
-        profile requires, then once for AUTOPILOT_VERSION where the control mode depends on it
-        (the checks run when every answer is in)."""
-        out = []
-        for s in team:
-            v = self._v[s.vehicle_id]
-            profile = profile_for(s.autopilot)
-            if profile is None or s.link != "alive":
-                continue
-            v.profile = profile
-            names = tuple(r.name for r in profile.params_for(self.plan.control_mode))
-            if names and not v.params_asked:
-                v.params_asked = True
-                out.append(self._send(s.vehicle_id, Cmd.READ_PARAMS, names=names))
-            elif profile.needs_version(self.plan.control_mode) and not v.version_asked:
-                v.version_asked = True
-                out.append(self._send(s.vehicle_id, Cmd.IDENTIFY))
-        return out
-
-    def _leave_quiet_modes(self, team: Sequence[VehicleStatus]) -> list[Command]:
-        """Once per vehicle on the ground, disarmed in a mode where its autopilot sends no
-        setpoint stream (gcs.mission.landed): its arm mode, before the streams are judged."""
-        out = []
-        for s in team:
-            v = self._v[s.vehicle_id]
-            if v.profile is None or v.quiet_left or s.link != "alive":
-                continue
-            cause = quiet_mode_cause(v.profile, s)
-            if cause is not None:
-                v.quiet_left = True
-                self._note(f"{cause}: commanding {v.profile.arm_mode.name} first")
-                out.append(self._send(s.vehicle_id, Cmd.ARM_MODE))
-        return out
-
-    def _to_prime(self) -> list[Command]:
-        """PRIME, after switching to hold the airborne vehicles that would act on the priming
-        setpoints at once (profile.hold_before_prime: ArduPilot in GUIDED or GUIDED_NOGPS)."""
-        held = []
-        for vid, v in self._v.items():
-            s, profile = v.status, self.profile(vid)
-            if s is not None and s.in_air and (
-                    (profile.hold_before_prime and s.mode in profile.setpoint_modes)
-                    or (v.goto is not None and not v.goto.released)):
-                held.append(vid)
-        if not held:
-            self._enter(Phase.PRIME)
-            return []
-        self._held = tuple(held)
-        self._enter(Phase.HOLD)
-        return [self._send(vid, Cmd.HOLD) for vid in held]
-
-    def _hold(self) -> list[Command]:
-        if not self._idle():
-            return []
-        waiting = [vid for vid in self._held
-                   if not (self._v[vid].status is not None
-                           and self._v[vid].status.mode == self.profile(vid).hold.name)]
-        if not waiting and not self.position_targets:
-            self._enter(Phase.PRIME)
-        elif self._elapsed() > self.plan.hold_timeout_s:
-            names = ", ".join(f"{vid} ({self.profile(vid).hold.name})" for vid in waiting)
-            self._begin_stop([Problem(None, f"vehicles {names} did not report their hold mode "
-                                            f"within {self.plan.hold_timeout_s:g} s")],
-                             EXIT_ABORTED)
-            return self._drive()
-        return []
-
-    # --- go to start --------------------------------------------------------------------------
-
-    def _to_goto(self) -> list[Command]:
-        """GOTO for the vehicles the plan names (module docstring), else PRIME (via HOLD)."""
-        plan = self.plan.go_to_start
-        flown = plan.flown(self._arming, self.vehicle_ids) if plan is not None else ()
-        if not flown:
-            return self._to_prime()
-        positions = {vid: self._v[vid].status.position_enu_m for vid in flown}
-        self._goto = GoToStart.begin(plan, self._now_s, positions)
-        for vid in flown:
-            self._v[vid].goto = _Goto()
-        self._enter(Phase.GOTO)
-        for vid in flown:
-            self._note(going_line(self._v[vid].status.name, plan.start_of(vid), positions[vid]))
-        starts = {vid: plan.start_of(vid) for vid in flown}
-        for i, j, d in crossing_pairs(positions, starts, plan.separation_m):
-            self._note(f"warning: vehicles {i} and {j} start within {plan.separation_m:g} m of "
-                       f"one altitude and their horizontal legs come {d:.2f} m apart",
-                       NoteLevel.WARNING)
-        return self._drive()
-
-    def _update_goto_vehicle(self, vid: int) -> None:
-        """Track a go-to-start vehicle's mode: seen in its position mode; released once it has
-        acknowledged its hold/stop command and reports another mode."""
-        v = self._v[vid]
-        g, s = v.goto, v.status
-        if g is None or s is None:
-            return
-        in_mode = s.mode == self.profile(vid).position_mode.name
-        g.seen_position_mode = g.seen_position_mode or in_mode
-        if g.hold_acked and not in_mode:
-            g.released = True
-
-    def _go_to_start(self) -> list[Command]:
-        g, plan = self._goto, self.plan.go_to_start
-        assert g is not None and plan is not None
-        flown = [vid for vid, v in self._v.items() if v.goto is not None]
-        problems = self._flight_problems()
-        for vid in flown:
-            v, s = self._v[vid], self._v[vid].status
-            name = self.profile(vid).position_mode.name
-            if v.goto.seen_position_mode and s is not None and s.link == "alive" \
-                    and s.mode != name and v.pending is None:
-                problems.append(Problem(vid, f"{s.name}: left {name} during the go-to-start "
-                                             f"(now {s.mode or '?'})", "mode"))
-        if problems:
-            self._begin_stop(problems, EXIT_ABORTED)
-            return self._drive()
-        out = []
-        for vid in flown:
-            v = self._v[vid]
-            if (v.pending is None and not v.goto.mode_sent
-                    and v.status.mode != self.profile(vid).position_mode.name
-                    and self._elapsed() >= plan.lead_s):
-                v.goto.mode_sent = True
-                out.append(self._send(vid, Cmd.POSITION_MODE))
-        positions = {vid: self._v[vid].status.position_enu_m for vid in flown}
-        velocities = {vid: self._v[vid].status.velocity_enu_mps for vid in flown}
-        in_mode = all(self._v[vid].status.mode == self.profile(vid).position_mode.name
-                      for vid in flown)
-        if in_mode and self._idle(flown) and g.update(self._now_s, positions, velocities):
-            self._note(g.settled_line())
-            return out + self._to_prime()
-        if g.timed_out(self._now_s):
-            names = {vid: self._v[vid].status.name for vid in flown}
-            lines = g.not_settled_lines(self._now_s, names, positions)
-            self._begin_stop([Problem(None, "\n  ".join(
-                [f"not every vehicle settled at its start position within "
-                 f"{plan.timeout_s:g} s (fly.go_to_start.timeout_s):", *lines]))], EXIT_ABORTED)
-            return out + self._drive()
-        return out
-
-    def _arm_and_take_off(self) -> list[Command]:
-        """Each ground vehicle on its own: its arm mode (unless it reports it), its pre-arm
-        checks (where reliable), arming (retried while "not ready yet"), then NAV_TAKEOFF at
-        once (PX4 and ArduPilot disarm an armed vehicle that does not take off within 10 s)."""
-        out: list[Command] = []
-        now = self._now_s
-        for vid in self._arming:
-            v, profile = self._v[vid], self.profile(vid)
-            a, s = v.arm, v.status
-            if a is None or s is None or v.pending is not None or a.takeoff_sent:
-                continue
-            if a.armed:
-                a.z0_m = s.position_enu_m[2]
-                a.takeoff_sent = v.took_off = True
-                out.append(self._send(vid, Cmd.TAKEOFF, self.plan.takeoff_altitude_m))
-            elif s.mode != profile.arm_mode.name and not a.mode_sent:
-                a.mode_sent = True
-                out.append(self._send(vid, Cmd.ARM_MODE))
-            elif profile.prearm_bit_reliable and s.prearm_ok is False:
-                if not a.waiting_noted:
-                    a.waiting_noted = True
-                    self._note(f"{s.name}: waiting for its pre-arm checks (SYS_STATUS)")
-            elif now - a.last_attempt_s >= self.plan.arm_retry_s:
-                a.attempts += 1
-                a.last_attempt_s = now
-                out.append(self._send(vid, Cmd.ARM))
-        if all(self._v[vid].arm.takeoff_sent for vid in self._arming) and self._idle():
-            self._enter(Phase.TAKEOFF)
-            return out
-        if self._elapsed() > self.plan.arm_timeout_s:
-            lines = [self._not_armed_line(vid) for vid in self._arming
-                     if not self._v[vid].arm.armed]
-            if lines:
-                self._begin_stop([Problem(None, "\n  ".join(
-                    [f"not every vehicle armed within {self.plan.arm_timeout_s:g} s "
-                     "(fly.arm_timeout_s):", *lines]))], EXIT_ABORTED)
-                return self._drive()
-        return out
-
-    def _not_armed_line(self, vid: int) -> str:
-        v = self._v[vid]
-        a, s = v.arm, v.status
-        name = s.name if s is not None else f"vehicle {vid}"
-        attempts = a.attempts if a is not None else 0
-        last = f", last answer {a.last_result}" if a is not None and a.last_result else ""
-        ready = (", pre-arm checks failing (SYS_STATUS)"
-                 if s is not None and s.prearm_ok is False else "")
-        text = s.status_text if s is not None and s.status_text else "none"
-        mode = s.mode if s is not None and s.mode else "?"
-        return (f"{name}: not armed after {attempts} attempts{last}{ready}, mode {mode}; "
-                f"latest STATUSTEXT: {text}")
-
-    def _takeoff(self) -> list[Command]:
-        if not self._idle():
-            return []
-        alt, tol = self.plan.takeoff_altitude_m, self.plan.takeoff_tolerance_m
-        waiting = [vid for vid in self._arming if not self._took_off(vid, alt - tol)]
-        if not waiting:
-            return self._to_goto()
-        if self._elapsed() > self.plan.takeoff_timeout_s:
-            lines = [self._takeoff_line(vid) for vid in waiting]
-            self._begin_stop([Problem(None, "\n  ".join(
-                [f"vehicles {waiting} did not complete the takeoff to {alt:g} m (tolerance "
-                 f"{tol:g} m) within {self.plan.takeoff_timeout_s:g} s:", *lines]))],
-                EXIT_ABORTED)
-            return self._drive()
-        return []
-
-    def _height_m(self, vid: int) -> float:
-        """Height above the takeoff point, as the vehicle reports it: GLOBAL_POSITION_INT
-        relative_alt (above home, which the autopilot sets where it arms; the same reference as
-        the NAV_TAKEOFF altitude), else the rise of its local z since it was armed. Never its
-        local z alone: that is relative to its EKF origin, which need not be where it took off."""
-        v = self._v[vid]
-        if v.status is None or v.arm is None:
-            return math.nan
-        if math.isfinite(v.status.height_above_home_m):
-            return v.status.height_above_home_m
-        return v.status.position_enu_m[2] - v.arm.z0_m
-
-    def _took_off(self, vid: int, min_height_m: float) -> bool:
-        s = self._v[vid].status
-        return (s is not None and s.landed_state == LandedState.IN_AIR
-                and s.mode in self.profile(vid).takeoff_done_modes
-                and self._height_m(vid) >= min_height_m)
-
-    def _takeoff_line(self, vid: int) -> str:
-        s = self._v[vid].status
-        if s is None:
-            return f"vehicle {vid}: no status"
-        try:
-            landed = LandedState(s.landed_state).name
-        except ValueError:
-            landed = str(s.landed_state)
-        done = " or ".join(sorted(self.profile(vid).takeoff_done_modes))
-        return (f"{s.name}: {self._height_m(vid):.2f} m above its takeoff point (home), "
-                f"landed state {landed} (need IN_AIR), mode {s.mode or '?'} (need {done})")
+    # --- prime and formation ---------------------------------------------------------------------
 
     def _prime(self) -> list[Command]:
         problems = self._flight_problems()
         if problems:
-            self._begin_stop(problems, EXIT_ABORTED)
+            begin_stop(self, problems, EXIT_ABORTED)
             return self._drive()
         if self._elapsed() < self.plan.prime_s:
             return []
@@ -867,7 +397,7 @@ class MissionMachine:
                 problems.append(Problem(vid, f"{s.name}: left {name} (now {s.mode or '?'})",
                                         "mode"))
         if problems:
-            self._begin_stop(problems, EXIT_ABORTED)
+            begin_stop(self, problems, EXIT_ABORTED)
             return self._drive()
         if t >= self.plan.duration_s:
             never = [Problem(vid, f"{v.status.name}: never reported "
@@ -875,9 +405,9 @@ class MissionMachine:
                                   f"(reports {v.status.mode or '?'})", "mode")
                      for vid, v in self._v.items() if not v.seen_offboard and v.status is not None]
             if never:
-                self._begin_stop(never, EXIT_ABORTED)
+                begin_stop(self, never, EXIT_ABORTED)
                 return self._drive()
-            self._begin_stop([], EXIT_OK, end=True)
+            begin_stop(self, [], EXIT_OK, end=True)
             return self._drive()
         return []
 
@@ -908,102 +438,16 @@ class MissionMachine:
                     "(fly.formation_check)"), "follow"))
         return out
 
-    # --- stopping --------------------------------------------------------------------------------
 
-    def _begin_stop(self, problems: Sequence[Problem], code: int, end: bool = False) -> None:
-        if self.phase in (Phase.STOPPING, Phase.DONE):
-            return
-        lost = {p.vehicle_id for p in problems if p.kind == "link" and p.vehicle_id is not None}
-        if end:
-            action, reason = self.plan.end_action, "formation complete"
-        elif lost and code != EXIT_INTERRUPTED:
-            action = self.plan.link_loss_action
-            reason = "; ".join(p.text for p in problems)
-        else:
-            action = self.plan.abort_action
-            reason = "; ".join(p.text for p in problems)
-        for vid, v in self._v.items():
-            if vid in lost:
-                v.lost = True
-                v.stop = _Stop(None, done=True)
-            elif v.status is None or v.status.link != "alive":
-                v.stop = _Stop(None, done=True, failure="no link")
-            else:
-                v.stop = _Stop(action)
-        self._stop_reason = Outcome(code, reason)
-        self._stopping_since_s = self._now_s
-        self._note(f"stopping ({action}): {reason}", NoteLevel.INFO if end else NoteLevel.WARNING)
-        self._enter(Phase.STOPPING)
-
-    def _stopping(self) -> list[Command]:
-        out: list[Command] = []
-        now = self._now_s
-        for vid, v in self._v.items():
-            st, s = v.stop, v.status
-            if st is None or st.done:
-                continue
-            if s is not None and s.link == "alive" and not s.armed and not s.in_air:
-                st.done = True  # disarmed, not flying (landed state known or not): never commanded
-                continue
-            if s is None or s.link == "lost" or (s.data_age_s > self.plan.rules.link_lost_after_s):
-                v.lost = True
-                st.done, st.failure = True, "link lost while stopping"
-                continue
-            on_ground = s.landed is True
-            if v.pending is not None:
-                continue
-            if on_ground:  # landed but still armed
-                st.landed_since_s = st.landed_since_s if st.landed_since_s is not None else now
-                if now - st.landed_since_s > self.plan.disarm_after_landed_s:
-                    out.append(self._send(vid, Cmd.DISARM))
-                    st.landed_since_s = now
-                continue
-            if st.action == FlyAction.HOLD and st.acked and s.mode == self.profile(vid).hold.name:
-                st.done = True
-                continue
-            if (not st.acked and st.attempts < self.plan.command_attempts
-                    and now - st.last_attempt_s >= self.plan.command_retry_s):
-                st.attempts += 1
-                st.last_attempt_s = now
-                out.append(self._send(vid, Cmd.LAND if st.action == FlyAction.LAND else Cmd.HOLD))
-            if now - self._stopping_since_s > self.plan.land_timeout_s:
-                st.done = True
-                st.failure = f"not {st.action}ed within {self.plan.land_timeout_s:g} s"
-        if all(v.stop is None or v.stop.done for v in self._v.values()) and self._idle():
-            base = self._stop_reason or Outcome(EXIT_ABORTED, "stopped")
-            failures = [f"vehicle {vid}: {v.stop.failure}" for vid, v in self._v.items()
-                        if v.stop is not None and v.stop.failure]
-            if failures:
-                code = base.exit_code or EXIT_ABORTED
-                self._finish(Outcome(code, "; ".join([base.reason, *failures])))
-            else:
-                self._finish(base)
-        return out
-
-    def _finish(self, outcome: Outcome) -> None:
-        self.outcome = outcome
-        self._note(f"done: exit {outcome.exit_code}: {outcome.reason}")
-        self._enter(Phase.DONE)
-
-
-def connect_waiting_label(vehicle_id: int, status: VehicleStatus | None) -> str:
-    """'vehicle 2 (sysid 2) on udp 127.0.0.1:14541' (plus a foreign sysid heard there)."""
-    if status is None:
-        return f"vehicle {vehicle_id}"
-    text = f"{status.name} on {status.listen}" if status.listen else status.name
-    if status.sysid_mismatch is not None:
-        text += f" [heard sysid {status.sysid_mismatch} there instead]"
-    return text
-
-
-def connect_failure_line(vehicle_id: int, status: VehicleStatus | None, heard: bool) -> str:
-    """One line per vehicle never heard: where the ground station listened and what it got."""
-    if status is None:
-        return f"vehicle {vehicle_id}: no status"
-    where = f" on {status.listen}" if status.listen else ""
-    if status.sysid_mismatch is not None:
-        return (f"{status.name}: only sysid {status.sysid_mismatch} was heard{where}; "
-                f"check the team file's sysid and link for this vehicle")
-    if heard:
-        return f"{status.name}: heard{where}, then silent"
-    return f"{status.name}: nothing heard{where}; is it running, and does it send there?"
+#: Each phase's step: the commands to send now (it may move the machine to another phase).
+_PHASES: dict[Phase, Callable[[MissionMachine], list[Command]]] = {
+    Phase.CONNECT: MissionMachine._connect,
+    Phase.PREFLIGHT: preflight,
+    Phase.ARM: arm_and_take_off,
+    Phase.TAKEOFF: takeoff,
+    Phase.GOTO: go_to_start,
+    Phase.HOLD: hold,
+    Phase.PRIME: MissionMachine._prime,
+    Phase.FORMATION: MissionMachine._formation,
+    Phase.STOPPING: stopping,
+}
