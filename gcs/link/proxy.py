@@ -32,6 +32,7 @@ from gcs.link.enums import (
     MavType,
 )
 from gcs.link.fastpath import TABLE_NAMES, HotRow
+from gcs.link.liveness import LIVENESS_COUNTERS, LinkLiveness
 from gcs.link.port import MavlinkPort, PortStats
 from gcs.link.setpoints import SETPOINT_COUNTERS, VehicleSetpoints
 from gcs.link.statustext import StatusTextLog
@@ -140,9 +141,10 @@ class VehicleProxy:
             on_learn=self._learned_address if self._hot is not None else None)
         self._cache = TelemetryCache()
         self._seq = SequenceTracker()
-        self._n: dict[str, int] = {  # the others: setpoints, _address, _round_trips
+        self._n: dict[str, int] = {  # the others: setpoints, _address, _round_trips, _liveness
             f.name: 0 for f in fields(ProxyCounters)
-            if f.name not in (*SETPOINT_COUNTERS, *ADDRESS_COUNTERS, *ROUND_TRIP_COUNTERS)}
+            if f.name not in (*SETPOINT_COUNTERS, *ADDRESS_COUNTERS, *ROUND_TRIP_COUNTERS,
+                              *LIVENESS_COUNTERS)}
         self.setpoints = VehicleSetpoints(self.name, config, self._codec, self._send,
                                           self._time_boot_ms)
         self.statustexts = StatusTextLog(self.name)  # every STATUSTEXT of the vehicle
@@ -152,9 +154,8 @@ class VehicleProxy:
                                          statustexts=self.statustexts, latest=self.latest)
         self._tasks: list[asyncio.Task[None]] = []
         self._t0_s = self._clock.now_s()
-        self._link_state = LinkState.WAITING
-        #: when the monitor last saw the link come alive (HEARTBEAT staleness counts from there)
-        self._alive_since_s = self._t0_s
+        self._liveness = LinkLiveness(self.name, config.link_timeout_s,
+                                      config.heartbeat_timeout_s, self._t0_s)
 
     # --- lifetime --------------------------------------------------------------------------------
 
@@ -163,7 +164,8 @@ class VehicleProxy:
         if self._owns_port:
             await self._port.open()
         self._port.attach(self.config.sysid, self, self._slot)
-        self._t0_s = self._alive_since_s = self._clock.now_s()
+        self._t0_s = self._clock.now_s()
+        self._liveness.restart(self._t0_s)
         self._send_heartbeat()
         self._tasks = [
             asyncio.create_task(self._heartbeat_loop(), name=f"{self.name} heartbeat"),
@@ -271,39 +273,19 @@ class VehicleProxy:
         return self._round_trips.round_trips_s()
 
     def link_state(self) -> LinkState:
-        """WAITING before the first message, LOST when nothing at all arrived for
-        `link_timeout_s`: every message counts, not HEARTBEAT alone (at 20 % loss five 1 Hz
-        beats in a row go missing every ~50 min per vehicle while its telemetry streams on)."""
-        last_any = self._last_any_rx_s()
-        if last_any == -math.inf:
-            return LinkState.WAITING
-        if self._clock.now_s() - last_any > self.config.link_timeout_s:
-            return LinkState.LOST
-        return LinkState.ALIVE
+        """WAITING, ALIVE or LOST now (gcs.link.liveness.LinkLiveness.link_state)."""
+        return self._liveness.link_state(self._clock.now_s(), self._last_any_rx_s())
 
     def heartbeat_stale(self) -> bool:
         """No HEARTBEAT for `heartbeat_timeout_s` while other messages arrive: the link is up,
-        but armed state and mode are those of the last HEARTBEAT (logged when it happens).
-        Counted from the later of the last HEARTBEAT and the link's coming alive (its first
-        messages, or its return after a loss): a 1 Hz HEARTBEAT may well come a second after
-        the telemetry, and a ground station that started listening long before must not call
-        that silence."""
-        hb = self._cache.latest("HEARTBEAT")
-        since = max(hb.rx_time_s if hb is not None else -math.inf, self._alive_since_s)
-        return (self._last_any_rx_s() > -math.inf
-                and self._clock.now_s() - since > self.config.heartbeat_timeout_s)
+        but armed state and mode are those of the last HEARTBEAT (logged when it happens;
+        gcs.link.liveness.LinkLiveness.heartbeat_stale)."""
+        return self._liveness.heartbeat_stale(self._clock.now_s(), self._last_any_rx_s(),
+                                              self._heartbeat_rx_s())
 
-    def _note_link_state(self, state: LinkState) -> None:
-        """The monitor's view of the link changed to ``state``: counted and logged."""
-        if state == LinkState.LOST:
-            self._n["link_lost_events"] += 1
-            logger.warning("%s: link lost (no message for > %.2f s)", self.name,
-                           self.config.link_timeout_s)
-        else:
-            logger.info("%s: link %s", self.name, state.value)
-            if state == LinkState.ALIVE:
-                self._alive_since_s = self._clock.now_s()
-        self._link_state = state
+    def _heartbeat_rx_s(self) -> float:
+        hb = self._cache.latest("HEARTBEAT")
+        return hb.rx_time_s if hb is not None else -math.inf
 
     def rate_hz(self, kind: str) -> float:
         """Receive rate of one message type (EWMA of its intervals; NaN before three arrived,
@@ -320,7 +302,7 @@ class VehicleProxy:
     def stats(self) -> LinkStats:
         """Every counter of the link; the hot path's counts (gcs.link.fastpath) included."""
         counters = (self._n | self.setpoints.counts() | self._address.counts()
-                    | self._round_trips.counts())
+                    | self._round_trips.counts() | self._liveness.counts())
         seq, by_type = self._seq.stats(), self._cache.type_stats()
         if self._hot is not None:
             counters["messages_accepted"] = self._accepted()
@@ -606,17 +588,11 @@ class VehicleProxy:
 
     async def _monitor_loop(self) -> None:
         period = min(self.config.link_timeout_s, self.config.heartbeat_timeout_s) / 4.0
-        stale = False
         await asyncio.sleep(self._phase * period)
         while True:
-            state = self.link_state()
-            if state != self._link_state:
-                self._note_link_state(state)
-            if state == LinkState.ALIVE and self.heartbeat_stale() != stale:
-                stale = not stale
-                if stale:
-                    self._n["heartbeat_stale_events"] += 1
-                    logger.warning("%s: no HEARTBEAT for > %.2f s while its other messages "
-                                   "arrive; armed state and mode are those of the last one",
-                                   self.name, self.config.heartbeat_timeout_s)
+            self._monitor_pass()
             await asyncio.sleep(period)
+
+    def _monitor_pass(self) -> None:
+        """One look of the link monitor: notes a change of link state or HEARTBEAT staleness."""
+        self._liveness.check(self._clock.now_s(), self._last_any_rx_s(), self._heartbeat_rx_s())

@@ -29,8 +29,7 @@ def _proxy() -> tuple[VehicleProxy, _Clock, mavlink.MAVLink]:
 
 def _receive(proxy: VehicleProxy, clock: _Clock, msg) -> None:
     proxy._on_datagram(msg, VEHICLE)
-    if proxy.link_state() != proxy._link_state:  # what the monitor does at its next pass
-        proxy._note_link_state(proxy.link_state())
+    proxy._monitor_pass()  # what the monitor does at its next pass
 
 
 def test_a_link_that_comes_alive_long_after_the_start_is_not_stale_before_its_first_beat():
@@ -41,7 +40,7 @@ def test_a_link_that_comes_alive_long_after_the_start_is_not_stale_before_its_fi
     clock.t_s += 8.0
     _receive(proxy, clock, position.pack(mav))
     # THEN the HEARTBEAT is not yet missed: the link has only just come alive
-    assert proxy._link_state == LinkState.ALIVE and not proxy.heartbeat_stale()
+    assert proxy._liveness.state == LinkState.ALIVE and not proxy.heartbeat_stale()
     # AND it is, once the link has been alive for the timeout with no HEARTBEAT at all
     for _ in range(6):
         clock.t_s += 1.0
@@ -64,11 +63,12 @@ def test_a_link_back_from_a_loss_counts_from_its_return_not_from_the_old_heartbe
     # GIVEN a link lost for 10 s (nothing at all arrived)
     clock.t_s += 10.0
     assert proxy.link_state() == LinkState.LOST
-    proxy._note_link_state(LinkState.LOST)
+    proxy._monitor_pass()
+    assert proxy._liveness.state == LinkState.LOST
     # WHEN its telemetry comes back before its next HEARTBEAT
     _receive(proxy, clock, mav.local_position_ned_encode(0, 0, 0, 0, 0, 0, 0).pack(mav))
     # THEN the HEARTBEAT is not called stale at once
-    assert proxy._link_state == LinkState.ALIVE and not proxy.heartbeat_stale()
+    assert proxy._liveness.state == LinkState.ALIVE and not proxy.heartbeat_stale()
     clock.t_s += 5.1
     _receive(proxy, clock, mav.local_position_ned_encode(0, 0, 0, 0, 0, 0, 0).pack(mav))
     assert proxy.heartbeat_stale()
