@@ -130,6 +130,8 @@ class Onboard:
         self.position_error_phi = np.exp(
             -1.0 / (rates * np.array([se.position_error_tau_s for se in sen]))
         )
+        self.position_error_share = np.array(
+            [se.velocity_error_in_position for se in sen], dtype=f)
         self.hold_wander_std = np.array([se.hold_wander_std_m for se in sen], dtype=f)
         self.hold_wander_ar = np.array(
             [sn.resonator_coefficients(se.hold_wander_hz, se.hold_wander_zeta, 1.0 / r)
@@ -243,6 +245,7 @@ class Onboard:
             self.velocity_error_std,
             self.velocity_error_phi,
             self.position_error_phi,
+            self.position_error_share,
             self.disturbance_std,
             self.gyro_integration_phi,
             self.gyro_bias_std,
@@ -337,7 +340,7 @@ def onboard_step(
         gyro_coef, dterm_coef, accel_coef, imu_mode, pos_delay, out_delay, gain_p, gain_i,
         gain_d, int_limit, yaw_alpha, accel_per_unit, accel_max, ref_gain, ref_phi, ref_gamma,
         angle_p, track, ref_delay, att_err_std, att_phi, vel_err_std, vel_phi, pos_phi,
-        disturbance, integ_phi, bias_std, bias_phi, dist_ar, wander_std, wander_ar,
+        pos_share, disturbance, integ_phi, bias_std, bias_phi, dist_ar, wander_std, wander_ar,
     ) = cal_par
     (
         rng, gyro_state, dterm_state, accel_state, gyro_raw, accel_raw, rate_meas, dgyro,
@@ -360,8 +363,8 @@ def onboard_step(
         # estimates as the autopilot reports them (truth plus the estimate errors), with their
         # sample steps; LOCAL_POSITION_NED optionally one period older
         sn.estimate_errors(
-            i, dt_c, noise_on, att_err_std, att_phi, vel_err_std, vel_phi, pos_phi, rng, att_err,
-            vel_err, pos_err,
+            i, dt_c, noise_on, att_err_std, att_phi, vel_err_std, vel_phi, pos_phi, pos_share, rng,
+            att_err, vel_err, pos_err,
         )
         sn.gyro_integration_errors(i, dt_c, noise_on, integ_phi, gyro_raw, omega, integ_err)
         sn.gyro_bias_step(i, noise_on, bias_std, bias_phi, rng, gyro_bias, gyro_imu)

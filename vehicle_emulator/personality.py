@@ -160,6 +160,9 @@ class Sensors:
     velocity_error_std_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)  # north, east, up
     velocity_error_tau_s: float = 1.0
     position_error_tau_s: float = 1.0
+    # the share of the velocity error the position estimate integrates: 1, the two agree; below
+    # 1, the reported position moves by less than the reported velocity's error says
+    velocity_error_in_position: float = 1.0
     # the autopilot's own position hold (Hold, takeoff, OFFBOARD position setpoints), airborne,
     # with EMU_NOISE = 1: the loop chases its setpoint plus a slow wander, a band-pass resonator
     # per axis (north, east, up; 1 sigma [m]) at ``hold_wander_hz`` with damping
@@ -210,9 +213,10 @@ PX4_SENSORS = Sensors(
     imu_average_samples=2,  # HIGHRES_IMU: recorded std = SIH's / 1.37 (two-sample means)
     position_delay_periods=1,  # LOCAL_POSITION_NED timestamps 4 ms older than attitude's
     # EKF2's estimate wander (fitted stand-in, benchmarks/fit_emulator.py --fit)
-    velocity_error_std_mps=(0.126, 0.126, 0.147),
+    velocity_error_std_mps=(0.126, 0.126, 0.10),
     velocity_error_tau_s=1.5,  # recorded vz autocorrelation 0.72 at 0.5 s
     position_error_tau_s=6.0,
+    velocity_error_in_position=0.0,
     # PX4's position hold on SIH (OFFBOARD position setpoints, 2026-12-04 go-to-start recording,
     # four vehicles, 48 s each): 0.32-0.38 m RMS about the setpoint, 2 s means 0.26-0.31 m off
     # and drifting 0.12-0.13 m/s (medians), 10 s means 0.16-0.22 m off; with this wander one

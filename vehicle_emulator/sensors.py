@@ -168,14 +168,15 @@ def sample_sensors(
 
 
 @njit(cache=True)
-def estimate_errors(i, dt_c, noise_on, att_std, att_phi, vel_std, vel_phi, pos_phi, rng,
-                    att_err, vel_err, pos_err):
+def estimate_errors(i, dt_c, noise_on, att_std, att_phi, vel_std, vel_phi, pos_phi, pos_share,
+                    rng, att_err, vel_err, pos_err):
     """Advance vehicle i's estimate errors by one control period: first-order Gauss-Markov
     attitude errors (roll, pitch, yaw; body axes; factors ``att_phi[i, k]`` per axis) and
     velocity errors (ENU arrays; ``vel_std[i]`` = (north, east, vertical), LOCAL_POSITION_NED's
     x, y, z), stationary 1 sigma ``*_std``, factors ``*_phi = exp(-dt/tau)``; the position error
-    integrates the velocity error and decays by ``pos_phi`` per period. Off (held at zero)
-    without noise."""
+    integrates the share ``pos_share[i]`` of the velocity error and decays by ``pos_phi`` per
+    period (share 1: position and velocity estimates agree; 0: the reported velocity carries an
+    error the reported position does not show). Off (held at zero) without noise."""
     if not noise_on[i]:
         for k in range(3):
             att_err[i, k] = 0.0
@@ -199,7 +200,7 @@ def estimate_errors(i, dt_c, noise_on, att_std, att_phi, vel_std, vel_phi, pos_p
         for k in range(3):
             s = vel_std[i, 1] if k == 0 else (vel_std[i, 0] if k == 1 else vel_std[i, 2])
             vel_err[i, k] = pv * vel_err[i, k] + kv * s * nv[k]
-            pos_err[i, k] = pos_phi[i] * pos_err[i, k] + vel_err[i, k] * dt_c
+            pos_err[i, k] = pos_phi[i] * pos_err[i, k] + pos_share[i] * vel_err[i, k] * dt_c
 
 
 @njit(cache=True)

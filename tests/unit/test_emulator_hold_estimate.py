@@ -31,6 +31,9 @@ def test_px4_hold_captures_the_position_estimate_so_the_reported_position_does_n
     # its position estimate to be off the truth by centimetres to decimetres
     spec = replace(default_vehicle(1, on_ground=False), autopilot="px4")
     emu = Emulator([spec], seed=3, param_overrides={"EMU_NOISE": 1})
+    # (the px4 personality keeps its velocity error out of its position, as SIH does; here the
+    # position integrates it, so that the estimate is off the truth and the test can tell)
+    emu.plant.onboard.position_error_share[0] = 1.0
     link = RecordingLink()
     emu.nodes[0].links.append(link)
     run_until(emu, 20.0)
