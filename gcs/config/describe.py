@@ -119,6 +119,11 @@ def describe(team: TeamConfig) -> str:
         "     delay compensation: " + ("the law reads states predicted to when its setpoints act "
                                        "(fly.predict)" if fly.predict else
                                        "off, the law reads the latest samples (fly.predict)"),
+        "     the law's velocity: " + (
+            f"the reported position's rate below 1/{fly.velocity_from_position_s:g} s, the "
+            "reported velocity above (fly.velocity_from_position_s)"
+            if fly.velocity_from_position_s > 0 else
+            "the reported velocity as it is (fly.velocity_from_position_s 0)"),
         f"     scheduling {fly.scheduling} (fly.scheduling: the operating system's priority for "
         "the tick)",
         _go_to_start_line(team),

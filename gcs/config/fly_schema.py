@@ -122,6 +122,9 @@ class FlyConfig:
     timesync_period_s: float = 0.5  # TIMESYNC round-trip requests; 0: none
     # the law reads the states predicted to when its setpoints act (gcs/fly/predict.py)
     predict: bool = True
+    # the law's velocity takes the reported position's rate below 1 / this [s]; 0: the reported
+    # velocity as it is (gcs/fly/consistent.py)
+    velocity_from_position_s: float = 0.2
     # the operating system's priority for the ground station (gcs/fly/sched.py)
     scheduling: str = "auto"
     # any valid message from the vehicle keeps its link ALIVE; none for this long -> LOST (a

@@ -153,7 +153,7 @@ def read_fly(node: Node) -> FlyConfig:
         "max_tilt_rad geofence log_rate_hz connect_timeout_s takeoff_timeout_s land_timeout_s "
         "takeoff_tolerance_m arm_timeout_s arm_retry_s mode_timeout_s formation_check response "
         "link_delay_s initial_mass go_to_start max_data_age_s timesync_period_s predict "
-        "scheduling",
+        "velocity_from_position_s scheduling",
     )
     geofence = None
     g = node.child("geofence")
@@ -188,6 +188,8 @@ def read_fly(node: Node) -> FlyConfig:
         timesync_period_s=node.child("timesync_period_s").number(d.timesync_period_s, ge=0.0,
                                                                  le=60.0),
         predict=node.child("predict").boolean(d.predict),
+        velocity_from_position_s=node.child("velocity_from_position_s").number(
+            d.velocity_from_position_s, ge=0.0, le=60.0),
         scheduling=node.child("scheduling").string(d.scheduling, FLY_SCHEDULING),
         max_tilt_rad=node.child("max_tilt_rad").number(d.max_tilt_rad, gt=0.0, le=math.pi),
         geofence=geofence,

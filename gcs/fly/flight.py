@@ -38,6 +38,7 @@ import numpy as np
 
 from gcs.config import ControlMode, FlyAction, TeamConfig
 from gcs.fly.commander import Commander
+from gcs.fly.consistent import VelocityConsistency
 from gcs.fly.origins import (
     TeamTies,
     origin_from_gps_global_origin,
@@ -117,7 +118,9 @@ class Flight:
             flight_log_builder(setup, rhohat, inertia_estimated), TickStats(setup.tick_rate_hz),
             AgeStats(self.n), np.zeros(self.n, dtype=np.int64),
             # delay compensation (gcs/fly/predict.py) and its measured error
-            PredictionAudit(self.n) if team.fly.predict and not position_mode else None)
+            PredictionAudit(self.n) if team.fly.predict and not position_mode else None,
+            VelocityConsistency(self.n, 0.0 if position_mode
+                                else team.fly.velocity_from_position_s))
         self.commander = Commander(self.machine, setup.requested_rates_hz,
                                    setup.plan.mode_timeout_s, self._proxy_by_id)
         self.setpoints = Setpoints(team, setup.mode, self.machine, self.ties, self.proxies,

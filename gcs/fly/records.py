@@ -13,6 +13,7 @@ import numpy as np
 
 from gcs.config import ControlMode
 from gcs.flightlog import FlightLogBuilder, estimates_record, save_timeseries
+from gcs.fly.consistent import VelocityConsistency
 from gcs.fly.measure import HoverEstimate
 from gcs.fly.predict import PredictionAudit
 from gcs.fly.sched import Scheduling
@@ -84,6 +85,7 @@ class Figures:
     ages: AgeStats
     limited_ticks: np.ndarray  # per vehicle: formation ticks with the rate or torque limit applied
     audit: PredictionAudit | None  # delay compensation (gcs/fly/predict.py) and its error
+    consistency: VelocityConsistency  # the law's velocity (gcs/fly/consistent.py)
     hover_estimates: dict[int, HoverEstimate] = field(default_factory=dict)
     start_error_m: dict[int, float] = field(default_factory=dict)  # |p(0) - start| at t = 0
 
@@ -144,7 +146,8 @@ class Records:
                     "round_trip": round_trip_report(self.proxies[i].round_trips_s()),
                     "clock": clock_report(self.proxies[i].clock.estimate()),
                     "prediction": prediction_report(
-                        fig.audit.figures(i) if fig.audit is not None else None)}
+                        fig.audit.figures(i) if fig.audit is not None else None),
+                    "velocity_from_position": fig.consistency.report(i)}
                    for i, s in enumerate(stats)],
         )
         tick = fig.ticks.report()

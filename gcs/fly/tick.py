@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import copy
+import dataclasses
 import logging
 import math
 import time
@@ -211,6 +212,7 @@ class Tick:
         self.commander = commander
         self.setpoints = setpoints
         self.figures = figures
+        self.consistency = figures.consistency
         self.hover = HoverStart(setup, machine, law, hot, proxies, figures.hover_estimates)
         self._from_hover = setup.law == "adaptive" and any(v.estimates.from_hover
                                                            for v in team.vehicles)
@@ -241,6 +243,8 @@ class Tick:
         """Tick k: its deadline and its start `now_s` on the event loop's clock."""
         sample = team_sample(self.proxies, now_s, self.last_sample, self._tie_arrays, self.hot)
         self.last_sample = sample
+        self.consistency.update(sample.position_m, sample.velocity_mps, sample.position_taken_s,
+                                sample.finite)
         m = self.machine
         rows = self._status_slices.rows(k)
         if rows is None or rows:
@@ -372,6 +376,11 @@ class Tick:
         now plus the team's uplink delay (gcs/fly/predict.py); in formation, the audit compares
         each prediction with what the vehicles report for that instant."""
         held = sample.measurement()
+        if self.machine.phase is Phase.FORMATION:
+            self.consistency.update_figures()
+        if self.consistency.on:
+            held = dataclasses.replace(held, velocity_mps=self.consistency.velocity(
+                held.velocity_mps))
         if self.figures.audit is None:
             return held
         # each link's least one-way delay: the table's copy of the clock filters' (a column)

@@ -1,0 +1,70 @@
+"""The law's velocity made consistent with the reported position (gcs/fly/consistent.py)."""
+
+import numpy as np
+import pytest
+
+from gcs.fly.consistent import MAX_CORRECTION_MPS, VelocityConsistency
+
+
+def feed(f: VelocityConsistency, t: np.ndarray, p: np.ndarray, v: np.ndarray) -> None:
+    """Samples of one vehicle (rows of t, p, v) fed one by one."""
+    for k in range(len(t)):
+        f.update(p[k][None], v[k][None], np.array([t[k]]), np.array([True]))
+
+
+def test_consistent_position_and_velocity_leave_the_velocity_alone():
+    t = np.arange(0.0, 5.0, 0.01)
+    a = np.array([0.3, -0.2, 0.1])
+    v = np.array([0.5, 0.1, -0.2]) + t[:, None] * a
+    p = np.array([1.0, 2.0, 3.0]) + np.array([0.5, 0.1, -0.2]) * t[:, None] + 0.5 * a * t[:, None] ** 2
+    f = VelocityConsistency(1, 1.0)
+    feed(f, t, p, v)
+    assert np.abs(f.correction_mps).max() < 1e-9
+    assert f.resets[0] == 0
+
+
+def test_a_velocity_that_misses_the_positions_rate_is_corrected_at_low_frequency():
+    # the position moves 0.2 m/s faster east than the reported velocity says
+    t = np.arange(0.0, 10.0, 0.008)
+    v = np.tile([0.1, 0.0, 0.0], (len(t), 1))
+    p = np.column_stack([0.3 * t, 0.0 * t, 0.0 * t])
+    f = VelocityConsistency(1, 1.0)
+    feed(f, t[:126], p[:126], v[:126])  # one time constant
+    assert f.correction_mps[0, 0] == pytest.approx(0.2 * (1 - np.exp(-1.0)), rel=0.02)
+    feed(f, t[126:], p[126:], v[126:])
+    assert f.velocity(v[-1:])[0] == pytest.approx([0.3, 0.0, 0.0], abs=1e-3)
+
+
+def test_a_position_jump_a_gap_and_a_nonfinite_row_move_nothing():
+    f = VelocityConsistency(2, 1.0)
+    z = np.zeros((2, 3))
+    ok = np.array([True, True])
+    f.update(z, z, np.array([0.0, 0.0]), ok)
+    jumped = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])  # 1 m in 10 ms: an estimator reset
+    f.update(jumped, z, np.array([0.01, 0.01]), ok)
+    assert f.resets.tolist() == [1, 0]
+    assert not f.correction_mps.any()
+    f.update(jumped + 0.5, z, np.array([1.0, 1.0]), ok)  # 0.99 s apart: a gap
+    assert not f.correction_mps.any()
+    f.update(np.full((2, 3), np.nan), z, np.array([1.01, 1.01]), np.array([False, False]))
+    f.update(jumped + 0.5, z, np.array([1.02, 1.02]), ok)  # the NaN row was not taken as a sample
+    assert not f.correction_mps.any()
+
+
+def test_the_correction_is_bounded():
+    t = np.arange(0.0, 20.0, 0.01)
+    v = np.zeros((len(t), 3))
+    p = np.column_stack([2.0 * t, 0.0 * t, 0.0 * t])  # the position runs 2 m/s, velocity says 0
+    f = VelocityConsistency(1, 1.0)
+    feed(f, t, p, v)
+    assert f.correction_mps[0, 0] == MAX_CORRECTION_MPS
+    assert f.clamped[0] > 0
+
+
+def test_off_is_the_reported_velocity():
+    f = VelocityConsistency(1, 0.0)
+    t = np.arange(0.0, 2.0, 0.01)
+    p = np.column_stack([0.3 * t, 0.0 * t, 0.0 * t])
+    feed(f, t, p, np.zeros((len(t), 3)))
+    v = np.array([[0.1, 0.2, 0.3]])
+    assert f.velocity(v) is v
