@@ -19,15 +19,18 @@ without restarting the vehicles. Per flight, from the flight's own records:
 
     python benchmarks/bench_from_ground.py [--team px4 --team mixed] [--duration-s 60] [--no-write]
 
-Writes the "## From the ground, twice" section of docs/benchmarks.md (about 12 min).
+Writes the "## From the ground, twice" section of docs/benchmarks.md (about 17 min). The team
+`px4-sih-2026-12-04` flies the recorded SIH team file instead, beside the recorded flight.
 """
 
 from __future__ import annotations
 
 import argparse
+import gzip
 import json
 import math
 import platform
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -40,8 +43,15 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## From the ground, twice"
+#: the section the px4-sih-2026-12-04 team writes when it is flown alone
+SIH_HEADING = "## From the ground, twice: the px4 personality against the 2026-12-04 SIH flights"
 TEAMS = {"px4": ("px4",) * 4, "ardupilot": ("ardupilot",) * 4,
-         "mixed": ("px4", "ardupilot", "px4", "ardupilot")}
+         "mixed": ("px4", "ardupilot", "px4", "ardupilot"), "px4-sih-2026-12-04": ("px4",) * 4}
+#: the team file of the 2026-12-04 flights of four real PX4 SIH vehicles, flown as it was then
+#: (the law read the reported velocity: fly.velocity_from_position_s 0), and what SIH gave
+SIH_TEAM = "flights/2026-12-04/team_px4sih.yaml"
+SIH_REPORT = "flights/2026-12-04/px4_rates_1st/report.json"
+SIH_FLOWN = {"fly": {"velocity_from_position_s": 0.0}}
 # where each vehicle boots (team frame ENU, on the ground): a 50 m diamond around the formation
 BOOT_XY_M = ((25.0, 0.0), (0.0, -25.0), (-25.0, 0.0), (0.0, 25.0))
 FLIGHTS = ("first", "second")
@@ -49,13 +59,19 @@ FLIGHTS = ("first", "second")
 sys.path.insert(0, str(ROOT))
 from benchmarks.docsection import write_section  # noqa: E402
 from vehicle_emulator.personality import ARDUPILOT_DYNAMICS  # noqa: E402
+from vehicle_emulator.replay import data_dir  # noqa: E402
 from vehicle_emulator.testing import free_udp_port_block  # noqa: E402
 
 
 def team_file(kind: str, work: Path, duration_s: float) -> Path:
-    """configs/square4.yaml as shipped, on free ports, each vehicle of its autopilot booting on
-    the ground at BOOT_XY_M with its own EKF origin below it."""
-    data = yaml.safe_load((ROOT / "configs" / "square4.yaml").read_text())
+    """configs/square4.yaml as shipped (the SIH team file as flown, for that kind), on free
+    ports, each vehicle of its autopilot booting on the ground at BOOT_XY_M with its own EKF
+    origin below it."""
+    if kind == "px4-sih-2026-12-04":
+        data = yaml.safe_load((data_dir() / SIH_TEAM).read_text())
+        data["fly"].update(SIH_FLOWN["fly"])
+    else:
+        data = yaml.safe_load((ROOT / "configs" / "square4.yaml").read_text())
     data["name"] = f"square4-{kind}"
     data["mission"]["duration_s"] = duration_s
     data["faults"] = []
@@ -174,13 +190,28 @@ def fly_team(kind: str, work: Path, duration_s: float) -> list[dict]:
     return rows
 
 
+def recorded_sih_row(work: Path) -> dict:
+    """The 2026-12-04 first flight of four real PX4 SIH vehicles through the same figures (its
+    report.json and tlog from the recordings)."""
+    src = data_dir() / SIH_REPORT
+    out = work / "sih-recorded"
+    out.mkdir(exist_ok=True)
+    shutil.copy(src, out / "report.json")
+    with gzip.open(src.parent / "flight.tlog.gz") as tlog, open(out / "flight.tlog", "wb") as dst:
+        shutil.copyfileobj(tlog, dst)
+    max_rate = float(yaml.safe_load((data_dir() / SIH_TEAM).read_text())["fly"]["rates"].get(
+        "max_rate_radps", 1.0))
+    return {"team": "real PX4 SIH, recorded", "flight": "first", "exit": 0,
+            **figures(out, "px4-sih-2026-12-04", max_rate)}
+
+
 def _cell(x: float, fmt: str) -> str:
     return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, fmt)
 
 
-def section(rows: list[dict], duration_s: float) -> str:
+def section(rows: list[dict], duration_s: float, heading: str = HEADING) -> str:
     lines = [
-        HEADING, "",
+        heading, "",
         f"`python benchmarks/bench_from_ground.py` on {platform.machine()}, Python "
         f"{platform.python_version()}: configs/square4.yaml (Scenario I) as shipped, flown by "
         "`gcs fly --team FILE` with no other option (`fly.mode: auto`), against one "
@@ -192,7 +223,13 @@ def section(rows: list[dict], duration_s: float) -> str:
         "max over vehicles of |mhat - m| / m at 20 s (ArduPilot: m / 1.069, the "
         "thrust-equivalent mass). Rate limit: share of setpoints after 10 s with the roll/pitch "
         "rate command at its limit, worst vehicle. Heading: largest |yaw - yaw at the "
-        "formation start| after 10 s, from ATTITUDE_QUATERNION.",
+        "formation start| after 10 s, from ATTITUDE_QUATERNION. The px4-sih-2026-12-04 team "
+        "is the team file of the 2026-12-04 flights of four real PX4 v1.16.0 SIH vehicles "
+        f"(`{SIH_TEAM}` in the recordings: alpha_p 1, c_p 2, go-to-start tolerance 0.5 m) "
+        "flown as it was then, reading the reported velocity "
+        "(`fly.velocity_from_position_s: 0`), against the px4 personality; the row \"real PX4 "
+        "SIH, recorded\" is that day's first flight through the same figures (the second "
+        "ended in preflight; five first flights that day held 0.26-0.59 / 0.53-0.95 m).",
         "",
         "| team | flight | exit | mode | formation error mean / max, t >= 30 s [m] | mass error "
         "at 20 s | rate limit active after 10 s | heading error after 10 s | late ticks |",
@@ -220,11 +257,14 @@ def main() -> None:
     rows: list[dict] = []
     with tempfile.TemporaryDirectory() as tmp:
         for kind in args.team or list(TEAMS):
+            if kind == "px4-sih-2026-12-04":
+                rows.append(recorded_sih_row(Path(tmp)))
             rows += fly_team(kind, Path(tmp), args.duration_s)
-    text = section(rows, args.duration_s)
+    heading = SIH_HEADING if args.team == ["px4-sih-2026-12-04"] else HEADING
+    text = section(rows, args.duration_s, heading)
     print(text)
     if not args.no_write:
-        write_section(DOC, HEADING, text)
+        write_section(DOC, heading, text)
 
 
 if __name__ == "__main__":
