@@ -189,13 +189,16 @@ def test_px4_vehicle_that_cannot_follow_stops_the_flight_by_the_formation_rule(
     team = px4_team(tmp_path, duration_s=40.0, ground=False, faults=weak,
                     fly={"geofence": {"min_enu_m": [-60.0, -60.0, -5.0],
                                       "max_enu_m": [60.0, 60.0, 60.0]},
-                         "formation_check": {"after_s": 10.0}})
+                         # judged at 5 s: UAV 2 is then on the ground and the error ~10 m
+                         # against a bound of ~3.3 m (0.5 x 6.6 m); by 10 s its neighbours,
+                         # pulled down to it by the law's coupling, have closed it to 3.3-4.6 m
+                         "formation_check": {"after_s": 5.0}})
     with emulators(team, 0, tmp_path):
         code, out, log = fly_once(team, tmp_path / "run")
-    # THEN the flight stops at t = 10 s by the rule of docs/gcs.md, exit 1
+    # THEN the flight stops at t = 5 s by the rule of docs/gcs.md, exit 1
     assert code == 1, log[-3000:]
     match = re.search(r"the vehicles do not follow the formation: error ([\d.]+) m at t = "
-                      r"10\.0 s > ([\d.]+) m = max\(1 m, 0\.5 x ([\d.]+) m at t = 0\) "
+                      r"5\.0 s > ([\d.]+) m = max\(1 m, 0\.5 x ([\d.]+) m at t = 0\) "
                       r"\(fly\.formation_check\)", out + log)
     assert match is not None, log[-3000:]
     assert float(match[1]) > float(match[2]) >= 1.0
