@@ -19,15 +19,13 @@ install: $(BIN)/activate
 
 # Three workers on two cores: the integration tests fly in real time and mostly wait (the suite
 # keeps the cores ~65 % busy), so a third file in flight cuts the wall time by a quarter. Tests
-# go to whichever worker is free (worksteal), not a file per worker: the long files (the
-# first-run compile, the px4 flights) would otherwise hold one worker for minutes at the end. Tests
 # marked `alone` then run by themselves: flights whose figures the suite's own load would move
 # (pyproject.toml, the marker's text). Both stages always run; the target fails at the end if
 # either did. The parallel stage lists its 20 slowest tests: where the suite's time goes.
 test: install
 	$(BIN)/ruff check gcs vehicle_emulator tests benchmarks
 	status=0; \
-	$(BIN)/python -m pytest -n 3 --dist worksteal -m "not alone" --durations=20 || status=$$?; \
+	$(BIN)/python -m pytest -n 3 --dist loadfile -m "not alone" --durations=20 || status=$$?; \
 	$(BIN)/python -m pytest -m alone || status=$$?; \
 	if [ $$status -ne 0 ]; then echo "make test: a stage failed (see above)"; fi; \
 	exit $$status
