@@ -85,7 +85,9 @@ class Figures:
     ages: AgeStats
     limited_ticks: np.ndarray  # per vehicle: formation ticks with the rate or torque limit applied
     audit: PredictionAudit | None  # delay compensation (gcs/fly/predict.py) and its error
-    consistency: VelocityConsistency  # the law's velocity (gcs/fly/consistent.py)
+    # the law's velocity filter (gcs/fly/consistent.py): the tick feeds and reads it, the report
+    # states what it did
+    consistency: VelocityConsistency
     hover_estimates: dict[int, HoverEstimate] = field(default_factory=dict)
     start_error_m: dict[int, float] = field(default_factory=dict)  # |p(0) - start| at t = 0
 

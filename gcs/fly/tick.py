@@ -367,6 +367,7 @@ class Tick:
         log, self._next_log_k = log_due(k, self._k0, self.setup.log_every, self._next_log_k)
         if self.machine.phase is Phase.FORMATION:
             self.figures.ages.record(sample.delay_s, sample.age_s, fresh, stale_neighbours)
+            self.consistency.update_figures()
             if log:
                 self.log(t, sample, ref[0], command)
         return command
@@ -376,8 +377,6 @@ class Tick:
         now plus the team's uplink delay (gcs/fly/predict.py); in formation, the audit compares
         each prediction with what the vehicles report for that instant."""
         held = sample.measurement()
-        if self.machine.phase is Phase.FORMATION:
-            self.consistency.update_figures()
         if self.consistency.on:
             held = dataclasses.replace(held, velocity_mps=self.consistency.velocity(
                 held.velocity_mps))
