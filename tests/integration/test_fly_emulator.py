@@ -307,21 +307,28 @@ def test_actuators_mode_is_refused_in_preflight_against_px4_1_16(tmp_path):
 
 def test_scenario_two_over_the_link_adaptive_holds_baseline_climbs(tmp_path):
     # Scenario II with the drop at 10 s instead of 40 s: the same windows after the drop
-    # (|v_z| <= 0.05 from 15 s after it; baseline climbing >= 0.3 m/s 20 s after it)
+    # (|v_z| <= 0.05 from 15 s after it; baseline climbing >= 0.3 m/s 20 s after it). The two
+    # laws fly at once, each with its own fleet, ports and ground station: neither sees the
+    # other's traffic, and the team files state the loaded machine's link (loaded_links)
     drop = [{"kind": "mass_drop", "vehicle": 1, "at_s": 10.0, "fraction": 0.3}]
     vz = {}
-    for law in ("adaptive", "baseline"):
-        base = free_udp_port_block(4)
-        team = team_file(tmp_path, base, duration_s=31.0, faults=drop, massdrop=True,
-                         loaded_links=True)
-        with emulators(team, base, tmp_path):
-            gcs = Gcs(
+    with contextlib.ExitStack() as stack:
+        flights = {}
+        for law in ("adaptive", "baseline"):
+            work = tmp_path / f"{law}-files"
+            work.mkdir()
+            base = free_udp_port_block(4)
+            team = team_file(work, base, duration_s=31.0, faults=drop, massdrop=True,
+                             loaded_links=True)
+            stack.enter_context(emulators(team, base, work))
+            flights[law] = Gcs(
                 team, tmp_path / law, "--mode", "rates", "--controller", law, "--end-action", "hold"
             )
+        for law, gcs in flights.items():
             code, out = gcs.finish(180)
-        assert code == 0, out
-        t, v = series(gcs.report(), "velocity_ned_mps")
-        vz[law] = (t, -v[:, :, 2])  # NED d -> up
+            assert code == 0, (law, out)
+            t, v = series(gcs.report(), "velocity_ned_mps")
+            vz[law] = (t, -v[:, :, 2])  # NED d -> up
     t, up = vz["adaptive"]
     assert np.nanmax(np.abs(up[t >= 25.0])) <= 0.05
     t, up = vz["baseline"]

@@ -161,7 +161,8 @@ def test_scenario_one_over_50_ms_links_with_jitter_and_loss_converges(tmp_path):
     # 60 ms (fly.link_delay_s) for the default mode with the default delay compensation
     # (fly.predict)
     base = free_udp_port_block(4)
-    team = delayed_team(tmp_path, base, 50.0, probability=0.2, duration_s=60.0, at_s=0.0, fly={
+    # (18 s of the formation from t = 30 s: 1800 samples per vehicle against the 5 cm bound)
+    team = delayed_team(tmp_path, base, 50.0, probability=0.2, duration_s=48.0, at_s=0.0, fly={
         "link_delay_s": 0.06, "initial_mass": "from_hover",
         "rates": {"k_eps": 1.5, "k_eps_yaw": 2.0, "alpha_p": 1.0, "c_p": 1.0}})
     with emulators(team, base, tmp_path):
