@@ -22,9 +22,11 @@ reported position against the reported velocity" section of docs/benchmarks.md.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import gzip
 import sys
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -62,13 +64,19 @@ def mismatch_rms(t: np.ndarray, p: np.ndarray, v: np.ndarray,
     return out
 
 
-def recorded_hover() -> np.ndarray:
-    """D(w) of the recorded hover's last HOVER_S seconds (NED)."""
-    with gzip.open(rp.data_dir() / HOVER) as src, tempfile.NamedTemporaryFile(
+@contextlib.contextmanager
+def recorded_tlog(name: str) -> Iterator:
+    """A pymavlink reader of the gzipped recording ``name`` (under the recordings' folder)."""
+    with gzip.open(rp.data_dir() / name) as src, tempfile.NamedTemporaryFile(
             suffix=".tlog") as tmp:
         tmp.write(src.read())
         tmp.flush()
-        log = mavutil.mavlink_connection(tmp.name)
+        yield mavutil.mavlink_connection(tmp.name)
+
+
+def recorded_hover() -> np.ndarray:
+    """D(w) of the recorded hover's last HOVER_S seconds (NED)."""
+    with recorded_tlog(HOVER) as log:
         rows = []
         while (m := log.recv_match(type="LOCAL_POSITION_NED")) is not None:
             rows.append((m.time_boot_ms * 1e-3, m.x, m.y, m.z, m.vx, m.vy, m.vz))

@@ -111,6 +111,11 @@ class Onboard:
         self.attitude_error_phi = np.exp(
             -1.0 / (rates[:, None] * np.array([se.attitude_error_tau_s for se in sen], dtype=f))
         )
+        order = np.array([se.attitude_error_order for se in sen], dtype=np.int64).reshape(n, 3)
+        if not np.isin(order, (1, 2)).all():
+            raise ValueError(f"attitude_error_order must be 1 or 2 per axis, got {order.tolist()}")
+        self.attitude_error_smooth = np.where(
+            order == 2, np.vectorize(sn.smooth_gain)(self.attitude_error_phi), 0.0)
         # complementary-filter estimate error: factor per period, -1 where the axis is off
         tau_g = np.array([se.gyro_integration_tau_s for se in sen], dtype=f).reshape(n, 3)
         self.gyro_integration_phi = np.where(
@@ -171,6 +176,7 @@ class Onboard:
         self._delay_buffer = np.zeros((n, 3, REF_DELAY_MAX))
         self._delay_index = np.zeros(n, dtype=np.int64)
         self.attitude_error = np.zeros((n, 3))
+        self.attitude_error_stage = np.zeros((n, 3))
         self.integration_error = np.zeros((n, 3))
         self.gyro_bias = np.zeros((n, 3))
         self.disturbance_state = np.zeros((n, 3, 3))
@@ -242,6 +248,7 @@ class Onboard:
             self.ref_delay,
             self.attitude_error_std,
             self.attitude_error_phi,
+            self.attitude_error_smooth,
             self.velocity_error_std,
             self.velocity_error_phi,
             self.position_error_phi,
@@ -285,6 +292,7 @@ class Onboard:
             self._position_prev_step,
             self._delay_buffer,
             self._delay_index,
+            self.attitude_error_stage,
             self.attitude_error,
             self.velocity_error,
             self.position_error,
@@ -339,15 +347,15 @@ def onboard_step(
         loop, _damping, _decay, _drag, _scale, ctrl_div, noise_on, gyro_std, accel_std, off_std,
         gyro_coef, dterm_coef, accel_coef, imu_mode, pos_delay, out_delay, gain_p, gain_i,
         gain_d, int_limit, yaw_alpha, accel_per_unit, accel_max, ref_gain, ref_phi, ref_gamma,
-        angle_p, track, ref_delay, att_err_std, att_phi, vel_err_std, vel_phi, pos_phi,
+        angle_p, track, ref_delay, att_err_std, att_phi, att_smooth, vel_err_std, vel_phi, pos_phi,
         pos_share, disturbance, integ_phi, bias_std, bias_phi, dist_ar, wander_std, wander_ar,
     ) = cal_par
     (
         rng, gyro_state, dterm_state, accel_state, gyro_raw, accel_raw, rate_meas, dgyro,
         gyro_imu, accel_imu, yaw_lpf, shaped, ref, angle_err, track_int, torque_next,
         thrust_next, torque_new, rot_est, pos_est, vel_est, pos_prev, vel_prev, att_step,
-        pos_step, pos_prev_step, delay_buf, delay_idx, att_err, vel_err, pos_err, integ_err,
-        gyro_bias, dist_state, wander_state, wander, wandered_sp, limited,
+        pos_step, pos_prev_step, delay_buf, delay_idx, att_stage, att_err, vel_err, pos_err,
+        integ_err, gyro_bias, dist_state, wander_state, wander, wandered_sp, limited,
     ) = cal_st
     for i in range(loop.shape[0]):
         if loop[i] == 0 or step % ctrl_div[i] != 0:
@@ -363,8 +371,8 @@ def onboard_step(
         # estimates as the autopilot reports them (truth plus the estimate errors), with their
         # sample steps; LOCAL_POSITION_NED optionally one period older
         sn.estimate_errors(
-            i, dt_c, noise_on, att_err_std, att_phi, vel_err_std, vel_phi, pos_phi, pos_share, rng,
-            att_err, vel_err, pos_err,
+            i, dt_c, noise_on, att_err_std, att_phi, att_smooth, vel_err_std, vel_phi, pos_phi,
+            pos_share, rng, att_stage, att_err, vel_err, pos_err,
         )
         sn.gyro_integration_errors(i, dt_c, noise_on, integ_phi, gyro_raw, omega, integ_err)
         sn.gyro_bias_step(i, noise_on, bias_std, bias_phi, rng, gyro_bias, gyro_imu)

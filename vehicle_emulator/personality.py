@@ -144,10 +144,13 @@ class Sensors:
     imu_average_samples: int = 1  # raw samples averaged into HIGHRES_IMU (1 or 2)
     accel_cutoff_hz: float = 0.0  # 2nd-order low pass of the accel when imu_filtered
     position_delay_periods: int = 0  # LOCAL_POSITION_NED is this many periods older
-    # estimate errors (EMU_NOISE = 1): first-order Gauss-Markov processes, 1 sigma, ENU/FLU;
-    # the position error integrates the velocity error and decays with its own time constant
+    # estimate errors (EMU_NOISE = 1): Gauss-Markov processes, 1 sigma, ENU/FLU; the position
+    # error integrates the velocity error and decays with its own time constant. The attitude
+    # errors are first order, or second order (two poles at 1/tau: autocorrelation
+    # (1 + w/tau) exp(-w/tau) at lag w, smooth where a first-order one jumps) per axis
     attitude_error_std_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)  # roll, pitch, yaw
     attitude_error_tau_s: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    attitude_error_order: tuple[int, int, int] = (1, 1, 1)
     # attitude estimate as a complementary filter, per body axis (0: off): it integrates the
     # raw gyro samples (noise included) and is pulled to the true attitude with this time
     # constant (tilt from the accelerometer and velocity fusion, heading from the magnetometer),
@@ -232,8 +235,9 @@ PX4_SENSORS = Sensors(
     # over 6 s (the recorded roll is a quarter of the true wander's size), plus slow errors on
     # pitch and heading (recorded autocorrelation 0.92 at 1 s, 0.33 at 3 s) (fitted)
     gyro_integration_tau_s=(6.0, 6.0, 0.0),
-    attitude_error_std_rad=(0.0, 0.016, 0.042),
+    attitude_error_std_rad=(0.0, 0.016, 0.058),
     attitude_error_tau_s=(4.0, 4.0, 4.0),
+    attitude_error_order=(1, 1, 2),
 )
 
 # ArduCopter 4.7.0-dev SITL, frame "quad" (plus), 3 kg. Its attitude controller in GUIDED_NOGPS

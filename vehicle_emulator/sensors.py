@@ -24,6 +24,7 @@ __all__ = [
     "biquad_prime",
     "gauss_pair",
     "noise_seed",
+    "smooth_gain",
     "one_pole_alpha",
 ]
 
@@ -59,6 +60,13 @@ def biquad_prime(coef: np.ndarray, state: np.ndarray, value: float) -> None:
     d = value / (1.0 + a1 + a2)
     state[0] = d
     state[1] = d
+
+
+def smooth_gain(phi: float) -> float:
+    """Gain of a Gauss-Markov process's second stage, x2 <- phi x2 + c x1 with x1 a unit-variance
+    first-order stage of the same factor ``phi``, that gives x2 unit variance:
+    Var x2 = c^2 (1 + phi^2) / (1 - phi^2)^2."""
+    return (1.0 - phi * phi) / math.sqrt(1.0 + phi * phi)
 
 
 def noise_seed(seed: int, sysid: int) -> np.uint64:
@@ -168,10 +176,12 @@ def sample_sensors(
 
 
 @njit(cache=True)
-def estimate_errors(i, dt_c, noise_on, att_std, att_phi, vel_std, vel_phi, pos_phi, pos_share,
-                    rng, att_err, vel_err, pos_err):
-    """Advance vehicle i's estimate errors by one control period: first-order Gauss-Markov
-    attitude errors (roll, pitch, yaw; body axes; factors ``att_phi[i, k]`` per axis) and
+def estimate_errors(i, dt_c, noise_on, att_std, att_phi, att_smooth, vel_std, vel_phi, pos_phi,
+                    pos_share, rng, att_stage, att_err, vel_err, pos_err):
+    """Advance vehicle i's estimate errors by one control period: Gauss-Markov attitude errors
+    (roll, pitch, yaw; body axes; factors ``att_phi[i, k]`` per axis), first order where
+    ``att_smooth[i, k]`` is 0, else second order (two equal poles: a unit first-order stage
+    ``att_stage`` low-passed once more with gain ``att_smooth``, smooth at short lags), and
     velocity errors (ENU arrays; ``vel_std[i]`` = (north, east, vertical), LOCAL_POSITION_NED's
     x, y, z), stationary 1 sigma ``*_std``, factors ``*_phi = exp(-dt/tau)``; the position error
     integrates the share ``pos_share[i]`` of the velocity error and decays by ``pos_phi`` per
@@ -180,6 +190,7 @@ def estimate_errors(i, dt_c, noise_on, att_std, att_phi, vel_std, vel_phi, pos_p
     if not noise_on[i]:
         for k in range(3):
             att_err[i, k] = 0.0
+            att_stage[i, k] = 0.0
             vel_err[i, k] = 0.0
             pos_err[i, k] = 0.0
         return
@@ -191,7 +202,12 @@ def estimate_errors(i, dt_c, noise_on, att_std, att_phi, vel_std, vel_phi, pos_p
         for k in range(3):
             pa = att_phi[i, k]
             ka = math.sqrt(max(0.0, 1.0 - pa * pa))
-            att_err[i, k] = pa * att_err[i, k] + ka * att_std[i, k] * na[k]
+            if att_smooth[i, k] == 0.0:
+                att_err[i, k] = pa * att_err[i, k] + ka * att_std[i, k] * na[k]
+            else:
+                att_stage[i, k] = pa * att_stage[i, k] + ka * na[k]
+                c = att_smooth[i, k] * att_std[i, k]
+                att_err[i, k] = pa * att_err[i, k] + c * att_stage[i, k]
     if vel_std[i, 0] != 0.0 or vel_std[i, 1] != 0.0 or vel_std[i, 2] != 0.0:
         kv = math.sqrt(max(0.0, 1.0 - pv * pv))
         n3, n4 = gauss_pair(rng, i)

@@ -390,3 +390,30 @@ def test_gyro_bias_wanders_in_highres_imu_only():
     assert np.all(np.std(diff, axis=0) > 0.2 * bias)
     assert np.all(np.std(diff, axis=0) < 2.0 * bias)
     assert np.argmax(np.std(diff, axis=0)) == 2
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_attitude_estimate_errors_are_gauss_markov_of_their_order(order):
+    # GIVEN one vehicle's yaw estimate error of 1 sigma 0.05 rad, tau 0.5 s, first or second
+    # order, advanced every 10 ms for 2000 s
+    dt, tau, std, steps = 0.01, 0.5, 0.05, 200_000
+    phi = math.exp(-dt / tau)
+    att_std = np.array([[0.0, 0.0, std]])
+    att_phi = np.full((1, 3), phi)
+    smooth = np.array([[0.0, 0.0, sn.smooth_gain(phi) if order == 2 else 0.0]])
+    zeros = np.zeros((1, 3))
+    stage, err = np.zeros((1, 3)), np.zeros((1, 3))
+    vel_err, pos_err = np.zeros((1, 3)), np.zeros((1, 3))
+    rng = np.array([sn.noise_seed(3, 1)])
+    yaw = np.empty(steps)
+    for s in range(steps):
+        sn.estimate_errors(0, dt, np.array([True]), att_std, att_phi, smooth, zeros,
+                           np.ones(1), np.ones(1), np.ones(1), rng, stage, err, vel_err, pos_err)
+        yaw[s] = err[0, 2]
+    # THEN its std is the stated one and its autocorrelation at lag tau is exp(-1) (first
+    # order) or 2 exp(-1) (second order: (1 + w/tau) exp(-w/tau)); the other axes stay at 0
+    lag = int(round(tau / dt))
+    rho = np.corrcoef(yaw[:-lag], yaw[lag:])[0, 1]
+    assert np.std(yaw) == pytest.approx(std, rel=0.1)
+    assert rho == pytest.approx(order * math.exp(-1.0), abs=0.05)
+    assert not err[0, :2].any()
