@@ -11,11 +11,13 @@ without restarting the vehicles. Per flight, from the flight's own records:
 - formation error (report.json) mean and max for t >= 30 s;
 - mass estimate error at t = 20 s, max over vehicles, in % of the truth (ArduPilot vehicles: of
   the thrust-equivalent mass m / thrust_scale, what its reported hover thrust gives);
-- share of setpoints after t = 10 s with the roll/pitch body-rate limit active (|p, q| at
+- share of setpoints with the roll/pitch body-rate limit active (|p, q| at
   fly.rates.max_rate_radps; from the SET_ATTITUDE_TARGET in the tlog), rates mode only;
-- heading error after t = 10 s, max over vehicles and samples: ATTITUDE_QUATERNION's yaw
-  against the yaw at the formation start (fly.heading: hold), from the tlog. The formation
-  start is the first SET_ATTITUDE_TARGET to the vehicle after its last position setpoint.
+- heading error, max over vehicles and samples: ATTITUDE_QUATERNION's yaw against the yaw at
+  the formation start (fly.heading: hold), from the tlog.
+The last two from t = 10 s to the formation's end: the formation starts at the first
+SET_ATTITUDE_TARGET to the vehicle after its last position setpoint and lasts the report's
+time span; the landing that may follow in the same setpoints is not counted.
 
     python benchmarks/bench_from_ground.py [--team px4 --team mixed] [--duration-s 60] [--no-write]
 
@@ -87,9 +89,10 @@ def team_file(kind: str, work: Path, duration_s: float) -> Path:
     return path
 
 
-def tlog_figures(tlog: Path, sysids: list[int], max_rate: float) -> dict:
-    """Heading error after t = 10 s [deg] and the rate-limit share after t = 10 s, per vehicle,
-    from what was sent and reported (pymavlink reads the tlog)."""
+def tlog_figures(tlog: Path, sysids: list[int], max_rate: float, formation_s: float) -> dict:
+    """Heading error [deg] and the rate-limit share over the formation from t = 10 s to its end
+    (``formation_s`` after its first rates setpoint; the landing that follows is not in it), per
+    vehicle, from what was sent and reported (pymavlink reads the tlog)."""
     from pymavlink import mavutil
 
     conn = mavutil.mavlink_connection(str(tlog))
@@ -119,10 +122,11 @@ def tlog_figures(tlog: Path, sysids: list[int], max_rate: float) -> dict:
             heading[k] = limited[k] = math.nan
             continue
         t0 = sp[0, 0]
-        after = sp[sp[:, 0] >= t0 + 10.0]
+        t1 = min(sp[-1, 0], t0 + formation_s)
+        after = sp[(sp[:, 0] >= t0 + 10.0) & (sp[:, 0] <= t1)]
         limited[k] = 100.0 * float(np.mean(after[:, 1] >= max_rate - 1e-4)) if len(after) else 0.0
         start = yw[np.searchsorted(yw[:, 0], t0), 1]
-        late = yw[(yw[:, 0] >= t0 + 10.0) & (yw[:, 0] <= sp[-1, 0])]
+        late = yw[(yw[:, 0] >= t0 + 10.0) & (yw[:, 0] <= t1)]
         err = np.angle(np.exp(1j * (late[:, 1] - start)))
         heading[k] = float(np.degrees(np.abs(err).max())) if len(err) else math.nan
     return {"heading_deg": heading, "limited_pct": limited}
@@ -139,7 +143,8 @@ def figures(out: Path, kind: str, max_rate: float) -> dict:
     scale = np.array([ARDUPILOT_DYNAMICS.thrust_scale if a == "ardupilot" else 1.0
                       for a in TEAMS[kind]])
     mass_pct = 100.0 * np.abs(mhat - truth / scale) / (truth / scale)
-    tl = tlog_figures(out / "flight.tlog", [1, 2, 3, 4], max_rate)  # square4's sysids
+    tl = tlog_figures(out / "flight.tlog", [1, 2, 3, 4], max_rate,  # square4's sysids
+                      float(t[-1]) if len(t) else 0.0)
     mode = report["extra"]["mode"]
     return {
         "mode": mode,
@@ -223,8 +228,9 @@ def section(rows: list[dict], duration_s: float, heading: str = HEADING) -> str:
         "again. Formation error: the largest over the pairs (report.json), t >= 30 s. Mass: "
         "max over vehicles of |mhat - m| / m at 20 s (ArduPilot: m / 1.069, the "
         "thrust-equivalent mass). Rate limit: share of setpoints after 10 s with the roll/pitch "
-        "rate command at its limit, worst vehicle. Heading: largest |yaw - yaw at the "
-        "formation start| after 10 s, from ATTITUDE_QUATERNION. The px4-sih-2026-12-04 team "
+        "rate command at its limit, worst vehicle, and heading: largest |yaw - yaw at the "
+        "formation start| (ATTITUDE_QUATERNION), both from t = 10 s to the formation's end "
+        "(the landing after it not included). The px4-sih-2026-12-04 team "
         "is the team file of the 2026-12-04 flights of four real PX4 v1.16.0 SIH vehicles "
         f"(`{SIH_TEAM}` in the recordings: alpha_p 1, c_p 2, go-to-start tolerance 0.5 m) "
         "flown as it was then, reading the reported velocity "
