@@ -20,6 +20,7 @@ SET_ATTITUDE_TARGET to the vehicle after its last position setpoint and lasts th
 time span; the landing that may follow in the same setpoints is not counted.
 
     python benchmarks/bench_from_ground.py [--team px4 --team mixed] [--duration-s 60] [--no-write]
+        [--keep DIR]
 
 Writes the "## From the ground, twice" section of docs/benchmarks.md (about 17 min). The team
 `px4-sih-2026-12-04` flies the recorded SIH team file instead, beside the recorded flight.
@@ -260,13 +261,18 @@ def main() -> None:
     ap.add_argument("--team", choices=sorted(TEAMS), action="append")
     ap.add_argument("--duration-s", type=float, default=60.0)
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--keep", type=Path, metavar="DIR",
+                    help="fly in DIR and keep each flight's records there (default: a temporary "
+                         "folder, removed)")
     args = ap.parse_args()
     rows: list[dict] = []
     with tempfile.TemporaryDirectory() as tmp:
+        work = args.keep or Path(tmp)
+        work.mkdir(parents=True, exist_ok=True)
         for kind in args.team or list(TEAMS):
             if kind == "px4-sih-2026-12-04":
-                rows.append(recorded_sih_row(Path(tmp)))
-            rows += fly_team(kind, Path(tmp), args.duration_s)
+                rows.append(recorded_sih_row(work))
+            rows += fly_team(kind, work, args.duration_s)
     # the SIH team file (and SIH's own row) has its section; the shipped teams share the other
     sih = {"px4-sih-2026-12-04", SIH_RECORDED}
     for heading, part in ((HEADING, [r for r in rows if r["team"] not in sih]),

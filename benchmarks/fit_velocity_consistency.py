@@ -113,6 +113,12 @@ def _row(label: str, d: np.ndarray) -> str:
     return f"| {label} | " + " | ".join(cells) + " |"
 
 
+def _ratio_range(emulated: np.ndarray, *recorded: np.ndarray) -> str:
+    """The range of emulated / recorded over the axes and recordings, as "a-b"."""
+    r = np.concatenate([emulated / rec for rec in recorded])
+    return f"{r.min():.1f}-{r.max():.1f}"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--no-write", action="store_true", help="print only")
@@ -132,12 +138,16 @@ def main(argv: list[str] | None = None) -> int:
         "",
         f"The personality's velocity error (1 sigma "
         f"{' / '.join(f'{x:g}' for x in s.velocity_error_std_mps)} m/s north / east / up, "
-        f"{s.velocity_error_tau_s:g} s) is kept out of its position "
+        f"{s.velocity_error_tau_s:g} s, plus a drift of "
+        f"{' / '.join(f'{x:g}' for x in s.velocity_drift_std_mps)} m/s, "
+        f"{s.velocity_drift_tau_s:g} s) is kept out of its position "
         f"(`velocity_error_in_position` {s.velocity_error_in_position:g}; at 1, position and "
         "velocity agreeing, its D(1 s) was 0.045-0.059 m). On SIH D(w) grows almost in "
-        "proportion to w up to 5 s, and its east axis is the largest; the personality's grows "
-        "less than proportionally (its error's time constant) and is the same on every axis: "
-        "over 1 s it is 0.5-0.9 times SIH's, over 5 s 0.3-0.7 times. A law that damps the "
+        "proportion to w up to 5 s, and its east axis is the largest in the formation; the "
+        "personality's error is the same on every axis and its drift makes D(w) grow nearly "
+        "in proportion too: over 1 s it is "
+        f"{_ratio_range(emulated[1], hover[1], formation[1])} times SIH's, over 5 s "
+        f"{_ratio_range(emulated[3], hover[3], formation[3])} times. A law that damps the "
         "reported velocity and places the reported position meets the mismatch as a push; "
         "`gcs fly` reads the position's rate instead at low frequency "
         "(`fly.velocity_from_position_s`, docs/gcs.md \"The law's velocity\").",

@@ -132,6 +132,10 @@ class Onboard:
         self.velocity_error_phi = np.exp(
             -1.0 / (rates * np.array([se.velocity_error_tau_s for se in sen]))
         )
+        self.velocity_drift_std = np.array([se.velocity_drift_std_mps for se in sen], dtype=f)
+        self.velocity_drift_phi = np.exp(
+            -1.0 / (rates * np.array([se.velocity_drift_tau_s for se in sen]))
+        )
         self.position_error_phi = np.exp(
             -1.0 / (rates * np.array([se.position_error_tau_s for se in sen]))
         )
@@ -185,6 +189,7 @@ class Onboard:
         self.hold_wander_enu_m = np.zeros((n, 3))
         self._wandered_sp = np.zeros((n, 3))
         self.velocity_error = np.zeros((n, 3))
+        self.velocity_error_parts = np.zeros((n, 2, 3))  # fast, drift
         self.position_error = np.zeros((n, 3))
         self.attitude_sample_step = np.zeros(n, dtype=np.int64)
         self.position_sample_step = np.zeros(n, dtype=np.int64)
@@ -251,6 +256,8 @@ class Onboard:
             self.attitude_error_smooth,
             self.velocity_error_std,
             self.velocity_error_phi,
+            self.velocity_drift_std,
+            self.velocity_drift_phi,
             self.position_error_phi,
             self.position_error_share,
             self.disturbance_std,
@@ -294,6 +301,7 @@ class Onboard:
             self._delay_index,
             self.attitude_error_stage,
             self.attitude_error,
+            self.velocity_error_parts,
             self.velocity_error,
             self.position_error,
             self.integration_error,
@@ -347,14 +355,16 @@ def onboard_step(
         loop, _damping, _decay, _drag, _scale, ctrl_div, noise_on, gyro_std, accel_std, off_std,
         gyro_coef, dterm_coef, accel_coef, imu_mode, pos_delay, out_delay, gain_p, gain_i,
         gain_d, int_limit, yaw_alpha, accel_per_unit, accel_max, ref_gain, ref_phi, ref_gamma,
-        angle_p, track, ref_delay, att_err_std, att_phi, att_smooth, vel_err_std, vel_phi, pos_phi,
-        pos_share, disturbance, integ_phi, bias_std, bias_phi, dist_ar, wander_std, wander_ar,
+        angle_p, track, ref_delay, att_err_std, att_phi, att_smooth, vel_err_std, vel_phi,
+        drift_std, drift_phi, pos_phi, pos_share, disturbance, integ_phi, bias_std, bias_phi,
+        dist_ar, wander_std, wander_ar,
     ) = cal_par
     (
         rng, gyro_state, dterm_state, accel_state, gyro_raw, accel_raw, rate_meas, dgyro,
         gyro_imu, accel_imu, yaw_lpf, shaped, ref, angle_err, track_int, torque_next,
         thrust_next, torque_new, rot_est, pos_est, vel_est, pos_prev, vel_prev, att_step,
-        pos_step, pos_prev_step, delay_buf, delay_idx, att_stage, att_err, vel_err, pos_err,
+        pos_step, pos_prev_step, delay_buf, delay_idx, att_stage, att_err, vel_parts, vel_err,
+        pos_err,
         integ_err, gyro_bias, dist_state, wander_state, wander, wandered_sp, limited,
     ) = cal_st
     for i in range(loop.shape[0]):
@@ -371,8 +381,8 @@ def onboard_step(
         # estimates as the autopilot reports them (truth plus the estimate errors), with their
         # sample steps; LOCAL_POSITION_NED optionally one period older
         sn.estimate_errors(
-            i, dt_c, noise_on, att_err_std, att_phi, att_smooth, vel_err_std, vel_phi, pos_phi,
-            pos_share, rng, att_stage, att_err, vel_err, pos_err,
+            i, dt_c, noise_on, att_err_std, att_phi, att_smooth, vel_err_std, vel_phi, drift_std,
+            drift_phi, pos_phi, pos_share, rng, att_stage, att_err, vel_parts, vel_err, pos_err,
         )
         sn.gyro_integration_errors(i, dt_c, noise_on, integ_phi, gyro_raw, omega, integ_err)
         sn.gyro_bias_step(i, noise_on, bias_std, bias_phi, rng, gyro_bias, gyro_imu)

@@ -176,22 +176,28 @@ def sample_sensors(
 
 
 @njit(cache=True)
-def estimate_errors(i, dt_c, noise_on, att_std, att_phi, att_smooth, vel_std, vel_phi, pos_phi,
-                    pos_share, rng, att_stage, att_err, vel_err, pos_err):
+def estimate_errors(i, dt_c, noise_on, att_std, att_phi, att_smooth, vel_std, vel_phi,
+                    drift_std, drift_phi, pos_phi, pos_share, rng, att_stage, att_err, vel_parts,
+                    vel_err, pos_err):
     """Advance vehicle i's estimate errors by one control period: Gauss-Markov attitude errors
     (roll, pitch, yaw; body axes; factors ``att_phi[i, k]`` per axis), first order where
     ``att_smooth[i, k]`` is 0, else second order (two equal poles: a unit first-order stage
     ``att_stage`` low-passed once more with gain ``att_smooth``, smooth at short lags), and
     velocity errors (ENU arrays; ``vel_std[i]`` = (north, east, vertical), LOCAL_POSITION_NED's
-    x, y, z), stationary 1 sigma ``*_std``, factors ``*_phi = exp(-dt/tau)``; the position error
-    integrates the share ``pos_share[i]`` of the velocity error and decays by ``pos_phi`` per
-    period (share 1: position and velocity estimates agree; 0: the reported velocity carries an
-    error the reported position does not show). Off (held at zero) without noise."""
+    x, y, z), stationary 1 sigma ``*_std``, factors ``*_phi = exp(-dt/tau)``. The velocity
+    error ``vel_err`` is the sum of two independent first-order processes kept in ``vel_parts``:
+    a fast one (``vel_std``, ``vel_phi``) and a slow drift (``drift_std``, ``drift_phi``; axes as
+    ``vel_std``). The position error integrates the share ``pos_share[i]`` of the velocity error
+    and decays by ``pos_phi`` per period (share 1: position and velocity estimates agree; 0: the
+    reported velocity carries an error the reported position does not show). Off (held at zero)
+    without noise."""
     if not noise_on[i]:
         for k in range(3):
             att_err[i, k] = 0.0
             att_stage[i, k] = 0.0
             vel_err[i, k] = 0.0
+            vel_parts[i, 0, k] = 0.0
+            vel_parts[i, 1, k] = 0.0
             pos_err[i, k] = 0.0
         return
     pv = vel_phi[i]
@@ -209,14 +215,25 @@ def estimate_errors(i, dt_c, noise_on, att_std, att_phi, att_smooth, vel_std, ve
                 c = att_smooth[i, k] * att_std[i, k]
                 att_err[i, k] = pa * att_err[i, k] + c * att_stage[i, k]
     if vel_std[i, 0] != 0.0 or vel_std[i, 1] != 0.0 or vel_std[i, 2] != 0.0:
-        kv = math.sqrt(max(0.0, 1.0 - pv * pv))
-        n3, n4 = gauss_pair(rng, i)
-        n5, _ = gauss_pair(rng, i)
-        nv = (n3, n4, n5)
-        for k in range(3):
-            s = vel_std[i, 1] if k == 0 else (vel_std[i, 0] if k == 1 else vel_std[i, 2])
-            vel_err[i, k] = pv * vel_err[i, k] + kv * s * nv[k]
-            pos_err[i, k] = pos_phi[i] * pos_err[i, k] + pos_share[i] * vel_err[i, k] * dt_c
+        _markov_enu(i, pv, vel_std, rng, vel_parts, 0)
+    if drift_std[i, 0] != 0.0 or drift_std[i, 1] != 0.0 or drift_std[i, 2] != 0.0:
+        _markov_enu(i, drift_phi[i], drift_std, rng, vel_parts, 1)
+    for k in range(3):
+        vel_err[i, k] = vel_parts[i, 0, k] + vel_parts[i, 1, k]
+        pos_err[i, k] = pos_phi[i] * pos_err[i, k] + pos_share[i] * vel_err[i, k] * dt_c
+
+
+@njit(cache=True)
+def _markov_enu(i, phi, std_neu, rng, parts, j):
+    """One period of the first-order process ``parts[i, j]`` (ENU) of stationary 1 sigma
+    ``std_neu[i]`` given as (north, east, up) and factor ``phi``."""
+    kv = math.sqrt(max(0.0, 1.0 - phi * phi))
+    n3, n4 = gauss_pair(rng, i)
+    n5, _ = gauss_pair(rng, i)
+    nv = (n3, n4, n5)
+    for k in range(3):
+        s = std_neu[i, 1] if k == 0 else (std_neu[i, 0] if k == 1 else std_neu[i, 2])
+        parts[i, j, k] = phi * parts[i, j, k] + kv * s * nv[k]
 
 
 @njit(cache=True)

@@ -403,12 +403,13 @@ def test_attitude_estimate_errors_are_gauss_markov_of_their_order(order):
     smooth = np.array([[0.0, 0.0, sn.smooth_gain(phi) if order == 2 else 0.0]])
     zeros = np.zeros((1, 3))
     stage, err = np.zeros((1, 3)), np.zeros((1, 3))
-    vel_err, pos_err = np.zeros((1, 3)), np.zeros((1, 3))
+    vel_parts, vel_err, pos_err = np.zeros((1, 2, 3)), np.zeros((1, 3)), np.zeros((1, 3))
     rng = np.array([sn.noise_seed(3, 1)])
     yaw = np.empty(steps)
     for s in range(steps):
-        sn.estimate_errors(0, dt, np.array([True]), att_std, att_phi, smooth, zeros,
-                           np.ones(1), np.ones(1), np.ones(1), rng, stage, err, vel_err, pos_err)
+        sn.estimate_errors(0, dt, np.array([True]), att_std, att_phi, smooth, zeros, np.ones(1),
+                           zeros, np.ones(1), np.ones(1), np.ones(1), rng, stage, err, vel_parts,
+                           vel_err, pos_err)
         yaw[s] = err[0, 2]
     # THEN its std is the stated one and its autocorrelation at lag tau is exp(-1) (first
     # order) or 2 exp(-1) (second order: (1 + w/tau) exp(-w/tau)); the other axes stay at 0
@@ -417,3 +418,31 @@ def test_attitude_estimate_errors_are_gauss_markov_of_their_order(order):
     assert np.std(yaw) == pytest.approx(std, rel=0.1)
     assert rho == pytest.approx(order * math.exp(-1.0), abs=0.05)
     assert not err[0, :2].any()
+
+
+def test_velocity_error_is_a_fast_error_plus_a_slow_drift_kept_out_of_the_position():
+    # GIVEN one vehicle's velocity error: a fast part (north 0.1 m/s, 0.5 s) and a slow drift
+    # (north 0.15 m/s, 20 s), none in the position (share 0), advanced every 10 ms for 4000 s
+    dt, steps = 0.01, 400_000
+    fast_std, fast_tau, drift_std, drift_tau = 0.1, 0.5, 0.15, 20.0
+    zeros = np.zeros((1, 3))
+    vel_std, drift = np.array([[fast_std, 0.0, 0.0]]), np.array([[drift_std, 0.0, 0.0]])
+    phis = np.array([math.exp(-dt / fast_tau)]), np.array([math.exp(-dt / drift_tau)])
+    stage, err = np.zeros((1, 3)), np.zeros((1, 3))
+    vel_parts, vel_err, pos_err = np.zeros((1, 2, 3)), np.zeros((1, 3)), np.zeros((1, 3))
+    rng = np.array([sn.noise_seed(5, 1)])
+    north = np.empty(steps)
+    slow = np.empty(steps)
+    for s in range(steps):
+        sn.estimate_errors(0, dt, np.array([True]), zeros, np.ones((1, 3)), zeros, vel_std,
+                           phis[0], drift, phis[1], np.ones(1), np.zeros(1), rng, stage, err,
+                           vel_parts, vel_err, pos_err)
+        north[s], slow[s] = vel_err[0, 1], vel_parts[0, 1, 1]  # ENU: north is y
+    # THEN the error is the sum of the two, its variance theirs added, the drift's
+    # autocorrelation at its tau exp(-1), and the position, east and up carry none of it
+    lag = int(round(drift_tau / dt))
+    assert np.std(north) == pytest.approx(math.hypot(fast_std, drift_std), rel=0.15)
+    assert np.std(slow) == pytest.approx(drift_std, rel=0.2)
+    assert np.corrcoef(slow[:-lag], slow[lag:])[0, 1] == pytest.approx(math.exp(-1.0), abs=0.1)
+    assert vel_err[0, 1] == pytest.approx(vel_parts[0, 0, 1] + vel_parts[0, 1, 1])
+    assert not pos_err.any() and vel_err[0, 0] == 0.0 and vel_err[0, 2] == 0.0
