@@ -30,163 +30,42 @@ personality: ArduCopter 4.7.0-dev SITL as recorded (docs/emulator.md,
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
-from enum import IntEnum
+from dataclasses import dataclass, field
 
-import numpy as np
-
+from vehicle_emulator.ardupilot_boot import PAST_BOOT, BootTimeline
+from vehicle_emulator.ardupilot_flight import (
+    LAND_DETECT_S,
+    LAND_DISARM_S,
+    MAX_TICK_DT_S,
+    STOPPED_MPS,
+    AngleTarget,
+    CopterFlight,
+)
+from vehicle_emulator.ardupilot_modes import (
+    ARMABLE,
+    FLOWN,
+    GUIDED_MODES,
+    NEEDS_POSITION,
+    XY_CONTROL,
+    Mode,
+)
 from vehicle_emulator.autopilot import (
-    AttitudeSetpoint,
     Demand,
     Idle,
     MavResult,
     MotorsOff,
     Observation,
     PositionTarget,
-    RatesSetpoint,
     Severity,
 )
 from vehicle_emulator.params import ParamStore
 
-__all__ = [
-    "AngleTarget",
-    "ArduCopter",
-    "BootTimeline",
-    "CopterObservation",
-    "Mode",
-    "mode_name",
-]
+__all__ = ["ArduCopter", "CopterObservation"]
 
-GRAVITY_MPS2 = 9.80665
 FORCE_ARM_MAGIC = 2989
 FORCE_DISARM_MAGIC = 21196
 MSG_HOME_POSITION = 242
 MSG_GPS_GLOBAL_ORIGIN = 49
-
-
-class Mode(IntEnum):
-    """ArduCopter flight mode numbers (HEARTBEAT custom_mode, DO_SET_MODE param2)."""
-
-    STABILIZE = 0
-    ACRO = 1
-    ALT_HOLD = 2
-    AUTO = 3
-    GUIDED = 4
-    LOITER = 5
-    RTL = 6
-    CIRCLE = 7
-    LAND = 9
-    DRIFT = 11
-    SPORT = 13
-    FLIP = 14
-    AUTOTUNE = 15
-    POSHOLD = 16
-    BRAKE = 17
-    THROW = 18
-    AVOID_ADSB = 19
-    GUIDED_NOGPS = 20
-    SMART_RTL = 21
-    FLOWHOLD = 22
-    FOLLOW = 23
-    ZIGZAG = 24
-    SYSTEMID = 25
-    AUTOROTATE = 26
-    AUTO_RTL = 27
-    TURTLE = 28
-
-
-M = Mode
-FLOWN = frozenset({M.STABILIZE, M.ALT_HOLD, M.GUIDED, M.LOITER, M.LAND, M.POSHOLD, M.BRAKE,
-                   M.GUIDED_NOGPS})
-# Mode::allows_arming (ArduCopter 4.7)
-ARMABLE = frozenset({M.STABILIZE, M.ACRO, M.ALT_HOLD, M.GUIDED, M.LOITER, M.DRIFT, M.SPORT,
-                     M.POSHOLD, M.GUIDED_NOGPS, M.THROW, M.FLOWHOLD, M.ZIGZAG, M.TURTLE})
-# Mode::requires_GPS
-NEEDS_POSITION = frozenset({M.AUTO, M.GUIDED, M.LOITER, M.RTL, M.CIRCLE, M.DRIFT, M.POSHOLD,
-                            M.BRAKE, M.THROW, M.SMART_RTL, M.FOLLOW, M.ZIGZAG, M.AUTO_RTL})
-GUIDED_MODES = frozenset({M.GUIDED, M.GUIDED_NOGPS})  # Mode::in_guided_mode
-# HEARTBEAT base_mode GUIDED_ENABLED (8): the horizontal position controller runs (recorded:
-# STABILIZE 81, GUIDED / BRAKE / LAND 89 disarmed, 217 armed, GUIDED_NOGPS 89 disarmed, 209 armed)
-XY_CONTROL = frozenset({M.AUTO, M.GUIDED, M.LOITER, M.RTL, M.CIRCLE, M.LAND, M.POSHOLD, M.BRAKE,
-                        M.SMART_RTL, M.FOLLOW, M.ZIGZAG, M.AUTO_RTL})
-PILOT_MODES = frozenset({M.STABILIZE, M.ALT_HOLD, M.LOITER, M.POSHOLD})
-
-
-def mode_name(number: int) -> str:
-    """ArduCopter's name of a mode number ('GUIDED_NOGPS'), or 'MODE <n>'."""
-    try:
-        return Mode(number).name
-    except ValueError:
-        return f"MODE {number}"
-
-
-@dataclass(frozen=True, slots=True)
-class BootTimeline:
-    """What ArduCopter 4.7.0-dev SITL did after process start (recorded twice, s), times
-    ``scale``. ``arm_reasons`` are the "Arm: ..." failures of an arming attempt at a time."""
-
-    scale: float = 1.0
-
-    READY_S = 2.46  # "ArduPilot Ready": system_status BOOT -> STANDBY
-    EKF_INIT_S = 4.46
-    TILT_S = 5.81
-    ACCELS_OK_S = 13.6  # "Accels inconsistent" until 13.26-14.02 s
-    GYROS_OK_S = 23.6  # "Gyros inconsistent" until 23.26-24.02 s (armed at 24.02 / 24.26 s)
-    ORIGIN_S = 20.03  # EKF origin: GPS_GLOBAL_ORIGIN + HOME_POSITION
-    POSITION_S = 41.63  # "EKF3 IMU0 is using GPS": position estimate, LOCAL_POSITION_NED
-    PREARM_FIRST_S = 29.46  # "PreArm: <reason>" while disarmed and failing, every 30 s
-    PREARM_PERIOD_S = 30.0
-    TEXTS = (
-        (0.33, "Calibrating barometer"),
-        (1.93, "Barometer 1 calibration complete"),
-        (1.93, "Barometer 2 calibration complete"),
-        (2.46, "ArduPilot Ready"),
-        (2.46, "AHRS: DCM active"),
-        (4.46, "EKF3 IMU0 initialised"),
-        (4.46, "EKF3 IMU1 initialised"),
-        (4.46, "AHRS: EKF3 active"),
-        (5.81, "EKF3 IMU0 tilt alignment complete"),
-        (5.81, "EKF3 IMU1 tilt alignment complete"),
-        (5.91, "EKF3 IMU0 MAG0 initial yaw alignment complete"),
-        (5.91, "EKF3 IMU1 MAG0 initial yaw alignment complete"),
-        (9.81, "GPS 1: probing for u-blox at 230400 baud"),
-        (9.84, "GPS 1: detected u-blox"),
-        (20.03, "EKF3 IMU0 origin set"),
-        (20.23, "EKF3 IMU1 origin set"),
-        (41.63, "EKF3 IMU0 is using GPS"),
-        (41.64, "EKF3 IMU1 is using GPS"),
-    )
-
-    def at(self, t_recorded_s: float) -> float:
-        """Emulator time of a recorded boot time."""
-        return t_recorded_s * self.scale
-
-    def initialised(self, now_s: float) -> bool:
-        return now_s >= self.at(self.READY_S)
-
-    def origin_set(self, now_s: float) -> bool:
-        return now_s >= self.at(self.ORIGIN_S)
-
-    def position_ok(self, now_s: float) -> bool:
-        return now_s >= self.at(self.POSITION_S)
-
-    def sensor_reasons(self, now_s: float) -> list[str]:
-        """The boot-time "Arm: ..." reasons (without the "Arm: " prefix), in recorded order."""
-        if not self.initialised(now_s):
-            return ["System not initialised"]
-        if now_s < self.at(self.EKF_INIT_S):
-            return ["Accels inconsistent", "EKF attitude is bad",
-                    "AHRS: not using configured AHRS type"]
-        if now_s < self.at(self.TILT_S):
-            return ["Accels inconsistent", "EKF attitude is bad", "AHRS: EKF3 still initialising"]
-        if now_s < self.at(self.ACCELS_OK_S):
-            return ["Accels inconsistent"]
-        if now_s < self.at(self.GYROS_OK_S):
-            return ["Gyros inconsistent"]
-        return []
-
-
-PAST_BOOT = BootTimeline(scale=0.0)  # a vehicle that starts in the air
 
 
 @dataclass(frozen=True, slots=True)
@@ -196,32 +75,8 @@ class CopterObservation(Observation):
     tilt_cos: float = 1.0
 
 
-@dataclass(frozen=True, slots=True)
-class AngleTarget:
-    """A guided attitude target (SET_ATTITUDE_TARGET): rates or attitude (the setpoint's thrust
-    field unused when ``use_thrust`` is False), and thrust or climb rate."""
-
-    setpoint: RatesSetpoint | AttitudeSetpoint
-    use_thrust: bool
-    climb_rate_mps: float = 0.0  # when not use_thrust (up positive)
-
-
-# Vertical loop (ArduPilot's PSC_POSZ_P 1, PSC_VELZ_P 5 style; integrator for mass changes)
-POS_Z_P = 1.0
-VEL_Z_P = 5.0
-VEL_Z_I = 2.0
-VEL_Z_I_LIMIT = 3.0  # m/s^2
-LEASH_Z_M = 1.0
-TAKEOFF_SPOOL_S = 2.5  # NAV_TAKEOFF -> liftoff (recorded 48.70 -> 51.20 s)
-LAND_DETECT_S = 1.6  # touchdown -> land complete (recorded 108.08 -> 109.67 s)
-LAND_DISARM_S = 0.5  # land complete -> "Disarming motors" in LAND (recorded 109.67 -> 110.16 s)
-MAX_TICK_DT_S = 0.1  # the longest step the vertical loop integrates at one tick
-STOPPED_MPS = 0.1  # a braking vehicle holds its position below this horizontal speed
-TAKEOFF_DONE_M = 0.1
-
-
 @dataclass(slots=True)
-class ArduCopter:
+class ArduCopter(CopterFlight):
     """One vehicle's ArduCopter-like state machine. Call ``tick`` regularly (>= 10 Hz)."""
 
     vehicle_id: int
@@ -604,139 +459,3 @@ class ArduCopter:
     @staticmethod
     def _position_hold(obs: Observation) -> PositionTarget:
         return PositionTarget(obs.position_enu_m, yaw_enu_rad=obs.yaw_enu_rad)
-
-    def _pilot_down_mps(self) -> float:
-        down = self.params["PILOT_SPEED_DN"] or self.params["PILOT_SPEED_UP"]
-        return down * 0.01
-
-    def _land_speed_mps(self, obs: Observation) -> float:
-        above_home_m = obs.position_enu_m[2] - self.home_enu_m[2]
-        if above_home_m > self.params["LAND_ALT_LOW"] * 0.01:
-            return self.params["WPNAV_SPEED_DN"] * 0.01
-        return self.params["LAND_SPEED"] * 0.01
-
-    def _land_speed_update(self, obs: Observation) -> None:
-        d = self.demand
-        speed = self._land_speed_mps(obs)
-        if isinstance(d, PositionTarget) and d.velocity_ff_enu_mps[2] != -speed:
-            self._set(replace(d, velocity_ff_enu_mps=(0.0, 0.0, -speed)))
-
-    def _takeoff_progress(self, now_s: float, obs: Observation) -> None:
-        """Spool-up, then a trapezoidal climb (WPNAV_SPEED_UP, WPNAV_ACCEL_Z) to the altitude,
-        flown by the position controller; GUIDED then holds there."""
-        t = now_s - self._takeoff_started_s
-        if self._taking_off == "spool":
-            if t < TAKEOFF_SPOOL_S:
-                return
-            self._taking_off = "climb"
-            self.land_complete = False
-            self._landed_since_s = None
-            self._takeoff_started_s = now_s
-            t = 0.0
-        z, v = _trapezoid(self._takeoff_alt_m - self._takeoff_from_m, t,
-                          self.params["WPNAV_SPEED_UP"] * 0.01,
-                          self.params["WPNAV_ACCEL_Z"] * 0.01)
-        x, y = obs.position_enu_m[0], obs.position_enu_m[1]
-        if isinstance(self.demand, PositionTarget):
-            x, y = self.demand.position_enu_m[0], self.demand.position_enu_m[1]
-        self._set(PositionTarget((x, y, self._takeoff_from_m + z), (0.0, 0.0, v),
-                                 (1.0, 1.0, 1.0), getattr(self.demand, "yaw_enu_rad",
-                                                          obs.yaw_enu_rad)))
-        if v == 0.0 and abs(obs.position_enu_m[2] - self._takeoff_alt_m) < TAKEOFF_DONE_M:
-            self._taking_off = ""
-
-    def expire(self, now_s: float, obs: Observation) -> None:
-        """A guided target's GUID_TIMEOUT, checked when it falls due (``deadline_s``) and not
-        only at the next tick: ArduCopter checks it on every main-loop pass (400 Hz), so an
-        expired attitude target is not flown, nor echoed in ATTITUDE_TARGET, a tick longer."""
-        self.deadline_s = math.inf
-        if not self.armed or self._taking_off:
-            return
-        if self.angle_control and self.mode in GUIDED_MODES:
-            if self._fresh(now_s):
-                self.deadline_s = self._setpoint_s + self.params["GUID_TIMEOUT"]
-            else:
-                self._fly_angle(now_s, obs, 0.0)
-        elif self._velocity_target_expired(now_s):
-            self._stop_guided(obs)
-        elif self._velocity_target_s is not None:
-            self.deadline_s = self._velocity_target_s + self.params["GUID_TIMEOUT"]
-
-    def _velocity_target_expired(self, now_s: float) -> bool:
-        return (self._velocity_target_s is not None
-                and now_s - self._velocity_target_s > self.params["GUID_TIMEOUT"])
-
-    def _fly_angle(self, now_s: float, obs: Observation, dt_s: float) -> None:
-        """Guided angle control (ArduPilot's angle_control_run): the target while fresh, else
-        level + altitude hold; idle on the ground unless thrust or a climb is commanded. ``dt_s``:
-        the time the altitude target integrates a climb rate over (the tick period at a tick; 0
-        when a setpoint or an expiry only changes what is flown)."""
-        sp = self.setpoint if self._fresh(now_s) else None
-        if sp is None and not self._expiry_counted:
-            self._expiry_counted = True
-            self.guided_timeouts += 1
-        if self._angle_idles(sp):
-            if self.armed and not isinstance(self.demand, Idle):
-                self._set(Idle())
-            return
-        if sp is not None and sp.use_thrust:
-            if self.demand is not sp.setpoint:
-                self._set(sp.setpoint)
-            return
-        if sp is not None:
-            self._set(self._climb(obs, sp.setpoint, sp.climb_rate_mps, dt_s))
-        else:
-            self._set(self._level_climb(obs, 0.0, dt_s))
-
-    def _angle_idles(self, sp: AngleTarget | None) -> bool:
-        """make_safe_ground_handling: disarmed, not auto-armed, or landed without thrust or a
-        climb commanded."""
-        lifting = sp is not None and (sp.use_thrust or sp.climb_rate_mps > 0.0)
-        return not self.armed or not self.auto_armed or (self.land_complete and not lifting)
-
-    def _fresh(self, now_s: float) -> bool:
-        return now_s - self._setpoint_s <= self.params["GUID_TIMEOUT"]
-
-    def _level_climb(self, obs: Observation, climb_mps: float, dt_s: float) -> AttitudeSetpoint:
-        """Level attitude with the current heading, thrust from the vertical loop."""
-        c, s = math.cos(obs.yaw_enu_rad), math.sin(obs.yaw_enu_rad)
-        level = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        return self._climb(obs, AttitudeSetpoint(level, 0.0, 0.0), climb_mps, dt_s)
-
-    def _climb(self, obs: Observation, sp: RatesSetpoint | AttitudeSetpoint, climb_mps: float,
-               dt_s: float) -> RatesSetpoint | AttitudeSetpoint:
-        """``sp`` with the thrust of a climb rate (ArduPilot's set_pos_target_z_from_climb_rate:
-        the altitude target integrates the rate, within a leash)."""
-        z = obs.position_enu_m[2]
-        z_ref = z if self._z_ref_m is None else self._z_ref_m
-        z_ref = min(max(z_ref + climb_mps * dt_s, z - LEASH_Z_M), z + LEASH_Z_M)
-        self._z_ref_m = z_ref
-        err = climb_mps + POS_Z_P * (z_ref - z) - obs.velocity_enu_mps[2]
-        self._vz_int = min(max(self._vz_int + VEL_Z_I * err * dt_s, -VEL_Z_I_LIMIT),
-                           VEL_Z_I_LIMIT)
-        acc = VEL_Z_P * err + self._vz_int
-        tilt = max(getattr(obs, "tilt_cos", 1.0), 0.5)
-        thrust = self.params["MOT_THST_HOVER"] * (1.0 + acc / GRAVITY_MPS2) / tilt
-        thrust = min(max(thrust, 0.05), 1.0)
-        return replace(sp, thrust_norm=thrust)
-
-
-def _trapezoid(distance_m: float, t_s: float, v_max: float, a_max: float) -> tuple[float, float]:
-    """(distance covered, speed) at ``t_s`` of a rest-to-rest move with speed and acceleration
-    limits (the speed is 0 once it has arrived)."""
-    d = max(distance_m, 0.0)
-    v_peak = min(v_max, math.sqrt(a_max * d))
-    t_acc = v_peak / a_max
-    d_acc = 0.5 * a_max * t_acc * t_acc
-    t_cruise = (d - 2.0 * d_acc) / v_peak if v_peak > 0 else 0.0
-    t_end = 2.0 * t_acc + t_cruise
-    if t_s <= 0.0:
-        return 0.0, 0.0
-    if t_s < t_acc:
-        return 0.5 * a_max * t_s * t_s, a_max * t_s
-    if t_s < t_acc + t_cruise:
-        return d_acc + v_peak * (t_s - t_acc), v_peak
-    if t_s < t_end:
-        r = t_end - t_s
-        return d - 0.5 * a_max * r * r, a_max * r
-    return d, 0.0

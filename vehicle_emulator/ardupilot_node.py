@@ -37,8 +37,8 @@ from vehicle_emulator.ardupilot import (
     MSG_HOME_POSITION,
     ArduCopter,
     CopterObservation,
-    Mode,
 )
+from vehicle_emulator.ardupilot_modes import Mode
 from vehicle_emulator.ardupilot_targets import guided_attitude_target, guided_position_target
 from vehicle_emulator.autopilot import MavResult, Severity
 from vehicle_emulator.codec import mavlink

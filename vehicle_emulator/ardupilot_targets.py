@@ -27,7 +27,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from vehicle_emulator import frames
-from vehicle_emulator.ardupilot import AngleTarget
+from vehicle_emulator.ardupilot_flight import AngleTarget
 from vehicle_emulator.autopilot import AttitudeSetpoint, PositionTarget, RatesSetpoint
 from vehicle_emulator.setpoints import (
     ACC_IGNORE_BITS,

@@ -8,7 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from vehicle_emulator.ardupilot import ArduCopter, BootTimeline, CopterObservation, Mode
+from vehicle_emulator.ardupilot import ArduCopter, CopterObservation
+from vehicle_emulator.ardupilot_boot import BootTimeline
+from vehicle_emulator.ardupilot_modes import Mode
 from vehicle_emulator.ardupilot_targets import climb_rate_of_thrust, guided_attitude_target
 from vehicle_emulator.autopilot import (
     AttitudeSetpoint,
