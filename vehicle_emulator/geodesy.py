@@ -9,6 +9,8 @@ flat-earth approximation), so a ground station that converts back with any prope
 geodetic -> ECEF: x = (N + h) cos(lat) cos(lon), y = (N + h) cos(lat) sin(lon),
 z = (N (1 - e^2) + h) sin(lat), N = a / sqrt(1 - e^2 sin^2(lat)). ECEF -> geodetic: Bowring's
 initial latitude, then two Newton-style refinements (sub-micrometre at aircraft altitudes).
+The team frame's default origin (``DEFAULT_ORIGIN_LLA``) and the NED form telemetry uses
+(``geodetic_of_ned``) are here too.
 """
 
 from __future__ import annotations
@@ -72,3 +74,23 @@ def geodetic_to_enu(
     ref = _ecef(np.asarray(lat0), np.asarray(lon0), np.asarray(float(h0_m)))
     xyz = _ecef(np.radians(lat_deg), np.radians(lon_deg), np.asarray(h_m, dtype=float))
     return (xyz - ref) @ _rotation(lat0, lon0).T
+
+
+# The team frame's origin on the globe when the team file states none (its `frame.origin`):
+# PX4 SITL's default home (Zurich). Geodetic coordinates (GLOBAL_POSITION_INT, HOME_POSITION,
+# GPS_GLOBAL_ORIGIN) are exact WGS-84 (geodesy.py).
+HOME_LAT_DEG = 47.397742
+HOME_LON_DEG = 8.545594
+HOME_ALT_M = 488.0
+DEFAULT_ORIGIN_LLA = (HOME_LAT_DEG, HOME_LON_DEG, HOME_ALT_M)
+
+
+def geodetic_of_ned(
+    ned_m: np.ndarray, origin_lla: tuple[float, float, float] = DEFAULT_ORIGIN_LLA
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Team-frame NED points (..., 3) -> (lat deg, lon deg, altitude m) on the WGS-84
+    ellipsoid (the emulator reports ellipsoid heights as AMSL: no geoid model); the team
+    frame's origin is ``origin_lla`` (lat deg, lon deg, alt m)."""
+    ned = np.asarray(ned_m, dtype=float)
+    enu = np.stack((ned[..., 1], ned[..., 0], -ned[..., 2]), axis=-1)
+    return enu_to_geodetic(enu, *origin_lla)

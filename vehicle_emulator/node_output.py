@@ -12,7 +12,7 @@ from typing import Any, Protocol
 
 from vehicle_emulator.autopilot import Severity
 from vehicle_emulator.codec import mavlink
-from vehicle_emulator.telemetry import geodetic_of_ned
+from vehicle_emulator.geodesy import geodetic_of_ned
 
 log = logging.getLogger("vehicle_emulator.vehicle")  # the node's one logger, as before the split
 

@@ -24,12 +24,14 @@ from vehicle_emulator.ardupilot_node import ArduPilotNode
 from vehicle_emulator.autopilot import Autopilot, Severity
 from vehicle_emulator.codec import GenericEncoder, HotDecoder
 from vehicle_emulator.faults import FaultSchedule, LinkImpairment
+from vehicle_emulator.fleet_status import FleetStatus
+from vehicle_emulator.geodesy import DEFAULT_ORIGIN_LLA
 from vehicle_emulator.params import ParamError, ParamStore, param_table
 from vehicle_emulator.personality import personality_of
 from vehicle_emulator.plant import FleetPlant
 from vehicle_emulator.server import LinkPoller, UdpLink
 from vehicle_emulator.team import FaultSpec, VehicleSpec
-from vehicle_emulator.telemetry import DEFAULT_ORIGIN_LLA, FleetStatus, Telemetry
+from vehicle_emulator.telemetry import Telemetry
 from vehicle_emulator.vehicle import VehicleNode
 
 log = logging.getLogger(__name__)

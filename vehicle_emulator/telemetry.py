@@ -16,7 +16,6 @@ Pure: time is an argument; noise comes from an injected numpy Generator.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -24,14 +23,13 @@ from numba import njit
 
 from vehicle_emulator import frames, hotstreams
 from vehicle_emulator.codec import CRC_TABLE, BatchEncoder, mavlink
-from vehicle_emulator.geodesy import enu_to_geodetic
-from vehicle_emulator.gnss import GPS_RATE_HZ, fill_gps_raw_int
+from vehicle_emulator.fleet_status import FleetStatus
+from vehicle_emulator.geodesy import DEFAULT_ORIGIN_LLA
+from vehicle_emulator.gnss import GPS_RATE_HZ
 from vehicle_emulator.plant import FleetPlant
+from vehicle_emulator.telemetry_payloads import TelemetryPayloads
 
-__all__ = [
-    "DEFAULT_ORIGIN_LLA", "DEFAULT_RATES_HZ", "FleetStatus", "Telemetry", "HOME_LAT_DEG",
-    "HOME_LON_DEG",
-]
+__all__ = ["DEFAULT_RATES_HZ", "Telemetry"]
 
 DEFAULT_RATES_HZ: dict[str, float] = {
     "HEARTBEAT": 1.0,
@@ -49,13 +47,6 @@ DEFAULT_RATES_HZ: dict[str, float] = {
     "HOME_POSITION": 0.5,
     "GPS_RAW_INT": GPS_RATE_HZ,
 }
-# The team frame's origin on the globe when the team file states none (its `frame.origin`):
-# PX4 SITL's default home (Zurich). Geodetic coordinates (GLOBAL_POSITION_INT, HOME_POSITION,
-# GPS_GLOBAL_ORIGIN) are exact WGS-84 (geodesy.py).
-HOME_LAT_DEG = 47.397742
-HOME_LON_DEG = 8.545594
-HOME_ALT_M = 488.0
-DEFAULT_ORIGIN_LLA = (HOME_LAT_DEG, HOME_LON_DEG, HOME_ALT_M)
 # Noise standard deviations when EMU_NOISE = 1.
 NOISE_POS_M = 0.01
 NOISE_VEL_MPS = 0.02
@@ -65,93 +56,6 @@ NOISE_ACC_MPS2 = 0.05
 
 _NEED_POSITION = frozenset({"LOCAL_POSITION_NED"})
 _NO_NOISE = {key: np.zeros((0, 3)) for key in ("att", "gyro", "pos", "vel", "acc")}
-_GPS = 0x20  # MAV_SYS_STATUS_SENSOR_GPS: present and enabled once there is a global position
-_SENSORS = 0x1 | 0x2 | 0x4 | 0x8 | 0x400 | 0x800 | 0x1000 | 0x8000 | 0x200000
-_PREARM_CHECK = 0x10000000  # MAV_SYS_STATUS_PREARM_CHECK: health set while arming would pass
-
-
-@dataclass(slots=True)
-class FleetStatus:
-    """Per-vehicle autopilot status arrays the runner keeps up to date (n,)."""
-
-    sysid: np.ndarray  # uint8
-    armed: np.ndarray  # bool
-    custom_mode: np.ndarray  # uint32
-    base_mode_flags: np.ndarray  # uint8, without SAFETY_ARMED
-    landed_state: np.ndarray  # uint8 MAV_LANDED_STATE
-    system_status: np.ndarray  # uint8 MAV_STATE
-    prearm_ok: np.ndarray  # bool: SYS_STATUS pre-arm check health bit
-    position_ok: np.ndarray  # bool: SYS_STATUS GPS bit present and enabled (global position)
-    mav_autopilot: np.ndarray  # uint8 MAV_AUTOPILOT of the personality
-    origin_ned_m: np.ndarray  # (n, 3) EKF origin in the team frame (NED): LOCAL_POSITION_NED zero
-    home_ned_m: np.ndarray  # (n, 3) home in the team frame (NED)
-    noise: np.ndarray  # bool
-    #: int64 time_boot_ms from which the estimator has a position: LOCAL_POSITION_NED is sent only
-    #: with samples taken then or later (a sample stamped before it has no estimate behind it)
-    position_from_ms: np.ndarray
-    vtol_state: np.ndarray  # uint8 EXTENDED_SYS_STATE.vtol_state (ArduCopter: MC, 3)
-    battery_remaining: np.ndarray  # 0..1
-    battery_voltage_v: np.ndarray
-    battery_current_a: np.ndarray
-    errors_comm: np.ndarray  # uint16: rejected input so far
-    #: bool: the autopilot publishes an attitude/rates setpoint (else no ATTITUDE_TARGET is sent,
-    #: whatever its interval: PX4 sends one only per new setpoint)
-    attitude_target: np.ndarray
-
-    #: The columns a vehicle refreshes at the autopilot's rate (`VehicleNode.status_row`), in
-    #: the row's order.
-    ROW_COLUMNS = ("armed", "system_status", "prearm_ok", "position_ok", "custom_mode",
-                   "base_mode_flags", "landed_state", "errors_comm", "attitude_target")
-
-    def write_row(self, i: int, row: tuple) -> None:
-        """One vehicle's `ROW_COLUMNS` values."""
-        for name, value in zip(self.ROW_COLUMNS, row, strict=True):
-            getattr(self, name)[i] = value
-
-    def write_rows(self, rows: list[tuple]) -> None:
-        """Every vehicle's `ROW_COLUMNS` values (``rows[i]``: vehicle i's), a column at a time:
-        at 240 vehicles and 50 Hz, a numpy write per value was a tenth of the fleet's time."""
-        for name, column in zip(self.ROW_COLUMNS, zip(*rows, strict=True), strict=True):
-            getattr(self, name)[:] = column
-
-    def refresh_battery(self, charge_used_c: np.ndarray, thrust_n: np.ndarray,
-                        capacity_c: np.ndarray | float, which: slice = slice(None)) -> None:
-        """The battery model of the vehicles ``which`` (after their ``armed``): the charge used
-        of ``capacity_c`` [C], 13.2 V empty to 16.8 V full, 0.5 A + 0.8 A per newton of thrust
-        while armed."""
-        remaining = np.maximum(0.0, 1.0 - charge_used_c[which] / capacity_c)
-        self.battery_remaining[which] = remaining
-        self.battery_voltage_v[which] = 13.2 + 3.6 * remaining
-        self.battery_current_a[which] = np.where(self.armed[which], 0.5 + 0.8 * thrust_n[which],
-                                                 0.0)
-
-    @classmethod
-    def create(cls, sysids: list[int]) -> FleetStatus:
-        """Defaults for ``len(sysids)`` vehicles."""
-        n = len(sysids)
-        return cls(
-            sysid=np.array(sysids, dtype=np.uint8),
-            armed=np.zeros(n, dtype=bool),
-            custom_mode=np.zeros(n, dtype=np.uint32),
-            base_mode_flags=np.ones(n, dtype=np.uint8),
-            landed_state=np.ones(n, dtype=np.uint8),
-            system_status=np.full(n, 3, dtype=np.uint8),
-            prearm_ok=np.ones(n, dtype=bool),
-            position_ok=np.ones(n, dtype=bool),
-            mav_autopilot=np.full(n, 12, dtype=np.uint8),
-            origin_ned_m=np.zeros((n, 3)),
-            home_ned_m=np.zeros((n, 3)),
-            noise=np.zeros(n, dtype=bool),
-            position_from_ms=np.zeros(n, dtype=np.int64),
-            vtol_state=np.zeros(n, dtype=np.uint8),
-            battery_remaining=np.ones(n),
-            battery_voltage_v=np.full(n, 16.8),
-            battery_current_a=np.zeros(n),
-            errors_comm=np.zeros(n, dtype=np.uint16),
-            attitude_target=np.ones(n, dtype=bool),
-        )
-
-
 @njit(cache=True)
 def _select_sources(rows, model, rot, rot_est, omega, rate_meas, pos, pos_est, vel, vel_est, sf,
                     accel_imu, out_rot, out_w, out_pos, out_vel, out_sf):
@@ -179,22 +83,11 @@ def _scatter(out, ln, idx, buf, cursor):
         cursor[v] = c + ln[r]
 
 
-def geodetic_of_ned(
-    ned_m: np.ndarray, origin_lla: tuple[float, float, float] = DEFAULT_ORIGIN_LLA
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Team-frame NED points (..., 3) -> (lat deg, lon deg, altitude m) on the WGS-84
-    ellipsoid (the emulator reports ellipsoid heights as AMSL: no geoid model); the team
-    frame's origin is ``origin_lla`` (lat deg, lon deg, alt m)."""
-    ned = np.asarray(ned_m, dtype=float)
-    enu = np.stack((ned[..., 1], ned[..., 0], -ned[..., 2]), axis=-1)
-    return enu_to_geodetic(enu, *origin_lla)
-
-
 def _msg_class(name: str) -> Any:
     return getattr(mavlink, f"MAVLink_{name.lower()}_message")
 
 
-class Telemetry:
+class Telemetry(TelemetryPayloads):
     """Per-vehicle, per-message schedule plus batched builders for the whole fleet."""
 
     def __init__(
@@ -470,138 +363,3 @@ class Telemetry:
         d["t_pos_ms"] = (pos_s * 1e3).astype(np.int64)
         d["t_pos_us"] = (pos_s * 1e6).astype(np.int64)
         d["z_up"] = np.ascontiguousarray(src[2][:, 2])  # one layout for frame_streams
-
-    # --- builders: fill payload rows for vehicles idx ----------------------------------------
-
-    def _heartbeat(self, rows, idx, now_s, plant, status) -> None:
-        armed = status.armed[idx]
-        rows["custom_mode"] = status.custom_mode[idx]
-        rows["type"] = 2  # MAV_TYPE_QUADROTOR
-        rows["autopilot"] = status.mav_autopilot[idx]
-        rows["base_mode"] = status.base_mode_flags[idx] | np.where(armed, 128, 0).astype(np.uint8)
-        rows["system_status"] = status.system_status[idx]
-        rows["mavlink_version"] = 3
-
-    def _attitude(self, rows, idx, now_s, plant, status) -> None:
-        d = self._d
-        eul, w = d["eul"][idx], d["w_frd"][idx]
-        rows["time_boot_ms"] = d["t_att_ms"][idx]
-        rows["roll"], rows["pitch"], rows["yaw"] = eul[:, 0], eul[:, 1], eul[:, 2]
-        rows["rollspeed"], rows["pitchspeed"], rows["yawspeed"] = w[:, 0], w[:, 1], w[:, 2]
-
-    def _attitude_quaternion(self, rows, idx, now_s, plant, status) -> None:
-        d = self._d
-        q, w = d["q"][idx], d["w_frd"][idx]
-        rows["time_boot_ms"] = d["t_att_ms"][idx]
-        rows["q1"], rows["q2"], rows["q3"], rows["q4"] = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-        rows["rollspeed"], rows["pitchspeed"], rows["yawspeed"] = w[:, 0], w[:, 1], w[:, 2]
-
-    def _local_position(self, rows, idx, now_s, plant, status) -> None:
-        d = self._d
-        p, v = d["pos_ned"][idx] - status.origin_ned_m[idx], d["vel_ned"][idx]
-        rows["time_boot_ms"] = d["t_pos_ms"][idx]
-        rows["x"], rows["y"], rows["z"] = p[:, 0], p[:, 1], p[:, 2]
-        rows["vx"], rows["vy"], rows["vz"] = v[:, 0], v[:, 1], v[:, 2]
-
-    def _odometry(self, rows, idx, now_s, plant, status) -> None:
-        d = self._d
-        p, v, w = d["pos_ned"][idx] - status.origin_ned_m[idx], d["vel_frd"][idx], d["w_frd"][idx]
-        rows["time_usec"] = d["t_pos_us"][idx]
-        rows["frame_id"] = 1  # MAV_FRAME_LOCAL_NED
-        rows["child_frame_id"] = 12  # MAV_FRAME_BODY_FRD: the twist is in the body frame
-        rows["x"], rows["y"], rows["z"] = p[:, 0], p[:, 1], p[:, 2]
-        rows["q"] = d["q"][idx]
-        rows["vx"], rows["vy"], rows["vz"] = v[:, 0], v[:, 1], v[:, 2]
-        rows["rollspeed"], rows["pitchspeed"], rows["yawspeed"] = w[:, 0], w[:, 1], w[:, 2]
-        rows["pose_covariance"][:, 0] = np.nan
-        rows["velocity_covariance"][:, 0] = np.nan
-        rows["quality"] = 100
-
-    def _highres_imu(self, rows, idx, now_s, plant, status) -> None:
-        d = self._d
-        acc, w = d["acc_frd"][idx], d["gimu_frd"][idx]
-        rows["time_usec"] = d["t_att_us"][idx]
-        rows["xacc"], rows["yacc"], rows["zacc"] = acc[:, 0], acc[:, 1], acc[:, 2]
-        rows["xgyro"], rows["ygyro"], rows["zgyro"] = w[:, 0], w[:, 1], w[:, 2]
-        z = d["z_up"][idx]
-        alt0_m = self.origin_lla[2]
-        rows["abs_pressure"] = 1013.25 * (1.0 - 2.25577e-5 * (alt0_m + z)) ** 5.25588
-        rows["pressure_alt"] = alt0_m + z
-        rows["temperature"] = 25.0
-        rows["fields_updated"] = 0x3F | 0x200 | 0x800 | 0x1000
-
-    def _global_position(self, rows, idx, now_s, plant, status) -> None:
-        d = self._d
-        p = d["pos_ned"][idx]
-        v = d["vel_ned"][idx]
-        lat, lon, alt = geodetic_of_ned(p, self.origin_lla)
-        rows["time_boot_ms"] = d["t_pos_ms"][idx]
-        rows["lat"] = np.round(lat * 1e7)
-        rows["lon"] = np.round(lon * 1e7)
-        rows["alt"] = np.round(alt * 1e3)
-        rows["relative_alt"] = np.round((status.home_ned_m[idx, 2] - p[:, 2]) * 1e3)
-        rows["vx"] = np.round(v[:, 0] * 100)
-        rows["vy"] = np.round(v[:, 1] * 100)
-        rows["vz"] = np.round(v[:, 2] * 100)
-        rows["hdg"] = np.round(np.degrees(d["yaw_ned"][idx]) * 100).astype(np.int64) % 36000
-
-    def _attitude_target(self, rows, idx, now_s, plant, status) -> None:
-        d = self._d
-        w = d["rate_sp_frd"][idx]
-        rows["time_boot_ms"] = int(now_s * 1e3)
-        rows["q"] = d["q_sp"][idx]
-        rows["body_roll_rate"], rows["body_pitch_rate"] = w[:, 0], w[:, 1]
-        rows["body_yaw_rate"] = w[:, 2]
-        rows["thrust"] = plant.thrust_sp_norm[idx]
-
-    def _extended_sys_state(self, rows, idx, now_s, plant, status) -> None:
-        rows["landed_state"] = status.landed_state[idx]
-        rows["vtol_state"] = status.vtol_state[idx]
-
-    def _sys_status(self, rows, idx, now_s, plant, status) -> None:
-        # PX4 v1.16.0 SIH: the GPS health bit is set from boot, but GPS is present and enabled
-        # only once the estimator has a global position (with the pre-arm bit, when armable)
-        gps = np.where(status.position_ok[idx], _GPS, 0).astype(np.uint32)
-        rows["onboard_control_sensors_present"] = _SENSORS | _PREARM_CHECK | gps
-        rows["onboard_control_sensors_enabled"] = _SENSORS | _PREARM_CHECK | gps
-        rows["onboard_control_sensors_health"] = _SENSORS | _GPS | np.where(
-            status.prearm_ok[idx], _PREARM_CHECK, 0
-        ).astype(np.uint32)
-        rows["load"] = 200
-        rows["voltage_battery"] = np.round(status.battery_voltage_v[idx] * 1e3).astype(np.uint16)
-        rows["current_battery"] = np.round(status.battery_current_a[idx] * 100).astype(np.int16)
-        rows["battery_remaining"] = np.round(status.battery_remaining[idx] * 100).astype(np.int8)
-        rows["errors_comm"] = status.errors_comm[idx]
-
-    def _timesync(self, rows, idx, now_s, plant, status) -> None:
-        rows["tc1"] = 0
-        rows["ts1"] = int(now_s * 1e9)
-
-    def _home_position(self, rows, idx, now_s, plant, status) -> None:
-        home = status.home_ned_m[idx]
-        lat, lon, alt = geodetic_of_ned(home, self.origin_lla)
-        local = home - status.origin_ned_m[idx]
-        rows["latitude"] = np.round(lat * 1e7)
-        rows["longitude"] = np.round(lon * 1e7)
-        rows["altitude"] = np.round(alt * 1e3)
-        rows["x"], rows["y"], rows["z"] = local[:, 0], local[:, 1], local[:, 2]
-        rows["q"] = np.array([1.0, 0.0, 0.0, 0.0])
-        rows["time_usec"] = int(now_s * 1e6)
-
-    def _gps_raw_int(self, rows, idx, now_s, plant, status) -> None:
-        d = self._d
-        lat, lon, alt = geodetic_of_ned(d["pos_ned"][idx], self.origin_lla)
-        fill_gps_raw_int(rows, d["t_pos_us"][idx], lat, lon, alt, d["vel_ned"][idx])
-
-    def _battery_status(self, rows, idx, now_s, plant, status) -> None:
-        rows["current_consumed"] = np.round(plant.charge_used_c[idx] / 3.6).astype(np.int32)
-        rows["energy_consumed"] = -1
-        rows["temperature"] = 32767
-        volts = np.full((idx.size, 10), 65535, dtype=np.uint16)
-        volts[:, 0] = np.round(status.battery_voltage_v[idx] * 1e3).astype(np.uint16)
-        rows["voltages"] = volts
-        rows["current_battery"] = np.round(status.battery_current_a[idx] * 100).astype(np.int16)
-        rows["battery_function"] = 1  # MAV_BATTERY_FUNCTION_ALL
-        rows["type"] = 1  # MAV_BATTERY_TYPE_LIPO
-        rows["battery_remaining"] = np.round(status.battery_remaining[idx] * 100).astype(np.int8)
-        rows["charge_state"] = 1  # MAV_BATTERY_CHARGE_STATE_OK

@@ -36,6 +36,7 @@ from vehicle_emulator.faults import (
     link_param_values,
     link_text,
 )
+from vehicle_emulator.fleet_status import FleetStatus
 from vehicle_emulator.node_commands import DeferredAck, NodeCommands
 from vehicle_emulator.node_commands import _int as _int  # ardupilot_node imports it from here
 from vehicle_emulator.node_output import REPORT_PERIOD_S, Link, NodeOutput
@@ -50,7 +51,7 @@ from vehicle_emulator.setpoints import (
     from_position_target_local_ned,
 )
 from vehicle_emulator.team import FaultSpec, VehicleSpec
-from vehicle_emulator.telemetry import FleetStatus, Telemetry
+from vehicle_emulator.telemetry import Telemetry
 
 log = logging.getLogger(__name__)
 

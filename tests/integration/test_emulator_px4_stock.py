@@ -26,7 +26,7 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(150)]
 ACCEPTED, TEMP_REJECTED, UNSUPPORTED = 0, 1, 3
 GPS_BIT = 0x20  # MAV_SYS_STATUS_SENSOR_GPS
 PREARM_BIT = 0x10000000  # MAV_SYS_STATUS_PREARM_CHECK
-HOME_AMSL_M = 488.0  # the emulator's home (telemetry.HOME_ALT_M)
+HOME_AMSL_M = 488.0  # the emulator's home (geodesy.HOME_ALT_M)
 PX4_ALREADY_HIGHER = "Already higher than takeoff altitude"  # PX4 navigator takeoff.cpp
 
 

@@ -9,10 +9,17 @@ import math
 import numpy as np
 import pytest
 
-from vehicle_emulator.geodesy import WGS84_A_M, WGS84_F, enu_to_geodetic, geodetic_to_enu
+from vehicle_emulator.geodesy import (
+    HOME_ALT_M,
+    HOME_LAT_DEG,
+    HOME_LON_DEG,
+    WGS84_A_M,
+    WGS84_F,
+    enu_to_geodetic,
+    geodetic_to_enu,
+)
 from vehicle_emulator.runner import Emulator
 from vehicle_emulator.team import TeamFileError, default_vehicle, parse_team
-from vehicle_emulator.telemetry import HOME_ALT_M, HOME_LAT_DEG, HOME_LON_DEG
 from vehicle_emulator.testing import RecordingLink, run_until
 
 E2 = WGS84_F * (2.0 - WGS84_F)
