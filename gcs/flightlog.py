@@ -1,4 +1,4 @@
-"""The time series of one formation flight (sim or fly): the FlightLog record, its builder, CSV I/O.
+"""The time series of one formation flight (sim or fly): the FlightLog record.
 
 Frames and units: every vector is in the app's world frame ENU (x east, y north, z up; the paper's
 frame), SI units as the field suffixes say. ``t_s = 0`` is the start of the formation phase.
@@ -6,69 +6,27 @@ Shapes: ``k`` samples, ``n`` vehicles.
 
 * ``FlightLog`` is frozen; its arrays are read-only float64 (ids and sysids int64) copies.
 * ``FlightLog.from_arrays`` makes one from whole arrays (the simulation);
-  ``FlightLogBuilder`` appends one sample at a time (``gcs fly``) and ``build()``s it.
-* ``save_timeseries`` / ``load_timeseries`` write and read a self-describing CSV that round-trips
-  exactly (floats are written with ``repr``, the shortest string that reads back bit for bit).
-
-CSV format (``TIMESERIES_FORMAT``)::
-
-    # formation-flight-timeseries/1
-    # meta: {"name": ..., "source": ..., "controller": ..., "team": ..., "vehicle_ids": [...],
-    #        "sysids": [...], "offsets_enu_m": [[...], ...], "n_samples": k, "extra": {...}}
-    t_s,vehicle_id,x_enu_m,y_enu_m,z_enu_m,vx_enu_mps,...,fz_enu_n
-    0.0,1,4.0,4.0,9.0,...
-
-One row per sample and vehicle, sample-major (all vehicles of sample 0, then sample 1, ...).
-Metadata is one JSON object on the line starting with ``# meta: ``. The reference velocity is
-repeated on every vehicle row of its sample. Missing values are written ``nan``. Readers other than
-``load_timeseries`` can skip the ``#`` lines (``pandas.read_csv(path, comment="#")``).
+  ``flightlog_builder.FlightLogBuilder`` appends one sample at a time (``gcs fly``).
+* ``flightlog_csv.save_timeseries`` / ``load_timeseries`` write and read it as a CSV that
+  round-trips exactly (the format is described there).
 """
 
 from __future__ import annotations
 
-import json
 import math
-import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from gcs.metrics import grid_indices
 
-TIMESERIES_FORMAT = "formation-flight-timeseries/1"
 SOURCES = ("sim", "fly")
 #: no law ran: the vehicles' own position controllers flew their formation slots (gcs fly's
 #: position mode, gcs/control/slots.py)
 AUTOPILOT_CONTROLLER = "autopilot"
 CONTROLLERS = ("adaptive", "baseline", AUTOPILOT_CONTROLLER)
-
-#: CSV data columns after ``t_s,vehicle_id``: (column name, FlightLog field, component or None).
-CSV_COLUMNS: tuple[tuple[str, str, int | None], ...] = (
-    ("x_enu_m", "position_enu_m", 0),
-    ("y_enu_m", "position_enu_m", 1),
-    ("z_enu_m", "position_enu_m", 2),
-    ("vx_enu_mps", "velocity_enu_mps", 0),
-    ("vy_enu_mps", "velocity_enu_mps", 1),
-    ("vz_enu_mps", "velocity_enu_mps", 2),
-    ("vrx_enu_mps", "reference_velocity_enu_mps", 0),
-    ("vry_enu_mps", "reference_velocity_enu_mps", 1),
-    ("vrz_enu_mps", "reference_velocity_enu_mps", 2),
-    ("attitude_error", "attitude_error", None),
-    ("omega_error_radps", "omega_error_radps", None),
-    ("mass_estimate_kg", "mass_estimate_kg", None),
-    ("mass_true_kg", "mass_true_kg", None),
-    ("jx_estimate_kgm2", "inertia_estimate_kgm2", 0),
-    ("jy_estimate_kgm2", "inertia_estimate_kgm2", 1),
-    ("jz_estimate_kgm2", "inertia_estimate_kgm2", 2),
-    ("thrust_n", "thrust_n", None),
-    ("fx_enu_n", "force_enu_n", 0),
-    ("fy_enu_n", "force_enu_n", 1),
-    ("fz_enu_n", "force_enu_n", 2),
-)
-CSV_HEADER: tuple[str, ...] = ("t_s", "vehicle_id", *(c[0] for c in CSV_COLUMNS))
 
 #: Per-sample series: field name -> shape after the leading k ("n" = number of vehicles).
 SERIES_SHAPES: dict[str, tuple[str | int, ...]] = {
@@ -85,7 +43,7 @@ SERIES_SHAPES: dict[str, tuple[str | int, ...]] = {
 }
 
 
-def _shape_str(shape: Sequence[str | int]) -> str:
+def shape_str(shape: Sequence[str | int]) -> str:
     return "(" + ", ".join(str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
 
 
@@ -190,7 +148,7 @@ class FlightLog:
             expected = (k, *(n if s == "n" else s for s in tail))
             if a.shape != expected:
                 raise ValueError(
-                    f"FlightLog.{name}: expected shape {_shape_str(('k', *tail))} = {expected} "
+                    f"FlightLog.{name}: expected shape {shape_str(('k', *tail))} = {expected} "
                     f"for k={k} samples and n={n} vehicles, got {a.shape}"
                 )
             put(name, _readonly(a))
@@ -374,256 +332,5 @@ def estimates_record(
     }
 
 
-class FlightLogBuilder:
-    """Collects a flight one sample at a time (``gcs fly``'s control tick) and builds a FlightLog.
-
-    Not thread-safe; call ``append`` from the tick that owns the log. Every sample is checked on
-    the way in, so a wrong shape fails at the tick that produced it, naming the field and sample.
-    """
-
-    def __init__(
-        self,
-        *,
-        vehicle_ids: Sequence[int],
-        offsets_enu_m: Any,
-        source: str,
-        controller: str,
-        team: str,
-        name: str,
-        sysids: Sequence[int] | None = None,
-        extra: Mapping[str, Any] | None = None,
-    ) -> None:
-        self._meta: dict[str, Any] = {
-            "vehicle_ids": np.asarray(vehicle_ids),
-            "sysids": np.asarray(vehicle_ids if sysids is None else sysids),
-            "offsets_enu_m": np.asarray(offsets_enu_m, dtype=np.float64),
-            "source": source,
-            "controller": controller,
-            "team": team,
-            "name": name,
-            "extra": dict(extra or {}),
-        }
-        # Validate the metadata now (with one dummy sample) rather than at build() after a flight.
-        self._n = int(self._meta["vehicle_ids"].size)
-        FlightLog.from_arrays(**self._dummy_series(), **self._meta)
-        self._t: list[float] = []
-        self._series: dict[str, list[np.ndarray]] = {name: [] for name in SERIES_SHAPES}
-
-    def _dummy_series(self) -> dict[str, np.ndarray]:
-        out: dict[str, np.ndarray] = {"t_s": np.zeros(1)}
-        for name, tail in SERIES_SHAPES.items():
-            out[name] = np.zeros((1, *(self._n if s == "n" else s for s in tail)))
-        return out
-
-    def __len__(self) -> int:
-        return len(self._t)
-
-    def append(
-        self,
-        *,
-        t_s: float,
-        position_enu_m: Any,
-        velocity_enu_mps: Any,
-        reference_velocity_enu_mps: Any,
-        attitude_error: Any = None,
-        omega_error_radps: Any = None,
-        mass_estimate_kg: Any = None,
-        inertia_estimate_kgm2: Any = None,
-        thrust_n: Any = None,
-        force_enu_n: Any = None,
-        mass_true_kg: Any = None,
-    ) -> None:
-        """Record one sample (shapes as in FlightLog without the leading k). Returns when stored.
-
-        A series given as None is recorded unknown (NaN): ``mass_true_kg`` without a plant, the
-        law's figures of a flight that runs no law (position mode). Raises ValueError on a wrong
-        shape or a time that is not finite or not after the previous sample.
-        """
-        index = len(self._t)
-        t = float(t_s)
-        if not math.isfinite(t):
-            raise ValueError(f"FlightLogBuilder.append: sample {index}: t_s is not finite ({t})")
-        if self._t and t <= self._t[-1]:
-            raise ValueError(
-                f"FlightLogBuilder.append: sample {index}: t_s = {t!r} is not after the previous "
-                f"sample's {self._t[-1]!r}"
-            )
-        values = {
-            "position_enu_m": position_enu_m,
-            "velocity_enu_mps": velocity_enu_mps,
-            "reference_velocity_enu_mps": reference_velocity_enu_mps,
-            "attitude_error": attitude_error,
-            "omega_error_radps": omega_error_radps,
-            "mass_estimate_kg": mass_estimate_kg,
-            "mass_true_kg": mass_true_kg,
-            "inertia_estimate_kgm2": inertia_estimate_kgm2,
-            "thrust_n": thrust_n,
-            "force_enu_n": force_enu_n,
-        }
-        checked: dict[str, np.ndarray] = {}
-        for name, tail in SERIES_SHAPES.items():
-            expected = tuple(self._n if s == "n" else s for s in tail)
-            a = (np.full(expected, np.nan) if values[name] is None
-                 else np.array(values[name], dtype=np.float64))
-            if a.shape != expected:
-                raise ValueError(
-                    f"FlightLogBuilder.append: sample {index} (t_s = {t!r}): {name}: expected "
-                    f"shape {_shape_str(tail)} = {expected} for n={self._n} vehicles, got {a.shape}"
-                )
-            checked[name] = a
-        self._t.append(t)
-        for name, a in checked.items():
-            self._series[name].append(a)
-
-    def build(self, extra: Mapping[str, Any] | None = None) -> FlightLog:
-        """The FlightLog of the samples so far; ``extra`` is merged over the builder's extra.
-
-        Raises ValueError if no sample was appended.
-        """
-        if not self._t:
-            raise ValueError("FlightLogBuilder.build: no samples were appended")
-        meta = dict(self._meta)
-        meta["extra"] = {**meta["extra"], **dict(extra or {})}
-        series = {name: np.stack(values) for name, values in self._series.items()}
-        return FlightLog(t_s=np.asarray(self._t), **series, **meta)
-
-
 # --------------------------------------------------------------------------------------------------
 # CSV
-
-
-def _json_default(obj: object) -> object:
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    raise TypeError(f"FlightLog.extra: value of type {type(obj).__name__} is not JSON-compatible")
-
-
-def save_timeseries(log: FlightLog, path: str | os.PathLike[str]) -> Path:
-    """Write ``log`` as the CSV described in the module docstring; returns the path when written.
-
-    The file is written to a temporary name and renamed, so a reader never sees half a file.
-    Raises TypeError if ``log.extra`` holds a value JSON cannot encode.
-    """
-    path = Path(path)
-    k, n = log.n_samples, log.n_vehicles
-    meta = {
-        "name": log.name,
-        "source": log.source,
-        "controller": log.controller,
-        "team": log.team,
-        "vehicle_ids": log.vehicle_ids.tolist(),
-        "sysids": log.sysids.tolist(),
-        "offsets_enu_m": log.offsets_enu_m.tolist(),
-        "n_samples": k,
-        "extra": log.extra,
-    }
-    meta_line = json.dumps(meta, default=_json_default, separators=(", ", ": "))
-    if "\n" in meta_line or "\r" in meta_line:  # json escapes newlines in strings; be sure
-        raise ValueError("FlightLog metadata must encode on one line")
-
-    columns = []
-    for _, name, comp in CSV_COLUMNS:
-        a = getattr(log, name)
-        if name == "reference_velocity_enu_mps":
-            a = np.broadcast_to(a[:, None, :], (k, n, 3))
-        columns.append(a[..., comp] if comp is not None else a)
-    data = np.stack(columns, axis=-1).reshape(k * n, len(CSV_COLUMNS)).tolist()
-    t_col = np.repeat(log.t_s, n).tolist()
-    id_col = np.tile(log.vehicle_ids, k).tolist()
-
-    tmp = path.with_name(path.name + ".tmp")
-    with tmp.open("w", encoding="utf-8", newline="") as f:
-        f.write(f"# {TIMESERIES_FORMAT}\n")
-        f.write(f"# meta: {meta_line}\n")
-        f.write(",".join(CSV_HEADER) + "\n")
-        rep = float.__repr__
-        f.writelines(
-            f"{rep(t)},{vid},{','.join(map(rep, row))}\n"
-            for t, vid, row in zip(t_col, id_col, data, strict=True)
-        )
-    os.replace(tmp, path)
-    return path
-
-
-def load_timeseries(path: str | os.PathLike[str]) -> FlightLog:
-    """Read a CSV written by ``save_timeseries`` back into a FlightLog (bit-exact floats).
-
-    Rows may come in any order; each sample must have exactly one row per vehicle of the metadata,
-    with the same reference velocity on each. Raises ValueError naming the file and the problem.
-    """
-    path = Path(path)
-    with path.open("r", encoding="utf-8", newline="") as f:
-        lines = f.read().splitlines()
-    if not lines or lines[0].strip() != f"# {TIMESERIES_FORMAT}":
-        raise ValueError(f"{path}: not a {TIMESERIES_FORMAT} file (first line {lines[:1]!r})")
-    meta: dict[str, Any] | None = None
-    i = 1
-    while i < len(lines) and lines[i].startswith("#"):
-        if lines[i].startswith("# meta: "):
-            meta = json.loads(lines[i][len("# meta: ") :])
-        i += 1
-    if meta is None:
-        raise ValueError(f"{path}: missing the '# meta: {{...}}' line")
-    if i >= len(lines):
-        raise ValueError(f"{path}: missing the column header line")
-    header = [h.strip() for h in lines[i].split(",")]
-    missing = [c for c in CSV_HEADER if c not in header]
-    if missing:
-        raise ValueError(f"{path}: missing columns {missing}")
-    body = [ln for ln in lines[i + 1 :] if ln.strip()]
-
-    ids = np.asarray(meta["vehicle_ids"], dtype=np.int64)
-    n = ids.size
-    k = int(meta["n_samples"])
-    if len(body) != k * n:
-        raise ValueError(
-            f"{path}: expected {k} samples x {n} vehicles = {k * n} rows, got {len(body)}"
-        )
-    table = np.loadtxt(body, delimiter=",", dtype=np.float64, ndmin=2)
-    if table.shape[1] != len(header):
-        raise ValueError(f"{path}: expected {len(header)} columns per row, got {table.shape[1]}")
-    col = {name: table[:, header.index(name)] for name in CSV_HEADER}
-
-    position = {int(v): j for j, v in enumerate(ids)}
-    row_ids = col["vehicle_id"]
-    unknown = sorted({int(v) for v in row_ids} - set(position))
-    if unknown:
-        raise ValueError(f"{path}: rows for vehicles {unknown} not in vehicle_ids {ids.tolist()}")
-    vpos = np.array([position[int(v)] for v in row_ids], dtype=np.intp)
-    order = np.lexsort((vpos, col["t_s"]))
-    t_grid = col["t_s"][order].reshape(k, n)
-    if not np.all(t_grid == t_grid[:, :1]) or not np.all(vpos[order].reshape(k, n) == np.arange(n)):
-        raise ValueError(
-            f"{path}: every sample must have exactly one row per vehicle {ids.tolist()}"
-        )
-
-    series: dict[str, np.ndarray] = {}
-    for name, tail in SERIES_SHAPES.items():
-        comps = [c for c in CSV_COLUMNS if c[1] == name]
-        a = np.stack([col[c[0]][order] for c in comps], axis=-1).reshape(k, n, len(comps))
-        if name == "reference_velocity_enu_mps":
-            same = (a == a[:, :1]) | (np.isnan(a) & np.isnan(a[:, :1]))
-            if not np.all(same):
-                bad = int(np.flatnonzero(~same.all(axis=(1, 2)))[0])
-                raise ValueError(
-                    f"{path}: reference velocity differs between vehicles at t_s = "
-                    f"{float(t_grid[bad, 0])!r}"
-                )
-            a = a[:, 0, :]
-        elif len(tail) == 1:
-            a = a[..., 0]
-        series[name] = a
-    return FlightLog(
-        t_s=t_grid[:, 0],
-        **series,
-        vehicle_ids=ids,
-        sysids=np.asarray(meta["sysids"], dtype=np.int64),
-        offsets_enu_m=np.asarray(meta["offsets_enu_m"], dtype=np.float64),
-        source=meta["source"],
-        controller=meta["controller"],
-        team=meta["team"],
-        name=meta["name"],
-        extra=meta.get("extra") or {},
-    )

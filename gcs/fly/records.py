@@ -12,7 +12,9 @@ from typing import Any
 import numpy as np
 
 from gcs.config import ControlMode
-from gcs.flightlog import FlightLogBuilder, estimates_record, save_timeseries
+from gcs.flightlog import estimates_record
+from gcs.flightlog_builder import FlightLogBuilder
+from gcs.flightlog_csv import save_timeseries
 from gcs.fly.consistent import VelocityConsistency
 from gcs.fly.measure import HoverEstimate
 from gcs.fly.predict import PredictionAudit

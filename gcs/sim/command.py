@@ -8,7 +8,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from gcs.config import TeamConfig, load_team
-from gcs.flightlog import FlightLog, load_timeseries, save_timeseries
+from gcs.flightlog import FlightLog
+from gcs.flightlog_csv import load_timeseries, save_timeseries
 from gcs.plots import write_comparison_figures, write_figures
 from gcs.precompile import compile_sim
 from gcs.report import build_report, summary_table, write_report

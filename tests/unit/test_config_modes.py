@@ -24,7 +24,7 @@ from gcs.config import (
     team_to_yaml,
 )
 from gcs.config.modes import as_strings
-from gcs.flightlog import load_timeseries, save_timeseries
+from gcs.flightlog_csv import load_timeseries, save_timeseries
 from gcs.fly.records import flight_log_builder
 from gcs.fly.setup import FlightSetupError, FlyOptions, prepare
 from gcs.report import build_report, write_report

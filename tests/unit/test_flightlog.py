@@ -11,14 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from gcs.flightlog import (
-    CSV_HEADER,
-    TIMESERIES_FORMAT,
-    FlightLog,
-    FlightLogBuilder,
-    load_timeseries,
-    save_timeseries,
-)
+from gcs.flightlog import FlightLog
+from gcs.flightlog_builder import FlightLogBuilder
+from gcs.flightlog_csv import CSV_HEADER, TIMESERIES_FORMAT, load_timeseries, save_timeseries
 
 SERIES = (
     "t_s",
