@@ -1,6 +1,7 @@
 """The paper's Section V scenarios in-process: the verification mode against the reference figures
-of spec sections 4-5, and the implementable default (model-based derivatives, sampled law at 1 kHz)
-against the acceptance bounds. Reference numbers are copied from ../shared/spec/control-law.md."""
+of the corrected equations (docs/reproducing-the-paper.md quotes them beside ours), and the
+implementable default (model-based derivatives, sampled law at 1 kHz) against the acceptance
+bounds."""
 
 from __future__ import annotations
 
@@ -66,10 +67,11 @@ def test_verification_mode_reproduces_the_scenario_i_reference_table():
     # GIVEN Scenario I run with the law inside every RK4 stage and the exact u', u''
     log = run("square4.yaml", oracle=True)
     fe, ve = formation_error(log), velocity_error(log)
-    # THEN formation and velocity errors match spec 4.1 within 1e-3
+    # THEN formation and velocity errors match spec 4.1 within 2 % of each value (the table
+    # gives two or three digits, 3.6e-6 to 5.59e-2; the simulation lands within 0.8 % of all)
     for t, (fe_ref, ve_ref) in REFERENCE_4_1.items():
-        assert fe[at(log, t)] == pytest.approx(fe_ref, abs=1e-3), t
-        assert ve[at(log, t)] == pytest.approx(ve_ref, abs=1e-3), t
+        assert fe[at(log, t)] == pytest.approx(fe_ref, rel=0.02), t
+        assert ve[at(log, t)] == pytest.approx(ve_ref, rel=0.02), t
     assert fe[at(log, 0)] == pytest.approx(7.07, abs=5e-3)
     # AND the mass estimates alpha_m mhat/phi match the reference within 1e-3 kg
     for t, masses in REFERENCE_MASS.items():
