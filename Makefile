@@ -23,7 +23,7 @@ install: $(BIN)/activate
 # (pyproject.toml, the marker's text). Both stages always run; the target fails at the end if
 # either did. The parallel stage lists its 20 slowest tests: where the suite's time goes.
 test: install
-	$(BIN)/ruff check gcs vehicle_emulator tests benchmarks
+	$(BIN)/ruff check flightkit gcs vehicle_emulator tests benchmarks
 	status=0; \
 	$(BIN)/python -m pytest -n 3 --dist loadfile -m "not alone" --durations=20 || status=$$?; \
 	$(BIN)/python -m pytest -m alone || status=$$?; \
@@ -44,7 +44,7 @@ bench: install
 	$(BIN)/python benchmarks/bench_fly.py
 
 lint: install
-	$(BIN)/ruff check gcs vehicle_emulator tests benchmarks
+	$(BIN)/ruff check flightkit gcs vehicle_emulator tests benchmarks
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

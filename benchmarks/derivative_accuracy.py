@@ -16,13 +16,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from flightkit.physics import rk4_step  # noqa: E402
 from gcs.config import load_team  # noqa: E402
 from gcs.control.derivatives import force_derivatives, levant_advance  # noqa: E402
 from gcs.control.formation import edge_list, reference_velocity  # noqa: E402
 from gcs.control.law import attitude_stage, position_stage  # noqa: E402
 from gcs.sim.loop import _acceleration  # noqa: E402
 from gcs.sim.runner import law_gains  # noqa: E402
-from vehicle_emulator.physics import rk4_step  # noqa: E402
 
 
 def main() -> int:

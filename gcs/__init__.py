@@ -1,3 +1,3 @@
 """MAVLink offboard ground control for adaptive distributed formation flight."""
 
-import vehicle_emulator as _vehicle_emulator  # noqa: F401  (configures numba's cache first)
+import flightkit as _flightkit  # noqa: F401  (configures numba's cache first)

@@ -19,7 +19,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from vehicle_emulator.jitcache import compiling, is_compiled
+from flightkit.jitcache import compiling, is_compiled
 
 #: First-run compile times on a quiet 2-core machine (docs/benchmarks.md, "Start-up"), for the
 #: notice: measured 17.6-29.7 s law, 7.8-14.7 s simulator after it, 27 s simulator alone

@@ -1,5 +1,3 @@
 """A PX4-like quadrotor emulator that speaks MAVLink 2 over UDP (see docs/emulator.md)."""
 
-from vehicle_emulator import jitcache as _jitcache
-
-_jitcache.configure()
+import flightkit as _flightkit  # noqa: F401  (configures numba's cache first)

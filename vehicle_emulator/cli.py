@@ -33,11 +33,10 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from vehicle_emulator.jitcache import compiling
-from vehicle_emulator.latecompile import watch_late_compiles
-from vehicle_emulator.personality import AUTOPILOT_NAMES, DEFAULT_AUTOPILOT, personality_of
-from vehicle_emulator.runner import STREAM_MODES, Emulator, LinkPlan, RealtimeClock, RunStats
-from vehicle_emulator.sched import (
+from flightkit.fleet_protocol import ready_line
+from flightkit.jitcache import compiling
+from flightkit.latecompile import watch_late_compiles
+from flightkit.sched import (
     EMU_RAISED_NICE,
     EMU_RT_PRIORITY,
     EMULATOR,
@@ -45,14 +44,15 @@ from vehicle_emulator.sched import (
     SchedulingError,
     apply_scheduling,
 )
+from vehicle_emulator.personality import AUTOPILOT_NAMES, DEFAULT_AUTOPILOT, personality_of
+from vehicle_emulator.runner import STREAM_MODES, Emulator, LinkPlan, RealtimeClock, RunStats
 from vehicle_emulator.team import TeamFileError, TeamSpec, VehicleSpec, default_vehicle, load_team
 from vehicle_emulator.vehicle import VehicleNode
 
 log = logging.getLogger("vehicle_emulator")
 
-__all__ = ["main", "link_plan", "parse_address", "READY_PREFIX"]
+__all__ = ["main", "link_plan", "parse_address"]
 
-READY_PREFIX = "vehicle-emu: ready:"
 #: PX4 SITL instance 0's ports: it binds 14580 and sends to 14540 (instance i: + i).
 DEFAULT_BIND_BASE = 14580
 DEFAULT_REMOTE_BASE = 14540
@@ -322,16 +322,15 @@ async def _amain(args: argparse.Namespace) -> int:
             if link.connected:
                 ephemeral.append(f"sysid {s.sysid} sends from {host}:{port} to "
                                  f"{link.remote[0]}:{link.remote[1]}")
-    sysids = ", ".join(str(s.sysid) for s in specs)
-    udpclient = (f"; ephemeral ports (ArduPilot SITL udpclient): {', '.join(ephemeral)}"
+    udpclient = (f"ephemeral ports (ArduPilot SITL udpclient): {', '.join(ephemeral)}"
                  if ephemeral else "")
     # handlers first: a parent may stop the emulator the moment it reads the ready line
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
-    print(f"{READY_PREFIX} {len(specs)} vehicle{'s' if len(specs) != 1 else ''} (sysid {sysids})"
-          f"{udpclient}", flush=True)
+    print(ready_line([s.sysid for s in specs], [(s.vehicle_id, s.autopilot) for s in specs],
+                     udpclient), flush=True)
     if args.duration is not None:
         loop.call_later(args.duration / args.realtime_factor, stop.set)
     stats = RunStats()

@@ -29,15 +29,15 @@ from enum import IntEnum
 import numpy as np
 from numba import njit
 
-from vehicle_emulator.inner import attitude_control, position_control, rate_control
-from vehicle_emulator.onboard import Onboard, onboard_step
-from vehicle_emulator.personality import Personality, personality_of
-from vehicle_emulator.physics import (
+from flightkit.physics import (
     GRAVITY_MPS2,
     rk4_step,
     rotors_from_wrench_into,
     wrench_from_rotors,
 )
+from vehicle_emulator.inner import attitude_control, position_control, rate_control
+from vehicle_emulator.onboard import Onboard, onboard_step
+from vehicle_emulator.personality import Personality, personality_of
 from vehicle_emulator.team import VehicleSpec
 
 __all__ = ["ControlMode", "FleetPlant", "IDLE_THRUST_NORM", "torque_max_nm"]

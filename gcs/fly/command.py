@@ -14,6 +14,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TextIO
 
+from flightkit.fleet_protocol import READY_PREFIX, ready_personalities
 from gcs.config import TeamConfig, load_team
 from gcs.config.modes import FLY_ACTIONS, FLY_MODES, as_strings
 from gcs.fly.flight import Flight
@@ -23,8 +24,6 @@ from gcs.mission.plan import EXIT_ABORTED, EXIT_INTERRUPTED, EXIT_OK
 from gcs.precompile import compile_law
 from gcs.report import summary_table
 from gcs.status import StatusView
-from vehicle_emulator.cli import READY_PREFIX
-from vehicle_emulator.team import load_team as load_emulator_team
 
 logger = logging.getLogger(__name__)
 
@@ -188,11 +187,10 @@ class EmulatorFleet:
             self.proc.wait(timeout=5)
 
 
-def emulated_personalities(team_path: Path) -> dict[int, str]:
-    """Per vehicle id, 'vehicle-emu <personality>' as the fleet that `--emulators` starts reads
-    the team file (its `emulator.autopilot` sections, else the emulator's default)."""
-    vehicles = load_emulator_team(team_path).vehicles
-    return {v.vehicle_id: f"vehicle-emu {v.autopilot}" for v in vehicles}
+def emulated_personalities(ready: str) -> dict[int, str]:
+    """Per vehicle id, 'vehicle-emu <personality>', as the fleet that `--emulators` started
+    names them in its ready line."""
+    return {vid: f"vehicle-emu {name}" for vid, name in ready_personalities(ready).items()}
 
 
 @contextlib.contextmanager
@@ -235,7 +233,7 @@ def run_fly(args: argparse.Namespace) -> int:
                 fleet.wait_ready(setup.plan.connect_timeout_s)
                 up = fleet.ready_line.removeprefix(READY_PREFIX).strip()
                 print(f"gcs fly: emulator fleet up: {up}", file=sys.stderr, flush=True)
-                flight.vehicle_notes = emulated_personalities(args.team)
+                flight.vehicle_notes = emulated_personalities(fleet.ready_line)
             # after the fleet started: the emulators ask for their own (vehicle-emu --scheduling)
             flight.scheduling = apply_scheduling(team.fly.scheduling)
             fell_back = team.fly.scheduling == "auto" and flight.scheduling.policy == "normal"

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from flightkit.latecompile import watch_late_compiles
 from gcs.config import ControlMode, FlyAction, TeamConfig
 from gcs.fly.commander import Commander
 from gcs.fly.consistent import VelocityConsistency
@@ -67,7 +68,6 @@ from gcs.link.config import shared_ports
 from gcs.link.enums import MSG_ID, MavCmd
 from gcs.mission.machine import MissionMachine
 from gcs.mission.plan import EXIT_ABORTED, Outcome, Phase
-from vehicle_emulator.latecompile import watch_late_compiles
 
 logger = logging.getLogger("gcs.fly")
 

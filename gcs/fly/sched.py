@@ -4,7 +4,7 @@ The control tick and the links share one asyncio thread (docs/architecture.md, "
 the process's priority is the tick's: a busy machine (a compile, a browser, other vehicles'
 simulators) that preempts the ground station makes its ticks late, and a late tick is a delayed
 setpoint. The policies (auto, realtime, raised, normal) and the ways to grant them are
-vehicle_emulator/sched.py's; the ground station asks for SCHED_FIFO priority `RT_PRIORITY` or
+flightkit/sched.py's; the ground station asks for SCHED_FIFO priority `RT_PRIORITY` or
 nice `RAISED_NICE`, one step above what `vehicle-emu` asks for, so that on a shared core the
 tick preempts the vehicles' stand-in. Child processes (the `--emulators` fleet) start normally
 scheduled (SCHED_RESET_ON_FORK) and ask for their own.
@@ -12,8 +12,8 @@ scheduled (SCHED_RESET_ON_FORK) and ask for their own.
 
 from __future__ import annotations
 
-from vehicle_emulator.sched import POLICIES, Request, Scheduling, SchedulingError
-from vehicle_emulator.sched import apply_scheduling as _apply
+from flightkit.sched import POLICIES, Request, Scheduling, SchedulingError
+from flightkit.sched import apply_scheduling as _apply
 
 __all__ = ["GRANT", "POLICIES", "RAISED_NICE", "RT_PRIORITY", "Scheduling", "SchedulingError",
            "apply_scheduling"]

@@ -1,6 +1,6 @@
 """Compiled closed-loop kernels of `gcs sim`: the law against the nominal model, chunk by chunk.
 
-Two kernels share the law (gcs.control.law) and the physics (vehicle_emulator.physics):
+Two kernels share the law (gcs.control.law) and the physics (flightkit.physics):
 
 * `run_sampled`: what a flight computer does. The law runs every `ctrl_every` plant steps on the
   sampled state, its outputs are held (zero-order hold) while the plant is integrated by RK4, and
@@ -20,12 +20,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from flightkit.physics import derivatives as plant_derivatives
+from flightkit.physics import orthonormalise, rk4_step
 from gcs.control.derivatives import force_derivatives, levant_advance
 from gcs.control.formation import reference_velocity
 from gcs.control.geometry import is_nonsingular
 from gcs.control.law import DERIVATIVE_LEVANT, attitude_stage, position_stage
-from vehicle_emulator.physics import derivatives as plant_derivatives
-from vehicle_emulator.physics import orthonormalise, rk4_step
 
 MODE_ACTUATORS = 0  #: the paper's torque (26) is applied directly
 MODE_RATES = 1  #: the body-rate command is tracked by an idealised onboard rate loop

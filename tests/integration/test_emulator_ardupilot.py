@@ -383,4 +383,6 @@ def test_guided_position_and_velocity_targets_past_boot_with_a_forced_bind(tmp_p
         client.send(rates_setpoint(1, 0.0, 0.0, 0.0, HOVER))
         request(client, "ATTITUDE_TARGET", 20)
         client.wait("ATTITUDE_TARGET", 1, lambda m: m.thrust == HOVER)
-        assert re.search(r"ready: 1 vehicle \(sysid 1\)$", emu.log_text(), re.M)
+        # AND its ready line names no ephemeral port (the bind was forced)
+        assert re.search(r"ready: 1 vehicle \(sysid 1\) personalities 1:ardupilot$",
+                         emu.log_text(), re.M)

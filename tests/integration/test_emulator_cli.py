@@ -18,8 +18,8 @@ import pytest
 import yaml
 from pymavlink.dialects.v20 import common as mavlink
 
+from flightkit.sched import EMU_RAISED_NICE, EMU_RT_PRIORITY
 from vehicle_emulator.geodesy import HOME_ALT_M, HOME_LAT_DEG, HOME_LON_DEG, geodetic_to_enu
-from vehicle_emulator.sched import EMU_RAISED_NICE, EMU_RT_PRIORITY
 from vehicle_emulator.testing import (
     clients_on_port_block,
     free_udp_port,

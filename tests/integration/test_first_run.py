@@ -23,7 +23,7 @@ from pymavlink import mavutil
 from stall_relay import StallRelay
 from test_fly_emulator import ROOT, Gcs, emulators, team_file
 
-from vehicle_emulator.cli import READY_PREFIX
+from flightkit.fleet_protocol import READY_PREFIX
 from vehicle_emulator.testing import free_udp_port_block
 
 sys.path.insert(0, str(ROOT / "benchmarks"))

@@ -10,7 +10,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 IMPURE = {"asyncio", "socket", "time", "pymavlink", "mavsdk", "select", "threading", "subprocess"}
 PURE_MODULES = sorted((ROOT / "gcs" / "control").glob("*.py")) + [
-    ROOT / "vehicle_emulator" / "physics.py",
+    ROOT / "flightkit" / "physics.py",
+    ROOT / "flightkit" / "fleet_protocol.py",
     ROOT / "gcs" / "frames.py",
     ROOT / "gcs" / "geodesy.py",
 ]
@@ -47,13 +48,23 @@ def test_the_fly_set_up_policy_opens_nothing_and_imports_none_of_the_flight():
     assert not found & IMPURE, sorted(found & IMPURE)
     assert not [m for m in found if m.startswith(flying)]
 
-def test_emulator_never_imports_gcs():
-    offenders = [
-        str(p.relative_to(ROOT))
-        for p in (ROOT / "vehicle_emulator").rglob("*.py")
-        if "gcs" in imported_roots(p)
-    ]
-    assert offenders == []
+def importers(package: str, forbidden: set[str]) -> dict[str, list[str]]:
+    """The modules of ``package`` that import any of ``forbidden`` (top-level names)."""
+    found = {str(p.relative_to(ROOT)): sorted(imported_roots(p) & forbidden)
+             for p in (ROOT / package).rglob("*.py")}
+    return {path: names for path, names in found.items() if names}
+
+
+@pytest.mark.parametrize(("package", "forbidden"), [
+    # the emulator is an independent peer of the ground station
+    ("vehicle_emulator", {"gcs"}),
+    # gcs starts the emulator only as a program (`python -m vehicle_emulator.cli`)
+    ("gcs", {"vehicle_emulator"}),
+    # what both programs share imports neither
+    ("flightkit", {"gcs", "vehicle_emulator"}),
+])
+def test_no_package_imports_a_program_it_must_not(package, forbidden):
+    assert importers(package, forbidden) == {}
 
 
 def test_the_boundary_check_can_fail(tmp_path):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from flightkit.physics import TABLE_I
 from gcs.control.attitude import (
     adaptive_torque,
     attitude_errors,
@@ -14,7 +15,6 @@ from gcs.control.attitude import (
 )
 from gcs.control.gains import PAPER_GAINS
 from gcs.control.geometry import command_angular_velocity, command_attitude, hat
-from vehicle_emulator.physics import TABLE_I
 
 
 def _random_rotation(rng: np.random.Generator) -> np.ndarray:

@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from flightkit.physics import TABLE_I, orthonormalise
 from gcs.control.derivatives import levant_advance
 from gcs.control.formation import adjacency_from_edges, edge_list
 from gcs.control.gains import PAPER_GAINS
 from gcs.sim.loop import _oracle_rates
-from vehicle_emulator.physics import TABLE_I, orthonormalise
 
 
 def _levant_track(signal, d1, d2, t_end, dt, lipschitz, substep):

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
+from flightkit.physics import GRAVITY_MPS2
 from vehicle_emulator import sensors as sn
 from vehicle_emulator.inner import (
     PX4_I_FACTOR_RADPS,
@@ -21,7 +22,6 @@ from vehicle_emulator.inner import (
     second_order_step,
 )
 from vehicle_emulator.personality import PERSONALITIES, Dynamics, RateLoop, Sensors
-from vehicle_emulator.physics import GRAVITY_MPS2
 from vehicle_emulator.plant import ControlMode, FleetPlant
 from vehicle_emulator.replay import sitl_airframe
 from vehicle_emulator.team import default_vehicle

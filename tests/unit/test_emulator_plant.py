@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from vehicle_emulator.physics import GRAVITY_MPS2, rotors_from_wrench, wrench_from_rotors
+from flightkit.physics import GRAVITY_MPS2, rotors_from_wrench, wrench_from_rotors
 from vehicle_emulator.plant import ControlMode, FleetPlant, torque_max_nm
 from vehicle_emulator.team import default_vehicle
 

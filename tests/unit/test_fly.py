@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from flightkit.physics import rotors_from_wrench, wrench_from_rotors
 from gcs.config import load_team
 from gcs.config.fly_schema import ResponseConfig
 from gcs.control.formation import edge_list, reference_velocity
@@ -38,7 +39,6 @@ from gcs.fly.stats import (
 from gcs.mission.autopilots import PROFILES
 from gcs.mission.cascade import CascadeGains, laplacian_eigenvalues, verdict
 from gcs.sim.runner import law_gains
-from vehicle_emulator.physics import rotors_from_wrench, wrench_from_rotors
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 OUT = Path("/nonexistent")

@@ -12,8 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numba import njit
 
-from vehicle_emulator import physics as ph
-from vehicle_emulator.physics import GRAVITY_MPS2 as G
+from flightkit import physics as ph
+from flightkit.physics import GRAVITY_MPS2 as G
 
 Arr = np.ndarray
 JIT_DISABLED = os.environ.get("NUMBA_DISABLE_JIT", "0") not in ("", "0")

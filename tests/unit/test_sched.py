@@ -1,4 +1,4 @@
-"""Process scheduling (vehicle_emulator/sched.py) as the ground station (gcs/fly/sched.py) and
+"""Process scheduling (flightkit/sched.py) as the ground station (gcs/fly/sched.py) and
 `vehicle-emu` (cli.py) ask for it, applied in a child process (never to the test runner), as the
 user running the tests and, where the tests run as root, as an unprivileged user (setpriv), for
 whom the operating system refuses both raises."""
@@ -13,13 +13,13 @@ import sys
 
 import pytest
 
+from flightkit.sched import EMU_RAISED_NICE, EMU_RT_PRIORITY
 from gcs.fly.sched import POLICIES, RAISED_NICE, RT_PRIORITY, apply_scheduling
-from vehicle_emulator.sched import EMU_RAISED_NICE, EMU_RT_PRIORITY
 
 PROBE = """
 import json, os, sys
 from gcs.fly.sched import SchedulingError, apply_scheduling
-from vehicle_emulator import sched
+from flightkit import sched
 try:
     if sys.argv[2] == "gcs":
         s = apply_scheduling(sys.argv[1])

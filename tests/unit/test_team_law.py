@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from flightkit.physics import rk4_step
 from gcs.config import load_team
 from gcs.control.formation import reference_velocity
 from gcs.control.geometry import rotation_from_rpy
 from gcs.control.law import SingularCommandError, TeamLaw, TeamMeasurement
 from gcs.sim.runner import SimOptions, law_gains, simulate
-from vehicle_emulator.physics import rk4_step
 
 CONFIG = Path(__file__).resolve().parents[2] / "configs" / "square4.yaml"
 

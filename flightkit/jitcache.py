@@ -3,7 +3,8 @@
 numba's `cache=True` re-checks only the file of the function it compiled, not the files of the
 compiled functions it calls, so after an edit or an upgrade a caller could run stale machine
 code of a callee. Keying the cache directory by a digest of every source file of this
-distribution (gcs and vehicle_emulator) rules that out. A user's NUMBA_CACHE_DIR is respected.
+distribution (flightkit, gcs and vehicle_emulator) rules that out. A user's NUMBA_CACHE_DIR is
+respected.
 
 Compiling takes seconds (docs/benchmarks.md), so a program never does it silently:
 `compiling(part, estimate_s)` wraps the warm-up of one part (the law, the simulator, the
@@ -24,13 +25,13 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TextIO
 
-_PACKAGES = ("gcs", "vehicle_emulator")
+_PACKAGES = ("flightkit", "gcs", "vehicle_emulator")
 _KEEP = 3  # cache directories of other source states kept, newest first
 _digest = ""  # of the sources this process runs (set by configure)
 
 
 def source_digest(root: Path) -> str:
-    """SHA-1 over the paths and contents of the .py files of both packages that use numba."""
+    """SHA-1 over the paths and contents of the .py files of the packages that use numba."""
     digest = hashlib.sha1()
     for package in _PACKAGES:
         for path in sorted((root / package).rglob("*.py")):
