@@ -55,15 +55,15 @@ class Commander:
         try:
             if c.cmd is Cmd.CONFIGURE:
                 for kind, hz in self.requested_rates_hz.items():
-                    await p.set_message_interval(MSG_ID[kind], hz)
+                    await p.commands.set_message_interval(MSG_ID[kind], hz)
                 for kind, hz in OPTIONAL_RATES_HZ.items():
-                    await p.set_message_interval(MSG_ID[kind], hz, check=False)
+                    await p.commands.set_message_interval(MSG_ID[kind], hz, check=False)
             elif c.cmd is Cmd.READ_PARAMS:
                 for name in c.names:
-                    values.append((name, await p.param_read(name)))
+                    values.append((name, await p.commands.param_read(name)))
                 detail = ", ".join(f"{name} = {value:g}" for name, value in values)
             elif c.cmd is Cmd.IDENTIFY:
-                word = await p.autopilot_version()
+                word = await p.commands.autopilot_version()
                 values.append(("flight_sw_version", float(word)))
                 detail = f"{profile.name} {version_text(word)}"
             elif c.cmd is Cmd.ARM_MODE:
@@ -71,10 +71,10 @@ class Commander:
             elif c.cmd is Cmd.ARM:
                 await self.arm(p, profile, self.mode_timeout_s)
             elif c.cmd is Cmd.DISARM:
-                await p.disarm()
+                await p.commands.disarm()
             elif c.cmd is Cmd.TAKEOFF:
-                await p.takeoff(self.takeoff_amsl_m(p, c.altitude_m)
-                                if profile.takeoff_altitude_amsl else c.altitude_m)
+                await p.commands.takeoff(self.takeoff_amsl_m(p, c.altitude_m)
+                                         if profile.takeoff_altitude_amsl else c.altitude_m)
             elif c.cmd is Cmd.OFFBOARD:
                 await self.set_mode(p, profile, self.machine.offboard_mode(c.vehicle_id),
                                     confirm=self.mode_timeout_s)
@@ -128,11 +128,11 @@ class Commander:
         when the first ACK accepts it (the emergency stop's best effort)."""
         params = cls.mode_params(p, profile, mode)
         if confirm is None:
-            await p.command_long(MavCmd.DO_SET_MODE, params, timeout_s=timeout_s,
-                                 retries=retries)
+            await p.commands.command_long(MavCmd.DO_SET_MODE, params, timeout_s=timeout_s,
+                                          retries=retries)
             return
         want = mode.custom_mode(profile.family)
-        await p.command_confirmed(
+        await p.commands.command_confirmed(
             MavCmd.DO_SET_MODE, params, want=f"mode {mode.name}",
             shows=lambda hb: int(hb.custom_mode) == want, reported=cls.reported(profile),
             timeout_s=confirm, ack_timeout_s=timeout_s, retries=retries)
@@ -140,7 +140,7 @@ class Commander:
     @classmethod
     async def arm(cls, p: VehicleProxy, profile: AutopilotProfile, confirm: float) -> None:
         """COMPONENT_ARM_DISARM 1 (never forced); returns when HEARTBEAT shows armed."""
-        await p.command_confirmed(
+        await p.commands.command_confirmed(
             MavCmd.COMPONENT_ARM_DISARM, [1.0, 0.0], want="armed",
             shows=lambda hb: bool(int(hb.base_mode) & MavModeFlag.SAFETY_ARMED),
             reported=cls.reported(profile), timeout_s=confirm)
@@ -155,7 +155,7 @@ class Commander:
             await cls.set_mode(p, profile, profile.land, confirm=confirm, timeout_s=timeout_s,
                                retries=retries)
         else:
-            await p.land(timeout_s=timeout_s, retries=retries)
+            await p.commands.land(timeout_s=timeout_s, retries=retries)
 
     @staticmethod
     def takeoff_amsl_m(p: VehicleProxy, altitude_m: float) -> float:

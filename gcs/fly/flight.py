@@ -288,8 +288,9 @@ class Flight:
     async def _ask_origin(p: VehicleProxy) -> None:
         """REQUEST_MESSAGE GPS_GLOBAL_ORIGIN (49); the answer lands in the telemetry cache."""
         try:
-            await p.command_long(MavCmd.REQUEST_MESSAGE, (float(MSG_ID["GPS_GLOBAL_ORIGIN"]),),
-                                 timeout_s=0.5, retries=0)
+            await p.commands.command_long(MavCmd.REQUEST_MESSAGE,
+                                          (float(MSG_ID["GPS_GLOBAL_ORIGIN"]),),
+                                          timeout_s=0.5, retries=0)
         except (CommandRejectedError, CommandTimeoutError, LinkClosedError) as exc:
             logger.debug("%s: origin request: %s", p.name, exc)
 

@@ -97,11 +97,11 @@ class Setpoints:
     def _send_one(self, i: int, p: VehicleProxy, vec: np.ndarray, thrust_norm: float) -> None:
         try:
             if self.mode == ControlMode.ACTUATORS:
-                p.send_actuator_controls(vec, thrust_norm)
+                p.setpoints.send_actuator_controls(vec, thrust_norm)
             elif self.mode == ControlMode.ATTITUDE:
-                p.send_attitude_thrust(vec, thrust_norm)
+                p.setpoints.send_attitude_thrust(vec, thrust_norm)
             else:
-                p.send_rates_thrust(vec, thrust_norm)
+                p.setpoints.send_rates_thrust(vec, thrust_norm)
         except SetpointError as exc:
             self.setpoint_errors += 1
             self.machine.request_abort(str(exc), operator=False)
@@ -137,7 +137,7 @@ class Setpoints:
         a_ned = (None if acceleration_enu_mps2 is None
                  else frames.ned_from_enu(tie.vectors_local_from_team(acceleration_enu_mps2)))
         try:
-            self.proxies[i].send_position_target(ned, v_ned, yaw_ned_rad, a_ned)
+            self.proxies[i].setpoints.send_position_target(ned, v_ned, yaw_ned_rad, a_ned)
         except SetpointError as exc:
             self.setpoint_errors += 1
             self.machine.request_abort(str(exc), operator=False)

@@ -196,7 +196,7 @@ class _SendPlan:
 
 
 class TeamSetpoints:
-    """`VehicleProxy.send_rates_thrust` for many vehicles at once: one encode call
+    """`VehicleSetpoints.send_rates_thrust` for many vehicles at once: one encode call
     (gcs.link.fastpath.encode_set_attitude_target), the sequence numbers in one numpy call when
     the links keep theirs in one block (the app's: its HotTable's), one ``sendto`` each. What does
     not change from tick to tick (ids, boot times, tlogs, who is sent what on which port) is

@@ -12,7 +12,7 @@ import logging
 import math
 from collections.abc import Callable, Collection, Iterator, Sequence
 
-from gcs.link.codec import MavlinkCodec, MAVLinkMessage, message_name
+from gcs.link.codec import MavlinkCodec, MAVLinkMessage, mavlink, message_name
 from gcs.link.commands import (
     AckLog,
     CommandChannel,
@@ -24,7 +24,7 @@ from gcs.link.commands import (
     command_label,
 )
 from gcs.link.config import VehicleLinkConfig
-from gcs.link.enums import MavCmd, MavResult
+from gcs.link.enums import MavCmd, MavModeFlag, MavResult
 from gcs.link.statustext import StatusTextLog
 from gcs.link.telemetry import Received
 from gcs.link.udp import LinkClosedError
@@ -32,6 +32,7 @@ from gcs.link.udp import LinkClosedError
 logger = logging.getLogger("gcs.link.proxy")  # the records of the proxy these serve
 
 AUTOPILOT_VERSION_ID = 148  # REQUEST_MESSAGE param1
+FORCE_MAGIC = 21196  # COMPONENT_ARM_DISARM param2 forcing arm/disarm (PX4; ArduPilot disarm)
 #: A command is not confirmed once its timeout has passed AND this many HEARTBEATs received
 #: after its ACK did not show the effect; with fewer heard (a lossy link), the wait goes on up to
 #: CONFIRM_LOSSY_FACTOR x the timeout (command_confirmed).
@@ -108,13 +109,19 @@ class MessageWaiters:
 
 class VehicleCommands:
     """One vehicle's commands that wait for an answer: COMMAND_LONG (its ACK exchange:
-    `CommandChannel`), commands confirmed by HEARTBEAT, PARAM_REQUEST_READ, AUTOPILOT_VERSION
-    and SET_MESSAGE_INTERVAL. Messages are built with ``codec`` and handed to ``send``."""
+    `CommandChannel`) and the helpers built on it (arm, disarm, modes, takeoff, land), commands
+    confirmed by HEARTBEAT, PARAM_REQUEST_READ, AUTOPILOT_VERSION and SET_MESSAGE_INTERVAL
+    (``on_stream_set`` hears the name of each stream whose new rate was accepted). Messages are
+    built with ``codec`` and handed to ``send``; every method returns when answered.
+
+    The helpers (`arm` ... `land`) take ``check``: raise CommandRejectedError naming the vehicle
+    and command unless the answer is ACCEPTED; ``timeout_s``/``retries`` as in `command_long`."""
 
     def __init__(self, name: str, config: VehicleLinkConfig, codec: MavlinkCodec,
                  send: Callable[[MAVLinkMessage], object], *, liveness: Liveness,
                  waiters: MessageWaiters, statustexts: StatusTextLog,
-                 latest: Callable[[str], Received | None]) -> None:
+                 latest: Callable[[str], Received | None],
+                 on_stream_set: Callable[[str], None] | None = None) -> None:
         self._name = name
         self._sysid = config.sysid
         self._compid = config.compid
@@ -124,6 +131,7 @@ class VehicleCommands:
         self._waiters = waiters
         self._statustexts = statustexts
         self._latest = latest
+        self._on_stream_set = on_stream_set
         self._channel = CommandChannel(name, config.gcs_sysid, self._send_command,
                                        liveness=liveness, silent_wait_s=config.silent_wait_s)
 
@@ -150,6 +158,50 @@ class VehicleCommands:
             raise CommandRejectedError(
                 f"{self._name}: {command_label(command)} answered {result.name}", command, result)
         return result
+
+    async def arm(self, *, force: bool = False, check: bool = True, timeout_s: float = 0.5,
+                  retries: int = 2) -> MavResult:
+        """Arm (COMPONENT_ARM_DISARM 400; force: param2 = FORCE_MAGIC)."""
+        return await self.checked(MavCmd.COMPONENT_ARM_DISARM,
+                                  [1.0, FORCE_MAGIC if force else 0.0], check, timeout_s, retries)
+
+    async def disarm(self, *, force: bool = False, check: bool = True, timeout_s: float = 0.5,
+                     retries: int = 2) -> MavResult:
+        """Disarm (force: also in the air)."""
+        return await self.checked(MavCmd.COMPONENT_ARM_DISARM,
+                                  [0.0, FORCE_MAGIC if force else 0.0], check, timeout_s, retries)
+
+    async def set_mode_px4(self, main_mode: int, sub_mode: int = 0, *, check: bool = True,
+                           timeout_s: float = 0.5, retries: int = 2) -> MavResult:
+        """PX4 mode via DO_SET_MODE (176): param1 = CUSTOM_MODE_ENABLED (+ SAFETY_ARMED if the
+        latest HEARTBEAT says armed), param2 = main mode, param3 = sub mode."""
+        hb = self._latest("HEARTBEAT")
+        armed = hb is not None and bool(hb.msg.base_mode & MavModeFlag.SAFETY_ARMED)
+        base = MavModeFlag.CUSTOM_MODE_ENABLED | (MavModeFlag.SAFETY_ARMED if armed else 0)
+        return await self.checked(MavCmd.DO_SET_MODE, [float(base), main_mode, sub_mode], check,
+                                  timeout_s, retries)
+
+    async def set_mode_ardupilot(self, mode: int, *, check: bool = True, timeout_s: float = 0.5,
+                                 retries: int = 2) -> MavResult:
+        """ArduPilot mode number (e.g. GUIDED 4) via DO_SET_MODE."""
+        return await self.checked(MavCmd.DO_SET_MODE,
+                                  [float(MavModeFlag.CUSTOM_MODE_ENABLED), mode], check,
+                                  timeout_s, retries)
+
+    async def takeoff(self, altitude_m: float = math.nan, *, check: bool = True,
+                      timeout_s: float = 0.5, retries: int = 2) -> MavResult:
+        """NAV_TAKEOFF (22) with param7 = altitude (PX4: AMSL, NaN = MIS_TAKEOFF_ALT; ArduPilot:
+        relative to home); answered when accepted, not when the vehicle reached it."""
+        return await self.checked(
+            MavCmd.NAV_TAKEOFF, [0, 0, 0, math.nan, math.nan, math.nan, altitude_m], check,
+            timeout_s, retries)
+
+    async def land(self, *, check: bool = True, timeout_s: float = 0.5,
+                   retries: int = 2) -> MavResult:
+        """NAV_LAND (21) here (lat/lon/yaw NaN); answered when accepted, not when landed."""
+        return await self.checked(
+            MavCmd.NAV_LAND, [0, 0, 0, math.nan, math.nan, math.nan, 0], check, timeout_s,
+            retries)
 
     async def command_confirmed(self, command: int, params: Sequence[float], *, want: str,
                                 shows: Callable[[MAVLinkMessage], bool],
@@ -299,4 +351,7 @@ class VehicleCommands:
         if check and result != MavResult.ACCEPTED:
             raise CommandRejectedError(f"{what}: SET_MESSAGE_INTERVAL answered {result.name}",
                                        MavCmd.SET_MESSAGE_INTERVAL, result)
+        msg_type = mavlink.mavlink_map.get(msg_id)
+        if result == MavResult.ACCEPTED and msg_type is not None and self._on_stream_set:
+            self._on_stream_set(msg_type.msgname)  # the rate asked for is measured from here on
         return result

@@ -280,14 +280,14 @@ def test_param_read_answers_retries_and_times_out_naming_vehicle_and_parameter()
             cfg = VehicleLinkConfig(vehicle_id=1, sysid=1, local_port=0, remote_port=port)
             async with VehicleProxy(cfg) as proxy:
                 # THEN the read is retried and returns the value
-                assert await proxy.param_read("GUID_OPTIONS", timeout_s=0.2, retries=2) == 8.0
+                assert await proxy.commands.param_read("GUID_OPTIONS", timeout_s=0.2, retries=2) == 8.0
                 # AND a parameter nobody answers raises a TimeoutError naming both
                 with pytest.raises(ParamTimeoutError, match=(
                         r"^vehicle 1 \(sysid 1\): PARAM_REQUEST_READ FS_GCS_ENABLE got no "
                         r"PARAM_VALUE in 2 attempts of 0\.05 s$")):
-                    await proxy.param_read("FS_GCS_ENABLE", timeout_s=0.05, retries=1)
+                    await proxy.commands.param_read("FS_GCS_ENABLE", timeout_s=0.05, retries=1)
                 with pytest.raises(ValueError, match="1-16 ASCII characters"):
-                    await proxy.param_read("A_NAME_LONGER_THAN_16")
+                    await proxy.commands.param_read("A_NAME_LONGER_THAN_16")
         finally:
             assert peer.transport is not None
             peer.transport.close()

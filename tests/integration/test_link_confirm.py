@@ -38,7 +38,7 @@ def reported(hb: Any) -> str:
 
 async def set_mode(proxy: VehicleProxy, custom_mode: int, params: list[float], name: str,
                    timeout_s: float = 3.0) -> tuple[MavResult, ...]:
-    return await proxy.command_confirmed(
+    return await proxy.commands.command_confirmed(
         MavCmd.DO_SET_MODE, params, want=f"mode {name}",
         shows=lambda hb: int(hb.custom_mode) == custom_mode, reported=reported,
         timeout_s=timeout_s)
@@ -84,7 +84,7 @@ def test_px4_refusal_after_accepted_wins_and_a_shown_mode_is_confirmed(tmp_path:
         # a HEARTBEAT showing it
         async def stream() -> None:
             while True:
-                proxy.send_rates_thrust([0.0, 0.0, 0.0], 0.5)
+                proxy.setpoints.send_rates_thrust([0.0, 0.0, 0.0], 0.5)
                 await asyncio.sleep(0.05)
 
         setpoints = asyncio.create_task(stream())

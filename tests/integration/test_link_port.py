@@ -94,7 +94,7 @@ def test_one_port_serves_three_vehicles_each_at_its_own_learned_address(
             assert all(p.remote_learned and p.shared_port for p in proxies)
             # AND a command to each reaches that vehicle only, and is acknowledged by it
             for proxy in proxies:
-                assert await proxy.arm() == MavResult.ACCEPTED
+                assert await proxy.commands.arm() == MavResult.ACCEPTED
             for k, peer in enumerate(peers, start=1):
                 (cmd,) = peer.commands()
                 assert (cmd.command, cmd.target_system) == (400, k)
@@ -156,7 +156,7 @@ def test_a_stranger_address_on_a_learned_link_is_counted_and_ignored(
             assert not proxy.state().armed
             assert proxy.stats().proxy.messages_accepted == 1
             # AND commands still go to the vehicle, not to the impostor
-            assert await proxy.arm() == MavResult.ACCEPTED
+            assert await proxy.commands.arm() == MavResult.ACCEPTED
             assert len(vehicle.commands()) == 1 and impostor.commands() == []
 
     with caplog.at_level(logging.WARNING):
@@ -230,7 +230,7 @@ def test_both_personalities_on_one_port_are_learned_and_their_streams_requested(
                 await proxy.wait_heartbeat(timeout_s=60.0)
             # WHEN the GCS asks each vehicle for EXTENDED_SYS_STATE at 5 Hz
             for proxy in proxies:
-                assert await proxy.set_message_interval(ESS_ID, 5.0) == MavResult.ACCEPTED
+                assert await proxy.commands.set_message_interval(ESS_ID, 5.0) == MavResult.ACCEPTED
             # THEN each one's stream arrives (ArduPilot sends it only when asked)
             for proxy in proxies:
                 await proxy.wait_message("EXTENDED_SYS_STATE", timeout_s=5.0)
@@ -238,7 +238,7 @@ def test_both_personalities_on_one_port_are_learned_and_their_streams_requested(
             with pytest.raises(CommandRejectedError, match=(
                     r"^vehicle 3 \(sysid 3\): stream TIMESYNC \(111\) at 1 Hz: "
                     r"SET_MESSAGE_INTERVAL answered DENIED$")):
-                await proxies[2].set_message_interval(TIMESYNC_ID, 1.0)
+                await proxies[2].commands.set_message_interval(TIMESYNC_ID, 1.0)
             assert port.stats().unknown_sysid_frames == 0
             return [p.remote for p in proxies]
 

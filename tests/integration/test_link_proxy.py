@@ -190,7 +190,7 @@ def test_learns_the_remote_from_the_first_valid_packet() -> None:
                 vehicle.heartbeat()
                 await proxy.wait_heartbeat(timeout_s=2.0)
                 assert proxy.remote == ("127.0.0.1", vehicle.port)
-                assert await proxy.arm() == MavResult.ACCEPTED
+                assert await proxy.commands.arm() == MavResult.ACCEPTED
 
     run(scenario())
 
@@ -202,7 +202,7 @@ def test_arm_sends_command_long_and_returns_the_ack() -> None:
     async def scenario() -> None:
         async with FakeVehicle() as vehicle, VehicleProxy(config(vehicle)) as proxy:
             await connected(vehicle, proxy)
-            assert await proxy.arm() == MavResult.ACCEPTED
+            assert await proxy.commands.arm() == MavResult.ACCEPTED
             (cmd,) = vehicle.of_type("COMMAND_LONG")
             assert (cmd.command, cmd.param1, cmd.confirmation) == (400, 1.0, 0)
             assert (cmd.target_system, cmd.target_component) == (1, 1)
@@ -216,7 +216,7 @@ def test_dropped_first_ack_is_retried() -> None:
         async with FakeVehicle(ack_policy=policy) as vehicle, \
                 VehicleProxy(config(vehicle)) as proxy:
             await connected(vehicle, proxy)
-            assert await proxy.disarm(force=True, timeout_s=0.3) == MavResult.ACCEPTED
+            assert await proxy.commands.disarm(force=True, timeout_s=0.3) == MavResult.ACCEPTED
             cmds = vehicle.of_type("COMMAND_LONG")
             assert [c.confirmation for c in cmds] == [0, 1]
             assert cmds[1].param2 == 21196.0
@@ -233,7 +233,7 @@ def test_unanswered_command_times_out_naming_vehicle_and_command() -> None:
             with pytest.raises(CommandTimeoutError, match=(
                     r"vehicle 1 \(sysid 1\): MAV_CMD_NAV_LAND \(21\) got no COMMAND_ACK in 2 "
                     r"attempts of 0\.05 s")):
-                await proxy.land(timeout_s=0.05, retries=1)
+                await proxy.commands.land(timeout_s=0.05, retries=1)
             assert len(vehicle.of_type("COMMAND_LONG")) == 2
 
     run(scenario())
@@ -250,12 +250,12 @@ def test_rejection_and_mode_takeoff_interval_params() -> None:
             with pytest.raises(CommandRejectedError, match=(
                     r"vehicle 1 \(sysid 1\): MAV_CMD_DO_SET_MODE \(176\) answered "
                     r"TEMPORARILY_REJECTED")) as err:
-                await proxy.set_mode_px4(Px4MainMode.OFFBOARD)
+                await proxy.commands.set_mode_px4(Px4MainMode.OFFBOARD)
             assert err.value.result == MavResult.TEMPORARILY_REJECTED
-            assert await proxy.set_mode_px4(6, check=False) == MavResult.TEMPORARILY_REJECTED
-            await proxy.takeoff(2.5)
-            await proxy.set_message_interval(32, 50.0)
-            await proxy.set_message_interval(331, 0.0)
+            assert await proxy.commands.set_mode_px4(6, check=False) == MavResult.TEMPORARILY_REJECTED
+            await proxy.commands.takeoff(2.5)
+            await proxy.commands.set_message_interval(32, 50.0)
+            await proxy.commands.set_message_interval(331, 0.0)
             mode, _, takeoff, interval, off = vehicle.of_type("COMMAND_LONG")
             assert (mode.param1, mode.param2, mode.param3) == (129.0, 6.0, 0.0)
             assert takeoff.command == 22 and takeoff.param7 == 2.5 and math.isnan(takeoff.param4)
@@ -272,16 +272,16 @@ def test_setpoints_are_converted_checked_and_counted() -> None:
     async def scenario() -> None:
         async with FakeVehicle() as vehicle, VehicleProxy(config(vehicle)) as proxy:
             await connected(vehicle, proxy)
-            proxy.send_rates_thrust([0.1, 0.2, 0.3], 0.6)
-            proxy.send_rates_thrust(np.zeros(3), 1.4)  # clamped to 1
-            proxy.send_attitude_thrust(np.eye(3), 0.5)  # facing east
-            proxy.send_actuator_controls([0.5, 2.0, -0.1], 0.4)  # pitch torque clamped
+            proxy.setpoints.send_rates_thrust([0.1, 0.2, 0.3], 0.6)
+            proxy.setpoints.send_rates_thrust(np.zeros(3), 1.4)  # clamped to 1
+            proxy.setpoints.send_attitude_thrust(np.eye(3), 0.5)  # facing east
+            proxy.setpoints.send_actuator_controls([0.5, 2.0, -0.1], 0.4)  # pitch torque clamped
             with pytest.raises(SetpointError, match=r"vehicle 1 \(sysid 1\): rates_flu_radps"):
-                proxy.send_rates_thrust([0.0, math.nan, 0.0], 0.5)
+                proxy.setpoints.send_rates_thrust([0.0, math.nan, 0.0], 0.5)
             with pytest.raises(SetpointError, match="thrust_norm: expected finite, got inf"):
-                proxy.send_rates_thrust([0.0, 0.0, 0.0], math.inf)
+                proxy.setpoints.send_rates_thrust([0.0, 0.0, 0.0], math.inf)
             with pytest.raises(SetpointError, match="not a rotation matrix"):
-                proxy.send_attitude_thrust(2.0 * np.eye(3), 0.5)
+                proxy.setpoints.send_attitude_thrust(2.0 * np.eye(3), 0.5)
             await wait_until(lambda: len(vehicle.of_type("SET_ACTUATOR_CONTROL_TARGET")) == 1)
             rates, clamped, att = vehicle.of_type("SET_ATTITUDE_TARGET")
             assert rates.type_mask == 128
@@ -310,7 +310,7 @@ def test_signed_link_end_to_end() -> None:
         async with FakeVehicle(signing_key=KEY) as vehicle, \
                 VehicleProxy(config(vehicle, signing_key=KEY)) as proxy:
             await connected(vehicle, proxy)
-            assert await proxy.arm() == MavResult.ACCEPTED
+            assert await proxy.commands.arm() == MavResult.ACCEPTED
             assert vehicle.mav.signing.goodsig_count >= 2  # our HEARTBEAT and COMMAND_LONG
             assert all(m._signed for m in vehicle.received)
             # WHEN the vehicle stops signing THEN its packets are rejected and counted
@@ -329,7 +329,7 @@ def test_tlog_records_both_directions(tmp_path: Path) -> None:
             async with FakeVehicle() as vehicle, \
                     VehicleProxy(config(vehicle), tlog=tlog) as proxy:
                 await connected(vehicle, proxy)
-                await proxy.arm()
+                await proxy.commands.arm()
                 vehicle.send(vehicle.mav.extended_sys_state_encode(0, LandedState.ON_GROUND))
                 await proxy.wait_message("EXTENDED_SYS_STATE", 2.0)
 

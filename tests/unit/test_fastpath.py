@@ -414,7 +414,7 @@ async def _team_setpoints(tlog: TlogWriter) -> None:
             rates = np.array([[0.1, -0.2, 0.3], [0.0, 0.5, -0.5]])
             thrust = np.array([0.4, 1.7])  # the second is clamped to 1 and counted
             TeamSetpoints([p1, p2]).send_rates_thrust([0, 1], rates, thrust)
-            p1.send_rates_thrust(rates[0], thrust[0])
+            p1.setpoints.send_rates_thrust(rates[0], thrust[0])
             await asyncio.sleep(0.05)
             parser = mavlink.MAVLink(None)
             got = [[parser.decode(bytearray(s.recv(512))) for _ in range(n)]
@@ -554,7 +554,7 @@ async def _slow_burst() -> None:
         # THEN the timer ran while part of the burst still waited: the slow path gave the loop
         # back after its budget instead of routing the burst in one callback
         assert len(at_timer) == 1 and 0 < at_timer[0] < 120, at_timer
-        assert p._port.stats().slow_deferred >= 1
+        assert p.port.stats().slow_deferred >= 1
         # AND nothing was lost or reordered on the way
         assert heartbeats() == 120
         seq = p.stats().sequence

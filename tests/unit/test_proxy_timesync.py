@@ -19,7 +19,7 @@ def test_replies_released_together_after_a_stop_leave_the_links_round_trips():
 
     def request(at_s: float) -> int:  # what the proxy's timesync task sends, every 0.5 s
         clock.t_s = at_s
-        ts1 = proxy._port.claim_timesync(VEHICLE, at_s, 0.5)
+        ts1 = proxy.port.claim_timesync(VEHICLE, at_s, 0.5)
         assert ts1 is not None
         return ts1
 
