@@ -32,6 +32,8 @@ _CHILD = r'''
 import json, sys, time
 sys.path.insert(0, sys.argv[1])
 cfg = json.loads(sys.argv[2])
+from flightkit import jitcache
+jitcache.configure()
 from vehicle_emulator.runner import Emulator
 from vehicle_emulator.team import parse_team
 

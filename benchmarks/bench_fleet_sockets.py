@@ -39,6 +39,10 @@ from pymavlink.dialects.v20 import common as mavlink
 HERE = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(HERE / "benchmarks"))
 sys.path.insert(0, str(HERE))
+from flightkit import jitcache  # noqa: E402
+
+jitcache.configure()  # numba's cache, before the compiled modules below are imported
+
 from bench_fleet_inprocess import GCS_RATES_HZ  # noqa: E402
 
 from vehicle_emulator.codec import BatchEncoder  # noqa: E402

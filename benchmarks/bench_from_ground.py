@@ -61,6 +61,10 @@ BOOT_XY_M = ((25.0, 0.0), (0.0, -25.0), (-25.0, 0.0), (0.0, 25.0))
 FLIGHTS = ("first", "second")
 
 sys.path.insert(0, str(ROOT))
+from flightkit import jitcache  # noqa: E402
+
+jitcache.configure()  # numba's cache, before the compiled modules below are imported
+
 from benchmarks.docsection import write_section  # noqa: E402
 from vehicle_emulator.personality import ARDUPILOT_DYNAMICS  # noqa: E402
 from vehicle_emulator.replay import data_dir  # noqa: E402

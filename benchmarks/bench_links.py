@@ -40,6 +40,10 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from flightkit import jitcache  # noqa: E402
+
+jitcache.configure()  # numba's cache, before the compiled modules below are imported
+
 from benchmarks.docsection import write_section  # noqa: E402
 from gcs.config import load_team  # noqa: E402
 from gcs.control.position import phi  # noqa: E402

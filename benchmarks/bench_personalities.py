@@ -38,6 +38,10 @@ BOOTED_S = 10.0  # the fleet runs this long before `gcs fly` starts (past every 
 SITL_NAMES = {"px4": "PX4 v1.16.0 SIH", "ardupilot": "ArduCopter 4.7.0-dev SITL"}
 
 sys.path.insert(0, str(ROOT))
+from flightkit import jitcache  # noqa: E402
+
+jitcache.configure()  # numba's cache, before the compiled modules below are imported
+
 from benchmarks.docsection import write_section  # noqa: E402
 from vehicle_emulator.replay import data_dir  # noqa: E402
 from vehicle_emulator.testing import free_udp_port_block  # noqa: E402

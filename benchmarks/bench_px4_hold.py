@@ -33,6 +33,10 @@ from pymavlink import mavutil
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from flightkit import jitcache  # noqa: E402
+
+jitcache.configure()  # numba's cache, before the compiled modules below are imported
+
 from benchmarks.docsection import publish  # noqa: E402
 from gcs.mission import goto  # noqa: E402
 from vehicle_emulator.replay import data_dir  # noqa: E402

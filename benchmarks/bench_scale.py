@@ -37,6 +37,10 @@ HEADING = "## Scale"
 SHARED_PORT = 14550
 
 sys.path.insert(0, str(ROOT))
+from flightkit import jitcache  # noqa: E402
+
+jitcache.configure()  # numba's cache, before the compiled modules below are imported
+
 from benchmarks.bench_edges import time_grid  # noqa: E402
 from benchmarks.docsection import write_section  # noqa: E402
 from benchmarks.make_grid import team_text  # noqa: E402

@@ -19,6 +19,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from flightkit import jitcache  # noqa: E402
+
+jitcache.configure()  # numba's cache, before the compiled modules below are imported
+
 from gcs.config import load_team  # noqa: E402
 from gcs.sim.runner import SimOptions, simulate  # noqa: E402
 

@@ -16,6 +16,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from flightkit import jitcache  # noqa: E402
+
+jitcache.configure()  # numba's cache, before the compiled modules below are imported
+
 from flightkit.physics import rk4_step  # noqa: E402
 from gcs.config import load_team  # noqa: E402
 from gcs.control.derivatives import force_derivatives, levant_advance  # noqa: E402

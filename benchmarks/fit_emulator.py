@@ -40,6 +40,10 @@ from scipy.optimize import least_squares
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from flightkit import jitcache  # noqa: E402
+
+jitcache.configure()  # numba's cache, before the compiled modules below are imported
+
 from vehicle_emulator import metrics as mx  # noqa: E402
 from vehicle_emulator import replay as rp  # noqa: E402
 from vehicle_emulator.personality import PERSONALITIES, Personality  # noqa: E402

@@ -31,6 +31,10 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from flightkit import jitcache  # noqa: E402
+
+jitcache.configure()  # numba's cache, before the compiled modules below are imported
+
 from benchmarks.docsection import publish  # noqa: E402
 from benchmarks.fit_velocity_consistency import (  # noqa: E402
     DOC,

@@ -28,6 +28,10 @@ from scipy.optimize import least_squares
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from flightkit import jitcache  # noqa: E402
+
+jitcache.configure()  # numba's cache, before the compiled modules below are imported
+
 from benchmarks.docsection import publish  # noqa: E402
 from benchmarks.fit_emulator import kernel_doublets, recorded_rates  # noqa: E402
 from gcs.mission.cascade import PX4_RESPONSE  # noqa: E402

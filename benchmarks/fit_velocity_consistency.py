@@ -34,6 +34,10 @@ from pymavlink import mavutil
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from flightkit import jitcache  # noqa: E402
+
+jitcache.configure()  # numba's cache, before the compiled modules below are imported
+
 from benchmarks.docsection import publish  # noqa: E402
 from vehicle_emulator import replay as rp  # noqa: E402
 from vehicle_emulator.personality import PX4_SENSORS  # noqa: E402

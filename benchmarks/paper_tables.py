@@ -14,6 +14,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from flightkit import jitcache  # noqa: E402
+
+jitcache.configure()  # numba's cache, before the compiled modules below are imported
+
 from gcs import metrics  # noqa: E402
 from gcs.config import load_team  # noqa: E402
 from gcs.sim.runner import SimOptions, simulate  # noqa: E402

@@ -6,6 +6,12 @@ code of a callee. Keying the cache directory by a digest of every source file of
 distribution (flightkit, gcs and vehicle_emulator) rules that out. A user's NUMBA_CACHE_DIR is
 respected.
 
+numba picks a function's cache directory when `@njit(cache=True)` decorates it, that is when its
+module is imported. So `configure()` is the first thing each program does, before it imports any
+compiled module: the entry points (`gcs.cli.main`, `vehicle_emulator.cli.main`), the test
+suite's conftest.py and the benchmark scripts call it; importing a package never does. Code that
+imports compiled modules without it runs correctly, but caches in numba's default places.
+
 Compiling takes seconds (docs/benchmarks.md), so a program never does it silently:
 `compiling(part, estimate_s)` wraps the warm-up of one part (the law, the simulator, the
 emulator physics). When that part has not been compiled into the current cache yet, it prints
@@ -43,7 +49,9 @@ def source_digest(root: Path) -> str:
 
 
 def configure() -> None:
-    """Point NUMBA_CACHE_DIR at the cache of the current sources (call before compiling)."""
+    """Point NUMBA_CACHE_DIR at the cache of the current sources and delete all but the `_KEEP`
+    newest caches of other source states. Call it before importing any module with a
+    `cache=True` function: one imported earlier keeps the cache directory numba found then."""
     global _digest
     root = Path(__file__).resolve().parent.parent
     _digest = source_digest(root)

@@ -61,11 +61,11 @@ class Request:
 EMU_RT_PRIORITY = 9
 #: nice value of `vehicle-emu --scheduling raised` (the ground station's is -10).
 EMU_RAISED_NICE = -5
-#: what `vehicle-emu` asks for (cli.py). Its `auto` is raised, not realtime: beside other
-#: real-time processes (several flights of a test run, each ground station at SCHED_FIFO 10) a
-#: SCHED_FIFO stand-in takes its core from everything normally scheduled, the ground stations'
-#: own start-up and the tests' clients included, and same-priority FIFO tasks do not share a
-#: core; realtime stays available by name.
+#: what `vehicle-emu` asks for (vehicle_emulator/command.py). Its `auto` is raised, not
+#: realtime: beside other real-time processes (several flights of a test run, each ground station
+#: at SCHED_FIFO 10) a SCHED_FIFO stand-in takes its core from everything normally scheduled, the
+#: ground stations' own start-up and the tests' clients included, and same-priority FIFO tasks do
+#: not share a core; realtime stays available by name.
 EMULATOR = Request(
     "--scheduling", EMU_RT_PRIORITY, EMU_RAISED_NICE,
     "grant it with root, `sudo setcap cap_sys_nice+ep \"$(readlink -f .venv/bin/python)\"`, or "

@@ -1,4 +1,7 @@
-"""The `gcs` command line: sim, fly, check and plot (print lives here, not in the library)."""
+"""The `gcs` command line: sim, fly, check and plot (print lives here, not in the library).
+
+`main` points numba's cache at the current sources (flightkit.jitcache) before it imports a
+compiled module, so this module imports none at its top."""
 
 from __future__ import annotations
 
@@ -7,6 +10,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from flightkit import jitcache
 from gcs.config import ConfigError, describe, load_team
 
 EXIT_OK = 0
@@ -92,6 +96,8 @@ def _check_file(args: argparse.Namespace) -> Path:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    # before build_parser: it imports `gcs fly`, whose modules hold numba's cached kernels
+    jitcache.configure()
     args = build_parser().parse_args(argv)
     try:
         if args.command == "check":

@@ -6,11 +6,18 @@ compile from an empty cache and take a minute to several minutes each; collected
 start at once and the many short files fill the gaps, instead of one of them starting last and
 running alone at the end (the longest-first rule of scheduling). Figures: junit times of an idle
 run, seconds per file.
+
+numba's cache is pointed at the current sources here, before any test module imports compiled
+code (flightkit/jitcache.py), as the programs' entry points do.
 """
 
 from __future__ import annotations
 
 import pytest
+
+from flightkit import jitcache
+
+jitcache.configure()
 
 LONGEST_FIRST = (
     "tests/integration/test_first_run.py",  # 393 (empty-cache compiles)

@@ -20,7 +20,7 @@ ArduCopter 4.7.0-dev SITL as recorded (docs/emulator.md, "ArduPilot personality"
   the local target it amounts to; terrain frames and invalid coordinates stop the vehicle.
 
 Links: ArduPilot SITL's ``udpclient`` sends from an ephemeral port, new for each process, and
-hears only its peer; runner.py / cli.py open such a link unless a bind is forced (``--bind``).
+hears only its peer; runner.py / command.py open such a link unless a bind is forced (``--bind``).
 """
 
 from __future__ import annotations

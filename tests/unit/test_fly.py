@@ -413,6 +413,8 @@ _KERNELS_AFTER_SETUP = """
 import sys, tempfile
 from pathlib import Path
 import numpy as np
+from flightkit import jitcache
+jitcache.configure()
 from gcs.fly.flight import Flight
 from gcs.fly.setup import FlyOptions, prepare
 from gcs.config import load_team
