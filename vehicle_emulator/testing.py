@@ -23,7 +23,6 @@ from collections.abc import Callable, Coroutine, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mavlink
 
 __all__ = [
@@ -263,6 +262,10 @@ class MavClient:
     )
 
     def __post_init__(self) -> None:
+        # imported here: pymavlink.mavutil sets MAVLINK_DIALECT when imported, and importing
+        # this module sets no environment variable
+        from pymavlink import mavutil
+
         self.conn = mavutil.mavlink_connection(
             f"udpin:127.0.0.1:{self.port}",
             source_system=GCS_SYSID,
