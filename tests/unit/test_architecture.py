@@ -1,20 +1,64 @@
-"""Layer boundaries: the pure layers do no I/O and read no clock; the emulator never imports gcs."""
+"""Layer boundaries: the pure layers do no I/O and read no clock; the emulator never imports gcs,
+gcs never imports the emulator, flightkit imports neither; importing a package does no work."""
 
 from __future__ import annotations
 
 import ast
+import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 IMPURE = {"asyncio", "socket", "time", "pymavlink", "mavsdk", "select", "threading", "subprocess"}
-PURE_MODULES = sorted((ROOT / "gcs" / "control").glob("*.py")) + [
-    ROOT / "flightkit" / "physics.py",
-    ROOT / "flightkit" / "fleet_protocol.py",
-    ROOT / "gcs" / "frames.py",
-    ROOT / "gcs" / "geodesy.py",
-]
+OWN = ("flightkit", "gcs", "vehicle_emulator")
+
+#: Every module that does no I/O and reads no clock (time is an argument), as a glob of files
+#: and what they are. Not listed, though their imports would pass: vehicle_emulator/team.py
+#: (`load_team` reads the file), flightkit/sched.py (changes the process's scheduling). The link's
+#: other sans-IO parts import pymavlink (codec.py, statustext.py) or a default clock (codec.py,
+#: telemetry.py), or the UDP layer's address type (address.py).
+PURE = {
+    "gcs/control/*.py": "the paper's law, the formation slots",
+    "gcs/mission/*.py": "the flight sequence as a state machine, safety and stability checks",
+    "gcs/frames.py": "NED/FRD <-> ENU/FLU conversions",
+    "gcs/geodesy.py": "one team frame from the vehicles' origins",
+    "gcs/link/clock.py": "a vehicle's clock and true sample times",
+    "gcs/link/enums.py": "MAVLink enumerations and mode encodings",
+    "gcs/link/liveness.py": "link and HEARTBEAT staleness, every time an argument",
+    "flightkit/physics.py": "the rigid-body model both programs simulate",
+    "flightkit/fleet_protocol.py": "the emulator fleet's ready line",
+    "vehicle_emulator/plant.py": "the fleet's physics step: inner loops, mixer, motors, RK4",
+    "vehicle_emulator/inner.py": "PX4-like inner loops",
+    "vehicle_emulator/onboard.py": "the calibrated personalities' onboard estimate and rate loops",
+    "vehicle_emulator/sensors.py": "IMU noise and filters",
+    "vehicle_emulator/personality.py": "the personalities' parameters",
+    "vehicle_emulator/frames.py": "the emulator's frame conversions",
+    "vehicle_emulator/geodesy.py": "WGS-84 <-> team-frame ENU",
+    "vehicle_emulator/gnss.py": "GPS_RAW_INT rows",
+    "vehicle_emulator/autopilot.py": "the PX4-like state machine",
+    "vehicle_emulator/ardupilot.py": "the ArduCopter-like state machine",
+    "vehicle_emulator/ardupilot_boot.py": "ArduCopter's boot as recorded",
+    "vehicle_emulator/ardupilot_flight.py": "how the ardupilot personality flies in GUIDED",
+    "vehicle_emulator/ardupilot_modes.py": "ArduCopter's flight modes",
+    "vehicle_emulator/ardupilot_targets.py": "attitude and position targets as ArduCopter reads them",
+    "vehicle_emulator/setpoints.py": "setpoint checks (type_mask rules)",
+    "vehicle_emulator/params.py": "the parameter table",
+    "vehicle_emulator/faults.py": "fault clock and schedule, link impairments",
+    "vehicle_emulator/fleet_status.py": "the fleet's status arrays",
+    "vehicle_emulator/telemetry_payloads.py": "telemetry payload builders",
+    "vehicle_emulator/metrics.py": "the recordings' figures",
+}
+#: Modules that, like the law, reach nothing of gcs outside gcs.control.
+LAW_LAYER = ("gcs/control/*.py", "gcs/frames.py", "gcs/geodesy.py", "flightkit/physics.py",
+             "flightkit/fleet_protocol.py")
+
+
+def expand(globs) -> list[Path]:
+    return sorted({p for pattern in globs for p in ROOT.glob(pattern)})
 
 
 def imported_roots(path: Path) -> set[str]:
@@ -30,10 +74,62 @@ def imported_roots(path: Path) -> set[str]:
     return roots
 
 
-@pytest.mark.parametrize("path", PURE_MODULES, ids=lambda p: str(p.relative_to(ROOT)))
+def module_file(root: Path, name: str) -> Path | None:
+    """The file of module `name` under `root` (a package's __init__.py), None if none."""
+    base = root.joinpath(*name.split("."))
+    for path in (base.with_suffix(".py"), base / "__init__.py"):
+        if path.is_file():
+            return path
+    return None
+
+
+def own_imports(root: Path, path: Path, own: tuple[str, ...]) -> set[Path]:
+    """The files of the repository's modules that `path` imports: `from a.b import c` is a.b's
+    file, or c's where c is a module. A package's __init__ counts where it is imported from,
+    not as the parent of a module imported."""
+    found: set[Path] = set()
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names = [f"{node.module}.{a.name}" if module_file(root, f"{node.module}.{a.name}")
+                     else node.module for a in node.names]
+        else:
+            continue
+        found |= {f for n in names if n.split(".")[0] in own and (f := module_file(root, n))}
+    return found
+
+
+def impure_reach(root: Path, path: Path, own: tuple[str, ...] = OWN) -> dict[str, list[str]]:
+    """Per file reachable from `path` through the repository's own imports (`path` included),
+    the IMPURE modules it imports; only files that import any."""
+    seen, todo, found = {path}, [path], {}
+    while todo:
+        current = todo.pop()
+        bad = imported_roots(current) & IMPURE
+        if bad:
+            found[str(current.relative_to(root))] = sorted(bad)
+        for dep in own_imports(root, current, own) - seen:
+            seen.add(dep)
+            todo.append(dep)
+    return found
+
+
+@pytest.mark.parametrize("pattern", [*PURE, *LAW_LAYER])
+def test_every_listed_pure_module_exists(pattern):
+    assert list(ROOT.glob(pattern)), f"{pattern} matches no file"
+
+
+@pytest.mark.parametrize("path", expand(PURE), ids=lambda p: str(p.relative_to(ROOT)))
 def test_pure_layers_do_no_io(path):
+    # GIVEN a module listed pure THEN neither it nor any module of ours that it imports (directly
+    # or through others) imports I/O or a clock
+    assert impure_reach(ROOT, path) == {}
+
+
+@pytest.mark.parametrize("path", expand(LAW_LAYER), ids=lambda p: str(p.relative_to(ROOT)))
+def test_the_law_layer_reaches_nothing_outside_gcs_control(path):
     found = imported_roots(path)
-    assert not found & IMPURE, f"{path.name} imports {sorted(found & IMPURE)}"
     assert not {m for m in found if m.startswith("gcs.")}, (
         f"{path.name} reaches outside gcs.control"
     )
@@ -47,6 +143,7 @@ def test_the_fly_set_up_policy_opens_nothing_and_imports_none_of_the_flight():
               "gcs.fly.setpoints", "gcs.fly.records")
     assert not found & IMPURE, sorted(found & IMPURE)
     assert not [m for m in found if m.startswith(flying)]
+
 
 def importers(package: str, forbidden: set[str]) -> dict[str, list[str]]:
     """The modules of ``package`` that import any of ``forbidden`` (top-level names)."""
@@ -67,8 +164,64 @@ def test_no_package_imports_a_program_it_must_not(package, forbidden):
     assert importers(package, forbidden) == {}
 
 
+_IMPORT_ALL = """
+import importlib, json, os, pkgutil, sys
+before = dict(os.environ)
+import flightkit, gcs, gcs.control, gcs.link, gcs.mission, vehicle_emulator
+names = []
+for package in (flightkit, gcs.control, gcs.link, gcs.mission, vehicle_emulator):
+    for info in pkgutil.walk_packages(package.__path__, package.__name__ + "."):
+        importlib.import_module(info.name)
+        names.append(info.name)
+after = dict(os.environ)
+changed = {k: [before.get(k), after.get(k)] for k in before.keys() | after.keys()
+           if before.get(k) != after.get(k)}
+print(json.dumps({"modules": names, "environ_changed": changed}))
+"""
+
+
+def test_importing_the_packages_sets_no_environment_variable_and_writes_no_file(tmp_path):
+    # GIVEN a fresh home and cache directory, and no NUMBA_CACHE_DIR
+    home, cache = tmp_path / "home", tmp_path / "cache"
+    home.mkdir()
+    cache.mkdir()
+    unset = ("NUMBA_CACHE_DIR", "XDG_CONFIG_HOME", "MPLCONFIGDIR")
+    env = {k: v for k, v in os.environ.items() if k not in unset}
+    env.update(HOME=str(home), XDG_CACHE_HOME=str(cache),
+               PYTHONPATH=os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]))
+    # WHEN a process imports flightkit, gcs, vehicle_emulator and every module of flightkit,
+    # gcs.control, gcs.link, gcs.mission and vehicle_emulator
+    out = subprocess.run([sys.executable, "-c", _IMPORT_ALL], env=env, cwd=ROOT,
+                         capture_output=True, text=True, timeout=240, check=True)
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    # THEN it imported them all, left its environment as it was and wrote nothing under the
+    # home or the cache directory
+    assert {"flightkit.jitcache", "gcs.control.law", "gcs.link.proxy", "gcs.mission.machine",
+            "vehicle_emulator.cli", "vehicle_emulator.plant"} <= set(result["modules"])
+    assert result["environ_changed"] == {}
+    assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")) == ["cache", "home"]
+
+
 def test_the_boundary_check_can_fail(tmp_path):
     # GIVEN a module that reads the clock THEN the import walk sees it
     bad = tmp_path / "bad.py"
     bad.write_text("import numpy as np\nfrom time import monotonic\n")
     assert "time" in imported_roots(bad)
+
+
+def test_the_pure_check_follows_imports_through_other_modules(tmp_path):
+    # GIVEN a module whose own imports are clean, but one of its modules imports another that
+    # reads the clock (through a package's __init__ it imports names from)
+    pkg = tmp_path / "pkg"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "law.py").write_text("import numpy as np\nfrom pkg.sub import helper\n")
+    (pkg / "sub" / "__init__.py").write_text("from pkg.sub.clocked import now\n")
+    (pkg / "sub" / "helper.py").write_text("from pkg import sub as _sub\n")
+    (pkg / "sub" / "clocked.py").write_text("import time\nnow = time.monotonic\n")
+    (pkg / "sub" / "plain.py").write_text("x = 1\n")
+    (pkg / "clean.py").write_text("from pkg.sub.plain import x\n")
+    # THEN the walk names the module that imports the clock
+    assert impure_reach(tmp_path, pkg / "law.py", ("pkg",)) == {"pkg/sub/clocked.py": ["time"]}
+    # AND a package's __init__ is not followed as the parent of a module imported from it
+    assert impure_reach(tmp_path, pkg / "clean.py", ("pkg",)) == {}

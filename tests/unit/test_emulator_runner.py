@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import ast
 import dataclasses
 from dataclasses import replace
 from pathlib import Path
@@ -313,28 +312,6 @@ def test_a_statustext_longer_than_50_bytes_goes_in_mavlink2_chunks():
         ("x" * 50, 2, 1),
         ("", 2, 2),
     ]
-
-
-PURE = [
-    "autopilot", "inner", "plant", "setpoints", "frames", "faults", "params", "team", "personality",
-    "onboard", "sensors", "metrics",
-]
-IMPURE = {"asyncio", "socket", "time", "pymavlink", "mavsdk", "select", "threading", "gcs"}
-
-
-@pytest.mark.parametrize("module", PURE)
-def test_pure_emulator_layers_do_no_io(module):
-    tree = ast.parse((ROOT / "vehicle_emulator" / f"{module}.py").read_text())
-    roots = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            roots |= {a.name.split(".")[0] for a in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.module:
-            roots.add(node.module.split(".")[0])
-            if node.module.startswith("vehicle_emulator."):
-                dep = node.module.split(".")[1]
-                assert dep in PURE + ["physics", "jitcache"], f"{module} imports {dep}"
-    assert not roots & IMPURE
 
 
 def test_an_ardupilot_attitude_target_stops_being_flown_within_one_tick_of_guid_timeout():

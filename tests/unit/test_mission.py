@@ -3,7 +3,6 @@ sockets, no clock: time and telemetry are arguments)."""
 
 from __future__ import annotations
 
-import ast
 import dataclasses
 import logging
 import math
@@ -774,17 +773,6 @@ def test_spectral_radius_is_the_growth_rate_of_the_simulated_delayed_loop(gains,
     growth = math.exp((log_norm - at_3000) / 1000)
     # THEN the criterion's spectral radius is that growth rate per tick
     assert torque_loop_radius(a_eps, a_om, inertia, h, delay) == pytest.approx(growth, rel=2e-3)
-
-
-def test_mission_modules_are_pure():
-    impure = {"asyncio", "socket", "time", "pymavlink", "select", "threading", "subprocess"}
-    for path in (ROOT / "gcs" / "mission").glob("*.py"):
-        tree = ast.parse(path.read_text())
-        names = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import)
-                 for a in n.names}
-        names |= {n.module.split(".")[0] for n in ast.walk(tree)
-                  if isinstance(n, ast.ImportFrom) and n.module}
-        assert not names & impure, f"{path.name} imports {names & impure}"
 
 
 def test_a_failed_preflight_never_commands_disarmed_vehicles_on_the_ground():
