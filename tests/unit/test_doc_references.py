@@ -10,11 +10,12 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 #: What a reader of the repository reads: the README, docs, team files and the Python sources.
-SCANNED = ("README.md", "docs/**/*.md", "configs/*.yaml", "gcs/**/*.py",
+SCANNED = ("README.md", "docs/**/*.md", "configs/*.yaml", "flightkit/**/*.py", "gcs/**/*.py",
            "vehicle_emulator/**/*.py", "benchmarks/**/*.py")
 #: A cited path starts with one of these folders (the repository's, and the two outside it that
 #: documents have cited: spec/ and shared/), optionally behind ../ (which leaves the repository).
-TOP = ("docs", "configs", "benchmarks", "tests", "gcs", "vehicle_emulator", "spec", "shared")
+TOP = ("docs", "configs", "benchmarks", "tests", "flightkit", "gcs", "vehicle_emulator", "spec",
+       "shared")
 PATH = re.compile(r"(?<![\w./$<>{}-])((?:\.\./)*(?:" + "|".join(TOP) + r")/[\w./*<>{}-]*)")
 #: A bare document name (`control-law.md`, not behind a folder): it must exist somewhere here.
 DOC = re.compile(r"(?<![\w./-])([\w-]+\.md)\b")
