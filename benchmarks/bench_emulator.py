@@ -95,7 +95,7 @@ def _emu_cmd(args: list[str], cpu: int | None) -> list[str]:
         "import os, sys\n"
         f"cpu = {cpu!r}\n"
         "if cpu is not None: os.sched_setaffinity(0, {cpu})\n"
-        "from vehicle_emulator.cli import main\n"
+        "from vehicle_emulator.fleet.cli import main\n"
         "sys.exit(main(sys.argv[1:]))\n"
     )
     return [sys.executable, "-c", prog, *args]

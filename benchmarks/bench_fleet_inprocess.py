@@ -34,8 +34,8 @@ sys.path.insert(0, sys.argv[1])
 cfg = json.loads(sys.argv[2])
 from flightkit import jitcache
 jitcache.configure()
-from vehicle_emulator.runner import Emulator
-from vehicle_emulator.team import parse_team
+from vehicle_emulator.fleet.runner import Emulator
+from vehicle_emulator.config.team import parse_team
 
 class Discard:
     name = "discard"

@@ -45,7 +45,7 @@ jitcache.configure()  # numba's cache, before the compiled modules below are imp
 
 from bench_fleet_inprocess import GCS_RATES_HZ  # noqa: E402
 
-from vehicle_emulator.codec import BatchEncoder  # noqa: E402
+from vehicle_emulator.mavlink.codec import BatchEncoder  # noqa: E402
 
 GCS_PORT = 24550
 BIND_BASE = 24700
@@ -202,7 +202,7 @@ def run(args: argparse.Namespace) -> dict:
         team_file(n, args.autopilot, team)
         gcs = Gcs(n)  # bound before the fleet starts sending
         prof = ["-m", "cProfile", "-o", args.profile] if args.profile else []
-        cmd = [sys.executable, *prof, "-m", "vehicle_emulator.cli", "--fleet", "--team", str(team),
+        cmd = [sys.executable, *prof, "-m", "vehicle_emulator", "--fleet", "--team", str(team),
                "--physics-rate", str(args.physics_rate), "--tick-ms", str(args.tick_ms),
                "--stats-json", str(stats), "--log-level", "WARNING"]
         if args.streams != "default":

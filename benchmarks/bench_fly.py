@@ -30,7 +30,7 @@ def run(team: Path, duration_s: float, work: Path, mode: str = "rates",
     """One flight of ``team`` against a fleet started with ``--scheduling emu_scheduling``."""
     emu_stats = work / "emu.json"
     emu = subprocess.Popen(
-        [sys.executable, "-m", "vehicle_emulator.cli", "--fleet", "--team", str(team),
+        [sys.executable, "-m", "vehicle_emulator", "--fleet", "--team", str(team),
          "--stats-json", str(emu_stats), "--log-level", "WARNING",
          "--scheduling", emu_scheduling],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

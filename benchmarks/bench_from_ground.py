@@ -66,8 +66,8 @@ from flightkit import jitcache  # noqa: E402
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
 from benchmarks.docsection import write_section  # noqa: E402
-from vehicle_emulator.personality import ARDUPILOT_DYNAMICS  # noqa: E402
-from vehicle_emulator.replay import data_dir  # noqa: E402
+from vehicle_emulator.calibration.replay import data_dir  # noqa: E402
+from vehicle_emulator.config.personality import ARDUPILOT_DYNAMICS  # noqa: E402
 from vehicle_emulator.testing import free_udp_port_block  # noqa: E402
 
 
@@ -171,7 +171,7 @@ def fly_team(kind: str, work: Path, duration_s: float) -> list[dict]:
     log = open(work / f"{kind}-fleet.log", "w")  # noqa: SIM115
     guided = ["--param", "GUID_OPTIONS=8"] if "ardupilot" in TEAMS[kind] else []
     fleet = subprocess.Popen(
-        [sys.executable, "-m", "vehicle_emulator.cli", "--fleet", "--team", str(team), *guided,
+        [sys.executable, "-m", "vehicle_emulator", "--fleet", "--team", str(team), *guided,
          "--log-level", "WARNING"],
         stdout=subprocess.PIPE, stderr=log, text=True)
     rows = []

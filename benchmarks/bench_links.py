@@ -113,7 +113,7 @@ def team_file(work: Path, mode: str, gains: CascadeGains, delay_s: float, latenc
 
 def fly(team: Path, out: Path, mode: str) -> dict:
     emu = subprocess.Popen(
-        [sys.executable, "-m", "vehicle_emulator.cli", "--fleet", "--team", str(team),
+        [sys.executable, "-m", "vehicle_emulator", "--fleet", "--team", str(team),
          "--log-level", "WARNING"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         proc = subprocess.run(

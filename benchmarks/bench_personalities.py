@@ -43,7 +43,7 @@ from flightkit import jitcache  # noqa: E402
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
 from benchmarks.docsection import write_section  # noqa: E402
-from vehicle_emulator.replay import data_dir  # noqa: E402
+from vehicle_emulator.calibration.replay import data_dir  # noqa: E402
 from vehicle_emulator.testing import free_udp_port_block  # noqa: E402
 
 #: the recorded flights: $SITL_DATA_DIR/flights, else the shared data folder beside the checkout
@@ -102,7 +102,7 @@ def fly(team: Path, out: Path, personality: str, mode: str = "rates") -> dict:
     `gcs fly` arms once, and PX4 refuses to arm for its first 3 s after boot."""
     extra = ardupilot_args(team) if personality == "ardupilot" else []
     emu = subprocess.Popen(
-        [sys.executable, "-m", "vehicle_emulator.cli", "--fleet", "--team", str(team),
+        [sys.executable, "-m", "vehicle_emulator", "--fleet", "--team", str(team),
          "--log-level", "WARNING", *extra],
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:

@@ -99,7 +99,7 @@ def reference_tick() -> tuple[float, float]:
 def fly(team: Path, work: Path) -> dict:
     emu_stats = work / "emu.json"
     emu = subprocess.Popen(
-        [sys.executable, "-m", "vehicle_emulator.cli", "--fleet", "--team", str(team),
+        [sys.executable, "-m", "vehicle_emulator", "--fleet", "--team", str(team),
          "--streams", "requested", "--stats-json", str(emu_stats), "--log-level", "WARNING"],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     out = work / "fly"

@@ -99,7 +99,7 @@ def measure(work: Path, cold: dict[str, float], warm: dict[str, float]) -> None:
         warm.update(run(_env(home)))
 
     def emu(env: dict[str, str]) -> dict[str, float]:
-        seen = _until([py, "-m", "vehicle_emulator.cli", "--id", "1", "--bind",
+        seen = _until([py, "-m", "vehicle_emulator", "--id", "1", "--bind",
                        f"127.0.0.1:{free_udp_port()}", "--remote", f"127.0.0.1:{free_udp_port()}"],
                       env, {"ready": "vehicle-emu: ready:"}, stop_after="ready")
         return {"emu_ready": seen["ready"]}

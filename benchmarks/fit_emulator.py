@@ -5,7 +5,7 @@
     options: --vehicles N (8), --seed S (0), --markdown FILE (write the table)
 
 The table (docs/emulator.md, "Calibration") replays the recorded setpoint stream
-(vehicle_emulator/replay.py) into N vehicles of each personality and sets the recorded figures
+(vehicle_emulator/calibration/replay.py) into N vehicles of each personality and sets the recorded figures
 (the JSON summaries of the recordings, from replay.data_dir()) beside the emulated ones: mean
 over the vehicles and repetitions, the ratio, and the tolerance of tests/unit/test_calibration.py.
 
@@ -44,10 +44,10 @@ from flightkit import jitcache  # noqa: E402
 
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
-from vehicle_emulator import metrics as mx  # noqa: E402
-from vehicle_emulator import replay as rp  # noqa: E402
-from vehicle_emulator.personality import PERSONALITIES, Personality  # noqa: E402
-from vehicle_emulator.plant import ControlMode, FleetPlant  # noqa: E402
+from vehicle_emulator.calibration import metrics as mx  # noqa: E402
+from vehicle_emulator.calibration import replay as rp  # noqa: E402
+from vehicle_emulator.config.personality import PERSONALITIES, Personality  # noqa: E402
+from vehicle_emulator.physics.plant import ControlMode, FleetPlant  # noqa: E402
 
 # tests/unit/test_calibration.py's tolerances (the issue's): ratio emulated / recorded
 TOLERANCE = {"t63_ms": 0.25, "peak": 0.20, "noise": 1.5}

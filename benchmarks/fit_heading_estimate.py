@@ -12,9 +12,9 @@ Recorded (PX4 v1.16.0 SIH): the 20 s hover of `px4/hover_noise.tlog.gz` (one veh
 setpoints: nothing holds the heading) and the formation of the 2026-12-04 flight
 `flights/2026-12-04/px4_rates_1st/flight.tlog.gz` (four vehicles, the law in rates mode holding
 the heading, from the first rates setpoint to the last). Emulated: the hover recording's
-setpoints replayed into four px4-personality vehicles (vehicle_emulator.replay), the same window.
+setpoints replayed into four px4-personality vehicles (vehicle_emulator.calibration.replay), the same window.
 The personality's heading error is a second-order Gauss-Markov process because of these figures
-(`attitude_error_order` in vehicle_emulator/personality.py). Writes the "## PX4 heading
+(`attitude_error_order` in vehicle_emulator/config/personality.py). Writes the "## PX4 heading
 estimate: the reported heading against the reported yaw rate" section of docs/benchmarks.md.
 
     python benchmarks/fit_heading_estimate.py [--no-write]
@@ -44,8 +44,8 @@ from benchmarks.fit_velocity_consistency import (  # noqa: E402
     mismatch_rms,
     recorded_tlog,
 )
-from vehicle_emulator import replay as rp  # noqa: E402
-from vehicle_emulator.personality import PX4_SENSORS  # noqa: E402
+from vehicle_emulator.calibration import replay as rp  # noqa: E402
+from vehicle_emulator.config.personality import PX4_SENSORS  # noqa: E402
 
 HEADING = "## PX4 heading estimate: the reported heading against the reported yaw rate"
 FORMATION = "flights/2026-12-04/px4_rates_1st/flight.tlog.gz"

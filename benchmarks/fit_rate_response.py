@@ -35,8 +35,8 @@ jitcache.configure()  # numba's cache, before the compiled modules below are imp
 from benchmarks.docsection import publish  # noqa: E402
 from benchmarks.fit_emulator import kernel_doublets, recorded_rates  # noqa: E402
 from gcs.mission.cascade import PX4_RESPONSE  # noqa: E402
-from vehicle_emulator import replay as rp  # noqa: E402
-from vehicle_emulator.personality import PERSONALITIES  # noqa: E402
+from vehicle_emulator.calibration import replay as rp  # noqa: E402
+from vehicle_emulator.config.personality import PERSONALITIES  # noqa: E402
 
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## PX4 rate loop: the criterion's model against the recorded doublets"

@@ -10,8 +10,8 @@ Recorded (PX4 v1.16.0 SIH): the 20 s hover of `px4/hover_noise.tlog.gz` (one veh
 rate setpoints, altitude hold) and the 60 s formation of the 2026-12-04 flight
 `flights/2026-12-04/px4_rates_1st/timeseries.csv` (four vehicles, the law in rates mode).
 Emulated: the hover recording's setpoints replayed into four px4-personality vehicles
-(vehicle_emulator.replay), the same window. The personality keeps its velocity error out of its
-position (`velocity_error_in_position` 0 in vehicle_emulator/personality.py) because of these
+(vehicle_emulator.calibration.replay), the same window. The personality keeps its velocity error out of its
+position (`velocity_error_in_position` 0 in vehicle_emulator/config/personality.py) because of these
 figures: SIH's reported altitude holds to 0.06 m while its reported vertical velocity wanders by
 0.15 m/s. Writes the "## PX4 position estimate: the
 reported position against the reported velocity" section of docs/benchmarks.md.
@@ -39,8 +39,8 @@ from flightkit import jitcache  # noqa: E402
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
 from benchmarks.docsection import publish  # noqa: E402
-from vehicle_emulator import replay as rp  # noqa: E402
-from vehicle_emulator.personality import PX4_SENSORS  # noqa: E402
+from vehicle_emulator.calibration import replay as rp  # noqa: E402
+from vehicle_emulator.config.personality import PX4_SENSORS  # noqa: E402
 
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## PX4 position estimate: the reported position against the reported velocity"

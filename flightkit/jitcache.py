@@ -8,7 +8,7 @@ respected.
 
 numba picks a function's cache directory when `@njit(cache=True)` decorates it, that is when its
 module is imported. So `configure()` is the first thing each program does, before it imports any
-compiled module: the entry points (`gcs.cli.main`, `vehicle_emulator.cli.main`), the test
+compiled module: the entry points (`gcs.cli.main`, `vehicle_emulator.fleet.cli.main`), the test
 suite's conftest.py and the benchmark scripts call it; importing a package never does. Code that
 imports compiled modules without it runs correctly, but caches in numba's default places.
 

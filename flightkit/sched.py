@@ -61,7 +61,7 @@ class Request:
 EMU_RT_PRIORITY = 9
 #: nice value of `vehicle-emu --scheduling raised` (the ground station's is -10).
 EMU_RAISED_NICE = -5
-#: what `vehicle-emu` asks for (vehicle_emulator/command.py). Its `auto` is raised, not
+#: what `vehicle-emu` asks for (vehicle_emulator/fleet/command.py). Its `auto` is raised, not
 #: realtime: beside other real-time processes (several flights of a test run, each ground station
 #: at SCHED_FIFO 10) a SCHED_FIFO stand-in takes its core from everything normally scheduled, the
 #: ground stations' own start-up and the tests' clients included, and same-priority FIFO tasks do

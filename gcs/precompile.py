@@ -118,7 +118,7 @@ def compile_all(emulator: bool = True) -> None:
     t0 = time.monotonic()
     proc = None
     if emulator:
-        proc = subprocess.Popen([sys.executable, "-m", "vehicle_emulator.cli", "--compile-only"],
+        proc = subprocess.Popen([sys.executable, "-m", "vehicle_emulator", "--compile-only"],
                                 stdin=subprocess.DEVNULL)
     try:
         compile_law()

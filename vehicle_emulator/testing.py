@@ -55,7 +55,7 @@ class RecordingLink:
     name = "recording"
 
     def __init__(self) -> None:
-        from vehicle_emulator.codec import PeerDecoder
+        from vehicle_emulator.mavlink.codec import PeerDecoder
 
         self.decoder = PeerDecoder()
         self.msgs: list = []
@@ -196,7 +196,7 @@ def run_emulator(
     bind_port = (bind_port or free_udp_port()) if bind else None
     remote_port = remote_port or free_udp_port()
     log_path = os.path.join(log_dir, f"vehicle-emu-{bind_port or remote_port}.log")
-    cmd = [sys.executable, "-m", "vehicle_emulator.cli", *args]
+    cmd = [sys.executable, "-m", "vehicle_emulator", *args]
     if bind_port is not None:
         cmd += ["--bind", f"127.0.0.1:{bind_port}"]
     cmd += ["--remote", f"127.0.0.1:{remote_port}"]
@@ -220,7 +220,7 @@ def run_emulator_ready(
     (what ``gcs fly --emulators`` waits for); TimeoutError naming the log if it never does."""
     bind_port = free_udp_port()
     log_path = os.path.join(log_dir, f"vehicle-emu-{bind_port}.log")
-    cmd = [sys.executable, "-m", "vehicle_emulator.cli", *args,
+    cmd = [sys.executable, "-m", "vehicle_emulator", *args,
            "--bind", f"127.0.0.1:{bind_port}", "--remote", f"127.0.0.1:{remote_port}"]
     with open(log_path, "w") as log:
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 # Faults: each kind is its own dataclass with kind, vehicle (an id) and at_s (s from the formation
-# start) first. The emulator (vehicle_emulator/team.py) reads the same keys.
+# start) first. The emulator (vehicle_emulator/config/team.py) reads the same keys.
 
 
 @dataclass(frozen=True, slots=True)

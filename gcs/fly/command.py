@@ -127,7 +127,7 @@ class EmulatorFleet:
 
     def start(self) -> None:
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "vehicle_emulator.cli", "--fleet", "--team",
+            [sys.executable, "-m", "vehicle_emulator", "--fleet", "--team",
              str(self.team_path), "--log-level", "WARNING"],
             stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, text=True, bufsize=1,
         )

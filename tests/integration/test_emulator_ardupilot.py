@@ -24,7 +24,7 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from vehicle_emulator.personality import PERSONALITIES
+from vehicle_emulator.config.personality import PERSONALITIES
 from vehicle_emulator.testing import (
     MavClient,
     SetpointStreamer,

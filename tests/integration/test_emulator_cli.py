@@ -19,7 +19,7 @@ import yaml
 from pymavlink.dialects.v20 import common as mavlink
 
 from flightkit.sched import EMU_RAISED_NICE, EMU_RT_PRIORITY
-from vehicle_emulator.geodesy import HOME_ALT_M, HOME_LAT_DEG, HOME_LON_DEG, geodetic_to_enu
+from vehicle_emulator.physics.geodesy import HOME_ALT_M, HOME_LAT_DEG, HOME_LON_DEG, geodetic_to_enu
 from vehicle_emulator.testing import (
     clients_on_port_block,
     free_udp_port,
@@ -30,7 +30,7 @@ from vehicle_emulator.testing import (
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 
 ROOT = Path(__file__).resolve().parents[2]
-EMU = [sys.executable, "-m", "vehicle_emulator.cli"]
+EMU = [sys.executable, "-m", "vehicle_emulator"]
 
 
 def test_console_script_help():

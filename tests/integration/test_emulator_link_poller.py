@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from vehicle_emulator.faults import LinkImpairment
-from vehicle_emulator.server import LinkPoller, UdpLink
+from vehicle_emulator.config.faults import LinkImpairment
+from vehicle_emulator.mavlink.server import LinkPoller, UdpLink
 from vehicle_emulator.testing import run_bounded, wait_until
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(60)]
@@ -86,8 +86,8 @@ def test_a_tick_that_falls_due_during_a_batch_runs_before_the_rest_of_it():
     """The fleet's tick comes first: a burst of datagrams (a 240-vehicle setpoint burst is ~3 ms
     of work) is delivered with the ticks that fall due meanwhile run between its datagrams, not
     after the whole batch with the telemetry that late."""
-    from vehicle_emulator.runner import Emulator, LinkPlan, RunStats, _Pace
-    from vehicle_emulator.team import parse_team
+    from vehicle_emulator.config.team import parse_team
+    from vehicle_emulator.fleet.runner import Emulator, LinkPlan, RunStats, _Pace
 
     class SteppedClock:  # simulated time: 1 ms passes for every message the vehicle handles
         t_s = 0.0

@@ -20,7 +20,7 @@ import time
 import numpy as np
 import pytest
 
-from vehicle_emulator.personality import DEFAULT_AUTOPILOT, PERSONALITIES
+from vehicle_emulator.config.personality import DEFAULT_AUTOPILOT, PERSONALITIES
 from vehicle_emulator.testing import free_udp_port, hover_thrust, run_emulator
 
 mavsdk_asyncio = pytest.importorskip("mavsdk.asyncio")

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from vehicle_emulator.replay import data_dir
+from vehicle_emulator.calibration.replay import data_dir
 from vehicle_emulator.testing import (
     MavClient,
     SetpointStreamer,

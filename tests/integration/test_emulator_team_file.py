@@ -18,14 +18,14 @@ import pytest
 import yaml
 from pymavlink.dialects.v20 import common as mavlink
 
-from vehicle_emulator.geodesy import geodetic_to_enu
+from vehicle_emulator.physics.geodesy import geodetic_to_enu
 from vehicle_emulator.testing import clients_on_port_block, free_udp_port_block
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 
 ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "tests" / "data" / "sitl"
-EMU = [sys.executable, "-m", "vehicle_emulator.cli"]
+EMU = [sys.executable, "-m", "vehicle_emulator"]
 
 
 def recorded_team(name: str) -> dict:

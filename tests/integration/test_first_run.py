@@ -63,7 +63,7 @@ def test_manual_path_on_an_empty_cache_fleet_and_gcs_started_together(tmp_path, 
     assert "vehicle-emu: compiling the emulator physics (first run" in emu
     assert "vehicle-emu: compiled the emulator physics in" in emu
     # and the compiled code is cached: the next start compiles nothing and says nothing
-    again = subprocess.run([sys.executable, "-m", "vehicle_emulator.cli", "--compile-only"],
+    again = subprocess.run([sys.executable, "-m", "vehicle_emulator", "--compile-only"],
                            capture_output=True, text=True, timeout=120)
     assert again.returncode == 0 and "compiling" not in again.stderr
 
@@ -84,7 +84,7 @@ def test_gcs_compile_leaves_every_program_ready(tmp_path, empty_cache):
         capture_output=True, text=True, timeout=120, cwd=Path(__file__).resolve().parents[2])
     assert sim.returncode == 0, sim.stderr
     assert "compiling" not in sim.stderr
-    emu = subprocess.run([sys.executable, "-m", "vehicle_emulator.cli", "--compile-only"],
+    emu = subprocess.run([sys.executable, "-m", "vehicle_emulator", "--compile-only"],
                          capture_output=True, text=True, timeout=120)
     assert emu.returncode == 0 and "compiling" not in emu.stderr
     # AND fleets of 1, 4 (one of every personality) and 16 vehicles fly on a copy of that cache
@@ -129,7 +129,7 @@ def _compiled_after_ready(tmp: Path, rows: int, cols: int, autopilots: list[str]
     stats = tmp / "emu.json"
     with open(tmp / "emu.log", "w") as emu_log:
         fleet = subprocess.Popen(
-            [sys.executable, "-m", "vehicle_emulator.cli", "--fleet", "--team", str(team),
+            [sys.executable, "-m", "vehicle_emulator", "--fleet", "--team", str(team),
              *(["--param", "GUID_OPTIONS=8"] if "ardupilot" in autopilots else []),
              "--stats-json", str(stats), "--log-level", "WARNING"],
             stdout=subprocess.PIPE, stderr=emu_log, text=True, env=env)
@@ -158,7 +158,7 @@ def test_a_vehicle_heard_then_silent_during_configure_is_waited_for_not_failed(t
     # GIVEN one vehicle whose program stops for 4 s right after its first HEARTBEAT reached the
     # ground station (as the fleet did while compiling after its ready line): the ground
     # station's stream requests go unanswered, and nothing else arrives either
-    subprocess.run([sys.executable, "-m", "vehicle_emulator.cli", "--compile-only"], check=True,
+    subprocess.run([sys.executable, "-m", "vehicle_emulator", "--compile-only"], check=True,
                    timeout=600)  # so that the vehicle boots in the connect window
     data = yaml.safe_load(team_text(1, 1, None))
     data["mission"]["duration_s"] = 2.0

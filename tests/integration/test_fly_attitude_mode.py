@@ -134,7 +134,7 @@ def test_ardupilot_pair_attitude_mode_with_the_thrust_equivalent_hover_mass(tmp_
     report = json.loads((tmp_path / "run" / "report.json").read_text())
     # THEN the hover mass is the thrust-equivalent mass m / 1.069 (ArduPilot's battery and
     # air-density compensation, docs/gcs.md "Initial mass"), within 5 %
-    from vehicle_emulator.personality import PERSONALITIES
+    from vehicle_emulator.config.personality import PERSONALITIES
 
     scale = PERSONALITIES["ardupilot"].dynamics.thrust_scale
     for vid, est in report["extra"]["hover_estimates"].items():

@@ -97,7 +97,7 @@ def emulators(
     cmd = [
         sys.executable,
         "-m",
-        "vehicle_emulator.cli",
+        "vehicle_emulator",
         "--team",
         str(team),
         "--log-level",
@@ -409,7 +409,7 @@ def test_four_vehicles_of_both_personalities_on_one_gcs_port_fly_to_completion(t
         v["emulator"] = {"autopilot": autopilot}
     team = tmp_path / "team.yaml"
     team.write_text(yaml.safe_dump(data, sort_keys=False))
-    cmd = [sys.executable, "-m", "vehicle_emulator.cli", "--team", str(team), "--log-level",
+    cmd = [sys.executable, "-m", "vehicle_emulator", "--team", str(team), "--log-level",
            "INFO"]
     procs = []
     try:

@@ -62,7 +62,7 @@ def ground_team(tmp: Path, autopilot: str, duration_s: float) -> Path:
 
 
 def fleet(team: Path, tmp: Path, *params: str) -> subprocess.Popen:
-    args = [sys.executable, "-m", "vehicle_emulator.cli", "--fleet", "--team", str(team),
+    args = [sys.executable, "-m", "vehicle_emulator", "--fleet", "--team", str(team),
             "--log-level", "WARNING"]
     for p in params:
         args += ["--param", p]

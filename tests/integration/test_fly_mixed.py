@@ -70,7 +70,7 @@ def test_mixed_px4_and_ardupilot_team_flies_from_the_ground_twice(tmp_path: Path
     first = Gcs(team, tmp_path / "first", "--mode", "rates")
     first.wait_for("INFO gcs.fly: rates mode with", 120)
     fleet = subprocess.Popen(
-        [sys.executable, "-m", "vehicle_emulator.cli", "--fleet", "--team", str(team),
+        [sys.executable, "-m", "vehicle_emulator", "--fleet", "--team", str(team),
          "--param", "GUID_OPTIONS=8", "--param", "EMU_BOOT_SCALE=0.25", "--log-level", "WARNING"],
         stdout=subprocess.DEVNULL, stderr=open(tmp_path / "fleet.log", "w"))  # noqa: SIM115
     try:

@@ -17,7 +17,7 @@ IMPURE = {"asyncio", "socket", "time", "pymavlink", "mavsdk", "select", "threadi
 OWN = ("flightkit", "gcs", "vehicle_emulator")
 
 #: Every module that does no I/O and reads no clock (time is an argument), as a glob of files
-#: and what they are. Not listed, though their imports would pass: vehicle_emulator/team.py
+#: and what they are. Not listed, though their imports would pass: vehicle_emulator/config/team.py
 #: (`load_team` reads the file), flightkit/sched.py (changes the process's scheduling). The link's
 #: other sans-IO parts import pymavlink (codec.py, statustext.py) or a default clock (codec.py,
 #: telemetry.py), or the UDP layer's address type (address.py).
@@ -31,26 +31,26 @@ PURE = {
     "gcs/link/liveness.py": "link and HEARTBEAT staleness, every time an argument",
     "flightkit/physics.py": "the rigid-body model both programs simulate",
     "flightkit/fleet_protocol.py": "the emulator fleet's ready line",
-    "vehicle_emulator/plant.py": "the fleet's physics step: inner loops, mixer, motors, RK4",
-    "vehicle_emulator/inner.py": "PX4-like inner loops",
-    "vehicle_emulator/onboard.py": "the calibrated personalities' onboard estimate and rate loops",
-    "vehicle_emulator/sensors.py": "IMU noise and filters",
-    "vehicle_emulator/personality.py": "the personalities' parameters",
-    "vehicle_emulator/frames.py": "the emulator's frame conversions",
-    "vehicle_emulator/geodesy.py": "WGS-84 <-> team-frame ENU",
-    "vehicle_emulator/gnss.py": "GPS_RAW_INT rows",
-    "vehicle_emulator/autopilot.py": "the PX4-like state machine",
-    "vehicle_emulator/ardupilot.py": "the ArduCopter-like state machine",
-    "vehicle_emulator/ardupilot_boot.py": "ArduCopter's boot as recorded",
-    "vehicle_emulator/ardupilot_flight.py": "how the ardupilot personality flies in GUIDED",
-    "vehicle_emulator/ardupilot_modes.py": "ArduCopter's flight modes",
-    "vehicle_emulator/ardupilot_targets.py": "attitude and position targets as ArduCopter reads them",
-    "vehicle_emulator/setpoints.py": "setpoint checks (type_mask rules)",
-    "vehicle_emulator/params.py": "the parameter table",
-    "vehicle_emulator/faults.py": "fault clock and schedule, link impairments",
-    "vehicle_emulator/fleet_status.py": "the fleet's status arrays",
-    "vehicle_emulator/telemetry_payloads.py": "telemetry payload builders",
-    "vehicle_emulator/metrics.py": "the recordings' figures",
+    "vehicle_emulator/physics/plant.py": "the fleet's physics step: inner loops, mixer, motors, RK4",
+    "vehicle_emulator/physics/inner.py": "PX4-like inner loops",
+    "vehicle_emulator/physics/onboard.py": "the calibrated personalities' onboard estimate and rate loops",
+    "vehicle_emulator/physics/sensors.py": "IMU noise and filters",
+    "vehicle_emulator/config/personality.py": "the personalities' parameters",
+    "vehicle_emulator/physics/frames.py": "the emulator's frame conversions",
+    "vehicle_emulator/physics/geodesy.py": "WGS-84 <-> team-frame ENU",
+    "vehicle_emulator/mavlink/gnss.py": "GPS_RAW_INT rows",
+    "vehicle_emulator/autopilots/px4/logic.py": "the PX4-like state machine",
+    "vehicle_emulator/autopilots/ardupilot/logic.py": "the ArduCopter-like state machine",
+    "vehicle_emulator/autopilots/ardupilot/boot.py": "ArduCopter's boot as recorded",
+    "vehicle_emulator/autopilots/ardupilot/flight.py": "how the ardupilot personality flies in GUIDED",
+    "vehicle_emulator/autopilots/ardupilot/modes.py": "ArduCopter's flight modes",
+    "vehicle_emulator/autopilots/ardupilot/targets.py": "attitude and position targets as ArduCopter reads them",
+    "vehicle_emulator/autopilots/setpoints.py": "setpoint checks (type_mask rules)",
+    "vehicle_emulator/config/params.py": "the parameter table",
+    "vehicle_emulator/config/faults.py": "fault clock and schedule, link impairments",
+    "vehicle_emulator/mavlink/fleet_status.py": "the fleet's status arrays",
+    "vehicle_emulator/mavlink/payloads.py": "telemetry payload builders",
+    "vehicle_emulator/calibration/metrics.py": "the recordings' figures",
 }
 #: Modules that, like the law, reach nothing of gcs outside gcs.control.
 LAW_LAYER = ("gcs/control/*.py", "gcs/frames.py", "gcs/geodesy.py", "flightkit/physics.py",
@@ -155,7 +155,7 @@ def importers(package: str, forbidden: set[str]) -> dict[str, list[str]]:
 @pytest.mark.parametrize(("package", "forbidden"), [
     # the emulator is an independent peer of the ground station
     ("vehicle_emulator", {"gcs"}),
-    # gcs starts the emulator only as a program (`python -m vehicle_emulator.cli`)
+    # gcs starts the emulator only as a program (`python -m vehicle_emulator`)
     ("gcs", {"vehicle_emulator"}),
     # what both programs share imports neither
     ("flightkit", {"gcs", "vehicle_emulator"}),
@@ -197,9 +197,59 @@ def test_importing_the_packages_sets_no_environment_variable_and_writes_no_file(
     # THEN it imported them all, left its environment as it was and wrote nothing under the
     # home or the cache directory
     assert {"flightkit.jitcache", "gcs.control.law", "gcs.link.proxy", "gcs.mission.machine",
-            "vehicle_emulator.cli", "vehicle_emulator.plant"} <= set(result["modules"])
+            "vehicle_emulator.fleet.cli", "vehicle_emulator.physics.plant"} <= set(result["modules"])
     assert result["environ_changed"] == {}
     assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")) == ["cache", "home"]
+
+
+#: The emulator's rooms, lowest first: a room imports only the rooms before it (and the
+#: package's top-level modules import any room; nothing imports them).
+EMULATOR_ROOMS = ("config", "physics", "mavlink", "autopilots", "fleet", "calibration")
+
+
+def upward_imports(package: Path, rooms: tuple[str, ...]) -> dict[str, list[str]]:
+    """The modules of ``package`` (a folder of rooms) that import a room after their own or a
+    top-level module of the package."""
+    name = package.name
+    found: dict[str, list[str]] = {}
+    for path in sorted(package.rglob("*.py")):
+        parts = path.relative_to(package).parts
+        if len(parts) == 1:
+            continue  # a top-level module: may import any room
+        own = rooms.index(parts[0])
+        bad = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            modules = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                       [node.module] if isinstance(node, ast.ImportFrom) and node.module else [])
+            for module in modules:
+                head = module.split(".")
+                if head[0] != name or len(head) < 2:
+                    continue
+                if head[1] not in rooms or rooms.index(head[1]) > own:
+                    bad.add(module)
+        if bad:
+            found[str(path.relative_to(package.parent))] = sorted(bad)
+    return found
+
+
+def test_each_emulator_room_imports_only_the_rooms_below_it():
+    # GIVEN vehicle_emulator's rooms THEN every room is one of them and none imports upward
+    rooms = {p.name for p in (ROOT / "vehicle_emulator").iterdir()
+             if p.is_dir() and (p / "__init__.py").exists()}
+    assert rooms == set(EMULATOR_ROOMS)
+    assert upward_imports(ROOT / "vehicle_emulator", EMULATOR_ROOMS) == {}
+
+
+def test_the_room_check_can_fail(tmp_path):
+    # GIVEN a physics module that imports the fleet, and a config module that imports a top-level one
+    for room in ("config", "physics", "fleet"):
+        (tmp_path / "emu" / room).mkdir(parents=True)
+    (tmp_path / "emu" / "physics" / "plant.py").write_text("from emu.fleet.runner import x\n")
+    (tmp_path / "emu" / "config" / "team.py").write_text("import emu.testing\n")
+    (tmp_path / "emu" / "fleet" / "runner.py").write_text("from emu.physics import plant\n")
+    # THEN both are named, the downward import is not
+    assert upward_imports(tmp_path / "emu", ("config", "physics", "fleet")) == {
+        "emu/physics/plant.py": ["emu.fleet.runner"], "emu/config/team.py": ["emu.testing"]}
 
 
 def test_the_boundary_check_can_fail(tmp_path):

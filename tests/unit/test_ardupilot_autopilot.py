@@ -8,11 +8,14 @@ import math
 import numpy as np
 import pytest
 
-from vehicle_emulator.ardupilot import ArduCopter, CopterObservation
-from vehicle_emulator.ardupilot_boot import BootTimeline
-from vehicle_emulator.ardupilot_modes import Mode
-from vehicle_emulator.ardupilot_targets import climb_rate_of_thrust, guided_attitude_target
-from vehicle_emulator.autopilot import (
+from vehicle_emulator.autopilots.ardupilot.boot import BootTimeline
+from vehicle_emulator.autopilots.ardupilot.logic import ArduCopter, CopterObservation
+from vehicle_emulator.autopilots.ardupilot.modes import Mode
+from vehicle_emulator.autopilots.ardupilot.targets import (
+    climb_rate_of_thrust,
+    guided_attitude_target,
+)
+from vehicle_emulator.autopilots.px4.logic import (
     AttitudeSetpoint,
     Idle,
     MavResult,
@@ -21,7 +24,7 @@ from vehicle_emulator.autopilot import (
     RatesSetpoint,
     Severity,
 )
-from vehicle_emulator.params import ParamStore
+from vehicle_emulator.config.params import ParamStore
 
 GROUND = CopterObservation((1.0, 2.0, 0.0), (0.0, 0.0, 0.0), 0.3, True)
 AIR = CopterObservation((1.0, 2.0, 5.0), (0.0, 0.0, 0.0), 0.3, False)

@@ -1,6 +1,6 @@
 """The px4 and ardupilot personalities against the recorded SITL flights (../shared/data/sitl).
 
-Each personality replays its recording's setpoint stream (vehicle_emulator/replay.py: in-process,
+Each personality replays its recording's setpoint stream (vehicle_emulator/calibration/replay.py: in-process,
 simulated time, pymavlink-encoded setpoints, the recorded GCS's altitude law closed on the decoded
 telemetry) into N_VEHICLES vehicles, whose noise streams differ, and the emulated figures (means
 over vehicles and repetitions) are compared with the recorded ones read from the JSON summaries:
@@ -16,7 +16,7 @@ from dataclasses import replace
 
 import pytest
 
-from vehicle_emulator import replay as rp
+from vehicle_emulator.calibration import replay as rp
 
 N_VEHICLES = 8
 SEED = 0

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vehicle_emulator.autopilot import (
+from vehicle_emulator.autopilots.px4.logic import (
     Autopilot,
     Idle,
     MavResult,
@@ -18,7 +18,7 @@ from vehicle_emulator.autopilot import (
     Severity,
     custom_mode_of,
 )
-from vehicle_emulator.params import ParamStore
+from vehicle_emulator.config.params import ParamStore
 
 AIR = Observation((1.0, 2.0, 10.0), (0.0, 0.0, 0.0), 0.3, False)
 GROUND = Observation((1.0, 2.0, 0.0), (0.0, 0.0, 0.0), 0.3, True)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from vehicle_emulator.codec import BatchEncoder, GenericEncoder, HotDecoder, PeerDecoder
-from vehicle_emulator.telemetry import DEFAULT_RATES_HZ
+from vehicle_emulator.mavlink.codec import BatchEncoder, GenericEncoder, HotDecoder, PeerDecoder
+from vehicle_emulator.mavlink.telemetry import DEFAULT_RATES_HZ
 
 
 def test_heartbeat_literal_bytes():

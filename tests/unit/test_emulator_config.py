@@ -8,8 +8,14 @@ from pathlib import Path
 
 import pytest
 
-from vehicle_emulator.params import ParamError, ParamStore, ParamType, decode_value, encode_value
-from vehicle_emulator.team import TeamFileError, default_vehicle, load_team, parse_team
+from vehicle_emulator.config.params import (
+    ParamError,
+    ParamStore,
+    ParamType,
+    decode_value,
+    encode_value,
+)
+from vehicle_emulator.config.team import TeamFileError, default_vehicle, load_team, parse_team
 
 ROOT = Path(__file__).resolve().parents[2]
 

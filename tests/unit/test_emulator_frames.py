@@ -1,4 +1,4 @@
-"""vehicle_emulator.frames: ENU/FLU <-> NED/FRD and quaternion conversions (round trips)."""
+"""vehicle_emulator.physics.frames: ENU/FLU <-> NED/FRD and quaternion conversions (round trips)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vehicle_emulator import frames
+from vehicle_emulator.physics import frames
 
 finite = st.floats(-1e3, 1e3, allow_nan=False)
 vec3 = st.tuples(finite, finite, finite)

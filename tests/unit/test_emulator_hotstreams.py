@@ -1,4 +1,4 @@
-"""The fleet's 100 Hz streams framed in one compiled pass (vehicle_emulator/hotstreams.py)
+"""The fleet's 100 Hz streams framed in one compiled pass (vehicle_emulator/mavlink/hotstreams.py)
 against the general path every other stream takes (`Telemetry.fused = False`): the same
 vehicles, seed and schedule must send the same messages with the same values, in datagrams
 whose sequence numbers run in order."""
@@ -11,10 +11,10 @@ from typing import Any
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from vehicle_emulator import hotstreams
-from vehicle_emulator.codec import PeerDecoder
-from vehicle_emulator.runner import Emulator
-from vehicle_emulator.team import default_vehicle
+from vehicle_emulator.config.team import default_vehicle
+from vehicle_emulator.fleet.runner import Emulator
+from vehicle_emulator.mavlink import hotstreams
+from vehicle_emulator.mavlink.codec import PeerDecoder
 
 # what `gcs fly` asks for (msgid: Hz), the three hot streams among slower ones
 GCS_RATES_HZ = {31: 100.0, 32: 100.0, 105: 100.0, 245: 5.0, 83: 10.0, 33: 5.0}

@@ -14,17 +14,17 @@ import pytest
 from scipy.linalg import expm
 
 from flightkit.physics import GRAVITY_MPS2
-from vehicle_emulator import sensors as sn
-from vehicle_emulator.inner import (
+from vehicle_emulator.calibration.replay import sitl_airframe
+from vehicle_emulator.config.personality import PERSONALITIES, Dynamics, RateLoop, Sensors
+from vehicle_emulator.config.team import default_vehicle
+from vehicle_emulator.physics import sensors as sn
+from vehicle_emulator.physics.inner import (
     PX4_I_FACTOR_RADPS,
     px4_rate_control,
     reference_rate_control,
     second_order_step,
 )
-from vehicle_emulator.personality import PERSONALITIES, Dynamics, RateLoop, Sensors
-from vehicle_emulator.plant import ControlMode, FleetPlant
-from vehicle_emulator.replay import sitl_airframe
-from vehicle_emulator.team import default_vehicle
+from vehicle_emulator.physics.plant import ControlMode, FleetPlant
 
 
 def _response(coef, f_hz, fs_hz):

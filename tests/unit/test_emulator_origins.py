@@ -9,7 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from vehicle_emulator.geodesy import (
+from vehicle_emulator.config.team import TeamFileError, default_vehicle, parse_team
+from vehicle_emulator.fleet.runner import Emulator
+from vehicle_emulator.physics.geodesy import (
     HOME_ALT_M,
     HOME_LAT_DEG,
     HOME_LON_DEG,
@@ -18,8 +20,6 @@ from vehicle_emulator.geodesy import (
     enu_to_geodetic,
     geodetic_to_enu,
 )
-from vehicle_emulator.runner import Emulator
-from vehicle_emulator.team import TeamFileError, default_vehicle, parse_team
 from vehicle_emulator.testing import RecordingLink, run_until
 
 E2 = WGS84_F * (2.0 - WGS84_F)

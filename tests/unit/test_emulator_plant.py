@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from flightkit.physics import GRAVITY_MPS2, rotors_from_wrench, wrench_from_rotors
-from vehicle_emulator.plant import ControlMode, FleetPlant, torque_max_nm
-from vehicle_emulator.team import default_vehicle
+from vehicle_emulator.config.team import default_vehicle
+from vehicle_emulator.physics.plant import ControlMode, FleetPlant, torque_max_nm
 
 
 def _plant(n=1, on_ground=False, **kw):

@@ -10,10 +10,13 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from vehicle_emulator import frames
-from vehicle_emulator.ardupilot_targets import guided_position_target
-from vehicle_emulator.autopilot import PositionTarget
-from vehicle_emulator.setpoints import PositionTargetFields, from_position_target_local_ned
+from vehicle_emulator.autopilots.ardupilot.targets import guided_position_target
+from vehicle_emulator.autopilots.px4.logic import PositionTarget
+from vehicle_emulator.autopilots.setpoints import (
+    PositionTargetFields,
+    from_position_target_local_ned,
+)
+from vehicle_emulator.physics import frames
 
 VEL, ACC, YAW, YAW_RATE = 8 | 16 | 32, 64 | 128 | 256, 1024, 2048
 POS = 1 | 2 | 4

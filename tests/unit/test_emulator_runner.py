@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from vehicle_emulator.codec import PeerDecoder
-from vehicle_emulator.faults import LinkImpairment
-from vehicle_emulator.runner import Emulator
-from vehicle_emulator.team import FaultSpec, default_vehicle
-from vehicle_emulator.telemetry import DEFAULT_RATES_HZ
+from vehicle_emulator.config.faults import LinkImpairment
+from vehicle_emulator.config.team import FaultSpec, default_vehicle
+from vehicle_emulator.fleet.runner import Emulator
+from vehicle_emulator.mavlink.codec import PeerDecoder
+from vehicle_emulator.mavlink.telemetry import DEFAULT_RATES_HZ
 from vehicle_emulator.testing import RecordingLink, run_until
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from vehicle_emulator.codec import PeerDecoder
-from vehicle_emulator.runner import Emulator
-from vehicle_emulator.team import VehicleSpec
+from vehicle_emulator.config.team import VehicleSpec
+from vehicle_emulator.fleet.runner import Emulator
+from vehicle_emulator.mavlink.codec import PeerDecoder
 from vehicle_emulator.testing import RecordingLink, run_until
 
 GCS = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)

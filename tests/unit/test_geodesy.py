@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gcs.geodesy import PX4_SITL_HOME, FrameTie, Geodetic, TeamFrame
-from vehicle_emulator import geodesy as emu_geodesy
+from vehicle_emulator.physics import geodesy as emu_geodesy
 
 HOME = Geodetic(*PX4_SITL_HOME)
 A, F = 6378137.0, 1.0 / 298.257223563

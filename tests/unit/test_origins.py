@@ -16,7 +16,7 @@ from gcs.fly.origins import (
     origin_from_home_position,
 )
 from gcs.geodesy import PX4_SITL_HOME, Geodetic, TeamFrame
-from vehicle_emulator import geodesy as emu_geodesy
+from vehicle_emulator.physics import geodesy as emu_geodesy
 
 HOME = Geodetic(*PX4_SITL_HOME)
 

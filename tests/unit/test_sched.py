@@ -1,5 +1,5 @@
 """Process scheduling (flightkit/sched.py) as the ground station (gcs/fly/sched.py) and
-`vehicle-emu` (vehicle_emulator/command.py) ask for it, applied in a child process (never to the test runner), as the
+`vehicle-emu` (vehicle_emulator/fleet/command.py) ask for it, applied in a child process (never to the test runner), as the
 user running the tests and, where the tests run as root, as an unprivileged user (setpriv), for
 whom the operating system refuses both raises."""
 

@@ -27,8 +27,12 @@ from typing import Any
 import yaml
 
 from flightkit.physics import TABLE_I
-from vehicle_emulator.params import ParamError, ParamStore, param_table
-from vehicle_emulator.personality import AUTOPILOT_NAMES, DEFAULT_AUTOPILOT, personality_of
+from vehicle_emulator.config.params import ParamError, ParamStore, param_table
+from vehicle_emulator.config.personality import (
+    AUTOPILOT_NAMES,
+    DEFAULT_AUTOPILOT,
+    personality_of,
+)
 
 __all__ = [
     "DEFAULT_AIRFRAMES",

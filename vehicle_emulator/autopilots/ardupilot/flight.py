@@ -9,8 +9,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from vehicle_emulator.ardupilot_modes import GUIDED_MODES
-from vehicle_emulator.autopilot import (
+from vehicle_emulator.autopilots.ardupilot.modes import GUIDED_MODES
+from vehicle_emulator.autopilots.px4.logic import (
     AttitudeSetpoint,
     Idle,
     Observation,

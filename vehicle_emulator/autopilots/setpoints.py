@@ -32,14 +32,14 @@ from typing import Any
 
 import numpy as np
 
-from vehicle_emulator import frames
-from vehicle_emulator.autopilot import (
+from vehicle_emulator.autopilots.px4.logic import (
     ActuatorSetpoint,
     AttitudeSetpoint,
     OffboardSetpoint,
     PositionTarget,
     RatesSetpoint,
 )
+from vehicle_emulator.physics import frames
 
 __all__ = [
     "Decoded",

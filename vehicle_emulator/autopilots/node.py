@@ -15,7 +15,13 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from vehicle_emulator.autopilot import (
+from vehicle_emulator.autopilots.node_commands import DeferredAck, NodeCommands
+from vehicle_emulator.autopilots.node_commands import (
+    _int as _int,  # ardupilot_node imports it from here
+)
+from vehicle_emulator.autopilots.node_output import REPORT_PERIOD_S, Link, NodeOutput
+from vehicle_emulator.autopilots.node_params import NodeParams
+from vehicle_emulator.autopilots.px4.logic import (
     ActuatorSetpoint,
     AttitudeSetpoint,
     Autopilot,
@@ -28,30 +34,26 @@ from vehicle_emulator.autopilot import (
     RatesSetpoint,
     Severity,
 )
-from vehicle_emulator.codec import GenericEncoder, mavlink
-from vehicle_emulator.faults import (
+from vehicle_emulator.autopilots.setpoints import (
+    PositionTargetFields,
+    from_actuator_control_target,
+    from_attitude_target,
+    from_position_target_local_ned,
+)
+from vehicle_emulator.config.faults import (
     LINK_PARAMS,
     FaultSchedule,
     LinkImpairment,
     link_param_values,
     link_text,
 )
-from vehicle_emulator.fleet_status import FleetStatus
-from vehicle_emulator.node_commands import DeferredAck, NodeCommands
-from vehicle_emulator.node_commands import _int as _int  # ardupilot_node imports it from here
-from vehicle_emulator.node_output import REPORT_PERIOD_S, Link, NodeOutput
-from vehicle_emulator.node_params import NodeParams
-from vehicle_emulator.params import ParamStore
-from vehicle_emulator.personality import Personality
-from vehicle_emulator.plant import ControlMode, FleetPlant
-from vehicle_emulator.setpoints import (
-    PositionTargetFields,
-    from_actuator_control_target,
-    from_attitude_target,
-    from_position_target_local_ned,
-)
-from vehicle_emulator.team import FaultSpec, VehicleSpec
-from vehicle_emulator.telemetry import Telemetry
+from vehicle_emulator.config.params import ParamStore
+from vehicle_emulator.config.personality import Personality
+from vehicle_emulator.config.team import FaultSpec, VehicleSpec
+from vehicle_emulator.mavlink.codec import GenericEncoder, mavlink
+from vehicle_emulator.mavlink.fleet_status import FleetStatus
+from vehicle_emulator.mavlink.telemetry import Telemetry
+from vehicle_emulator.physics.plant import ControlMode, FleetPlant
 
 log = logging.getLogger(__name__)
 

@@ -31,24 +31,27 @@ from typing import Any
 
 import numpy as np
 
-from vehicle_emulator import frames, geodesy
-from vehicle_emulator.ardupilot import (
+from vehicle_emulator.autopilots.ardupilot.logic import (
     MSG_GPS_GLOBAL_ORIGIN,
     MSG_HOME_POSITION,
     ArduCopter,
     CopterObservation,
 )
-from vehicle_emulator.ardupilot_modes import Mode
-from vehicle_emulator.ardupilot_targets import guided_attitude_target, guided_position_target
-from vehicle_emulator.autopilot import MavResult, Severity
-from vehicle_emulator.codec import mavlink
-from vehicle_emulator.setpoints import (
+from vehicle_emulator.autopilots.ardupilot.modes import Mode
+from vehicle_emulator.autopilots.ardupilot.targets import (
+    guided_attitude_target,
+    guided_position_target,
+)
+from vehicle_emulator.autopilots.node import Link, VehicleNode, _int
+from vehicle_emulator.autopilots.px4.logic import MavResult, Severity
+from vehicle_emulator.autopilots.setpoints import (
     MAV_FRAME_LOCAL_NED,
     POS_IGNORE_BITS,
     PositionTargetFields,
 )
-from vehicle_emulator.telemetry import DEFAULT_RATES_HZ as PX4_RATES_HZ
-from vehicle_emulator.vehicle import Link, VehicleNode, _int
+from vehicle_emulator.mavlink.codec import mavlink
+from vehicle_emulator.mavlink.telemetry import DEFAULT_RATES_HZ as PX4_RATES_HZ
+from vehicle_emulator.physics import frames, geodesy
 
 log = logging.getLogger(__name__)
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from vehicle_emulator.codec import frame_payload, mavlink, wire_dtype
+from vehicle_emulator.mavlink.codec import frame_payload, mavlink, wire_dtype
 
 #: The streams, in the order their frames are written (a vehicle's datagram starts with them).
 NAMES = ("ATTITUDE_QUATERNION", "LOCAL_POSITION_NED", "HIGHRES_IMU")

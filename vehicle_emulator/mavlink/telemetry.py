@@ -21,13 +21,14 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from vehicle_emulator import frames, hotstreams
-from vehicle_emulator.codec import CRC_TABLE, BatchEncoder, mavlink
-from vehicle_emulator.fleet_status import FleetStatus
-from vehicle_emulator.geodesy import DEFAULT_ORIGIN_LLA
-from vehicle_emulator.gnss import GPS_RATE_HZ
-from vehicle_emulator.plant import FleetPlant
-from vehicle_emulator.telemetry_payloads import TelemetryPayloads
+from vehicle_emulator.mavlink import hotstreams
+from vehicle_emulator.mavlink.codec import CRC_TABLE, BatchEncoder, mavlink
+from vehicle_emulator.mavlink.fleet_status import FleetStatus
+from vehicle_emulator.mavlink.gnss import GPS_RATE_HZ
+from vehicle_emulator.mavlink.payloads import TelemetryPayloads
+from vehicle_emulator.physics import frames
+from vehicle_emulator.physics.geodesy import DEFAULT_ORIGIN_LLA
+from vehicle_emulator.physics.plant import FleetPlant
 
 __all__ = ["DEFAULT_RATES_HZ", "Telemetry"]
 
@@ -112,7 +113,7 @@ class Telemetry(TelemetryPayloads):
         self.encoders = {nm: BatchEncoder(_msg_class(nm)) for nm in self.names}
         self.seq = np.zeros(n, dtype=np.uint8)
         self.sent = np.zeros(len(self.names), dtype=np.int64)
-        #: the 100 Hz streams framed in one compiled pass (vehicle_emulator/hotstreams.py);
+        #: the 100 Hz streams framed in one compiled pass (vehicle_emulator/mavlink/hotstreams.py);
         #: False: through the general path like the others (the reference its tests compare to)
         self.fused = True
         self._hot_cols = np.array([self.index[nm] for nm in hotstreams.NAMES], dtype=np.int64)

@@ -18,15 +18,15 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from vehicle_emulator import sensors as sn
-from vehicle_emulator.inner import (
+from vehicle_emulator.config.personality import Personality, RateLoop
+from vehicle_emulator.physics import sensors as sn
+from vehicle_emulator.physics.inner import (
     attitude_control,
     position_control,
     px4_rate_control,
     reference_rate_control,
     second_order_step,
 )
-from vehicle_emulator.personality import Personality, RateLoop
 
 __all__ = ["REF_DELAY_MAX", "Onboard", "onboard_step"]
 

@@ -34,7 +34,7 @@ from enum import IntEnum
 
 import numpy as np
 
-from vehicle_emulator.params import ParamStore
+from vehicle_emulator.config.params import ParamStore
 
 __all__ = [
     "ActuatorSetpoint",

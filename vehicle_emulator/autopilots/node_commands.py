@@ -15,12 +15,12 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from vehicle_emulator.autopilot import MavResult, Severity, not_emulated
-from vehicle_emulator.codec import mavlink
-from vehicle_emulator.node_output import Link
-from vehicle_emulator.team import FaultSpec
+from vehicle_emulator.autopilots.node_output import Link
+from vehicle_emulator.autopilots.px4.logic import MavResult, Severity, not_emulated
+from vehicle_emulator.config.team import FaultSpec
+from vehicle_emulator.mavlink.codec import mavlink
 
-log = logging.getLogger("vehicle_emulator.vehicle")  # the node's one logger, as before the split
+log = logging.getLogger("vehicle_emulator.autopilots.node")  # the node's one logger
 
 __all__ = ["DeferredAck", "NodeCommands"]
 

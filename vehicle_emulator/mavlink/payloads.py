@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from vehicle_emulator.geodesy import geodetic_of_ned
-from vehicle_emulator.gnss import fill_gps_raw_int
+from vehicle_emulator.mavlink.gnss import fill_gps_raw_int
+from vehicle_emulator.physics.geodesy import geodetic_of_ned
 
 _GPS = 0x20  # MAV_SYS_STATUS_SENSOR_GPS: present and enabled once there is a global position
 _SENSORS = 0x1 | 0x2 | 0x4 | 0x8 | 0x400 | 0x800 | 0x1000 | 0x8000 | 0x200000

@@ -11,12 +11,12 @@ from typing import Any
 
 import numpy as np
 
-from vehicle_emulator.autopilot import Severity
-from vehicle_emulator.codec import mavlink
-from vehicle_emulator.faults import LINK_PARAMS
-from vehicle_emulator.node_output import Link
-from vehicle_emulator.params import ParamError, decode_value, encode_value
-from vehicle_emulator.team import FaultSpec
+from vehicle_emulator.autopilots.node_output import Link
+from vehicle_emulator.autopilots.px4.logic import Severity
+from vehicle_emulator.config.faults import LINK_PARAMS
+from vehicle_emulator.config.params import ParamError, decode_value, encode_value
+from vehicle_emulator.config.team import FaultSpec
+from vehicle_emulator.mavlink.codec import mavlink
 
 __all__ = ["NodeParams"]
 

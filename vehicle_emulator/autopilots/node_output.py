@@ -10,11 +10,11 @@ from __future__ import annotations
 import logging
 from typing import Any, Protocol
 
-from vehicle_emulator.autopilot import Severity
-from vehicle_emulator.codec import mavlink
-from vehicle_emulator.geodesy import geodetic_of_ned
+from vehicle_emulator.autopilots.px4.logic import Severity
+from vehicle_emulator.mavlink.codec import mavlink
+from vehicle_emulator.physics.geodesy import geodetic_of_ned
 
-log = logging.getLogger("vehicle_emulator.vehicle")  # the node's one logger, as before the split
+log = logging.getLogger("vehicle_emulator.autopilots.node")  # the node's one logger
 
 __all__ = ["Link", "NodeOutput", "REPORT_PERIOD_S"]
 

@@ -18,21 +18,21 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from vehicle_emulator.ardupilot import ArduCopter
-from vehicle_emulator.ardupilot_node import DEFAULT_RATES_HZ as ARDUPILOT_RATES_HZ
-from vehicle_emulator.ardupilot_node import ArduPilotNode
-from vehicle_emulator.autopilot import Autopilot, Severity
-from vehicle_emulator.codec import GenericEncoder, HotDecoder
-from vehicle_emulator.faults import FaultSchedule, LinkImpairment
-from vehicle_emulator.fleet_status import FleetStatus
-from vehicle_emulator.geodesy import DEFAULT_ORIGIN_LLA
-from vehicle_emulator.params import ParamError, ParamStore, param_table
-from vehicle_emulator.personality import personality_of
-from vehicle_emulator.plant import FleetPlant
-from vehicle_emulator.server import LinkPoller, UdpLink
-from vehicle_emulator.team import FaultSpec, VehicleSpec
-from vehicle_emulator.telemetry import Telemetry
-from vehicle_emulator.vehicle import VehicleNode
+from vehicle_emulator.autopilots.ardupilot.logic import ArduCopter
+from vehicle_emulator.autopilots.ardupilot.node import DEFAULT_RATES_HZ as ARDUPILOT_RATES_HZ
+from vehicle_emulator.autopilots.ardupilot.node import ArduPilotNode
+from vehicle_emulator.autopilots.node import VehicleNode
+from vehicle_emulator.autopilots.px4.logic import Autopilot, Severity
+from vehicle_emulator.config.faults import FaultSchedule, LinkImpairment
+from vehicle_emulator.config.params import ParamError, ParamStore, param_table
+from vehicle_emulator.config.personality import personality_of
+from vehicle_emulator.config.team import FaultSpec, VehicleSpec
+from vehicle_emulator.mavlink.codec import GenericEncoder, HotDecoder
+from vehicle_emulator.mavlink.fleet_status import FleetStatus
+from vehicle_emulator.mavlink.server import LinkPoller, UdpLink
+from vehicle_emulator.mavlink.telemetry import Telemetry
+from vehicle_emulator.physics.geodesy import DEFAULT_ORIGIN_LLA
+from vehicle_emulator.physics.plant import FleetPlant
 
 log = logging.getLogger(__name__)
 

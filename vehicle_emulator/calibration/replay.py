@@ -27,11 +27,11 @@ from typing import Any
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
-from vehicle_emulator import metrics as mx
-from vehicle_emulator.codec import PeerDecoder
-from vehicle_emulator.personality import personality_of
-from vehicle_emulator.runner import Emulator
-from vehicle_emulator.team import VehicleSpec
+from vehicle_emulator.calibration import metrics as mx
+from vehicle_emulator.config.personality import personality_of
+from vehicle_emulator.config.team import VehicleSpec
+from vehicle_emulator.fleet.runner import Emulator
+from vehicle_emulator.mavlink.codec import PeerDecoder
 
 __all__ = [
     "AltitudeLaw",
@@ -57,7 +57,7 @@ def data_dir() -> Path:
     env = os.environ.get("SITL_DATA_DIR")
     if env:
         return Path(env)
-    repo = Path(__file__).resolve().parents[1]
+    repo = Path(__file__).resolve().parents[2]
     shared = repo.parent / "shared" / "data" / "sitl"
     return shared if (shared / "px4" / "flight_setpoints.csv").is_file() else (
         repo / "tests" / "data" / "sitl"

@@ -26,10 +26,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from vehicle_emulator import frames
-from vehicle_emulator.ardupilot_flight import AngleTarget
-from vehicle_emulator.autopilot import AttitudeSetpoint, PositionTarget, RatesSetpoint
-from vehicle_emulator.setpoints import (
+from vehicle_emulator.autopilots.ardupilot.flight import AngleTarget
+from vehicle_emulator.autopilots.px4.logic import AttitudeSetpoint, PositionTarget, RatesSetpoint
+from vehicle_emulator.autopilots.setpoints import (
     ACC_IGNORE_BITS,
     FORCE_SET,
     IGNORE_ATTITUDE,
@@ -48,6 +47,7 @@ from vehicle_emulator.setpoints import (
     PositionTargetFields,
     position_target_enu,
 )
+from vehicle_emulator.physics import frames
 
 __all__ = ["climb_rate_of_thrust", "guided_attitude_target", "guided_position_target"]
 

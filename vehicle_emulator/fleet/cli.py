@@ -14,7 +14,7 @@ __all__ = ["main"]
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``vehicle-emu`` console script; returns its exit status."""
     jitcache.configure()  # before the import below: numba fixes a kernel's cache when it decorates
-    from vehicle_emulator.command import main as run
+    from vehicle_emulator.fleet.command import main as run
 
     return run(argv)
 

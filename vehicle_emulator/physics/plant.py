@@ -35,10 +35,10 @@ from flightkit.physics import (
     rotors_from_wrench_into,
     wrench_from_rotors,
 )
-from vehicle_emulator.inner import attitude_control, position_control, rate_control
-from vehicle_emulator.onboard import Onboard, onboard_step
-from vehicle_emulator.personality import Personality, personality_of
-from vehicle_emulator.team import VehicleSpec
+from vehicle_emulator.config.personality import Personality, personality_of
+from vehicle_emulator.config.team import VehicleSpec
+from vehicle_emulator.physics.inner import attitude_control, position_control, rate_control
+from vehicle_emulator.physics.onboard import Onboard, onboard_step
 
 __all__ = ["ControlMode", "FleetPlant", "IDLE_THRUST_NORM", "torque_max_nm"]
 

@@ -36,8 +36,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from vehicle_emulator.codec import HotDecoder, PeerDecoder
-from vehicle_emulator.faults import LinkImpairment
+from vehicle_emulator.config.faults import LinkImpairment
+from vehicle_emulator.mavlink.codec import HotDecoder, PeerDecoder
 
 log = logging.getLogger(__name__)
 

@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 
 from flightkit.physics import GRAVITY_MPS2
-from vehicle_emulator.frames import quat_from_matrix
+from vehicle_emulator.physics.frames import quat_from_matrix
 
 # Gains (rad/s^2 per rad/s for rates; 1/s for attitude and position; 1/s^2 for velocity I).
 RATE_P = np.array([40.0, 40.0, 20.0])

@@ -32,8 +32,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from vehicle_emulator.ardupilot_boot import PAST_BOOT, BootTimeline
-from vehicle_emulator.ardupilot_flight import (
+from vehicle_emulator.autopilots.ardupilot.boot import PAST_BOOT, BootTimeline
+from vehicle_emulator.autopilots.ardupilot.flight import (
     LAND_DETECT_S,
     LAND_DISARM_S,
     MAX_TICK_DT_S,
@@ -41,7 +41,7 @@ from vehicle_emulator.ardupilot_flight import (
     AngleTarget,
     CopterFlight,
 )
-from vehicle_emulator.ardupilot_modes import (
+from vehicle_emulator.autopilots.ardupilot.modes import (
     ARMABLE,
     FLOWN,
     GUIDED_MODES,
@@ -49,7 +49,7 @@ from vehicle_emulator.ardupilot_modes import (
     XY_CONTROL,
     Mode,
 )
-from vehicle_emulator.autopilot import (
+from vehicle_emulator.autopilots.px4.logic import (
     Demand,
     Idle,
     MavResult,
@@ -58,7 +58,7 @@ from vehicle_emulator.autopilot import (
     PositionTarget,
     Severity,
 )
-from vehicle_emulator.params import ParamStore
+from vehicle_emulator.config.params import ParamStore
 
 __all__ = ["ArduCopter", "CopterObservation"]
 

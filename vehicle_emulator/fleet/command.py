@@ -45,10 +45,20 @@ from flightkit.sched import (
     SchedulingError,
     apply_scheduling,
 )
-from vehicle_emulator.personality import AUTOPILOT_NAMES, DEFAULT_AUTOPILOT, personality_of
-from vehicle_emulator.runner import STREAM_MODES, Emulator, LinkPlan, RealtimeClock, RunStats
-from vehicle_emulator.team import TeamFileError, TeamSpec, VehicleSpec, default_vehicle, load_team
-from vehicle_emulator.vehicle import VehicleNode
+from vehicle_emulator.autopilots.node import VehicleNode
+from vehicle_emulator.config.personality import (
+    AUTOPILOT_NAMES,
+    DEFAULT_AUTOPILOT,
+    personality_of,
+)
+from vehicle_emulator.config.team import (
+    TeamFileError,
+    TeamSpec,
+    VehicleSpec,
+    default_vehicle,
+    load_team,
+)
+from vehicle_emulator.fleet.runner import STREAM_MODES, Emulator, LinkPlan, RealtimeClock, RunStats
 
 log = logging.getLogger("vehicle_emulator")
 

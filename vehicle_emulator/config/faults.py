@@ -33,8 +33,8 @@ from enum import IntEnum
 
 import numpy as np
 
-from vehicle_emulator.params import ParamStore
-from vehicle_emulator.team import FaultSpec
+from vehicle_emulator.config.params import ParamStore
+from vehicle_emulator.config.team import FaultSpec
 
 __all__ = [
     "LINK_PARAMS",
