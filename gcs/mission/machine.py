@@ -64,6 +64,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from gcs.mission.autopilots import PX4, AutopilotProfile, ModeSpec, profile_for
+from gcs.mission.connect import connect
+from gcs.mission.formation import formation, prime
 from gcs.mission.goto import GotoResult, GoToStart, Vec3
 from gcs.mission.landed import quiet_mode_cause
 from gcs.mission.lines import (
@@ -339,31 +341,6 @@ class MissionMachine:
     def _idle(self, vids: Sequence[int] | None = None) -> bool:
         return all(self._v[vid].pending is None for vid in (vids or self.vehicle_ids))
 
-    def _connect(self) -> list[Command]:
-        """Wait, up to connect_timeout_s, until every vehicle has been heard; nothing is
-        commanded before that, so a vehicle that never answers ends the flight at once, with a
-        line per missing vehicle (where the ground station listened, which sysid it expected)."""
-        team = self._statuses()
-        for s in team:
-            v = self._v[s.vehicle_id]
-            if s.link == "alive" and not v.heard:
-                v.heard = True
-                self._note(f"heard {s.name} on {s.listen or 'its link'} after "
-                           f"{self._elapsed():.1f} s")
-        if len(team) == len(self._v) and all(s.link == "alive" for s in team):
-            self._enter(Phase.PREFLIGHT)
-            return [self._send(vid, Cmd.CONFIGURE) for vid in self.vehicle_ids]
-        if self._elapsed() > self.plan.connect_timeout_s:
-            missing = [vid for vid, v in self._v.items()
-                       if v.status is None or v.status.link != "alive"]
-            lines = [connect_failure_line(vid, self._v[vid].status, self._v[vid].heard)
-                     for vid in missing]
-            finish(self, Outcome(EXIT_ABORTED, (
-                f"no link to {len(missing)} of {len(self._v)} vehicles within "
-                f"{self.plan.connect_timeout_s:g} s (nothing was commanded):\n"
-                + "\n".join(f"  {line}" for line in lines))))
-        return []
-
     def connect_progress(self) -> str:
         """While connecting: who has been heard and who not, and how long is left."""
         heard = [vid for vid, v in self._v.items() if v.heard]
@@ -372,82 +349,17 @@ class MissionMachine:
         return connect_progress_line(self._elapsed(), self.plan.connect_timeout_s, heard,
                                      len(self._v), waiting)
 
-    # --- prime and formation ---------------------------------------------------------------------
-
-    def _prime(self) -> list[Command]:
-        problems = self._flight_problems()
-        if problems:
-            begin_stop(self, problems, EXIT_ABORTED)
-            return self._drive()
-        if self._elapsed() < self.plan.prime_s:
-            return []
-        self.formation_t0_s = self._now_s
-        self._enter(Phase.FORMATION)
-        return [self._send(vid, Cmd.OFFBOARD) for vid in self.vehicle_ids]
-
-    def _formation(self) -> list[Command]:
-        t = self._now_s - (self.formation_t0_s or self._now_s)
-        problems = self._flight_problems()
-        problems += self._not_following(t)
-        for vid, v in self._v.items():
-            s = v.status
-            if v.seen_offboard and s is not None and not self._in_offboard(vid) \
-                    and s.link == "alive":
-                name = self.offboard_mode(vid).name
-                problems.append(Problem(vid, f"{s.name}: left {name} (now {s.mode or '?'})",
-                                        "mode"))
-        if problems:
-            begin_stop(self, problems, EXIT_ABORTED)
-            return self._drive()
-        if t >= self.plan.duration_s:
-            never = [Problem(vid, f"{v.status.name}: never reported "
-                                  f"{self.offboard_mode(vid).name} during the formation "
-                                  f"(reports {v.status.mode or '?'})", "mode")
-                     for vid, v in self._v.items() if not v.seen_offboard and v.status is not None]
-            if never:
-                begin_stop(self, never, EXIT_ABORTED)
-                return self._drive()
-            begin_stop(self, [], EXIT_OK, end=True)
-            return self._drive()
-        return []
-
-    def _not_following(self, t: float) -> list[Problem]:
-        """The vehicles do not fly the law: one never reported the offboard mode within
-        `mode_timeout_s` + 2 s (the command's own confirmation normally fails first), or the
-        formation error did not fall as the law predicts (module docstring)."""
-        out = []
-        if t > self.plan.mode_timeout_s + 2.0:
-            for vid, v in self._v.items():
-                s = v.status
-                if not v.seen_offboard and s is not None and s.link == "alive":
-                    name = self.offboard_mode(vid).name
-                    out.append(Problem(vid, f"{s.name}: never reported {name} in {t:.1f} s of "
-                                            f"formation (reports {s.mode or '?'}): it does not "
-                                            "fly the setpoints", "mode"))
-        e = self._formation_error_m
-        if math.isfinite(e) and self._error_t0 is None:
-            self._error_t0 = e
-        e0 = self._error_t0
-        if t >= self.plan.formation_check_s and e0 is not None and math.isfinite(e):
-            bound = max(self.plan.formation_max_error_m, self.plan.formation_max_fraction * e0)
-            if e > bound:
-                out.append(Problem(None, (
-                    f"the vehicles do not follow the formation: error {e:.2f} m at t = "
-                    f"{t:.1f} s > {bound:.2f} m = max({self.plan.formation_max_error_m:g} m, "
-                    f"{self.plan.formation_max_fraction:g} x {e0:.2f} m at t = 0) "
-                    "(fly.formation_check)"), "follow"))
-        return out
 
 
 #: Each phase's step: the commands to send now (it may move the machine to another phase).
 _PHASES: dict[Phase, Callable[[MissionMachine], list[Command]]] = {
-    Phase.CONNECT: MissionMachine._connect,
+    Phase.CONNECT: connect,
     Phase.PREFLIGHT: preflight,
     Phase.ARM: arm_and_take_off,
     Phase.TAKEOFF: takeoff,
     Phase.GOTO: go_to_start,
     Phase.HOLD: hold,
-    Phase.PRIME: MissionMachine._prime,
-    Phase.FORMATION: MissionMachine._formation,
+    Phase.PRIME: prime,
+    Phase.FORMATION: formation,
     Phase.STOPPING: stopping,
 }

@@ -5,7 +5,7 @@ link impairment) to the fleet arrays (plant, telemetry status) and to its links.
 decoded pymavlink messages and answer through ``Link.send`` (bytes out); they never block, never
 raise on bad input (it is counted, logged and reported by STATUSTEXT), and never see sockets.
 Outgoing messages are in node_output.py, commands and their ACKs in node_commands.py, the
-parameter protocol in node_params.py.
+parameter protocol in node_params.py, the scheduled faults in node_faults.py.
 """
 
 from __future__ import annotations
@@ -17,8 +17,9 @@ from typing import Any
 
 from vehicle_emulator.autopilots.node_commands import DeferredAck, NodeCommands
 from vehicle_emulator.autopilots.node_commands import (
-    _int as _int,  # ardupilot_node imports it from here
+    _int as _int,  # ardupilot/node.py imports it from here
 )
+from vehicle_emulator.autopilots.node_faults import NodeFaults
 from vehicle_emulator.autopilots.node_output import REPORT_PERIOD_S, Link, NodeOutput
 from vehicle_emulator.autopilots.node_params import NodeParams
 from vehicle_emulator.autopilots.px4.logic import (
@@ -41,15 +42,12 @@ from vehicle_emulator.autopilots.setpoints import (
     from_position_target_local_ned,
 )
 from vehicle_emulator.config.faults import (
-    LINK_PARAMS,
     FaultSchedule,
     LinkImpairment,
-    link_param_values,
-    link_text,
 )
 from vehicle_emulator.config.params import ParamStore
 from vehicle_emulator.config.personality import Personality
-from vehicle_emulator.config.team import FaultSpec, VehicleSpec
+from vehicle_emulator.config.team import VehicleSpec
 from vehicle_emulator.mavlink.codec import GenericEncoder, mavlink
 from vehicle_emulator.mavlink.fleet_status import FleetStatus
 from vehicle_emulator.mavlink.telemetry import Telemetry
@@ -96,7 +94,7 @@ class InputCounters:
 
 
 @dataclass(slots=True)
-class VehicleNode(NodeOutput, NodeCommands, NodeParams):
+class VehicleNode(NodeOutput, NodeCommands, NodeParams, NodeFaults):
     """Vehicle ``index`` of the fleet; see module docstring. Outgoing messages are
     ``NodeOutput``'s (node_output.py), commands ``NodeCommands``'s (node_commands.py), the
     parameter protocol ``NodeParams``'s (node_params.py)."""
@@ -245,65 +243,6 @@ class VehicleNode(NodeOutput, NodeCommands, NodeParams):
 
     def refresh_extra(self, now_s: float) -> None:
         """Status a personality keeps beyond `status_row`'s columns (none here)."""
-
-    def tick_fault_clock(self, now_s: float) -> None:
-        """The fault clock's STATUSTEXT when it starts. Its parameter, EMU_FLT_CLK, is worked
-        out when it is read (`_param_msg`), not written at every tick: a fleet's 240 writes at
-        50 Hz were 5 % of its time."""
-        if self._fault_clock_announced:
-            return
-        if self.faults.clock_s(now_s, self.autopilot.first_offboard_s) is not None:
-            self._fault_clock_announced = True
-            t = self.params["EMU_MDROP_T"]
-            plan = f", mass drop at {t:.1f} s" if t >= 0 else ""
-            self.statustext(Severity.INFO, f"Fault clock started{plan}")
-
-    # --- faults ------------------------------------------------------------------------------
-
-    def apply_faults(self, now_s: float) -> None:
-        """Fire the scheduled faults that are due on the fault clock."""
-        clock = self.faults.clock_s(now_s, self.autopilot.first_offboard_s)
-        for f in self.faults.due(clock):
-            self.apply_fault(now_s, f, clock)
-        for r in self.faults.restores_due(now_s):
-            self._set_link(r.values)
-            at = "" if clock is None else f" at {clock:.3f} s"
-            self.statustext(Severity.INFO, f"Fault end: {link_text(r.values)}{at}")
-
-    def apply_fault(self, now_s: float, f: FaultSpec, clock: float | None) -> None:
-        """Apply one fault now."""
-        i = self.index
-        at = "" if clock is None else f" at {clock:.3f} s"
-        if f.kind == "mass_drop":
-            before = float(self.plant.mass_kg[i])
-            self.plant.mass_kg[i] = before * (1.0 - f.fraction)
-            self.params.set("EMU_MASS_KG", float(self.plant.mass_kg[i]), force=True)
-            self.statustext(
-                Severity.WARNING,
-                f"Fault: mass {before:.3f}->{self.plant.mass_kg[i]:.3f} kg{at}",
-            )
-        elif f.kind == "link_loss":
-            self.impairment.down_until_s = now_s + f.duration_s
-            self.statustext(Severity.WARNING, f"Fault: link lost for {f.duration_s:.1f} s{at}")
-        elif f.kind == "packet_loss":
-            if f.duration_s > 0.0:
-                before = tuple(self.params[name] for name in LINK_PARAMS)
-                self.faults.restore_at(now_s + f.duration_s, before)
-            values = link_param_values(f)
-            self._set_link(values)
-            window = f" for {f.duration_s:g} s" if f.duration_s > 0.0 else ""
-            self.statustext(Severity.WARNING, f"Fault: {link_text(values)}{window}{at}")
-        elif f.kind == "motor_efficiency":
-            name = f"EMU_MOT{f.motor}_EFF"
-            self.params.set(name, f.efficiency)
-            self._sync_param(name)
-            self.statustext(Severity.WARNING, f"Fault: motor {f.motor} eff {f.efficiency:.2f}{at}")
-
-    def _set_link(self, values: tuple[float, ...]) -> None:
-        """Write the link parameters (``LINK_PARAMS`` order) and apply them."""
-        for name, value in zip(LINK_PARAMS, values, strict=True):
-            self.params.set(name, value)
-            self._sync_param(name)
 
     # --- input ---------------------------------------------------------------------------------
 

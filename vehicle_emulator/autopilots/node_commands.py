@@ -1,6 +1,6 @@
 """One vehicle's commands: COMMAND_LONG/INT and SET_MODE, answered by COMMAND_ACKs (some deferred).
 
-``NodeCommands`` is mixed into ``VehicleNode`` (vehicle.py), which owns the state it reads and
+``NodeCommands`` is mixed into ``VehicleNode`` (node.py), which owns the state it reads and
 dispatches the messages to it. Every command is answered, a failing one with FAILED.
 
 With EMU_ACK_TWICE = 1 (default) a DO_SET_MODE COMMAND_LONG/INT is answered as PX4 v1.16.0 does:

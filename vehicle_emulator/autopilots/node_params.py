@@ -1,6 +1,6 @@
 """One vehicle's parameter protocol: PARAM_REQUEST_LIST/READ, PARAM_SET and their side effects.
 
-``NodeParams`` is mixed into ``VehicleNode`` (vehicle.py), which owns the state it reads (the
+``NodeParams`` is mixed into ``VehicleNode`` (node.py), which owns the state it reads (the
 parameter store, plant and status arrays, link impairment, counters). Its handlers answer with
 PARAM_VALUE; a refused read or write is counted and reported by a rate-limited STATUSTEXT.
 """

@@ -61,7 +61,7 @@ class Onboard:
         self.linear_drag_per_s = np.array([d.linear_drag_per_s for d in dyn], dtype=f)
         self.drag_decay = np.exp(-self.linear_drag_per_s * dt)  # velocity factor per step
         self.thrust_scale = np.array([d.thrust_scale for d in dyn], dtype=f)
-        self.noise_on = np.zeros(n, dtype=np.bool_)  # EMU_NOISE (vehicle.py syncs it)
+        self.noise_on = np.zeros(n, dtype=np.bool_)  # EMU_NOISE (autopilots/node.py syncs it)
         self.gyro_noise_std = np.array([se.gyro_noise_std_radps for se in sen], dtype=f)
         self.accel_noise_std = np.array([se.accel_noise_std_mps2 for se in sen], dtype=f)
         self.off_noise_std = np.array(

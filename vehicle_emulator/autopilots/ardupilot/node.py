@@ -1,7 +1,7 @@
 """The ArduPilot personality on the wire: the messages and commands of one ``ardupilot`` vehicle.
 
-``ArduPilotNode`` is the VehicleNode (vehicle.py) of a vehicle whose personality's protocol family
-is ``ardupilot``, around the pure ArduCopter state machine (ardupilot.py); what it reproduces is
+``ArduPilotNode`` is the VehicleNode (../node.py) of a vehicle whose personality's protocol family
+is ``ardupilot``, around the pure ArduCopter state machine (logic.py); what it reproduces is
 ArduCopter 4.7.0-dev SITL as recorded (docs/emulator.md, "ArduPilot personality"):
 
 * Streams: nothing but HEARTBEAT (1 Hz) and ArduPilot's own TIMESYNC request every 10 s until
@@ -166,7 +166,7 @@ class ArduPilotNode(VehicleNode):
     # --- commands ------------------------------------------------------------------------------
 
     def command(self, now_s: float, cmd: int, p: list[float], link: Link, addr: Any) -> MavResult:
-        """ArduCopter's answers (module docstring, ardupilot.py)."""
+        """ArduCopter's answers (module docstring, logic.py)."""
         ap, obs = self.autopilot, self.observe()
         if cmd == 400:  # COMPONENT_ARM_DISARM
             if p[0] not in (0.0, 1.0):

@@ -213,7 +213,7 @@ class Autopilot:
     home_enu_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     ready_s: float = 0.0  # arming is refused before this time (estimator not ready after boot)
     failsafe_active: bool = False  # a failsafe chose the mode; cleared by a mode command or disarm
-    # nothing of PX4's falls due between ticks (ArduCopter's guided timeout does: ardupilot.py)
+    # nothing of PX4's falls due between ticks (ArduCopter's guided timeout does)
     deadline_s: float = math.inf
     _last_setpoint_s: float = -math.inf  # time of the newest offboard setpoint (-inf: none yet)
     _armed_s: float = 0.0
