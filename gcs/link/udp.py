@@ -3,51 +3,24 @@
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
-import math
 import socket
-import struct
-import sys
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from types import TracebackType
 
 import numpy as np
 
-from gcs.link.mmsg import SLOT_BYTES as MULTI_SLOT_BYTES
-from gcs.link.mmsg import SO_RXQ_OVFL, MultiReceiver
-from gcs.link.mmsg import available as mmsg_available
+from gcs.link.bulk import MAX_BATCH_DATAGRAMS, BatchCallback, BulkReader, bind_bulk_socket
 
 logger = logging.getLogger(__name__)
 
 Address = tuple[str, int]
 DatagramCallback = Callable[[bytes, Address], None]
-#: ``on_batch(buffer, offsets, lengths, sources, stamps)``: datagram d is
-#: ``buffer[offsets[d]:offsets[d] + lengths[d]]`` (int64 arrays), from ``sources[d]``, received
-#: by the kernel at ``stamps[d]`` (float array, Unix time in s; NaN where the kernel gave none);
-#: the buffer is reused after the call returns.
-BatchCallback = Callable[[bytearray, np.ndarray, np.ndarray, list[Address], np.ndarray], None]
 
 #: Bytes the transport may hold unsent before send() drops (a healthy UDP socket holds none).
 DEFAULT_MAX_WRITE_BUFFER_BYTES = 256 * 1024
 DEFAULT_RX_QUEUE_SIZE = 1024
-#: Bulk reading (on_batch): at most this many datagrams per wake-up (the rest wait for the next
-#: one, so a flood cannot hold the event loop), into a buffer of this many bytes.
-MAX_BATCH_DATAGRAMS = 512
-BATCH_BUFFER_BYTES = 1 << 20
-MAX_DATAGRAM_BYTES = 65536
-#: Kernel receive buffer asked for in bulk mode (hundreds of vehicles' telemetry between wake-ups).
-BULK_RCVBUF_BYTES = 4 << 20
-#: Linux SO_TIMESTAMPNS / SCM_TIMESTAMPNS (not in Python's socket module): the kernel's receive
-#: time of each datagram as a struct timespec.
-_SO_TIMESTAMPNS = 35
-_TIMESPEC = struct.Struct("@qq")
-_DROPS = struct.Struct("@I")
-_ANCILLARY_BYTES = socket.CMSG_SPACE(_TIMESPEC.size) + socket.CMSG_SPACE(_DROPS.size)
-#: At most one warning per this many seconds about datagrams the kernel dropped.
-DROP_WARNING_S = 5.0
 
 
 class LinkClosedError(RuntimeError):
@@ -135,16 +108,12 @@ class UdpEndpoint:
         self._sock: socket.socket | None = None  # bulk mode: the socket, read and written directly
         self._loop: asyncio.AbstractEventLoop | None = None
         self._bound: Address | None = None  # local_address, once asked while open
-        self._kernel_stamps = False  # bulk mode: each datagram's kernel receive time (Linux)
-        self._batch_buf = bytearray(BATCH_BUFFER_BYTES if on_batch is not None else 0)
-        self._multi: MultiReceiver | None = None  # bulk mode on Linux: recvmmsg (gcs.link.mmsg)
+        self._reader: BulkReader | None = None  # bulk mode: reads the socket in batches
         self._rx_queue: asyncio.Queue[tuple[bytes, Address]] = asyncio.Queue(rx_queue_size)
         self._max_write_buffer_bytes = max_write_buffer_bytes
         self._transport: asyncio.DatagramTransport | None = None
         self._counts: dict[str, int] = {f.name: 0 for f in fields(UdpStats)}
         self._last_error: Exception | None = None
-        self._drops_warned = 0  # rx_dropped_kernel when the last warning went out
-        self._drop_warning_s = -math.inf
 
     # --- lifetime --------------------------------------------------------------------------------
 
@@ -154,27 +123,11 @@ class UdpEndpoint:
             raise RuntimeError(f"{self.name}: already open")
         loop = asyncio.get_running_loop()
         if self._on_batch_cb is not None:
-            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            try:
-                sock.setblocking(False)
-                with contextlib.suppress(OSError):
-                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, BULK_RCVBUF_BYTES)
-                sock.bind((self._local_host, self._local_port))
-            except OSError:
-                sock.close()
-                raise
+            sock = bind_bulk_socket(self._local_host, self._local_port)
             self._sock, self._loop = sock, loop
-            self._kernel_stamps = False
-            if sys.platform == "linux":
-                try:
-                    sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
-                    self._kernel_stamps = True
-                except OSError:
-                    logger.debug("%s: no kernel receive times; stamped when read", self.name)
-                with contextlib.suppress(OSError):
-                    sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
-            self._multi = MultiReceiver(sock) if mmsg_available(sock) else None
-            loop.add_reader(sock.fileno(), self._drain)
+            self._reader = BulkReader(sock, self.name, self._counts, self._on_error,
+                                      self._hand_over)
+            loop.add_reader(sock.fileno(), self._reader.drain)
             logger.debug("%s: bound %s (bulk), remote %s", self.name, self.local_address,
                          self._remote)
             return
@@ -321,93 +274,11 @@ class UdpEndpoint:
         self._counts["bytes_out"] += len(data)
         return True
 
-    def _drain(self) -> None:
-        """Bulk mode: read what the socket holds (bounded), hand it over in one call."""
-        sock, cb = self._sock, self._on_batch_cb
-        if sock is None or cb is None:
-            return
-        if self._multi is not None:
-            self._drain_multi(self._multi, cb)
-            return
-        view = memoryview(self._batch_buf)
-        limit = len(self._batch_buf) - MAX_DATAGRAM_BYTES
-        offsets: list[int] = []
-        lengths: list[int] = []
-        sources: list[Address] = []
-        stamps: list[float] = []
-        total = 0
-        kernel = self._kernel_stamps
-        drops = -1
-        while len(offsets) < MAX_BATCH_DATAGRAMS and total <= limit:
-            stamp = math.nan
-            try:
-                if kernel:
-                    nbytes, ancillary, _, addr = sock.recvmsg_into([view[total:]],
-                                                                   _ANCILLARY_BYTES)
-                    for level, kind, data in ancillary:
-                        if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS:
-                            sec, nsec = _TIMESPEC.unpack_from(data)
-                            stamp = sec + nsec * 1e-9
-                        elif level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL:
-                            drops = max(drops, _DROPS.unpack_from(data)[0])
-                else:
-                    nbytes, addr = sock.recvfrom_into(view[total:])
-            except (BlockingIOError, InterruptedError):
-                break
-            except OSError as exc:  # an ICMP error queued on the socket: counted, read on
-                self._on_error(exc)
-                continue
-            offsets.append(total)
-            lengths.append(nbytes)
-            sources.append((addr[0], addr[1]))
-            stamps.append(stamp)
-            total += nbytes
-        self._count_drops(drops)
-        if not offsets:
-            return
-        self._hand_over(cb, self._batch_buf, np.asarray(offsets, dtype=np.int64),
-                        np.asarray(lengths, dtype=np.int64), sources,
-                        np.asarray(stamps, dtype=np.float64))
-
-    def _drain_multi(self, multi: MultiReceiver, cb: BatchCallback) -> None:
-        for _ in range(2):  # an error the socket reports (ICMP) is read first, then the data
-            try:
-                n = multi.receive()
-                break
-            except OSError as exc:
-                self._on_error(exc)
-        else:
-            return
-        if n == 0:
-            return
-        self._count_drops(multi.drops(n))
-        lengths = multi.lengths(n)
-        truncated = int(multi.truncated(n).sum())
-        if truncated:
-            self._counts["rx_truncated"] += truncated
-            logger.warning("%s: %d datagram(s) longer than %d bytes, cut", self.name, truncated,
-                           MULTI_SLOT_BYTES)
-        stamps = multi.stamps(n) if self._kernel_stamps else np.full(n, np.nan)
-        self._hand_over(cb, multi.buffer, multi.offsets[:n], lengths, multi.sources(n), stamps)
-
-    def _count_drops(self, drops: int) -> None:
-        """The socket's drop count as the datagrams just read carried it (-1: none did): kept,
-        and told (at most every DROP_WARNING_S) when it grew. Those datagrams were sent and
-        arrived; the vehicles' sequence numbers count them as lost, this says why."""
-        counts = self._counts
-        if drops <= counts["rx_dropped_kernel"]:
-            return
-        counts["rx_dropped_kernel"] = drops
-        now_s = time.monotonic()
-        if now_s - self._drop_warning_s >= DROP_WARNING_S:
-            logger.warning("%s: the kernel dropped %d datagrams (%d in all) that arrived faster "
-                           "than this ground station read them: it is short of CPU, and the "
-                           "vehicles' telemetry has gaps", self.name, drops - self._drops_warned,
-                           drops)
-            self._drops_warned, self._drop_warning_s = drops, now_s
-
-    def _hand_over(self, cb: BatchCallback, buffer: bytearray, offsets: np.ndarray,
-                   lengths: np.ndarray, sources: list[Address], stamps: np.ndarray) -> None:
+    def _hand_over(self, buffer: bytearray, offsets: np.ndarray, lengths: np.ndarray,
+                   sources: list[Address], stamps: np.ndarray) -> None:
+        """Bulk mode: one batch read (`BulkReader`), counted, to ``on_batch``."""
+        cb = self._on_batch_cb
+        assert cb is not None
         counts = self._counts
         counts["packets_in"] += len(offsets)
         counts["bytes_in"] += int(lengths.sum())
@@ -449,3 +320,7 @@ class UdpEndpoint:
         if self._last_error is None or type(exc) is not type(self._last_error):
             logger.warning("%s: socket error: %s", self.name, exc)
         self._last_error = exc
+
+
+__all__ = ["MAX_BATCH_DATAGRAMS", "Address", "BatchCallback", "DatagramCallback",
+           "LinkClosedError", "UdpEndpoint", "UdpStats"]

@@ -110,7 +110,7 @@ async def _overflow(bulk_read: str, caplog: pytest.LogCaptureFixture) -> None:
 
     async with UdpEndpoint(0, None, learn_remote=True, on_batch=on_batch, name="gcs port") as ep:
         if bulk_read == "one at a time":
-            ep._multi = None  # the path of a platform without recvmmsg
+            ep._reader.multi = None  # the path of a platform without recvmmsg
         tx = _socket()
         # GIVEN a ground station that reads nothing for a while (the loop is blocked) as a
         # fleet's telemetry keeps coming: more datagrams than its socket's buffer holds
