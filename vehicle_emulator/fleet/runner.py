@@ -18,16 +18,13 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from vehicle_emulator.autopilots.ardupilot.logic import ArduCopter
-from vehicle_emulator.autopilots.ardupilot.node import DEFAULT_RATES_HZ as ARDUPILOT_RATES_HZ
-from vehicle_emulator.autopilots.ardupilot.node import ArduPilotNode
 from vehicle_emulator.autopilots.node import VehicleNode
-from vehicle_emulator.autopilots.px4.logic import Autopilot, Severity
-from vehicle_emulator.config.faults import FaultSchedule, LinkImpairment
-from vehicle_emulator.config.params import ParamError, ParamStore, param_table
+from vehicle_emulator.autopilots.px4.logic import Severity
+from vehicle_emulator.config.params import ParamStore, param_table
 from vehicle_emulator.config.personality import personality_of
 from vehicle_emulator.config.team import FaultSpec, VehicleSpec
-from vehicle_emulator.mavlink.codec import GenericEncoder, HotDecoder
+from vehicle_emulator.fleet.assemble import assemble_vehicle
+from vehicle_emulator.mavlink.codec import HotDecoder
 from vehicle_emulator.mavlink.fleet_status import FleetStatus
 from vehicle_emulator.mavlink.server import LinkPoller, UdpLink
 from vehicle_emulator.mavlink.telemetry import Telemetry
@@ -85,12 +82,6 @@ class LinkPlan:
 
 
 # per autopilot family: the node class, the autopilot state machine, parameter names
-_FAMILIES: dict[str, tuple[type[VehicleNode], Any, str, str]] = {
-    "px4": (VehicleNode, Autopilot, "MAV_SYS_ID", "MPC_THR_HOVER"),
-    "ardupilot": (ArduPilotNode, ArduCopter, "MAV_SYSID", "MOT_THST_HOVER"),
-}
-
-
 @dataclass(slots=True)
 class RunStats:
     """Pacing figures of a run: tick lateness [s] and CPU time."""
@@ -195,71 +186,10 @@ class Emulator:
             if not any(name in {p.name for p in param_table(f)} for f in families):
                 ParamStore.for_family(sorted(families)[0]).definition(name)
         for i, spec in enumerate(specs):
-            personality = personality_of(spec.autopilot)
-            family = personality.protocol.family
-            node_cls, autopilot_cls, sysid_param, hover_param = _FAMILIES[family]
-            self.status.mav_autopilot[i] = personality.protocol.mav_autopilot
-            params = ParamStore.for_family(family)
-            params.set(sysid_param, spec.sysid, force=True)
-            if "EMU_ACK_TWICE" in params:
-                params.set("EMU_ACK_TWICE", 1.0 if personality.protocol.ack_twice else 0.0)
-            for name, value in personality.protocol.param_defaults:
-                params.set(name, value)
-            params.set("EMU_SEED", seed)
-            params.set(hover_param, float(self.plant.hover_thrust_norm[i]))
-            params.set("EMU_MOT_TAU", float(self.plant.motor_time_constant_s[i]))
-            params.set("EMU_NOISE", 1.0 if personality.sensors.noise_default else 0.0)
-            params.set("EMU_MASS_KG", spec.mass_kg, force=True)
-            params.set("EMU_THR_MAX_N", 4.0 * spec.rotor_thrust_max_n, force=True)
-            for name, value in spec.autopilot_params:  # the team file's; --param wins
-                try:
-                    params.set(name, value)
-                except ParamError as exc:
-                    raise ValueError(f"vehicle {spec.vehicle_id} (sysid {spec.sysid}, "
-                                     f"{spec.autopilot}): emulator.autopilot_params: {exc}"
-                                     ) from None
-            for name, value in (param_overrides or {}).items():
-                if name in params:  # a mixed team: each vehicle takes the names it has
-                    params.set(name, value)
-            if family == "ardupilot":
-                self.telemetry.set_defaults(i, ARDUPILOT_RATES_HZ, delayed=("TIMESYNC",))
-                for msgid, ms in (message_intervals_ms or {}).items():
-                    if not self.telemetry.set_interval(i, msgid, ms * 1e3, 0.0):
-                        raise ValueError(f"message intervals: message id {msgid} is not one "
-                                         "the emulator streams")
-            if streams == "requested":
-                self.telemetry.requested_only(i)
-            if spec.starts_in_air:
-                self.plant.hold_here(i)
-            obs_spec = [f for f in faults if f.vehicle_id == spec.vehicle_id]
-            node = node_cls(
-                index=i,
-                spec=spec,
-                personality=personality,
-                plant=self.plant,
-                telemetry=self.telemetry,
-                status=self.status,
-                params=params,
-                autopilot=Autopilot(vehicle_id=spec.vehicle_id, params=params),
-                faults=FaultSchedule.from_specs(params, obs_spec),
-                impairment=LinkImpairment(np.random.default_rng(seed + i)),
-                encoder=GenericEncoder(spec.sysid, 1, self.telemetry.seq, i),
-            )
-            node.autopilot = autopilot_cls.start(
-                spec.vehicle_id,
-                params,
-                0.0,
-                node.observe(),
-                ready_after_s=personality.protocol.arming_ready_s,
-            )
-            origin = node.local_origin_enu_m
-            home = node.autopilot.home_enu_m
-            self.status.origin_ned_m[i] = (origin[1], origin[0], -origin[2])
-            self.status.home_ned_m[i] = (home[1], home[0], -home[2])
-            node.sync_all_params()
-            node.apply_demand()
-            node.refresh_status(0.0)
-            self.nodes.append(node)
+            self.nodes.append(assemble_vehicle(
+                i, spec, [f for f in faults if f.vehicle_id == spec.vehicle_id], self.plant,
+                self.telemetry, self.status, seed=seed, param_overrides=param_overrides or {},
+                message_intervals_ms=message_intervals_ms or {}, streams=streams))
         self.links: list[UdpLink] = []
         self.poller: LinkPoller | None = None
         self._setpoint_event: asyncio.Event | None = None
