@@ -15,7 +15,7 @@ from vehicle_emulator.autopilots.ardupilot.targets import (
     climb_rate_of_thrust,
     guided_attitude_target,
 )
-from vehicle_emulator.autopilots.px4.logic import (
+from vehicle_emulator.autopilots.demand import (
     AttitudeSetpoint,
     Idle,
     MavResult,

@@ -11,7 +11,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from vehicle_emulator.autopilots.ardupilot.targets import guided_position_target
-from vehicle_emulator.autopilots.px4.logic import PositionTarget
+from vehicle_emulator.autopilots.demand import PositionTarget
 from vehicle_emulator.autopilots.setpoints import (
     PositionTargetFields,
     from_position_target_local_ned,

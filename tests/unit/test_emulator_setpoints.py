@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from vehicle_emulator.autopilots.px4.logic import ActuatorSetpoint, AttitudeSetpoint, RatesSetpoint
+from vehicle_emulator.autopilots.demand import ActuatorSetpoint, AttitudeSetpoint, RatesSetpoint
 from vehicle_emulator.autopilots.setpoints import from_actuator_control_target, from_attitude_target
 
 LEVEL_NORTH = [1.0, 0.0, 0.0, 0.0]

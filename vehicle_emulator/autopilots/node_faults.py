@@ -7,7 +7,7 @@ arrays, parameter store, link impairment, fault schedule); each fault is announc
 
 from __future__ import annotations
 
-from vehicle_emulator.autopilots.px4.logic import Severity
+from vehicle_emulator.autopilots.demand import Severity
 from vehicle_emulator.config.faults import LINK_PARAMS, link_param_values, link_text
 from vehicle_emulator.config.team import FaultSpec
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 from typing import Any, Protocol
 
-from vehicle_emulator.autopilots.px4.logic import Severity
+from vehicle_emulator.autopilots.demand import Severity
 from vehicle_emulator.mavlink.codec import mavlink
 from vehicle_emulator.physics.geodesy import geodetic_of_ned
 

@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
+from vehicle_emulator.autopilots.demand import Severity
 from vehicle_emulator.autopilots.node_output import Link
-from vehicle_emulator.autopilots.px4.logic import Severity
 from vehicle_emulator.config.faults import LINK_PARAMS
 from vehicle_emulator.config.params import ParamError, decode_value, encode_value
 from vehicle_emulator.config.team import FaultSpec

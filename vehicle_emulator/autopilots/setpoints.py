@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from vehicle_emulator.autopilots.px4.logic import (
+from vehicle_emulator.autopilots.demand import (
     ActuatorSetpoint,
     AttitudeSetpoint,
     OffboardSetpoint,

@@ -18,8 +18,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from vehicle_emulator.autopilots.demand import Severity
 from vehicle_emulator.autopilots.node import VehicleNode
-from vehicle_emulator.autopilots.px4.logic import Severity
 from vehicle_emulator.config.params import ParamStore, param_table
 from vehicle_emulator.config.personality import personality_of
 from vehicle_emulator.config.team import FaultSpec, VehicleSpec

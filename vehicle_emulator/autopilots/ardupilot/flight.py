@@ -10,7 +10,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from vehicle_emulator.autopilots.ardupilot.modes import GUIDED_MODES
-from vehicle_emulator.autopilots.px4.logic import (
+from vehicle_emulator.autopilots.demand import (
     AttitudeSetpoint,
     Idle,
     Observation,

@@ -49,7 +49,7 @@ from vehicle_emulator.autopilots.ardupilot.modes import (
     XY_CONTROL,
     Mode,
 )
-from vehicle_emulator.autopilots.px4.logic import (
+from vehicle_emulator.autopilots.demand import (
     Demand,
     Idle,
     MavResult,

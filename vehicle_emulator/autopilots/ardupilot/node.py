@@ -42,8 +42,8 @@ from vehicle_emulator.autopilots.ardupilot.targets import (
     guided_attitude_target,
     guided_position_target,
 )
+from vehicle_emulator.autopilots.demand import MavResult, Severity
 from vehicle_emulator.autopilots.node import Link, VehicleNode, _int
-from vehicle_emulator.autopilots.px4.logic import MavResult, Severity
 from vehicle_emulator.autopilots.setpoints import (
     MAV_FRAME_LOCAL_NED,
     POS_IGNORE_BITS,

@@ -27,7 +27,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from vehicle_emulator.autopilots.ardupilot.flight import AngleTarget
-from vehicle_emulator.autopilots.px4.logic import AttitudeSetpoint, PositionTarget, RatesSetpoint
+from vehicle_emulator.autopilots.demand import AttitudeSetpoint, PositionTarget, RatesSetpoint
 from vehicle_emulator.autopilots.setpoints import (
     ACC_IGNORE_BITS,
     FORCE_SET,

@@ -30,10 +30,34 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from enum import IntEnum
 
-import numpy as np
-
+from vehicle_emulator.autopilots.demand import (
+    ActuatorSetpoint,
+    AttitudeSetpoint,
+    Demand,
+    Idle,
+    MavResult,
+    MotorsOff,
+    Observation,
+    OffboardSetpoint,
+    PositionTarget,
+    RatesSetpoint,
+    Severity,
+    capture,
+    climb,
+    descent,
+    hold,
+)
+from vehicle_emulator.autopilots.px4.modes import (
+    MANUAL,
+    MODE_NAMES,
+    PREVENTS_ARMING,
+    NavState,
+    custom_mode_of,
+    nav_state_of,
+    not_emulated,
+)
+from vehicle_emulator.autopilots.px4.reports import Px4Reports
 from vehicle_emulator.config.params import ParamStore
 
 __all__ = [
@@ -61,142 +85,10 @@ FORCE_MAGIC = 21196
 TAKEOFF_DONE_M = 0.15
 
 
-class MavResult(IntEnum):
-    """MAV_RESULT."""
-
-    ACCEPTED = 0
-    TEMPORARILY_REJECTED = 1
-    DENIED = 2
-    UNSUPPORTED = 3
-    FAILED = 4
-    IN_PROGRESS = 5
-
-
-class Severity(IntEnum):
-    """MAV_SEVERITY."""
-
-    EMERGENCY = 0
-    ALERT = 1
-    CRITICAL = 2
-    ERROR = 3
-    WARNING = 4
-    NOTICE = 5
-    INFO = 6
-    DEBUG = 7
-
-
-class NavState(IntEnum):
-    """Flight modes the emulator flies; values are PX4 (main_mode, sub_mode) packed as below."""
-
-    ALTCTL = 2 << 16
-    POSCTL = 3 << 16
-    AUTO_TAKEOFF = (4 << 16) | (2 << 24)
-    AUTO_LOITER = (4 << 16) | (3 << 24)
-    AUTO_LAND = (4 << 16) | (6 << 24)
-    OFFBOARD = 6 << 16
-
-
-def custom_mode_of(state: NavState) -> int:
-    """HEARTBEAT custom_mode of a nav state (main_mode << 16 | sub_mode << 24)."""
-    return int(state)
-
-
-def nav_state_of(main_mode: int, sub_mode: int) -> NavState | None:
-    """The NavState for a PX4 (main, sub) pair, or None when the emulator does not fly it."""
-    if main_mode == 4:
-        sub = {2: NavState.AUTO_TAKEOFF, 3: NavState.AUTO_LOITER, 6: NavState.AUTO_LAND}
-        return sub.get(sub_mode)
-    return {2: NavState.ALTCTL, 3: NavState.POSCTL, 6: NavState.OFFBOARD}.get(main_mode)
-
-
-#: (main, sub) modes PX4 flies and the emulator does not: AUTO_RTL. A DO_SET_MODE for one gets a
-#: single UNSUPPORTED ACK, not PX4's ACCEPTED first, so no client takes it for a mode change.
-_NOT_EMULATED = frozenset({(4, 5)})
-
-
-def not_emulated(main_mode: int, sub_mode: int) -> bool:
-    """True for a PX4 mode the emulator does not fly (and refuses as UNSUPPORTED)."""
-    return (main_mode, sub_mode) in _NOT_EMULATED
-
-
-_MANUAL = frozenset({NavState.POSCTL, NavState.ALTCTL})  # modes flown from (RC) sticks
-# the modes the emulator flies that PX4 refuses to arm in (mode_req_prevent_arming): never the
-# mode after disarming
-_PREVENTS_ARMING = frozenset({NavState.AUTO_LAND})
-
-_MODE_NAMES = {
-    NavState.ALTCTL: "Altitude",
-    NavState.POSCTL: "Position",
-    NavState.AUTO_TAKEOFF: "Takeoff",
-    NavState.AUTO_LOITER: "Hold",
-    NavState.AUTO_LAND: "Land",
-    NavState.OFFBOARD: "Offboard",
-}
-
-
-@dataclass(frozen=True, slots=True)
-class Observation:
-    """What the autopilot knows of its vehicle (ENU world, metres, radians)."""
-
-    position_enu_m: tuple[float, float, float]
-    velocity_enu_mps: tuple[float, float, float]
-    yaw_enu_rad: float
-    on_ground: bool
-    battery_remaining: float = 1.0
-
-
-@dataclass(frozen=True, slots=True)
-class RatesSetpoint:
-    """Body rates (FLU, rad/s) and collective thrust normalised 0..1 (of 4 f_max)."""
-
-    rate_flu_radps: tuple[float, float, float]
-    thrust_norm: float
-
-
-@dataclass(frozen=True, slots=True)
-class AttitudeSetpoint:
-    """Attitude R_enu_flu (3x3), yaw-rate feed-forward (FLU z, rad/s), normalised thrust."""
-
-    rotation_enu_flu: np.ndarray
-    yaw_rate_ff_flu_radps: float
-    thrust_norm: float
-
-
-@dataclass(frozen=True, slots=True)
-class ActuatorSetpoint:
-    """Normalised torques (FLU, -1..1, see plant.torque_max_nm) and normalised thrust 0..1."""
-
-    torque_norm_flu: tuple[float, float, float]
-    thrust_norm: float
-
-
-@dataclass(frozen=True, slots=True)
-class PositionTarget:
-    """Onboard position controller target: ENU position, velocity feed-forward, per-axis mask
-    (1: hold the position on that axis, 0: fly the feed-forward velocity only), ENU heading."""
-
-    position_enu_m: tuple[float, float, float]
-    velocity_ff_enu_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    mask: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    yaw_enu_rad: float = 0.0
-
-
-@dataclass(frozen=True, slots=True)
-class MotorsOff:
-    """Disarmed: rotors stopped."""
-
-
-@dataclass(frozen=True, slots=True)
-class Idle:
-    """Armed on the ground: idle thrust, no torque."""
-
-
-Demand = MotorsOff | Idle | PositionTarget | RatesSetpoint | AttitudeSetpoint | ActuatorSetpoint
-OffboardSetpoint = RatesSetpoint | AttitudeSetpoint | ActuatorSetpoint | PositionTarget
 
 
 @dataclass(slots=True)
-class Autopilot:
+class Autopilot(Px4Reports):
     """One vehicle's mode/arming state machine. Call ``tick`` regularly (>= 10 Hz)."""
 
     vehicle_id: int
@@ -243,39 +135,10 @@ class Autopilot:
             ap.armed = True
             ap._taken_off = True
             ap._armed_s = now_s
-        ap._set_demand(ap._hold_demand(obs))
+        ap._set_demand(hold(ap.armed, obs))
         return ap
 
     # --- queries ------------------------------------------------------------------------------
-
-    def prearm_ok(self, now_s: float) -> bool:
-        """PX4's pre-arm check result (SYS_STATUS MAV_SYS_STATUS_PREARM_CHECK health bit):
-        what ``arm`` would refuse with TEMPORARILY_REJECTED is failing."""
-        if now_s < self.ready_s:
-            return False
-        return not (self.nav_state is NavState.OFFBOARD and not self.offboard_available(now_s))
-
-    def position_ok(self, now_s: float) -> bool:
-        """The estimator has a global position (SYS_STATUS GPS bit present, enabled, healthy):
-        PX4 v1.16.0 SIH set it in the same SYS_STATUS as the pre-arm bit, when arming became
-        possible; MAVSDK's ``is_global_position_ok`` reads it."""
-        return now_s >= self.ready_s
-
-    def attitude_target_published(self) -> bool:
-        """Whether PX4 publishes an attitude or rates setpoint, which its ATTITUDE_TARGET stream
-        sends (only on a new one): not disarmed in OFFBOARD, where no controller runs and no
-        setpoint arrives (PX4 v1.16.0 sent none there for 60 s; in Hold, disarmed, it did)."""
-        return self.armed or self.nav_state is not NavState.OFFBOARD
-
-    def system_status(self, now_s: float) -> int:
-        """HEARTBEAT system_status as PX4 v1.16.0 sent it: UNINIT (0) disarmed before the
-        estimator is ready and disarmed in OFFBOARD, CRITICAL (5) while a failsafe holds the
-        mode, ACTIVE (4) armed, STANDBY (3) otherwise."""
-        if self.armed:
-            return 5 if self.failsafe_active else 4
-        if now_s < self.ready_s or self.nav_state is NavState.OFFBOARD:
-            return 0
-        return 3
 
     @property
     def custom_mode(self) -> int:
@@ -285,7 +148,7 @@ class Autopilot:
     @property
     def mode_name(self) -> str:
         """Human name of the current mode (QGroundControl's wording)."""
-        return _MODE_NAMES[self.nav_state]
+        return MODE_NAMES[self.nav_state]
 
     def offboard_available(self, now_s: float) -> bool:
         """True while the newest setpoint is younger than COM_OF_LOSS_T (PX4's offboardCheck):
@@ -440,7 +303,7 @@ class Autopilot:
         """A user's mode selection: the intended mode, and the mode after disarming unless the
         mode prevents arming (PX4's UserModeIntention::change)."""
         self.intended_state = target
-        if target not in _PREVENTS_ARMING:
+        if target not in PREVENTS_ARMING:
             self.after_disarm_state = target
 
     def _resume_after_disarm(self, obs: Observation) -> None:
@@ -450,35 +313,21 @@ class Autopilot:
         self.intended_state = self.after_disarm_state
         self._enter(self.after_disarm_state, obs)
 
-    def _hold_demand(self, obs: Observation) -> Demand:
-        if not self.armed:
-            return MotorsOff()
-        if obs.on_ground:
-            return Idle()
-        return PositionTarget(obs.position_enu_m, yaw_enu_rad=obs.yaw_enu_rad)
-
     def _mode_demand(self, obs: Observation) -> Demand:
         if not self.armed:
             return MotorsOff()
         if self.nav_state is NavState.OFFBOARD:
-            return self.setpoint if self.setpoint is not None else self._hold_demand(obs)
+            return self.setpoint if self.setpoint is not None else hold(self.armed, obs)
         if self.nav_state is NavState.AUTO_LAND:
-            return self._descent_demand(obs, self.params["MPC_LAND_SPEED"])
-        if self.nav_state in _MANUAL and self.params.get_int("COM_RC_IN_MODE") == 4:
+            return descent(obs, self.params["MPC_LAND_SPEED"])
+        if self.nav_state in MANUAL and self.params.get_int("COM_RC_IN_MODE") == 4:
             # no manual control input: PX4 reads the throttle stick as full down
-            return self._descent_demand(obs, self.params["MPC_Z_VEL_MAX_DN"])
-        return self._hold_demand(obs)
-
-    def _descent_demand(self, obs: Observation, speed_mps: float) -> Demand:
-        if obs.on_ground:
-            return Idle()
-        return PositionTarget(
-            obs.position_enu_m, (0.0, 0.0, -speed_mps), (1.0, 1.0, 0.0), obs.yaw_enu_rad
-        )
+            return descent(obs, self.params["MPC_Z_VEL_MAX_DN"])
+        return hold(self.armed, obs)
 
     def _enter(self, target: NavState, obs: Observation) -> None:
         if target is not self.nav_state:
-            self._event(Severity.INFO, f"Mode: {_MODE_NAMES[target]}")
+            self._event(Severity.INFO, f"Mode: {MODE_NAMES[target]}")
         self.nav_state = target
         self._takeoff_climbing = False
         if target is NavState.AUTO_TAKEOFF and self.armed:
@@ -492,15 +341,7 @@ class Autopilot:
             alt_m = self._takeoff_alt_m = obs.position_enu_m[2]
             self._event(Severity.CRITICAL, ALREADY_HIGHER_TEXT)
         self._takeoff_climbing = True
-        speed = self.params["MPC_TKO_SPEED"]
-        self._set_demand(
-            PositionTarget(
-                (obs.position_enu_m[0], obs.position_enu_m[1], alt_m),
-                (0.0, 0.0, speed),
-                (1.0, 1.0, 0.0),
-                obs.yaw_enu_rad,
-            )
-        )
+        self._set_demand(climb(obs, alt_m, self.params["MPC_TKO_SPEED"]))
 
     def _takeoff_progress(self, obs: Observation) -> None:
         """Climb at MPC_TKO_SPEED, then let the position loop (gain 1/s) capture the altitude
@@ -510,12 +351,7 @@ class Autopilot:
         demand = self.demand
         if isinstance(demand, PositionTarget) and demand.mask[2] == 0.0:
             if z >= alt - self.params["MPC_TKO_SPEED"]:
-                self._set_demand(
-                    PositionTarget(
-                        (demand.position_enu_m[0], demand.position_enu_m[1], alt),
-                        yaw_enu_rad=demand.yaw_enu_rad,
-                    )
-                )
+                self._set_demand(capture(demand, alt))
         elif z >= alt - TAKEOFF_DONE_M:
             self._takeoff_climbing = False
             self._event(Severity.INFO, "Takeoff complete, holding")
