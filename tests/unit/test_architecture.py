@@ -252,6 +252,37 @@ def test_the_room_check_can_fail(tmp_path):
         "emu/physics/plant.py": ["emu.fleet.runner"], "emu/config/team.py": ["emu.testing"]}
 
 
+MAX_MODULE_LINES = 600
+MAX_CLASS_LINES = 300
+
+
+def oversized(paths: list[Path]) -> list[str]:
+    """Modules over MAX_MODULE_LINES lines and classes over MAX_CLASS_LINES, with their size."""
+    found = []
+    for path in paths:
+        text = path.read_text()
+        if text.count("\n") > MAX_MODULE_LINES:
+            found.append(f"{path.name}: {text.count(chr(10))} lines")
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, ast.ClassDef):
+                size = node.end_lineno - node.lineno + 1
+                if size > MAX_CLASS_LINES:
+                    found.append(f"{path.name}: class {node.name} {size} lines")
+    return found
+
+
+def test_no_module_of_the_programs_is_over_600_lines_nor_a_class_over_300():
+    paths = [p for package in OWN for p in (ROOT / package).rglob("*.py")]
+    assert oversized(paths) == []
+
+
+def test_the_size_check_can_fail(tmp_path):
+    # GIVEN a class of 301 lines in a module of 601 THEN both are named
+    body = "class Big:\n" + "    x = 1\n" * 300 + "\n" * 300
+    (tmp_path / "big.py").write_text(body)
+    assert oversized([tmp_path / "big.py"]) == ["big.py: 601 lines", "big.py: class Big 301 lines"]
+
+
 def test_the_boundary_check_can_fail(tmp_path):
     # GIVEN a module that reads the clock THEN the import walk sees it
     bad = tmp_path / "bad.py"

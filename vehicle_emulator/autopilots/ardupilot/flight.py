@@ -1,5 +1,6 @@
-"""How the ardupilot personality flies in GUIDED: takeoff, landing speeds, guided angle
-targets and their GUID_TIMEOUT, and the vertical-speed loop that turns a climb rate into thrust.
+"""How the ardupilot personality flies in GUIDED: takeoff, landing speeds, the guided angle and
+position targets it takes (and their GUID_TIMEOUT), and the vertical-speed loop that turns a
+climb rate into thrust.
 A mixin of ``ArduCopter`` (its state lives there). Pure."""
 
 from __future__ import annotations
@@ -9,7 +10,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from vehicle_emulator.autopilots.ardupilot.modes import GUIDED_MODES
+from vehicle_emulator.autopilots.ardupilot.modes import GUIDED_MODES, Mode
 from vehicle_emulator.autopilots.demand import (
     AttitudeSetpoint,
     Idle,
@@ -164,6 +165,49 @@ class CopterFlight:
         thrust = self.params["MOT_THST_HOVER"] * (1.0 + acc / GRAVITY_MPS2) / tilt
         thrust = min(max(thrust, 0.05), 1.0)
         return replace(sp, thrust_norm=thrust)
+
+    def on_attitude_target(self, now_s: float, obs: Observation, target: AngleTarget | None
+                           ) -> bool:
+        """A SET_ATTITUDE_TARGET in a guided mode (None: invalid, which stops a GUIDED vehicle;
+        GUIDED_NOGPS keeps flying its last target). Ignored elsewhere. True if used."""
+        if self.mode not in GUIDED_MODES:
+            return False
+        if target is None:
+            if self.mode is Mode.GUIDED:
+                self._stop_guided(obs)
+            return False
+        self.setpoint = target
+        self._setpoint_s = now_s
+        self._expiry_counted = False
+        if not self.angle_control:
+            self.angle_control = True
+            self._z_ref_m = obs.position_enu_m[2]
+        self._velocity_target_s = None
+        self._taking_off = ""
+        self.deadline_s = now_s + self.params["GUID_TIMEOUT"]
+        self._fly_angle(now_s, obs, 0.0)
+        return True
+
+    def on_position_target(self, now_s: float, obs: Observation, target: PositionTarget | None,
+                           velocity_only: bool = False) -> bool:
+        """A SET_POSITION_TARGET_* in GUIDED, already in team ENU (None: invalid, stops).
+        ``velocity_only`` targets time out after GUID_TIMEOUT. GUIDED_NOGPS and other modes
+        ignore them. True if used."""
+        if self.mode is not Mode.GUIDED:
+            return False
+        if target is None:
+            self._stop_guided(obs)
+            return False
+        self.angle_control = False
+        self._taking_off = ""
+        self._velocity_target_s = now_s if velocity_only else None
+        if velocity_only:
+            self.deadline_s = now_s + self.params["GUID_TIMEOUT"]
+        if self._grounded():
+            return True  # taken, but a landed vehicle waits for a takeoff (ArduPilot)
+        self._braking = False
+        self._set(target)
+        return True
 
 
 def _trapezoid(distance_m: float, t_s: float, v_max: float, a_max: float) -> tuple[float, float]:

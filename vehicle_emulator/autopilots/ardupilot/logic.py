@@ -46,9 +46,9 @@ from vehicle_emulator.autopilots.ardupilot.modes import (
     FLOWN,
     GUIDED_MODES,
     NEEDS_POSITION,
-    XY_CONTROL,
     Mode,
 )
+from vehicle_emulator.autopilots.ardupilot.reports import CopterReports
 from vehicle_emulator.autopilots.demand import (
     Demand,
     Idle,
@@ -76,7 +76,7 @@ class CopterObservation(Observation):
 
 
 @dataclass(slots=True)
-class ArduCopter(CopterFlight):
+class ArduCopter(CopterFlight, CopterReports):
     """One vehicle's ArduCopter-like state machine. Call ``tick`` regularly (>= 10 Hz)."""
 
     vehicle_id: int
@@ -151,44 +151,6 @@ class ArduCopter(CopterFlight):
     @property
     def mode_name(self) -> str:
         return self.mode.name
-
-    def position_ok(self, now_s: float) -> bool:
-        """The EKF has a position estimate (LOCAL_POSITION_NED is sent, GUIDED is armable)."""
-        return self.boot.position_ok(now_s)
-
-    def prearm_ok(self, now_s: float) -> bool:
-        """SYS_STATUS pre-arm check bit: the pre-arm checks pass (recorded: set at 23.5 s, when
-        the gyros became consistent, in STABILIZE)."""
-        return not self.arm_failures(now_s, mode_check=False)
-
-    def attitude_target_published(self) -> bool:
-        """ATTITUDE_TARGET is sent at its rate in every mode (the attitude controller's target)."""
-        return True
-
-    def system_status(self, now_s: float) -> int:
-        """HEARTBEAT system_status: BOOT (1) before "ArduPilot Ready", STANDBY (3) landed,
-        ACTIVE (4) flying."""
-        if not self.boot.initialised(now_s):
-            return 1
-        return 3 if self.land_complete else 4
-
-    def base_mode(self, now_s: float) -> int:
-        """HEARTBEAT base_mode: CUSTOM_MODE_ENABLED | STABILIZE | MANUAL_INPUT (81), GUIDED (8)
-        while the horizontal position controller runs, SAFETY_ARMED (128)."""
-        xy = self.mode in XY_CONTROL or not self.boot.initialised(now_s)
-        if self.mode is Mode.GUIDED_NOGPS and not self.armed:
-            xy = True  # recorded 89
-        if self.mode is Mode.GUIDED and self.angle_control and self.armed:
-            xy = False
-        return 81 | (8 if xy else 0) | (128 if self.armed else 0)
-
-    def landed_state(self) -> int:
-        """EXTENDED_SYS_STATE landed_state: ON_GROUND 1, IN_AIR 2, TAKEOFF 3, LANDING 4."""
-        if self.land_complete:
-            return 1
-        if self.mode is Mode.LAND:
-            return 4
-        return 3 if self._taking_off else 2
 
     def setpoint_driven(self) -> bool:
         """Armed and flying guided attitude targets (lockstep follows these vehicles)."""
@@ -277,51 +239,6 @@ class ArduCopter(CopterFlight):
     def land(self, now_s: float, obs: Observation) -> MavResult:
         """MAV_CMD_NAV_LAND: the LAND mode."""
         return self.set_mode(now_s, obs, Mode.LAND)
-
-    # --- guided targets ------------------------------------------------------------------------
-
-    def on_attitude_target(self, now_s: float, obs: Observation, target: AngleTarget | None
-                           ) -> bool:
-        """A SET_ATTITUDE_TARGET in a guided mode (None: invalid, which stops a GUIDED vehicle;
-        GUIDED_NOGPS keeps flying its last target). Ignored elsewhere. True if used."""
-        if self.mode not in GUIDED_MODES:
-            return False
-        if target is None:
-            if self.mode is Mode.GUIDED:
-                self._stop_guided(obs)
-            return False
-        self.setpoint = target
-        self._setpoint_s = now_s
-        self._expiry_counted = False
-        if not self.angle_control:
-            self.angle_control = True
-            self._z_ref_m = obs.position_enu_m[2]
-        self._velocity_target_s = None
-        self._taking_off = ""
-        self.deadline_s = now_s + self.params["GUID_TIMEOUT"]
-        self._fly_angle(now_s, obs, 0.0)
-        return True
-
-    def on_position_target(self, now_s: float, obs: Observation, target: PositionTarget | None,
-                           velocity_only: bool = False) -> bool:
-        """A SET_POSITION_TARGET_* in GUIDED, already in team ENU (None: invalid, stops).
-        ``velocity_only`` targets time out after GUID_TIMEOUT. GUIDED_NOGPS and other modes
-        ignore them. True if used."""
-        if self.mode is not Mode.GUIDED:
-            return False
-        if target is None:
-            self._stop_guided(obs)
-            return False
-        self.angle_control = False
-        self._taking_off = ""
-        self._velocity_target_s = now_s if velocity_only else None
-        if velocity_only:
-            self.deadline_s = now_s + self.params["GUID_TIMEOUT"]
-        if self._grounded():
-            return True  # taken, but a landed vehicle waits for a takeoff (ArduPilot)
-        self._braking = False
-        self._set(target)
-        return True
 
     # --- the tick ------------------------------------------------------------------------------
 
