@@ -11,11 +11,16 @@ from types import TracebackType
 
 import numpy as np
 
-from gcs.link.bulk import MAX_BATCH_DATAGRAMS, BatchCallback, BulkReader, bind_bulk_socket
+from gcs.link.bulk import (
+    MAX_BATCH_DATAGRAMS,
+    Address,
+    BatchCallback,
+    BulkReader,
+    bind_bulk_socket,
+)
 
 logger = logging.getLogger(__name__)
 
-Address = tuple[str, int]
 DatagramCallback = Callable[[bytes, Address], None]
 
 #: Bytes the transport may hold unsent before send() drops (a healthy UDP socket holds none).
