@@ -17,6 +17,7 @@ from gcs.link import (
     VehicleProxy,
 )
 from gcs.link.enums import MSG_ID, MavCmd, MavModeFlag
+from gcs.link.samples import GlobalPosition
 from gcs.mission.autopilots import AutopilotProfile, ModeSpec, version_text
 from gcs.mission.machine import MissionMachine
 from gcs.mission.plan import Cmd, Command, CommandResult
@@ -161,7 +162,5 @@ class Commander:
     def takeoff_amsl_m(p: VehicleProxy, altitude_m: float) -> float:
         """PX4 NAV_TAKEOFF wants AMSL: home AMSL (GLOBAL_POSITION_INT alt - relative_alt) + alt;
         NaN (the autopilot's MIS_TAKEOFF_ALT) when the vehicle sent no global position."""
-        gpi = p.latest("GLOBAL_POSITION_INT")
-        if gpi is None:
-            return math.nan
-        return (gpi.msg.alt - gpi.msg.relative_alt) * 1e-3 + altitude_m
+        gpi = p.sample(GlobalPosition)
+        return math.nan if gpi is None else gpi.home_amsl_m + altitude_m

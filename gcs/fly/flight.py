@@ -66,6 +66,7 @@ from gcs.link import (
 )
 from gcs.link.config import shared_ports
 from gcs.link.enums import MSG_ID, MavCmd
+from gcs.link.samples import GpsGlobalOrigin, Heartbeat, HomePosition
 from gcs.mission.machine import MissionMachine
 from gcs.mission.plan import EXIT_ABORTED, Outcome, Phase
 
@@ -264,12 +265,12 @@ class Flight:
                     continue
                 origin, source = None, ""
                 try:
-                    if (gpo := p.latest("GPS_GLOBAL_ORIGIN")) is not None:
-                        origin, source = origin_from_gps_global_origin(gpo.msg), "GPS_GLOBAL_ORIGIN"
-                    elif (home := p.latest("HOME_POSITION")) is not None and requests[i] >= 2:
+                    if (gpo := p.sample(GpsGlobalOrigin)) is not None:
+                        origin, source = origin_from_gps_global_origin(gpo), "GPS_GLOBAL_ORIGIN"
+                    elif (home := p.sample(HomePosition)) is not None and requests[i] >= 2:
                         # GPS_GLOBAL_ORIGIN is the origin itself: HOME_POSITION's only when two
                         # requests for it went unanswered
-                        origin, source = origin_from_home_position(home.msg), "HOME_POSITION"
+                        origin, source = origin_from_home_position(home), "HOME_POSITION"
                 except ValueError as exc:
                     self.ties.refuse(i, f"malformed origin: {exc}")
                     continue
@@ -277,7 +278,7 @@ class Flight:
                     line = self.ties.tie(i, origin, source)
                     logger.log(logging.INFO if self.ties.ties[i] is not None else logging.WARNING,
                                "%s", line)
-                elif (self.machine.phase is not Phase.CONNECT and p.latest("HEARTBEAT") is not None
+                elif (self.machine.phase is not Phase.CONNECT and p.sample(Heartbeat) is not None
                       and loop.time() - asked[i] >= 1.0):  # asked once the team is connected
                     asked[i] = loop.time()
                     requests[i] += 1

@@ -13,27 +13,28 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
 
 from gcs import frames
 from gcs.geodesy import FrameTie, Geodetic, TeamFrame
+from gcs.link.samples import GpsGlobalOrigin, HomePosition
 
 #: The problem text of a vehicle whose origin has not arrived (yet).
 WAITING = "no origin yet (GPS_GLOBAL_ORIGIN or HOME_POSITION)"
 
 
-def origin_from_gps_global_origin(msg: Any) -> Geodetic:
+def origin_from_gps_global_origin(origin: GpsGlobalOrigin) -> Geodetic:
     """GPS_GLOBAL_ORIGIN -> the vehicle's EKF origin (raises ValueError for a bad one)."""
-    return Geodetic(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
+    return Geodetic(origin.latitude_deg, origin.longitude_deg, origin.altitude_amsl_m)
 
 
-def origin_from_home_position(msg: Any) -> Geodetic:
+def origin_from_home_position(home_position: HomePosition) -> Geodetic:
     """HOME_POSITION -> the EKF origin: home's geodetic position moved back by home's local
     position (x, y, z NED [m], relative to the origin)."""
-    home = Geodetic(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
-    local_home_enu = frames.enu_from_ned(np.array([msg.x, msg.y, msg.z], dtype=float))
+    hp = home_position
+    home = Geodetic(hp.latitude_deg, hp.longitude_deg, hp.altitude_amsl_m)
+    local_home_enu = frames.enu_from_ned(np.array(hp.local_ned_m, dtype=float))
     if not np.isfinite(local_home_enu).all():
         raise ValueError(f"HOME_POSITION local position not finite: {local_home_enu.tolist()}")
     lat, lon, alt = TeamFrame(home).geodetic_from_enu(-local_home_enu)

@@ -25,7 +25,7 @@ from gcs.fly.delay import DelayJudge, TorqueDelayJudge
 from gcs.fly.measure import TeamSample
 from gcs.fly.origins import WAITING, TeamTies
 from gcs.link import HotTable, VehicleProxy
-from gcs.link.enums import LandedState, LinkState, MavModeFlag, mode_name
+from gcs.link.enums import LandedState, LinkState, mode_name
 from gcs.link.fastpath import (
     ATTQ,
     EXTENDED_SYS_STATE,
@@ -37,6 +37,15 @@ from gcs.link.fastpath import (
     SENSORS_HEALTH,
     SENSORS_PRESENT,
     SYS_STATUS,
+)
+from gcs.link.samples import (
+    AttitudeQuaternion,
+    ExtendedSysState,
+    GlobalPosition,
+    Heartbeat,
+    HighresImu,
+    LocalPositionNed,
+    SysStatus,
 )
 from gcs.mission.autopilots import profile_for
 from gcs.mission.safety import VehicleStatus
@@ -50,7 +59,6 @@ _LANDED = {LandedState.ON_GROUND: True, LandedState.IN_AIR: False, LandedState.T
 _LANDED_BY_VALUE = {int(k): v for k, v in _LANDED.items()}
 _LANDED_STATES = frozenset(int(s) for s in LandedState)
 _LINK_TEXT = {state: state.value for state in LinkState}  # Enum.value is a slow descriptor
-_ARMED_BIT = int(MavModeFlag.SAFETY_ARMED)  # a plain int: IntFlag arithmetic costs microseconds
 
 
 def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
@@ -83,30 +91,27 @@ def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
         need_p = need_a = need_f = range(n)
     for i in need_p:
         p = proxies[i]
-        lpn = p.latest("LOCAL_POSITION_NED")
+        lpn = p.sample(LocalPositionNed)
         if lpn is not None:
-            m = lpn.msg
-            pos[i] = (m.x, m.y, m.z)
-            vel[i] = (m.vx, m.vy, m.vz)
+            pos[i] = lpn.position_ned_m
+            vel[i] = lpn.velocity_ned_mps
             prx[i] = lpn.rx_time_s
-            ptaken[i] = p.clock.sample_time_s(m.time_boot_ms * 1e-3, lpn.rx_time_s)
+            ptaken[i] = p.clock.sample_time_s(lpn.time_boot_s, lpn.rx_time_s)
     for i in need_a:
         p = proxies[i]
-        aq = p.latest("ATTITUDE_QUATERNION")
+        aq = p.sample(AttitudeQuaternion)
         if aq is not None:
-            m = aq.msg
-            quat = (m.q1, m.q2, m.q3, m.q4)
+            quat = aq.quaternion_wxyz
             if all(math.isfinite(x) for x in quat) and sum(x * x for x in quat) > 1e-6:
                 q[i] = quat
                 have_q[i] = True
-            rates[i] = (m.rollspeed, m.pitchspeed, m.yawspeed)
+            rates[i] = aq.rates_frd_radps
             arx[i] = aq.rx_time_s
-            ataken[i] = p.clock.sample_time_s(m.time_boot_ms * 1e-3, aq.rx_time_s)
+            ataken[i] = p.clock.sample_time_s(aq.time_boot_s, aq.rx_time_s)
     for i in need_f:
-        imu = proxies[i].latest("HIGHRES_IMU")
+        imu = proxies[i].sample(HighresImu)
         if imu is not None:
-            m = imu.msg
-            force[i] = (m.xacc, m.yacc, m.zacc)
+            force[i] = imu.specific_force_frd_mps2
             irx[i] = imu.rx_time_s
     rot = frames.rotation_enu_flu_from_mavlink_quat(q)
     rot[~have_q] = np.nan
@@ -276,20 +281,18 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
     problems = ties.problems if ties is not None else None
     for j, i in enumerate(which):
         p = proxies[i]
-        hb = p.latest("HEARTBEAT")
+        hb = p.sample(Heartbeat)
         armed, mode, autopilot, vtype = False, "", 0, 0
         if hb is not None:
-            m = hb.msg
-            armed = bool(int(m.base_mode) & _ARMED_BIT)
-            autopilot, vtype = int(m.autopilot), int(m.type)
-            mode = _mode_text(autopilot, int(m.custom_mode))
+            armed, autopilot, vtype = hb.armed, hb.autopilot, hb.vehicle_type
+            mode = _mode_text(autopilot, hb.custom_mode)
         fields, got = (misc[j], have[j]) if misc is not None and have is not None and \
             p.slot == i else (None, None)
         landed_raw: int | None = None
         if got is not None and got[EXTENDED_SYS_STATE]:
             landed_raw = int(fields[LANDED_STATE])
-        elif (ess := p.latest("EXTENDED_SYS_STATE")) is not None:
-            landed_raw = int(ess.msg.landed_state)
+        elif (ess := p.sample(ExtendedSysState)) is not None:
+            landed_raw = ess.landed_state
         landed, landed_state = None, 0
         if landed_raw is not None:
             landed_state = landed_raw if landed_raw in _LANDED_STATES else 0
@@ -297,9 +300,8 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
         sensors: tuple[int, int] | None = None
         if got is not None and got[SYS_STATUS]:
             sensors = (int(fields[SENSORS_PRESENT]), int(fields[SENSORS_HEALTH]))
-        elif (sys_status := p.latest("SYS_STATUS")) is not None:
-            sensors = (int(sys_status.msg.onboard_control_sensors_present),
-                       int(sys_status.msg.onboard_control_sensors_health))
+        elif (sys_status := p.sample(SysStatus)) is not None:
+            sensors = (sys_status.sensors_present, sys_status.sensors_health)
         prearm_ok = None
         if sensors is not None and sensors[0] & PREARM_CHECK_BIT:
             prearm_ok = bool(sensors[1] & PREARM_CHECK_BIT)
@@ -307,8 +309,8 @@ def vehicle_statuses(proxies: Sequence[VehicleProxy], ids: Sequence[int], sample
         height = math.nan
         if got is not None and got[GLOBAL_POSITION_INT]:
             height = fields[RELATIVE_ALT_M]
-        elif (gpi := p.latest("GLOBAL_POSITION_INT")) is not None:
-            height = float(gpi.msg.relative_alt) * 1e-3
+        elif (gpi := p.sample(GlobalPosition)) is not None:
+            height = gpi.height_above_home_m
         problem = problems[i] if problems is not None else None
         out.append(VehicleStatus(
             vehicle_id=ids[i], sysid=p.config.sysid, link=_LINK_TEXT[p.link_state()],

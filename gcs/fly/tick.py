@@ -48,6 +48,7 @@ from gcs.fly.stats import TickStats, log_due
 from gcs.fly.telemetry import StatusSlices, team_sample, vehicle_statuses
 from gcs.fly.telemetry import warm_up as sample_warm_up
 from gcs.link import HotTable, VehicleProxy, fastpath
+from gcs.link.samples import AttitudeTarget
 from gcs.metrics import formation_error, formation_error_m
 from gcs.mission.machine import MissionMachine
 from gcs.mission.plan import Phase
@@ -436,8 +437,8 @@ class HoverStart:
             if p.slot == i and hot.count[i, fastpath.ATTITUDE_TARGET] > 0:  # no decode per tick
                 self.thrust.add(i, float(hot.rx_s[i, fastpath.ATTITUDE_TARGET]),
                                 float(hot.misc[i, fastpath.TARGET_THRUST]))
-            elif (at := p.latest("ATTITUDE_TARGET")) is not None:
-                self.thrust.add(i, at.rx_time_s, float(at.msg.thrust))
+            elif (at := p.sample(AttitudeTarget)) is not None:
+                self.thrust.add(i, at.rx_time_s, at.thrust)
 
     def initial_mass(self, sample: TeamSample, now_s: float) -> bool:
         """At the formation start: mhat_i(0) from the hover of each `mhat: from_hover` vehicle,

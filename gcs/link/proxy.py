@@ -29,6 +29,7 @@ from gcs.link.fastpath import TABLE_NAMES, HotRow, HotTable
 from gcs.link.inbox import Inbox
 from gcs.link.liveness import LIVENESS_COUNTERS, LinkLiveness
 from gcs.link.port import MavlinkPort, PortStats
+from gcs.link.samples import S
 from gcs.link.setpoints import SETPOINT_COUNTERS, VehicleSetpoints
 from gcs.link.statustext import StatusTextLog
 from gcs.link.telemetry import (
@@ -208,14 +209,14 @@ class VehicleProxy:
         unknown = self.port.unknown_sysids()
         return min(unknown) if unknown else None
 
-    @property
-    def shared_port(self) -> bool:
-        """The GCS port serves other vehicles too."""
-        return self.port.shared
-
     def latest(self, kind: str) -> Received | None:
-        """Latest accepted message of type ``kind`` (e.g. 'ATTITUDE') with its receive time."""
+        """Latest accepted message of type ``kind`` (pymavlink's; above the link: `sample`)."""
         return self._inbox.latest(kind)
+
+    def sample(self, kind: type[S]) -> S | None:
+        """The latest accepted ``kind.MESSAGE`` as a typed sample (gcs.link.samples)."""
+        got = self._inbox.latest(kind.MESSAGE)
+        return None if got is None else kind.from_message(got.msg, got.rx_time_s)
 
     @property
     def slot(self) -> int | None:

@@ -91,7 +91,7 @@ def test_one_port_serves_three_vehicles_each_at_its_own_learned_address(
                 await proxy.wait_heartbeat(timeout_s=2.0)
             # THEN each proxy learned its own vehicle's address
             assert [p.remote for p in proxies] == [peer.address for peer in peers]
-            assert all(p.remote_learned and p.shared_port for p in proxies)
+            assert all(p.remote_learned and p.port.shared for p in proxies)
             # AND a command to each reaches that vehicle only, and is acknowledged by it
             for proxy in proxies:
                 assert await proxy.commands.arm() == MavResult.ACCEPTED

@@ -29,6 +29,7 @@ PURE = {
     "gcs/link/clock.py": "a vehicle's clock and true sample times",
     "gcs/link/enums.py": "MAVLink enumerations and mode encodings",
     "gcs/link/liveness.py": "link and HEARTBEAT staleness, every time an argument",
+    "gcs/link/samples.py": "typed samples of the messages read above the link",
     "flightkit/physics.py": "the rigid-body model both programs simulate",
     "flightkit/fleet_protocol.py": "the emulator fleet's ready line",
     "vehicle_emulator/physics/plant.py": "the fleet's physics step: inner loops, mixer, motors, RK4",
@@ -269,6 +270,33 @@ def oversized(paths: list[Path]) -> list[str]:
                 if size > MAX_CLASS_LINES:
                     found.append(f"{path.name}: class {node.name} {size} lines")
     return found
+
+
+def message_reads(path: Path) -> list[str]:
+    """Where a module reads a pymavlink message: ``x.msg`` or ``proxy.latest("TYPE")`` (the
+    link's untyped view), as "file:line"."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Attribute) and node.attr == "msg" or (
+                isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                and node.func.attr == "latest" and node.args
+                and isinstance(node.args[0], ast.Constant)):
+            found.append(f"{path.name}:{node.lineno}")
+    return found
+
+
+def test_pymavlink_messages_stop_at_the_link():
+    # the layers above gcs.link read typed samples (gcs.link.samples), never a pymavlink object
+    above = [p for p in (ROOT / "gcs").rglob("*.py") if "link" not in p.relative_to(ROOT).parts]
+    assert [hit for p in above for hit in message_reads(p)] == []
+    assert not importers("gcs", {"pymavlink"}).keys() - {
+        str(p.relative_to(ROOT)) for p in (ROOT / "gcs" / "link").glob("*.py")}
+
+
+def test_the_message_read_check_can_fail(tmp_path):
+    bad = tmp_path / "reader.py"
+    bad.write_text("def f(p):\n    return p.latest('HEARTBEAT').msg.base_mode\n")
+    assert message_reads(bad) == ["reader.py:2", "reader.py:2"]
 
 
 def test_no_module_of_the_programs_is_over_600_lines_nor_a_class_over_300():

@@ -661,8 +661,8 @@ async def _sample_before_the_imu() -> None:
                 break
         assert table.count[0, IMU] == 0
         asked: list[str] = []
-        latest = p.latest
-        p.latest = lambda kind: (asked.append(kind), latest(kind))[1]  # type: ignore[method-assign]
+        sample = p.sample
+        p.sample = lambda kind: (asked.append(kind.MESSAGE), sample(kind))[1]  # type: ignore[method-assign]
         # WHEN the tick takes the team's sample
         s = team_sample([p], time.monotonic(), table=table)
         # THEN position and attitude come from the table's arrays (ENU/FLU), and only the

@@ -16,6 +16,7 @@ from gcs.fly.origins import (
     origin_from_home_position,
 )
 from gcs.geodesy import PX4_SITL_HOME, Geodetic, TeamFrame
+from gcs.link.samples import GpsGlobalOrigin, HomePosition
 from vehicle_emulator.physics import geodesy as emu_geodesy
 
 HOME = Geodetic(*PX4_SITL_HOME)
@@ -32,8 +33,10 @@ def test_the_origin_from_home_position_is_the_origin_from_gps_global_origin():
     # 0.2 m up (x, y, z NED of home relative to the origin)
     o_lat, o_lon, o_alt = _int_geodetic([40.0, -25.0, 0.0])
     h_lat, h_lon, h_alt = _int_geodetic([43.0, -25.0, 0.2])
-    gpo = SimpleNamespace(latitude=o_lat, longitude=o_lon, altitude=o_alt)
-    home = SimpleNamespace(latitude=h_lat, longitude=h_lon, altitude=h_alt, x=0.0, y=3.0, z=-0.2)
+    gpo = GpsGlobalOrigin.from_message(
+        SimpleNamespace(latitude=o_lat, longitude=o_lon, altitude=o_alt), 0.0)
+    home = HomePosition.from_message(SimpleNamespace(
+        latitude=h_lat, longitude=h_lon, altitude=h_alt, x=0.0, y=3.0, z=-0.2), 0.0)
     # THEN both give the same origin, and the team frame puts it where it is (the 1e-7 deg
     # encoding is 1 cm)
     team = TeamFrame(HOME)
@@ -67,7 +70,8 @@ def test_ties_offset_positions_and_refuse_far_origins():
 
 
 def test_a_malformed_origin_message_is_a_problem_not_a_crash():
-    bad = SimpleNamespace(latitude=10 ** 10, longitude=0, altitude=0)
+    bad = GpsGlobalOrigin.from_message(SimpleNamespace(latitude=10 ** 10, longitude=0,
+                                                       altitude=0), 0.0)
     with pytest.raises(ValueError, match="lat_deg"):
         origin_from_gps_global_origin(bad)
     ties = TeamTies(TeamFrame(HOME), ["vehicle 1 (sysid 1)"], False, 1000.0)

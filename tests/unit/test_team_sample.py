@@ -18,7 +18,7 @@ class _Proxy:
     def __init__(self, slot: int | None) -> None:
         self.slot = slot
 
-    def latest(self, kind: str) -> None:
+    def sample(self, kind: type) -> None:
         return None
 
 
