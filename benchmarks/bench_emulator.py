@@ -27,7 +27,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from vehicle_emulator.testing import free_udp_port_block  # noqa: E402
+from tests.harness import free_udp_port_block  # noqa: E402
 
 
 def _team_yaml(n: int, path: Path, remote_base: int) -> None:

@@ -54,7 +54,7 @@ from gcs.mission.cascade import (  # noqa: E402
     stable_gains,
     verdict,
 )
-from vehicle_emulator.testing import free_udp_port_block  # noqa: E402
+from tests.harness import free_udp_port_block  # noqa: E402
 
 DOC = ROOT / "docs" / "benchmarks.md"
 FIGURE = ROOT / "docs" / "figures" / "bench_links.png"

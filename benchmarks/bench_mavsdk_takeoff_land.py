@@ -24,7 +24,7 @@ from mavsdk.asyncio.plugins.action import ActionAsync
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 from mavsdk.plugins.action import ActionError
 
-from vehicle_emulator.testing import free_udp_port, run_emulator_ready
+from tests.harness import free_udp_port, run_emulator_ready
 
 EXAMPLE_SLEEP_S = 10.0  # the example's asyncio.sleep(10) between takeoff and land
 

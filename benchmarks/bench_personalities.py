@@ -43,8 +43,8 @@ from flightkit import jitcache  # noqa: E402
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
 from benchmarks.docsection import write_section  # noqa: E402
+from tests.harness import free_udp_port_block  # noqa: E402
 from vehicle_emulator.calibration.replay import data_dir  # noqa: E402
-from vehicle_emulator.testing import free_udp_port_block  # noqa: E402
 
 #: the recorded flights: $SITL_DATA_DIR/flights, else the shared data folder beside the checkout
 FLIGHTS = data_dir() / "flights"

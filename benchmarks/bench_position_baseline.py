@@ -34,7 +34,7 @@ FROM_S = 30.0  # the figures' window: t >= FROM_S, as the other Scenario I figur
 
 sys.path.insert(0, str(ROOT))
 from benchmarks.docsection import write_section  # noqa: E402
-from vehicle_emulator.testing import free_udp_port_block  # noqa: E402
+from tests.harness import free_udp_port_block  # noqa: E402
 
 
 def team_on_free_ports(work: Path, duration_s: float) -> Path:

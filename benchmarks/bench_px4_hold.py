@@ -39,10 +39,10 @@ jitcache.configure()  # numba's cache, before the compiled modules below are imp
 
 from benchmarks.docsection import publish  # noqa: E402
 from gcs.mission import goto  # noqa: E402
+from tests.harness import RecordingLink  # noqa: E402
 from vehicle_emulator.calibration.replay import data_dir  # noqa: E402
 from vehicle_emulator.config.team import default_vehicle  # noqa: E402
 from vehicle_emulator.fleet.runner import Emulator  # noqa: E402
-from vehicle_emulator.testing import RecordingLink  # noqa: E402
 
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## PX4 position hold: SIH against the personality"

@@ -35,7 +35,7 @@ sys.path.insert(0, str(ROOT))
 
 from bench_sim import update_section  # noqa: E402
 
-from vehicle_emulator.testing import free_udp_port, free_udp_port_block  # noqa: E402
+from tests.harness import free_udp_port, free_udp_port_block  # noqa: E402
 
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## Start-up"

@@ -24,8 +24,7 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from vehicle_emulator.config.personality import PERSONALITIES
-from vehicle_emulator.testing import (
+from tests.harness import (
     MavClient,
     SetpointStreamer,
     free_udp_port,
@@ -33,6 +32,7 @@ from vehicle_emulator.testing import (
     rates_setpoint,
     run_emulator,
 )
+from vehicle_emulator.config.personality import PERSONALITIES
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 

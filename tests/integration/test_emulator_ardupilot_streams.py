@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 from pymavlink import mavutil
 
-from vehicle_emulator.testing import MavClient, free_udp_port, run_emulator
+from tests.harness import MavClient, free_udp_port, run_emulator
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 

@@ -19,13 +19,13 @@ import yaml
 from pymavlink.dialects.v20 import common as mavlink
 
 from flightkit.sched import EMU_RAISED_NICE, EMU_RT_PRIORITY
-from vehicle_emulator.physics.geodesy import HOME_ALT_M, HOME_LAT_DEG, HOME_LON_DEG, geodetic_to_enu
-from vehicle_emulator.testing import (
+from tests.harness import (
     clients_on_port_block,
     free_udp_port,
     free_udp_port_block,
     run_emulator,
 )
+from vehicle_emulator.physics.geodesy import HOME_ALT_M, HOME_LAT_DEG, HOME_LON_DEG, geodetic_to_enu
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 
@@ -154,7 +154,7 @@ def test_sigint_stops_a_single_vehicle_cleanly(tmp_path):
         stderr=subprocess.PIPE,
         text=True,
     )
-    from vehicle_emulator.testing import MavClient
+    from tests.harness import MavClient
 
     client = MavClient(port, target_system=2)
     try:

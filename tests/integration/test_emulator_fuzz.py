@@ -10,7 +10,7 @@ import socket
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from vehicle_emulator.testing import MavClient, free_udp_port, run_emulator
+from tests.harness import MavClient, free_udp_port, run_emulator
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 

@@ -30,8 +30,8 @@ import pytest
 import yaml
 from pymavlink.dialects.v20 import common as mavlink
 
+from tests.harness import MavClient, free_udp_port, run_emulator
 from vehicle_emulator.config.faults import REORDER_HOLD_S
-from vehicle_emulator.testing import MavClient, free_udp_port, run_emulator
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(90)]
 

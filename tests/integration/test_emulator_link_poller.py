@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
+from tests.harness import run_bounded, wait_until
 from vehicle_emulator.config.faults import LinkImpairment
 from vehicle_emulator.mavlink.server import LinkPoller, UdpLink
-from vehicle_emulator.testing import run_bounded, wait_until
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(60)]
 

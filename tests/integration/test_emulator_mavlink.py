@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
-from vehicle_emulator.testing import (
+from tests.harness import (
     PREARM_CHECK,
     MavClient,
     SetpointStreamer,

@@ -20,8 +20,8 @@ import time
 import numpy as np
 import pytest
 
+from tests.harness import free_udp_port, hover_thrust, run_emulator
 from vehicle_emulator.config.personality import DEFAULT_AUTOPILOT, PERSONALITIES
-from vehicle_emulator.testing import free_udp_port, hover_thrust, run_emulator
 
 mavsdk_asyncio = pytest.importorskip("mavsdk.asyncio")
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402

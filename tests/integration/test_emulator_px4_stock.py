@@ -14,7 +14,7 @@ import math
 import pytest
 
 from benchmarks.bench_mavsdk_takeoff_land import EXAMPLE_SLEEP_S, takeoff_and_land
-from vehicle_emulator.testing import (
+from tests.harness import (
     MavClient,
     free_udp_port,
     run_emulator,

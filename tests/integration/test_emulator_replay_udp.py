@@ -13,14 +13,14 @@ from pathlib import Path
 import pytest
 import yaml
 
-from vehicle_emulator.calibration.replay import data_dir
-from vehicle_emulator.testing import (
+from tests.harness import (
     MavClient,
     SetpointStreamer,
     free_udp_port,
     rates_setpoint,
     run_emulator,
 )
+from vehicle_emulator.calibration.replay import data_dir
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 

@@ -18,8 +18,8 @@ import pytest
 import yaml
 from pymavlink.dialects.v20 import common as mavlink
 
+from tests.harness import clients_on_port_block, free_udp_port_block
 from vehicle_emulator.physics.geodesy import geodetic_to_enu
-from vehicle_emulator.testing import clients_on_port_block, free_udp_port_block
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 

@@ -24,7 +24,7 @@ from stall_relay import StallRelay
 from test_fly_emulator import ROOT, Gcs, emulators, team_file
 
 from flightkit.fleet_protocol import READY_PREFIX
-from vehicle_emulator.testing import free_udp_port_block
+from tests.harness import free_udp_port_block
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from make_grid import team_text  # noqa: E402

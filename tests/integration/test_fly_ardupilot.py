@@ -42,7 +42,7 @@ from test_fly_confirmed import write_team
 
 from gcs.link import VehicleLinkConfig, VehicleProxy
 from gcs.link.vehicle_commands import ParamTimeoutError
-from vehicle_emulator.testing import EmulatorProcess, free_udp_port, run_emulator
+from tests.harness import EmulatorProcess, free_udp_port, run_emulator
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(150)]
 

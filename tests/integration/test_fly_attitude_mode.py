@@ -23,7 +23,7 @@ from pymavlink import mavutil
 from test_fly_ardupilot import copters, gcs_ports
 from test_fly_emulator import Gcs, emulators
 
-from vehicle_emulator.testing import free_udp_port_block
+from tests.harness import free_udp_port_block
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
 

@@ -20,7 +20,7 @@ import yaml
 from pymavlink import mavutil
 from test_fly_emulator import Gcs, emulators
 
-from vehicle_emulator.testing import MavClient, free_udp_port_block
+from tests.harness import MavClient, free_udp_port_block
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
 

@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from vehicle_emulator.testing import free_udp_port, run_emulator
+from tests.harness import free_udp_port, run_emulator
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(400)]
 

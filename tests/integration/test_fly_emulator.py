@@ -27,7 +27,7 @@ import yaml
 from pymavlink import mavutil
 
 from gcs.mission.cascade import NOMINAL_RESPONSE
-from vehicle_emulator.testing import free_udp_port_block
+from tests.harness import free_udp_port_block
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(420)]
 

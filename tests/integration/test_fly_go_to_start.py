@@ -27,7 +27,7 @@ from pymavlink import mavutil
 from test_fly_confirmed import write_team
 from test_fly_emulator import Gcs
 
-from vehicle_emulator.testing import free_udp_port_block
+from tests.harness import free_udp_port_block
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
 

@@ -12,7 +12,7 @@ import yaml
 from test_fly_confirmed import commands_sent
 from test_fly_emulator import Gcs, emulators, series, team_file
 
-from vehicle_emulator.testing import free_udp_port_block
+from tests.harness import free_udp_port_block
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
 

@@ -13,7 +13,7 @@ from pymavlink import mavutil
 from test_fly_ardupilot import copters, fly, gcs_ports, sequence, stats
 from test_fly_emulator import ORIGINS_ENU_M, Gcs, emulators, series, team_file
 
-from vehicle_emulator.testing import free_udp_port_block
+from tests.harness import free_udp_port_block
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import yaml
 
-from vehicle_emulator.testing import free_udp_port_block
+from tests.harness import free_udp_port_block
 
 ROOT = Path(__file__).resolve().parents[2]
 

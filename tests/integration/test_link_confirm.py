@@ -14,7 +14,7 @@ import pytest
 
 from gcs.link import CommandNotConfirmedError, CommandRejectedError, VehicleLinkConfig, VehicleProxy
 from gcs.link.enums import MavCmd, MavModeFlag, MavResult, mode_name, px4_custom_mode
-from vehicle_emulator.testing import run_emulator
+from tests.harness import run_emulator
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 

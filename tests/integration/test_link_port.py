@@ -20,7 +20,7 @@ from gcs.link import MavlinkPort, VehicleLinkConfig, VehicleProxy
 from gcs.link.commands import CommandRejectedError
 from gcs.link.enums import LinkState, MavResult
 from gcs.link.udp import Address
-from vehicle_emulator.testing import (
+from tests.harness import (
     EmulatorProcess,
     UdpPeer,
     free_udp_port,

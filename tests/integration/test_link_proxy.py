@@ -22,8 +22,8 @@ from gcs.link.proxy import VehicleProxy
 from gcs.link.setpoints import SetpointError
 from gcs.link.tlog import TlogWriter
 from gcs.link.udp import Address, LinkClosedError
-from vehicle_emulator.testing import UdpPeer, wait_until
-from vehicle_emulator.testing import run_bounded as run
+from tests.harness import UdpPeer, wait_until
+from tests.harness import run_bounded as run
 
 pytestmark = pytest.mark.integration
 

@@ -11,8 +11,8 @@ from pymavlink import mavutil
 
 from gcs.link.codec import MavlinkCodec
 from gcs.link.udp import Address, LinkClosedError, UdpEndpoint
-from vehicle_emulator.testing import run_bounded as run
-from vehicle_emulator.testing import wait_until
+from tests.harness import run_bounded as run
+from tests.harness import wait_until
 
 pytestmark = pytest.mark.integration
 

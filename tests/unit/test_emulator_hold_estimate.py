@@ -13,10 +13,10 @@ from dataclasses import replace
 import numpy as np
 from pymavlink.dialects.v20 import common as mavlink
 
+from tests.harness import RecordingLink, run_until
 from vehicle_emulator.config.team import default_vehicle
 from vehicle_emulator.fleet.runner import Emulator
 from vehicle_emulator.mavlink.codec import PeerDecoder
-from vehicle_emulator.testing import RecordingLink, run_until
 
 GCS = mavlink.MAVLink(None, srcSystem=245, srcComponent=190)
 

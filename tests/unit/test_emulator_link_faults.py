@@ -15,11 +15,11 @@ from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink
 
 from gcs.config import ConfigError, PacketLossFault, describe, team_from_dict, team_to_dict
+from tests.harness import RecordingLink, run_until
 from vehicle_emulator.config.faults import REORDER_HOLD_S, Jitter, LinkImpairment
 from vehicle_emulator.config.team import FaultSpec, TeamFileError, default_vehicle, parse_team
 from vehicle_emulator.fleet.runner import Emulator
 from vehicle_emulator.mavlink.codec import PeerDecoder
-from vehicle_emulator.testing import RecordingLink, run_until
 
 SQUARE4 = Path(__file__).resolve().parents[2] / "configs" / "square4.yaml"
 GCS = mavlink.MAVLink(None, srcSystem=245, srcComponent=190)

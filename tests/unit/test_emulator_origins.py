@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from tests.harness import RecordingLink, run_until
 from vehicle_emulator.config.team import TeamFileError, default_vehicle, parse_team
 from vehicle_emulator.fleet.runner import Emulator
 from vehicle_emulator.physics.geodesy import (
@@ -20,7 +21,6 @@ from vehicle_emulator.physics.geodesy import (
     enu_to_geodetic,
     geodetic_to_enu,
 )
-from vehicle_emulator.testing import RecordingLink, run_until
 
 E2 = WGS84_F * (2.0 - WGS84_F)
 

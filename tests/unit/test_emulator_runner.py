@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
+from tests.harness import RecordingLink, run_until
 from vehicle_emulator.config.faults import LinkImpairment
 from vehicle_emulator.config.team import FaultSpec, default_vehicle
 from vehicle_emulator.fleet.runner import Emulator
 from vehicle_emulator.mavlink.codec import PeerDecoder
 from vehicle_emulator.mavlink.telemetry import DEFAULT_RATES_HZ
-from vehicle_emulator.testing import RecordingLink, run_until
 
 ROOT = Path(__file__).resolve().parents[2]
 GCS = mavlink.MAVLink(None, srcSystem=245, srcComponent=190)

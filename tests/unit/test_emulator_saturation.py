@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
+from tests.harness import RecordingLink, run_until
 from vehicle_emulator.config.team import VehicleSpec
 from vehicle_emulator.fleet.runner import Emulator
 from vehicle_emulator.mavlink.codec import PeerDecoder
-from vehicle_emulator.testing import RecordingLink, run_until
 
 GCS = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
 # configs/square4.yaml's vehicles 3 and 2 (Table I): the light one and the low yaw authority one

@@ -7,11 +7,11 @@ from dataclasses import replace
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
+from tests.harness import RecordingLink, run_until
 from vehicle_emulator.config.team import default_vehicle
 from vehicle_emulator.fleet.runner import Emulator
 from vehicle_emulator.mavlink.codec import PeerDecoder
 from vehicle_emulator.mavlink.telemetry import DEFAULT_RATES_HZ
-from vehicle_emulator.testing import RecordingLink, run_until
 
 GCS = mavlink.MAVLink(None, srcSystem=245, srcComponent=190)
 
