@@ -8,7 +8,7 @@ their last torque), telemetry age p99, and the largest inertia estimate against 
 inertia of the same vehicle. Writes the "## Actuators mode beside two busy loops" section of
 docs/benchmarks.md.
 
-    python benchmarks/bench_actuators_busy.py [--runs 4] [--duration-s 32] [--keep DIR] [--no-write]
+    python -m benchmarks.bench_actuators_busy [--runs 4] [--duration-s 32] [--keep DIR] [--no-write]
 """
 
 from __future__ import annotations
@@ -22,11 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.bench_fly import run
+from benchmarks.bench_load import busy_processes, case_team
+from benchmarks.docsection import publish
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-from benchmarks.bench_fly import run  # noqa: E402
-from benchmarks.bench_load import busy_processes, case_team  # noqa: E402
-from benchmarks.docsection import publish  # noqa: E402
 
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## Actuators mode beside two busy loops"
@@ -61,7 +61,7 @@ def section(rows: list[dict], duration_s: float, busy: int) -> str:
     gains = next((r["fig"]["gains"] for r in rows if "fig" in r), "-")
     lines = [
         HEADING, "",
-        f"`python benchmarks/bench_actuators_busy.py` on {platform.machine()}, "
+        f"`python -m benchmarks.bench_actuators_busy` on {platform.machine()}, "
         f"{os.cpu_count()} CPU(s), Python {platform.python_version()}: Scenario I in actuators "
         f"mode at 250 Hz, torque gains {gains}, {duration_s:g} s of formation per flight, "
         f"{busy} busy Python loop(s) (nice 0) beside `gcs fly` and one `vehicle-emu --fleet` "

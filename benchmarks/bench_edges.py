@@ -1,7 +1,7 @@
 """Benchmark of the per-tick graph work of `gcs fly`: one law step + the staleness rule + the
 formation error, at n = 16, 64, 240 on grid graphs (row and column neighbours, as grid16.yaml).
 
-Run: `.venv/bin/python benchmarks/bench_edges.py [--before REF] [--write docs/benchmarks.md]`.
+Run: `.venv/bin/python -m benchmarks.bench_edges [--before REF] [--write docs/benchmarks.md]`.
 Times the tick as the current tree runs it (the law on an edge list); with `--before REF` (a git
 commit whose law still took the dense weight matrix, e.g. the parent of the edge-list change) it
 also runs itself in a temporary worktree of REF and times the tick as that code ran it:
@@ -44,8 +44,12 @@ def grid_adjacency(rows: int, cols: int) -> np.ndarray:
 
 def measure(root: Path, repeat_s: float) -> list[dict[str, float]]:
     """Per grid: median and best per-tick times [us] of each part of the tick, as the code under
-    `root` runs it."""
-    sys.path.insert(0, str(root))
+    `root` runs it. The process imports `root`'s gcs: run from `root` (`python -m`), or, for
+    --before, started with `root` first on PYTHONPATH (measure_before)."""
+    import gcs
+
+    if not Path(gcs.__file__).resolve().is_relative_to(root.resolve()):
+        raise SystemExit(f"gcs is imported from {gcs.__file__}, not from {root}")
     return [time_grid(n, rows, cols, repeat_s) for n, rows, cols in GRIDS]
 
 
@@ -121,7 +125,9 @@ def time_grid(n: int, rows: int, cols: int, repeat_s: float) -> dict[str, float]
 
 
 def measure_before(ref: str, repeat_s: float) -> list[dict[str, float]]:
-    """`measure` in a temporary git worktree of `ref` (this script run there by path)."""
+    """`measure` in a temporary git worktree of `ref`: this file run by path (its folder, which
+    holds no gcs, first on the import path) with the worktree next on PYTHONPATH, so that the
+    child imports the worktree's gcs and this file's timing code."""
     with tempfile.TemporaryDirectory() as tmp:
         tree = Path(tmp) / "before"
         subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree), ref],
@@ -129,7 +135,8 @@ def measure_before(ref: str, repeat_s: float) -> list[dict[str, float]]:
         try:
             proc = subprocess.run(
                 [sys.executable, str(Path(__file__).resolve()), "--measure-root", str(tree),
-                 "--seconds", str(repeat_s)], check=True, capture_output=True, text=True)
+                 "--seconds", str(repeat_s)], check=True, capture_output=True, text=True,
+                env={**os.environ, "PYTHONPATH": str(tree)})
         finally:
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(tree)],
                            check=True, capture_output=True)
@@ -159,7 +166,7 @@ def main() -> int:
         f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python "
         f"{platform.python_version()}, load average {load:.1f} (other work on the same cores: "
         "the medians of the dense n = 240 row vary by 2x between runs). Measured by "
-        f"`python benchmarks/bench_edges.py{' --before ' + args.before if args.before else ''}`"
+        f"`python -m benchmarks.bench_edges{' --before ' + args.before if args.before else ''}`"
         + (f"; 'dense' is commit {args.before}, the law on the (n, n) weight matrix, the rule "
            "as `effective_adjacency` + `stale_neighbour_counts` and the error through the "
            "(n, n, 3) pair array." if before else "."),
@@ -195,7 +202,7 @@ def main() -> int:
         "tuple) as an argument, which is why the edge-list law step is no faster at n = 16.",
     ]
     if args.write:
-        from docsection import write_section
+        from benchmarks.docsection import write_section  # not in the --before child
 
         write_section(args.write, HEADING, HEADING + "\n" + "\n".join(lines) + "\n")
         print(f"updated {args.write}")
@@ -203,5 +210,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     sys.exit(main())

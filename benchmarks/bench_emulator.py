@@ -6,7 +6,7 @@ lateness of each loop tick against its schedule, simulated time dropped because 
 behind (0 means real time was held). A receiver process on 127.0.0.1 counts the datagrams and
 bytes that arrive and decodes a sample of them, so the figures are for telemetry actually sent.
 
-    .venv/bin/python benchmarks/bench_emulator.py [--vehicles 100] [--duration 20] [--out FILE]
+    .venv/bin/python -m benchmarks.bench_emulator [--vehicles 100] [--duration 20] [--out FILE]
 """
 
 from __future__ import annotations
@@ -24,10 +24,9 @@ from pathlib import Path
 
 import yaml
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from tests.harness import free_udp_port_block
 
-from tests.harness import free_udp_port_block  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _team_yaml(n: int, path: Path, remote_base: int) -> None:

@@ -1,6 +1,6 @@
 """The emulator fleet's own cost, sockets aside: CPU seconds per simulated second, in-process.
 
-    python benchmarks/bench_fleet_inprocess.py [ROOT ...] [--vehicles N] [--physics-rate HZ]
+    python -m benchmarks.bench_fleet_inprocess [ROOT ...] [--vehicles N] [--physics-rate HZ]
         [--tick-ms MS] [--autopilot px4|ardupilot|nominal] [--seconds S] [--gcs-streams]
         [--streams default|requested]
 
@@ -28,10 +28,11 @@ from pathlib import Path
 # bench_fleet_sockets.py sends these
 GCS_RATES_HZ = {31: 100.0, 32: 100.0, 105: 100.0, 245: 5.0, 83: 10.0, 33: 5.0, 30: 0.0, 331: 0.0}
 
+# run by `python -c` with the checkout as its working directory: `-c` puts the working
+# directory first on the import path, so the child imports that checkout's packages
 _CHILD = r'''
 import json, sys, time
-sys.path.insert(0, sys.argv[1])
-cfg = json.loads(sys.argv[2])
+cfg = json.loads(sys.argv[1])
 from flightkit import jitcache
 jitcache.configure()
 from vehicle_emulator.fleet.runner import Emulator
@@ -77,7 +78,7 @@ def measure(root: Path, vehicles: int, physics_rate_hz: float, tick_ms: float, a
     cfg = {"vehicles": vehicles, "physics_rate_hz": physics_rate_hz, "tick_s": tick_ms * 1e-3,
            "autopilot": autopilot, "seconds": seconds,
            "streams": GCS_RATES_HZ if gcs_streams else {}, "stream_mode": stream_mode}
-    out = subprocess.run([sys.executable, "-c", _CHILD, str(root), json.dumps(cfg)],
+    out = subprocess.run([sys.executable, "-c", _CHILD, json.dumps(cfg)], cwd=root,
                          capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 

@@ -1,6 +1,6 @@
 """The emulator fleet from 16 to 240 vehicles at 1 kHz physics, before and after: docs section.
 
-    python benchmarks/bench_fleet_scaling.py [--before DIR] [--sizes 16,64,144,240]
+    python -m benchmarks.bench_fleet_scaling [--before DIR] [--sizes 16,64,144,240]
         [--seconds S] [--no-doc]
 
 For each fleet size: ``bench_fleet_inprocess.py`` (no sockets; the streams `gcs fly` asks for)
@@ -19,14 +19,11 @@ import platform
 import sys
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
+from benchmarks import bench_fleet_inprocess as inproc
+from benchmarks import bench_fleet_sockets as sockets
+from benchmarks.docsection import write_section
 
-import bench_fleet_inprocess as inproc  # noqa: E402
-import bench_fleet_sockets as sockets  # noqa: E402
-from docsection import write_section  # noqa: E402
-
-ROOT = HERE.parent
+ROOT = Path(__file__).resolve().parents[1]
 HEADING = "## Emulator fleet at 1 kHz"
 ANALYSIS = """
 Where the time goes at 240 vehicles (cProfile of the fleet under this load, and
@@ -117,7 +114,7 @@ def main(argv: list[str]) -> int:
     load_text = "" if args.rows else f" (load average {load[0]:.1f} at the end)"
     text = f"""{HEADING}
 
-`python benchmarks/bench_fleet_scaling.py --before DIR` on {platform.machine()}, {os.cpu_count()} CPU(s), Python {platform.python_version()}: px4 personality, physics at 1 kHz (`sim.plant_rate_hz` 1000: one RK4 step per millisecond, stepped in whole steps to the clock every 2 ms tick), vehicles in the air on a grid, {args.seconds:g} s measured per run. **No sockets**: `bench_fleet_inprocess.py --gcs-streams` (simulation, autopilots, telemetry building; links discarded), CPU per simulated second and the real-time factor that CPU alone would allow. **Sockets**: `bench_fleet_sockets.py`: one `vehicle-emu --fleet` process whose vehicles all send to ONE ground-station port, driven by a stand-in for `gcs fly --mode rates` in another process (MAV_CMD_SET_MESSAGE_INTERVAL for what gcs fly asks (gcs/fly/setup.py): ATTITUDE_QUATERNION, LOCAL_POSITION_NED, HIGHRES_IMU 100 Hz, ATTITUDE_TARGET 10, EXTENDED_SYS_STATE, GLOBAL_POSITION_INT, HEARTBEAT 5, ATTITUDE and ODOMETRY off; OFFBOARD; a SET_ATTITUDE_TARGET with body rates and thrust to every vehicle every 10 ms); the fleet's CPU over the window from /proc (user + system), its real-time factor (simulated / wall seconds over its whole run), simulated time dropped, its tick lateness, the datagrams/s the ground station received, and the vehicles' mode at the end. "{args.before_label}": the checkout before this work with its default streams; "after": this one with `--streams requested`. The machine was shared with other engineers' jobs, which moves the socket figures by several points{load_text}.
+`python -m benchmarks.bench_fleet_scaling --before DIR` on {platform.machine()}, {os.cpu_count()} CPU(s), Python {platform.python_version()}: px4 personality, physics at 1 kHz (`sim.plant_rate_hz` 1000: one RK4 step per millisecond, stepped in whole steps to the clock every 2 ms tick), vehicles in the air on a grid, {args.seconds:g} s measured per run. **No sockets**: `bench_fleet_inprocess.py --gcs-streams` (simulation, autopilots, telemetry building; links discarded), CPU per simulated second and the real-time factor that CPU alone would allow. **Sockets**: `bench_fleet_sockets.py`: one `vehicle-emu --fleet` process whose vehicles all send to ONE ground-station port, driven by a stand-in for `gcs fly --mode rates` in another process (MAV_CMD_SET_MESSAGE_INTERVAL for what gcs fly asks (gcs/fly/setup.py): ATTITUDE_QUATERNION, LOCAL_POSITION_NED, HIGHRES_IMU 100 Hz, ATTITUDE_TARGET 10, EXTENDED_SYS_STATE, GLOBAL_POSITION_INT, HEARTBEAT 5, ATTITUDE and ODOMETRY off; OFFBOARD; a SET_ATTITUDE_TARGET with body rates and thrust to every vehicle every 10 ms); the fleet's CPU over the window from /proc (user + system), its real-time factor (simulated / wall seconds over its whole run), simulated time dropped, its tick lateness, the datagrams/s the ground station received, and the vehicles' mode at the end. "{args.before_label}": the checkout before this work with its default streams; "after": this one with `--streams requested`. The machine was shared with other engineers' jobs, which moves the socket figures by several points{load_text}.
 
 | vehicles | version | no sockets: CPU of one core | no sockets: max real-time factor | sockets: CPU of one core (user + sys) | sockets: real-time factor | dropped | tick lateness mean / p99 | datagrams/s to the GCS | at the end |
 |---|---|---|---|---|---|---|---|---|---|

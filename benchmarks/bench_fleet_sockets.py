@@ -1,6 +1,6 @@
 """The emulator fleet over real sockets, driven like `gcs fly` drives it: CPU and real time.
 
-    python benchmarks/bench_fleet_sockets.py [--vehicles N] [--physics-rate HZ] [--tick-ms MS]
+    python -m benchmarks.bench_fleet_sockets [--vehicles N] [--physics-rate HZ] [--tick-ms MS]
         [--autopilot px4] [--seconds S] [--streams default|requested] [--root DIR] [--json FILE]
 
 One ``vehicle-emu --fleet`` process (checkout ``--root``, default this one) flies N vehicles
@@ -36,17 +36,14 @@ import numpy as np
 import yaml
 from pymavlink.dialects.v20 import common as mavlink
 
-HERE = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(HERE / "benchmarks"))
-sys.path.insert(0, str(HERE))
-from flightkit import jitcache  # noqa: E402
+from flightkit import jitcache
 
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
-from bench_fleet_inprocess import GCS_RATES_HZ  # noqa: E402
-
+from benchmarks.bench_fleet_inprocess import GCS_RATES_HZ  # noqa: E402
 from vehicle_emulator.mavlink.codec import BatchEncoder  # noqa: E402
 
+ROOT = Path(__file__).resolve().parents[1]
 GCS_PORT = 24550
 BIND_BASE = 24700
 SETPOINT_PERIOD_S = 0.01
@@ -275,7 +272,7 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--autopilot", default="px4")
     ap.add_argument("--seconds", type=float, default=20.0)
     ap.add_argument("--streams", default="requested", choices=("default", "requested"))
-    ap.add_argument("--root", default=str(HERE))
+    ap.add_argument("--root", default=str(ROOT))
     ap.add_argument("--profile", help="run the fleet under cProfile, writing this file")
     ap.add_argument("--json", help="append the result to this file (one JSON a line)")
     args = ap.parse_args(argv)

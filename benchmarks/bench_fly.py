@@ -2,7 +2,7 @@
 against one `vehicle-emu --fleet` process on this machine; writes the "## gcs fly" section of
 docs/benchmarks.md (tick timing, telemetry age, formation error, CPU of the GCS and the emulator).
 
-    python benchmarks/bench_fly.py [--team configs/grid16.yaml] [--duration-s 60] [--no-write]
+    python -m benchmarks.bench_fly [--team configs/grid16.yaml] [--duration-s 60] [--no-write]
 """
 
 from __future__ import annotations
@@ -17,12 +17,11 @@ import tempfile
 import time
 from pathlib import Path
 
+from benchmarks.docsection import write_section
+
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## gcs fly"
-
-sys.path.insert(0, str(ROOT))
-from benchmarks.docsection import write_section  # noqa: E402
 
 
 def run(team: Path, duration_s: float, work: Path, mode: str = "rates",
@@ -70,7 +69,7 @@ def section(r: dict, team: Path, duration_s: float) -> str:
     lines = [
         HEADING,
         "",
-        f"`python benchmarks/bench_fly.py` on {platform.machine()}, {os.cpu_count()} CPU(s), "
+        f"`python -m benchmarks.bench_fly` on {platform.machine()}, {os.cpu_count()} CPU(s), "
         f"Python {platform.python_version()}: `{team.relative_to(ROOT)}` "
         f"({len(rep['vehicles'])} vehicles), rates mode at {tick['rate_hz']:g} Hz, "
         f"{duration_s:g} s of formation, one `vehicle-emu --fleet` process on the same machine.",

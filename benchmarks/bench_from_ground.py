@@ -19,7 +19,7 @@ The last two from t = 10 s to the formation's end: the formation starts at the f
 SET_ATTITUDE_TARGET to the vehicle after its last position setpoint and lasts the report's
 time span; the landing that may follow in the same setpoints is not counted.
 
-    python benchmarks/bench_from_ground.py [--team px4 --team mixed] [--duration-s 60] [--no-write]
+    python -m benchmarks.bench_from_ground [--team px4 --team mixed] [--duration-s 60] [--no-write]
         [--keep DIR]
 
 Writes the "## From the ground, twice" section of docs/benchmarks.md (about 17 min). The team
@@ -43,6 +43,15 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from flightkit import jitcache
+
+jitcache.configure()  # numba's cache, before the compiled modules below are imported
+
+from benchmarks.docsection import write_section  # noqa: E402
+from tests.harness import free_udp_port_block  # noqa: E402
+from vehicle_emulator.calibration.replay import data_dir  # noqa: E402
+from vehicle_emulator.config.personality import ARDUPILOT_DYNAMICS  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## From the ground, twice"
@@ -59,16 +68,6 @@ SIH_FLOWN = {"fly": {"velocity_from_position_s": 0.0}}
 # where each vehicle boots (team frame ENU, on the ground): a 50 m diamond around the formation
 BOOT_XY_M = ((25.0, 0.0), (0.0, -25.0), (-25.0, 0.0), (0.0, 25.0))
 FLIGHTS = ("first", "second")
-
-sys.path.insert(0, str(ROOT))
-from flightkit import jitcache  # noqa: E402
-
-jitcache.configure()  # numba's cache, before the compiled modules below are imported
-
-from benchmarks.docsection import write_section  # noqa: E402
-from tests.harness import free_udp_port_block  # noqa: E402
-from vehicle_emulator.calibration.replay import data_dir  # noqa: E402
-from vehicle_emulator.config.personality import ARDUPILOT_DYNAMICS  # noqa: E402
 
 
 def team_file(kind: str, work: Path, duration_s: float) -> Path:
@@ -223,7 +222,7 @@ def _cell(x: float, fmt: str) -> str:
 def section(rows: list[dict], duration_s: float, heading: str = HEADING) -> str:
     lines = [
         heading, "",
-        f"`python benchmarks/bench_from_ground.py` on {platform.machine()}, Python "
+        f"`python -m benchmarks.bench_from_ground` on {platform.machine()}, Python "
         f"{platform.python_version()}: configs/square4.yaml (Scenario I) as shipped, flown by "
         "`gcs fly --team FILE` with no other option (`fly.mode: auto`), against one "
         "`vehicle-emu --fleet` whose vehicles boot on the ground on a 50 m diamond, each with "

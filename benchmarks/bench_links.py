@@ -21,7 +21,7 @@ same instant (the nominal personality reports its true state) beside the error o
 held without prediction. Writes the "## Link latency, jitter and loss" section and
 docs/figures/bench_links.png.
 
-    python benchmarks/bench_links.py [--latency-ms 0 50] [--loss 0 0.2] [--mode rates]
+    python -m benchmarks.bench_links [--latency-ms 0 50] [--loss 0 0.2] [--mode rates]
                                      [--predict on off] [--no-write]
 """
 
@@ -38,9 +38,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-from flightkit import jitcache  # noqa: E402
+from flightkit import jitcache
 
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
@@ -55,6 +53,8 @@ from gcs.mission.cascade import (  # noqa: E402
     verdict,
 )
 from tests.harness import free_udp_port_block  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
 
 DOC = ROOT / "docs" / "benchmarks.md"
 FIGURE = ROOT / "docs" / "figures" / "bench_links.png"
@@ -174,7 +174,7 @@ def _f(x: float, spec: str = ".3f") -> str:
 def section(rows: list[dict]) -> str:
     lines = [
         HEADING, "",
-        "`benchmarks/bench_links.py` (rerun: `.venv/bin/python benchmarks/bench_links.py`). "
+        "`benchmarks/bench_links.py` (rerun: `.venv/bin/python -m benchmarks.bench_links`). "
         "Scenario I (configs/square4.yaml, 60 s) flown by `gcs fly` against `vehicle-emu "
         "--fleet`, nominal personality, with every link impaired both ways from the formation's "
         f"start: the latency, 0-{JITTER_MS:g} ms uniform jitter, and the loss; with delay "

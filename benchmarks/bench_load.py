@@ -10,7 +10,7 @@ fleet one step below). Figures per case: ticks on time, lateness p99, skipped ti
 age p99 (worst vehicle), formation error at the end, and the scheduling each got. Writes the "## Ticks
 beside busy processes" section of docs/benchmarks.md.
 
-    python benchmarks/bench_load.py [--duration-s 30] [--policies normal auto] [--no-write]
+    python -m benchmarks.bench_load [--duration-s 30] [--policies normal auto] [--no-write]
 """
 
 from __future__ import annotations
@@ -27,10 +27,10 @@ from pathlib import Path
 
 import yaml
 
+from benchmarks.bench_fly import run
+from benchmarks.docsection import publish
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-from benchmarks.bench_fly import run  # noqa: E402
-from benchmarks.docsection import publish  # noqa: E402
 
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## Ticks beside busy processes"
@@ -80,7 +80,7 @@ def figures(r: dict) -> dict:
 def section(rows: list[dict], duration_s: float, busy: int) -> str:
     lines = [
         HEADING, "",
-        f"`python benchmarks/bench_load.py` on {platform.machine()}, {os.cpu_count()} CPU(s), "
+        f"`python -m benchmarks.bench_load` on {platform.machine()}, {os.cpu_count()} CPU(s), "
         f"Python {platform.python_version()}: {busy} busy Python loop(s) (one per core, nice 0) "
         f"running beside `gcs fly` and one `vehicle-emu --fleet`, {duration_s:g} s of formation "
         "per case. The policy is the ground station's `fly.scheduling` (gcs/fly/sched.py; "

@@ -7,7 +7,7 @@ API: connect, wait until connected, wait for health ``is_global_position_ok`` an
 ``is_home_position_ok``, arm, takeoff, sleep 10 s, land. Nothing is retried. Besides, the script
 records (without acting on it) when each step happened and the highest altitude reached.
 
-    python benchmarks/bench_mavsdk_takeoff_land.py --starts 10
+    python -m benchmarks.bench_mavsdk_takeoff_land --starts 10
 """
 
 from __future__ import annotations

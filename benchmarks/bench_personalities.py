@@ -12,8 +12,8 @@ velocity error at the end, mass estimate error at 10 s, and how often the body-r
 active in the formation phase. Writes the "## Emulator personalities against SITL" section of
 docs/benchmarks.md.
 
-    python benchmarks/bench_personalities.py [--autopilot px4] [--no-write]
-    python benchmarks/bench_personalities.py --autopilot px4 --mode attitude --from-hover --no-write
+    python -m benchmarks.bench_personalities [--autopilot px4] [--no-write]
+    python -m benchmarks.bench_personalities --autopilot px4 --mode attitude --from-hover --no-write
 """
 
 from __future__ import annotations
@@ -29,6 +29,14 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from flightkit import jitcache
+
+jitcache.configure()  # numba's cache, before the compiled modules below are imported
+
+from benchmarks.docsection import write_section  # noqa: E402
+from tests.harness import free_udp_port_block  # noqa: E402
+from vehicle_emulator.calibration.replay import data_dir  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## Emulator personalities against SITL"
@@ -36,15 +44,6 @@ TEAMS = {"px4": "px4/square4_px4sih.yaml", "ardupilot": "ardupilot/sitl4_relay.y
 TAKEOFF_M = 5.0
 BOOTED_S = 10.0  # the fleet runs this long before `gcs fly` starts (past every arming readiness)
 SITL_NAMES = {"px4": "PX4 v1.16.0 SIH", "ardupilot": "ArduCopter 4.7.0-dev SITL"}
-
-sys.path.insert(0, str(ROOT))
-from flightkit import jitcache  # noqa: E402
-
-jitcache.configure()  # numba's cache, before the compiled modules below are imported
-
-from benchmarks.docsection import write_section  # noqa: E402
-from tests.harness import free_udp_port_block  # noqa: E402
-from vehicle_emulator.calibration.replay import data_dir  # noqa: E402
 
 #: the recorded flights: $SITL_DATA_DIR/flights, else the shared data folder beside the checkout
 FLIGHTS = data_dir() / "flights"
@@ -169,8 +168,8 @@ def _bundled_rates_gains() -> str:
 def section(results: dict[str, dict[str, dict]]) -> str:
     lines = [
         HEADING, "",
-        "`benchmarks/bench_personalities.py` (rerun: `.venv/bin/python "
-        "benchmarks/bench_personalities.py`). Today's `gcs fly --mode rates` flies the team "
+        "`benchmarks/bench_personalities.py` (rerun: `.venv/bin/python -m "
+        "benchmarks.bench_personalities`). Today's `gcs fly --mode rates` flies the team "
         "file of each recorded SITL formation flight (the team's recordings, kept outside this "
         "repository) against "
         "`vehicle-emu` with that autopilot's personality and with `nominal`; the first row of "

@@ -5,7 +5,7 @@ position baseline (`--mode position`: each vehicle's formation slot as a positio
 PX4's own loops, no estimation); writes the side-by-side table into the "## Law against the
 position baseline" section of docs/benchmarks.md.
 
-    python benchmarks/bench_position_baseline.py [--duration-s 60] [--no-write]
+    python -m benchmarks.bench_position_baseline [--duration-s 60] [--no-write]
 
 Each flight gets a fresh `vehicle-emu --fleet` (its px4 personality, every vehicle booted in
 the air at its start with its own EKF origin, as `make demo` flies it) on free loopback ports.
@@ -25,16 +25,15 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from benchmarks.docsection import write_section
+from tests.harness import free_udp_port_block
+
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## Law against the position baseline"
 TEAM = ROOT / "configs" / "square4.yaml"
 MODES = ("rates", "position")
 FROM_S = 30.0  # the figures' window: t >= FROM_S, as the other Scenario I figures
-
-sys.path.insert(0, str(ROOT))
-from benchmarks.docsection import write_section  # noqa: E402
-from tests.harness import free_udp_port_block  # noqa: E402
 
 
 def team_on_free_ports(work: Path, duration_s: float) -> Path:
@@ -115,7 +114,7 @@ def section(results: dict[str, dict], duration_s: float) -> str:
     return "\n".join([
         HEADING,
         "",
-        f"`python benchmarks/bench_position_baseline.py --duration-s {duration_s:g}` on "
+        f"`python -m benchmarks.bench_position_baseline --duration-s {duration_s:g}` on "
         f"{platform.machine()}, {os.cpu_count()} CPU(s), Python {platform.python_version()}: "
         "Scenario I (`configs/square4.yaml` as shipped, on free ports) flown twice in one run, "
         "`gcs fly --emulators --end-action hold` against the px4 personality (PX4 v1.16.0's "

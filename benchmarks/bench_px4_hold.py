@@ -16,7 +16,7 @@ settles after the setpoints came to rest, by the still rule alone (the rule befo
 and by both. Writes the "## PX4 position hold: SIH against the personality" section of
 docs/benchmarks.md.
 
-    python benchmarks/bench_px4_hold.py [--no-write]
+    python -m benchmarks.bench_px4_hold [--no-write]
 """
 
 from __future__ import annotations
@@ -31,9 +31,7 @@ from pathlib import Path
 import numpy as np
 from pymavlink import mavutil
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-from flightkit import jitcache  # noqa: E402
+from flightkit import jitcache
 
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
@@ -43,6 +41,8 @@ from tests.harness import RecordingLink  # noqa: E402
 from vehicle_emulator.calibration.replay import data_dir  # noqa: E402
 from vehicle_emulator.config.team import default_vehicle  # noqa: E402
 from vehicle_emulator.fleet.runner import Emulator  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
 
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## PX4 position hold: SIH against the personality"
@@ -174,7 +174,7 @@ def main() -> int:
     rec_tracks, emu_tracks = recorded_tracks(), emulated_tracks(len(recorded_tracks()))
     settles = {(who, rule): settle_s(tracks, rule) for who, tracks in
                (("rec", rec_tracks), ("emu", emu_tracks)) for rule in (False, True)}
-    text = (f"{HEADING}\n\n`python benchmarks/bench_px4_hold.py` (the script's docstring says "
+    text = (f"{HEADING}\n\n`python -m benchmarks.bench_px4_hold` (the script's docstring says "
             "what is compared). Four SIH vehicles of the 2026-12-04 go-to-start flight against "
             f"four px4-personality vehicles, {HOLD_S:g} s each after the setpoint came to rest.\n\n"
             + table(figures(rec_tracks), figures(emu_tracks), settles) + "\n\n"

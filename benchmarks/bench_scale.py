@@ -3,7 +3,7 @@ GCS port), rates mode at 100 Hz, each flown against one `vehicle-emu --fleet` pr
 personality, streams only as asked) on this machine; beside each, `gcs sim` of the same team and
 gains. Writes the "## Scale" section of docs/benchmarks.md and docs/figures/bench_scale.png.
 
-    python benchmarks/bench_scale.py [--sizes 4,16,36,64,100,144,240] [--duration-s 60]
+    python -m benchmarks.bench_scale [--sizes 4,16,36,64,100,144,240] [--duration-s 60]
                                      [--no-sim] [--no-write]
 
 Figures per size: ticks on time (started <= 2 ms after the deadline), tick lateness p99, the
@@ -30,14 +30,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-ROOT = Path(__file__).resolve().parents[1]
-DOC = ROOT / "docs" / "benchmarks.md"
-FIGURE = ROOT / "docs" / "figures" / "bench_scale.png"
-HEADING = "## Scale"
-SHARED_PORT = 14550
-
-sys.path.insert(0, str(ROOT))
-from flightkit import jitcache  # noqa: E402
+from flightkit import jitcache
 
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
@@ -45,6 +38,12 @@ from benchmarks.bench_edges import time_grid  # noqa: E402
 from benchmarks.docsection import write_section  # noqa: E402
 from benchmarks.make_grid import team_text  # noqa: E402
 from gcs.control.position import phi  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+DOC = ROOT / "docs" / "benchmarks.md"
+FIGURE = ROOT / "docs" / "figures" / "bench_scale.png"
+HEADING = "## Scale"
+SHARED_PORT = 14550
 
 GRIDS = {4: (2, 2), 16: (4, 4), 36: (6, 6), 64: (8, 8), 100: (10, 10), 144: (12, 12),
          240: (15, 16)}
@@ -182,7 +181,7 @@ def _first_reason(why: str) -> str:
 def section(rows: list[dict], duration_s: float, ticks: list[tuple[float, float]]) -> str:
     lines = [
         HEADING, "",
-        f"`python benchmarks/bench_scale.py` on {platform.machine()}, {os.cpu_count()} CPU(s), "
+        f"`python -m benchmarks.bench_scale` on {platform.machine()}, {os.cpu_count()} CPU(s), "
         f"Python {platform.python_version()}: grids from `benchmarks/make_grid.py` "
         "(configs/grid240.yaml is the 15 x 16 one) behind one shared GCS port, rates mode at "
         f"100 Hz, {duration_s:g} s of formation, against one `vehicle-emu --fleet --streams "

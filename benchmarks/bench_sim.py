@@ -1,6 +1,6 @@
 """Benchmark of `gcs sim`: wall time of Scenario I (60 s of flight, 1 kHz plant and law).
 
-Run: `.venv/bin/python benchmarks/bench_sim.py [--repeat 5] [--write docs/benchmarks.md]`.
+Run: `.venv/bin/python -m benchmarks.bench_sim [--repeat 5] [--write docs/benchmarks.md]`.
 Measures the first (compiling, or loading numba's cache) run and the median of warm runs, for the
 implementable default (model-based derivatives, sampled law), the Levant variant and the
 verification mode, and the split between the law and the plant.
@@ -16,15 +16,14 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from flightkit import jitcache  # noqa: E402
+from flightkit import jitcache
 
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
 from gcs.config import load_team  # noqa: E402
 from gcs.sim.runner import SimOptions, simulate  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
 
 HEADING = "## gcs sim"
 
@@ -86,7 +85,7 @@ def main() -> int:
         "",
         "Scenario I (`configs/square4.yaml`), 60 s of flight, plant RK4 at 1 kHz, 4 vehicles; "
         f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python "
-        f"{platform.python_version()}. Measured by `python benchmarks/bench_sim.py` "
+        f"{platform.python_version()}. Measured by `python -m benchmarks.bench_sim` "
         f"(median of {args.repeat} warm runs; 'first' includes loading or compiling numba's cache).",
         "",
         "| run | first (s) | warm median (s) | best (s) | x real time | us per plant step |",

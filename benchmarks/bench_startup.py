@@ -1,6 +1,6 @@
 """Benchmark of start-up: how long each program takes to be ready, on an empty cache and a warm one.
 
-    python benchmarks/bench_startup.py [--repeat 2] [--no-write]
+    python -m benchmarks.bench_startup [--repeat 2] [--no-write]
 
 "Cold" is a new, empty HOME (so numba's, matplotlib's and pip's caches are empty: a fresh
 machine after `pip install` without `gcs compile`); "warm" runs again with the same HOME, which
@@ -30,13 +30,10 @@ from pathlib import Path
 
 import yaml
 
+from benchmarks.bench_sim import update_section
+from tests.harness import free_udp_port, free_udp_port_block
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from bench_sim import update_section  # noqa: E402
-
-from tests.harness import free_udp_port, free_udp_port_block  # noqa: E402
-
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## Start-up"
 
@@ -144,7 +141,7 @@ def section(cold: list[dict[str, float]], warm: list[dict[str, float]],
     ]
     lines = [
         "",
-        f"`python benchmarks/bench_startup.py` on {platform.machine()}, {os.cpu_count()} CPU(s), "
+        f"`python -m benchmarks.bench_startup` on {platform.machine()}, {os.cpu_count()} CPU(s), "
         f"Python {platform.python_version()}; median (range) of {len(cold)} run(s) each, in "
         "seconds. Cold: a new empty HOME (nothing compiled, as after a bare `pip install`); warm: "
         "the same HOME again (as every run after `make install`, which runs `gcs compile`).",

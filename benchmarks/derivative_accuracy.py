@@ -3,7 +3,7 @@
 Flies Scenario I with the default sampled law at 1 kHz and, at every tick, compares the model-based
 closed form (measured acceleration, the law's own mass estimate) and Levant's differentiator (28)
 with the exact oracle (true masses, T = |u|; docs/control-law.md) evaluated at the same state.
-Run: `.venv/bin/python benchmarks/derivative_accuracy.py`.
+Run: `.venv/bin/python -m benchmarks.derivative_accuracy`.
 """
 
 from __future__ import annotations
@@ -13,10 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from flightkit import jitcache  # noqa: E402
+from flightkit import jitcache
 
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
@@ -27,6 +24,8 @@ from gcs.control.formation import edge_list, reference_velocity  # noqa: E402
 from gcs.control.law import attitude_stage, position_stage  # noqa: E402
 from gcs.sim.loop import _acceleration  # noqa: E402
 from gcs.sim.runner import law_gains  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def main() -> int:

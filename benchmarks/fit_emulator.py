@@ -1,7 +1,7 @@
 """Calibration of vehicle-emu's px4 and ardupilot personalities against the recorded SITL flights.
 
-    PYTHONPATH=. .venv/bin/python benchmarks/fit_emulator.py               # the table
-    PYTHONPATH=. .venv/bin/python benchmarks/fit_emulator.py --fit         # refit, then the table
+    .venv/bin/python -m benchmarks.fit_emulator               # the table
+    .venv/bin/python -m benchmarks.fit_emulator --fit         # refit, then the table
     options: --vehicles N (8), --seed S (0), --markdown FILE (write the table)
 
 The table (docs/emulator.md, "Calibration") replays the recorded setpoint stream
@@ -37,10 +37,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from flightkit import jitcache  # noqa: E402
+from flightkit import jitcache
 
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
@@ -48,6 +45,8 @@ from vehicle_emulator.calibration import metrics as mx  # noqa: E402
 from vehicle_emulator.calibration import replay as rp  # noqa: E402
 from vehicle_emulator.config.personality import PERSONALITIES, Personality  # noqa: E402
 from vehicle_emulator.physics.plant import ControlMode, FleetPlant  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
 
 # tests/unit/test_calibration.py's tolerances (the issue's): ratio emulated / recorded
 TOLERANCE = {"t63_ms": 0.25, "peak": 0.20, "noise": 1.5}

@@ -17,21 +17,18 @@ The personality's heading error is a second-order Gauss-Markov process because o
 (`attitude_error_order` in vehicle_emulator/config/personality.py). Writes the "## PX4 heading
 estimate: the reported heading against the reported yaw rate" section of docs/benchmarks.md.
 
-    python benchmarks/fit_heading_estimate.py [--no-write]
+    python -m benchmarks.fit_heading_estimate [--no-write]
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-from flightkit import jitcache  # noqa: E402
+from flightkit import jitcache
 
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
@@ -46,6 +43,8 @@ from benchmarks.fit_velocity_consistency import (  # noqa: E402
 )
 from vehicle_emulator.calibration import replay as rp  # noqa: E402
 from vehicle_emulator.config.personality import PX4_SENSORS  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
 
 HEADING = "## PX4 heading estimate: the reported heading against the reported yaw rate"
 FORMATION = "flights/2026-12-04/px4_rates_1st/flight.tlog.gz"
@@ -129,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
     s = PX4_SENSORS
     lines = [
         HEADING, "",
-        "`python benchmarks/fit_heading_estimate.py` (the script's docstring says what is "
+        "`python -m benchmarks.fit_heading_estimate` (the script's docstring says what is "
         "compared). D(w): RMS over windows of w seconds of the reported heading's change minus "
         "the reported yaw rate's integral [deg].", "",
         "| source | " + " | ".join(f"D({w:g} s)" for w in WINDOWS_S) + " | D(5 s) / D(1 s) |",

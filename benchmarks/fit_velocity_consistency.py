@@ -16,7 +16,7 @@ figures: SIH's reported altitude holds to 0.06 m while its reported vertical vel
 0.15 m/s. Writes the "## PX4 position estimate: the
 reported position against the reported velocity" section of docs/benchmarks.md.
 
-    python benchmarks/fit_velocity_consistency.py [--no-write]
+    python -m benchmarks.fit_velocity_consistency [--no-write]
 """
 
 from __future__ import annotations
@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import gzip
-import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -32,15 +31,15 @@ from pathlib import Path
 import numpy as np
 from pymavlink import mavutil
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-from flightkit import jitcache  # noqa: E402
+from flightkit import jitcache
 
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
 from benchmarks.docsection import publish  # noqa: E402
 from vehicle_emulator.calibration import replay as rp  # noqa: E402
 from vehicle_emulator.config.personality import PX4_SENSORS  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
 
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## PX4 position estimate: the reported position against the reported velocity"
@@ -131,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     s = PX4_SENSORS
     lines = [
         HEADING, "",
-        "`python benchmarks/fit_velocity_consistency.py` (the script's docstring says what is "
+        "`python -m benchmarks.fit_velocity_consistency` (the script's docstring says what is "
         "compared). D(w): RMS over windows of w seconds of the reported position's change minus "
         "the reported velocity's integral, per axis (north / east / down) [m].", "",
         "| source | " + " | ".join(f"D({w:g} s)" for w in WINDOWS_S) + " |",

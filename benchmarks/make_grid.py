@@ -3,7 +3,7 @@ turn) on a grid graph (each vehicle talks to its row and column neighbours), 4 m
 Scenario I's reference like configs/grid16.yaml. The scale benchmark (bench_scale.py) flies
 these; configs/grid240.yaml is ``--rows 15 --cols 16 --shared-port 14550``.
 
-    python benchmarks/make_grid.py --rows 15 --cols 16 [--shared-port 14550] [--out FILE]
+    python -m benchmarks.make_grid --rows 15 --cols 16 [--shared-port 14550] [--out FILE]
 
 Links: vehicle i (sysid i) binds 14580 + i - 1 (PX4 SITL's numbering). With ``--shared-port P``
 every vehicle sends to the one GCS port P and the ground station tells them apart by sysid
@@ -40,7 +40,7 @@ HEADER = """\
 # {n} heterogeneous quadrotors (the four Table I airframes in turn) on a {rows} x {cols} grid
 # graph (each vehicle talks to its row and column neighbours: {m} edges) keep a 4 m grid while
 # tracking Scenario I's v_r(t). Positions ENU. Written by
-#   python benchmarks/make_grid.py {args}
+#   python -m benchmarks.make_grid {args}
 # and flown by benchmarks/bench_scale.py (docs/benchmarks.md, "Scale").
 #
 # Links: {links}

@@ -1,6 +1,6 @@
 """Print our Scenario I / II figures beside the reference values, as markdown tables.
 
-Run: `.venv/bin/python benchmarks/paper_tables.py` (about 10 s with numba's cache warm). The
+Run: `.venv/bin/python -m benchmarks.paper_tables` (about 10 s with numba's cache warm). The
 output is what docs/reproducing-the-paper.md shows.
 """
 
@@ -11,16 +11,15 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from flightkit import jitcache  # noqa: E402
+from flightkit import jitcache
 
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
 from gcs import metrics  # noqa: E402
 from gcs.config import load_team  # noqa: E402
 from gcs.sim.runner import SimOptions, simulate  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
 
 Z_SHIFT_M = 10.0
 REF_FE = {0: 7.07, 5: 3.14e-2, 10: 1.07e-5, 20: 1.02e-5, 30: 3.6e-6, 60: 9.4e-6}

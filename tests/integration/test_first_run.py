@@ -21,13 +21,11 @@ import pytest
 import yaml
 from pymavlink import mavutil
 from stall_relay import StallRelay
-from test_fly_emulator import ROOT, Gcs, emulators, team_file
+from test_fly_emulator import Gcs, emulators, team_file
 
+from benchmarks.make_grid import team_text
 from flightkit.fleet_protocol import READY_PREFIX
 from tests.harness import free_udp_port_block
-
-sys.path.insert(0, str(ROOT / "benchmarks"))
-from make_grid import team_text  # noqa: E402
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(300)]
 
