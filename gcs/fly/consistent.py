@@ -2,7 +2,7 @@
 
 An autopilot's estimator reports position and velocity as two outputs that need not agree: on
 PX4 v1.16 SIH the reported position moves, over 1-5 s, by 0.13-0.28 m/s (rms per axis) more or
-less than the reported velocity says (`benchmarks/fit_velocity_consistency.py` on the
+less than the reported velocity says (`benchmarks/calibration/fit_velocity_consistency.py` on the
 recorded formation flights; docs/gcs.md, "The law's velocity"). The law (21)-(23) damps the
 velocity it is given and positions the vehicles on the positions it is given; an offset d
 between the two holds each formation mode lambda at e = 2 d / (c_p lambda) from its slot, as if

@@ -78,11 +78,12 @@ class AutopilotResponse:
 
 
 #: PX4 v1.16.0 SIH, default tuning: the second order + dead time that fits the four recorded roll
-#: and pitch doublets over their whole traces in least squares (benchmarks/fit_rate_response.py:
-#: rms 0.065 rad/s, against 0.132 for zeta 0.30, wn 14.7 read off the noisy roll step's 37 %
-#: peak, which overstates the resonance the position loop meets; the dead time stays SIH's 4 ms
-#: lockstep, the fit's 4.9 ms lying between roll's 7.8 and pitch's 2.1); first-order + dead-time
-#: fit of the yaw doublet (99 ms / 590 ms), MC_ROLL_P 6.5, SIH_T_TAU 0.05 s.
+#: and pitch doublets over their whole traces in least squares
+#: (benchmarks/calibration/fit_rate_response.py: rms 0.065 rad/s, against 0.132 for zeta 0.30,
+#: wn 14.7 read off the noisy roll step's 37 % peak, which overstates the resonance the position
+#: loop meets; the dead time stays SIH's 4 ms lockstep, the fit's 4.9 ms lying between roll's 7.8
+#: and pitch's 2.1); first-order + dead-time fit of the yaw doublet (99 ms / 590 ms), MC_ROLL_P
+#: 6.5, SIH_T_TAU 0.05 s.
 PX4_RESPONSE = AutopilotResponse(
     rate_damping=0.73, rate_natural_radps=19.1, rate_dead_time_s=0.004,
     yaw_time_constant_s=0.59, yaw_dead_time_s=0.099, attitude_p_per_s=6.5,

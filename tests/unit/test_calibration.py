@@ -7,7 +7,7 @@ over vehicles and repetitions) are compared with the recorded ones read from the
 per axis the 63 % rise time within 25 % and the peak rate within 20 %, every hover noise std
 (IMU, reported rates, detrended attitude and local position) within a factor 1.5, the thrust
 steps' gain within 15 % and lag within 25 %, and the position samples' age.
-`benchmarks/fit_emulator.py` prints the whole table.
+`benchmarks/calibration/fit_emulator.py` prints the whole table.
 """
 
 from __future__ import annotations

@@ -10,8 +10,8 @@ the recorded ones, and the telemetry the emulator sends is decoded. The vehicles
 their sysid, hence in their noise streams, so a replay gives ``n`` realisations at once.
 
 ``metrics.py`` turns the traces into the README's figures. Used by tests/unit/test_calibration.py
-and benchmarks/fit_emulator.py. Pure bookkeeping over the Emulator's injected time: no sockets,
-no clock.
+and benchmarks/calibration/fit_emulator.py. Pure bookkeeping over the Emulator's injected time:
+no sockets, no clock.
 """
 
 from __future__ import annotations

@@ -219,10 +219,10 @@ PX4_SENSORS = Sensors(
     imu_filtered=False,
     imu_average_samples=2,  # HIGHRES_IMU: recorded std = SIH's / 1.37 (two-sample means)
     position_delay_periods=1,  # LOCAL_POSITION_NED timestamps 4 ms older than attitude's
-    # EKF2's estimate wander (fitted stand-in, benchmarks/fit_emulator.py --fit; the vertical one
-    # by hand, docs/emulator.md "What is not fitted"), kept out of the position as SIH's is
-    # (benchmarks/fit_velocity_consistency.py), so the position error's time constant has
-    # nothing to act on
+    # EKF2's estimate wander (fitted stand-in, benchmarks/calibration/fit_emulator.py --fit; the
+    # vertical one by hand, docs/emulator.md "What is not fitted"), kept out of the position as
+    # SIH's is (benchmarks/calibration/fit_velocity_consistency.py), so the position error's time
+    # constant has nothing to act on
     velocity_error_std_mps=(0.126, 0.126, 0.10),
     velocity_error_tau_s=1.5,  # recorded vz autocorrelation 0.72 at 0.5 s
     # plus a slow drift: SIH's reported position departs from its reported velocity's integral
@@ -253,13 +253,13 @@ PX4_SENSORS = Sensors(
 # ArduCopter 4.7.0-dev SITL, frame "quad" (plus), 3 kg. Its attitude controller in GUIDED_NOGPS
 # body-rate mode is not modelled term by term (the SITL frame's torque scales are not
 # identifiable from these recordings): a reference model per axis, fitted to the recorded rate
-# doublets by benchmarks/fit_emulator.py, with ArduPilot's own acceleration limits
+# doublets by benchmarks/calibration/fit_emulator.py, with ArduPilot's own acceleration limits
 # ATC_ACCEL_R_MAX/P_MAX 110000 and ATC_ACCEL_Y_MAX 27000 cdeg/s^2.
 ARDUPILOT_DYNAMICS = Dynamics(
     rate_loop=RateLoop.REFERENCE,
     control_period_s=0.002,  # ArduCopter's 400 Hz loop, rounded to whole physics steps
     accel_max_radps2=(math.radians(1100.0), math.radians(1100.0), math.radians(270.0)),
-    # fitted by benchmarks/fit_emulator.py --fit (docs/emulator.md, "Calibration")
+    # fitted by benchmarks/calibration/fit_emulator.py --fit (docs/emulator.md, "Calibration")
     ref_gain=(0.98, 0.98, 0.857),
     ref_wn_radps=(250.0, 250.0, 8.48),
     ref_zeta=(1.4, 1.4, 0.790),
@@ -286,7 +286,7 @@ ARDUPILOT_SENSORS = Sensors(
     gyro_cutoff_hz=20.0,  # INS_GYRO_FILTER
     imu_filtered=True,
     accel_cutoff_hz=20.0,  # INS_ACCEL_FILTER
-    # EKF3's estimate wander (fitted stand-in, benchmarks/fit_emulator.py --fit)
+    # EKF3's estimate wander (fitted stand-in, benchmarks/calibration/fit_emulator.py --fit)
     velocity_error_std_mps=(0.0032, 0.0052, 0.002),
     velocity_error_tau_s=5.0,  # recorded vz autocorrelation 0.90 at 0.5 s
     position_error_tau_s=3.0,

@@ -1,11 +1,12 @@
 """Print our Scenario I / II figures beside the reference values, as markdown tables.
 
-Run: `.venv/bin/python -m benchmarks.paper_tables` (about 10 s with numba's cache warm). The
+Run: `.venv/bin/python -m benchmarks.calibration.paper_tables` (about 10 s with numba's cache warm). The
 output is what docs/reproducing-the-paper.md shows.
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -19,7 +20,7 @@ from gcs import metrics  # noqa: E402
 from gcs.config import load_team  # noqa: E402
 from gcs.sim.runner import SimOptions, simulate  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 Z_SHIFT_M = 10.0
 REF_FE = {0: 7.07, 5: 3.14e-2, 10: 1.07e-5, 20: 1.02e-5, 30: 3.6e-6, 60: 9.4e-6}
@@ -47,6 +48,7 @@ def idx(log, t):
 
 
 def main() -> int:
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()  # --help; no options
     s1 = load_team(ROOT / "configs" / "square4.yaml")
     s2 = load_team(ROOT / "configs" / "square4_massdrop.yaml")
     oracle = simulate(s1, SimOptions(oracle=True)).log

@@ -1,6 +1,6 @@
 """The cascade criterion's model of PX4's roll/pitch rate loop against the recorded doublets.
 
-    python -m benchmarks.fit_rate_response [--no-write]
+    python -m benchmarks.calibration.fit_rate_response [--no-write]
 
 The criterion (gcs/mission/cascade.py) models the autopilot's rate loop as a second order plus
 a dead time, G(s) = wn^2 / (s^2 + 2 zeta wn s + wn^2) e^{-s T}. This script fits that model in
@@ -29,13 +29,13 @@ from flightkit import jitcache
 
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
+from benchmarks.calibration.fit_emulator import kernel_doublets, recorded_rates  # noqa: E402
 from benchmarks.docsection import publish  # noqa: E402
-from benchmarks.fit_emulator import kernel_doublets, recorded_rates  # noqa: E402
 from gcs.mission.cascade import PX4_RESPONSE  # noqa: E402
 from vehicle_emulator.calibration import replay as rp  # noqa: E402
 from vehicle_emulator.config.personality import PERSONALITIES  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## PX4 rate loop: the criterion's model against the recorded doublets"
@@ -114,7 +114,7 @@ def section() -> str:
     lines = [
         HEADING,
         "",
-        "`python -m benchmarks.fit_rate_response` (the script's docstring says what is "
+        "`python -m benchmarks.calibration.fit_rate_response` (the script's docstring says what is "
         f"compared): {len(data)} recorded PX4 v1.16.0 SIH roll and pitch doublets (+-0.5 rad/s), "
         "second order + dead time per model; rms of (model - recorded rate) over every sample "
         "[rad/s].",

@@ -3,11 +3,12 @@
 Flies Scenario I with the default sampled law at 1 kHz and, at every tick, compares the model-based
 closed form (measured acceleration, the law's own mass estimate) and Levant's differentiator (28)
 with the exact oracle (true masses, T = |u|; docs/control-law.md) evaluated at the same state.
-Run: `.venv/bin/python -m benchmarks.derivative_accuracy`.
+Run: `.venv/bin/python -m benchmarks.calibration.derivative_accuracy`.
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -25,10 +26,11 @@ from gcs.control.law import attitude_stage, position_stage  # noqa: E402
 from gcs.sim.loop import _acceleration  # noqa: E402
 from gcs.sim.runner import law_gains  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def main() -> int:
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()  # --help; no options
     team = load_team(ROOT / "configs" / "square4.yaml")
     gains = law_gains(team)
     n, dt = team.n, 1e-3

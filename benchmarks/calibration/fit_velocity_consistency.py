@@ -16,7 +16,7 @@ figures: SIH's reported altitude holds to 0.06 m while its reported vertical vel
 0.15 m/s. Writes the "## PX4 position estimate: the
 reported position against the reported velocity" section of docs/benchmarks.md.
 
-    python -m benchmarks.fit_velocity_consistency [--no-write]
+    python -m benchmarks.calibration.fit_velocity_consistency [--no-write]
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ from benchmarks.docsection import publish  # noqa: E402
 from vehicle_emulator.calibration import replay as rp  # noqa: E402
 from vehicle_emulator.config.personality import PX4_SENSORS  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 DOC = ROOT / "docs" / "benchmarks.md"
 HEADING = "## PX4 position estimate: the reported position against the reported velocity"
@@ -130,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     s = PX4_SENSORS
     lines = [
         HEADING, "",
-        "`python -m benchmarks.fit_velocity_consistency` (the script's docstring says what is "
+        "`python -m benchmarks.calibration.fit_velocity_consistency` (the script's docstring says what is "
         "compared). D(w): RMS over windows of w seconds of the reported position's change minus "
         "the reported velocity's integral, per axis (north / east / down) [m].", "",
         "| source | " + " | ".join(f"D({w:g} s)" for w in WINDOWS_S) + " |",

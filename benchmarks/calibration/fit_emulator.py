@@ -1,7 +1,7 @@
 """Calibration of vehicle-emu's px4 and ardupilot personalities against the recorded SITL flights.
 
-    .venv/bin/python -m benchmarks.fit_emulator               # the table
-    .venv/bin/python -m benchmarks.fit_emulator --fit         # refit, then the table
+    .venv/bin/python -m benchmarks.calibration.fit_emulator            # the table
+    .venv/bin/python -m benchmarks.calibration.fit_emulator --fit      # refit, then the table
     options: --vehicles N (8), --seed S (0), --markdown FILE (write the table)
 
 The table (docs/emulator.md, "Calibration") replays the recorded setpoint stream
@@ -46,7 +46,7 @@ from vehicle_emulator.calibration import replay as rp  # noqa: E402
 from vehicle_emulator.config.personality import PERSONALITIES, Personality  # noqa: E402
 from vehicle_emulator.physics.plant import ControlMode, FleetPlant  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 # tests/unit/test_calibration.py's tolerances (the issue's): ratio emulated / recorded
 TOLERANCE = {"t63_ms": 0.25, "peak": 0.20, "noise": 1.5}

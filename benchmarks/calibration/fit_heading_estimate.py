@@ -17,7 +17,7 @@ The personality's heading error is a second-order Gauss-Markov process because o
 (`attitude_error_order` in vehicle_emulator/config/personality.py). Writes the "## PX4 heading
 estimate: the reported heading against the reported yaw rate" section of docs/benchmarks.md.
 
-    python -m benchmarks.fit_heading_estimate [--no-write]
+    python -m benchmarks.calibration.fit_heading_estimate [--no-write]
 """
 
 from __future__ import annotations
@@ -32,8 +32,7 @@ from flightkit import jitcache
 
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
-from benchmarks.docsection import publish  # noqa: E402
-from benchmarks.fit_velocity_consistency import (  # noqa: E402
+from benchmarks.calibration.fit_velocity_consistency import (  # noqa: E402
     DOC,
     HOVER,
     HOVER_S,
@@ -41,10 +40,11 @@ from benchmarks.fit_velocity_consistency import (  # noqa: E402
     mismatch_rms,
     recorded_tlog,
 )
+from benchmarks.docsection import publish  # noqa: E402
 from vehicle_emulator.calibration import replay as rp  # noqa: E402
 from vehicle_emulator.config.personality import PX4_SENSORS  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 HEADING = "## PX4 heading estimate: the reported heading against the reported yaw rate"
 FORMATION = "flights/2026-12-04/px4_rates_1st/flight.tlog.gz"
@@ -128,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
     s = PX4_SENSORS
     lines = [
         HEADING, "",
-        "`python -m benchmarks.fit_heading_estimate` (the script's docstring says what is "
+        "`python -m benchmarks.calibration.fit_heading_estimate` (the script's docstring says what is "
         "compared). D(w): RMS over windows of w seconds of the reported heading's change minus "
         "the reported yaw rate's integral [deg].", "",
         "| source | " + " | ".join(f"D({w:g} s)" for w in WINDOWS_S) + " | D(5 s) / D(1 s) |",
