@@ -26,7 +26,6 @@ import os
 import select
 import socket
 import struct
-import subprocess
 import sys
 import tempfile
 import time
@@ -41,6 +40,7 @@ from flightkit import jitcache
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
 from benchmarks.bench_fleet_inprocess import GCS_RATES_HZ  # noqa: E402
+from benchmarks.fleet import fleet  # noqa: E402
 from vehicle_emulator.mavlink.codec import BatchEncoder  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -199,16 +199,12 @@ def run(args: argparse.Namespace) -> dict:
         team_file(n, args.autopilot, team)
         gcs = Gcs(n)  # bound before the fleet starts sending
         prof = ["-m", "cProfile", "-o", args.profile] if args.profile else []
-        cmd = [sys.executable, *prof, "-m", "vehicle_emulator", "--fleet", "--team", str(team),
-               "--physics-rate", str(args.physics_rate), "--tick-ms", str(args.tick_ms),
-               "--stats-json", str(stats), "--log-level", "WARNING"]
+        options = ["--physics-rate", str(args.physics_rate), "--tick-ms", str(args.tick_ms),
+                   "--stats-json", str(stats)]
         if args.streams != "default":
-            cmd += ["--streams", args.streams]
-        emu = subprocess.Popen(cmd, cwd=root, stdout=subprocess.PIPE, text=True)
-        try:
-            line = emu.stdout.readline()
-            if "ready" not in line:
-                raise RuntimeError(f"fleet did not start: {line!r}")
+            options += ["--streams", args.streams]
+        # the checkout `root`'s fleet (run from it), its stderr on this one's
+        with fleet(team, *options, cwd=root, python=[sys.executable, *prof], log=None) as emu:
             # set-up, parsing everything: hover thrust, streams, OFFBOARD
             gcs.sock.sendto(gcs.frame(mavlink.MAVLink_param_request_read_message(
                 1, 1, b"MPC_THR_HOVER", -1)), gcs.addr[0])
@@ -239,10 +235,7 @@ def run(args: argparse.Namespace) -> dict:
             late = gcs.stream(args.seconds, parse=False)
             wall = time.monotonic() - w0
             u1, s1 = cpu_s(emu.pid)
-        finally:
-            emu.terminate()
-            emu.wait(timeout=30)
-        st = json.loads(stats.read_text())
+        st = json.loads(stats.read_text())  # written when the fleet stopped
     modes: dict[str, int] = {}
     for v in st["by_vehicle"]:
         key = f"{v['mode']}{' armed' if v['armed'] else ''}"

@@ -11,13 +11,12 @@ import argparse
 import json
 import os
 import platform
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 from benchmarks.docsection import write_section
+from benchmarks.fleet import fleet, fly
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "benchmarks.md"
@@ -26,35 +25,19 @@ HEADING = "## gcs fly"
 
 def run(team: Path, duration_s: float, work: Path, mode: str = "rates",
         emu_scheduling: str = "auto") -> dict:
-    """One flight of ``team`` against a fleet started with ``--scheduling emu_scheduling``."""
+    """One flight of ``team`` against a fleet started with ``--scheduling emu_scheduling``;
+    SystemExit (with gcs fly's output) if gcs fly exits non-zero."""
     emu_stats = work / "emu.json"
-    emu = subprocess.Popen(
-        [sys.executable, "-m", "vehicle_emulator", "--fleet", "--team", str(team),
-         "--stats-json", str(emu_stats), "--log-level", "WARNING",
-         "--scheduling", emu_scheduling],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        time.sleep(1.0)  # the emulator binds its ports; the GCS would wait for it anyway
-        out = work / "run"
-        t0 = time.monotonic()
-        gcs = subprocess.Popen(
-            [sys.executable, "-m", "gcs.cli", "fly", "--team", str(team), "--out", str(out),
-             "--mode", mode, "--duration-s", str(duration_s), "--end-action", "hold",
-             "--no-figures", "--status", "off"],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        _, status, usage = os.wait4(gcs.pid, 0)
-        wall = time.monotonic() - t0
-        output = gcs.stdout.read() if gcs.stdout else ""
-        code = os.waitstatus_to_exitcode(status)
-        if code != 0:
-            raise SystemExit(f"gcs fly exited {code}:\n{output}")
-    finally:
-        emu.terminate()
-        emu.wait(timeout=20)
-    report = json.loads((out / "report.json").read_text())
-    emu_figures = json.loads(emu_stats.read_text())
-    return {"report": report, "gcs_cpu_s": usage.ru_utime + usage.ru_stime, "gcs_wall_s": wall,
-            "gcs_rss_mb": usage.ru_maxrss / 1024.0, "emu": emu_figures}
+    with fleet(team, "--stats-json", str(emu_stats), "--scheduling", emu_scheduling):
+        flight = fly(team, work / "run", "--mode", mode, "--duration-s", str(duration_s),
+                     "--end-action", "hold", merged=True)
+        if flight.exit != 0:
+            raise SystemExit(f"gcs fly exited {flight.exit}:\n{flight.stdout}")
+    if flight.report is None:
+        raise SystemExit(f"gcs fly wrote no {flight.out / 'report.json'}:\n{flight.stdout}")
+    emu_figures = json.loads(emu_stats.read_text())  # written when the fleet stopped
+    return {"report": flight.report, "gcs_cpu_s": flight.cpu_s, "gcs_wall_s": flight.wall_s,
+            "gcs_rss_mb": flight.rss_mb, "emu": emu_figures}
 
 
 def section(r: dict, team: Path, duration_s: float) -> str:

@@ -34,10 +34,7 @@ import json
 import math
 import platform
 import shutil
-import subprocess
-import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -48,6 +45,7 @@ from flightkit import jitcache
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
 from benchmarks.docsection import write_section  # noqa: E402
+from benchmarks.fleet import fleet, fly  # noqa: E402
 from tests.harness import free_udp_port_block  # noqa: E402
 from vehicle_emulator.calibration.replay import data_dir  # noqa: E402
 from vehicle_emulator.config.personality import ARDUPILOT_DYNAMICS  # noqa: E402
@@ -167,36 +165,20 @@ def figures(out: Path, kind: str, max_rate: float) -> dict:
 def fly_team(kind: str, work: Path, duration_s: float) -> list[dict]:
     team = team_file(kind, work, duration_s)
     max_rate = float(yaml.safe_load(team.read_text())["fly"]["rates"].get("max_rate_radps", 1.0))
-    log = open(work / f"{kind}-fleet.log", "w")  # noqa: SIM115
     guided = ["--param", "GUID_OPTIONS=8"] if "ardupilot" in TEAMS[kind] else []
-    fleet = subprocess.Popen(
-        [sys.executable, "-m", "vehicle_emulator", "--fleet", "--team", str(team), *guided,
-         "--log-level", "WARNING"],
-        stdout=subprocess.PIPE, stderr=log, text=True)
     rows = []
-    try:
-        ready = fleet.stdout.readline() if fleet.stdout else ""
-        if not ready.startswith("vehicle-emu: ready"):
-            raise SystemExit(f"vehicle-emu did not start ({ready!r}): see {log.name}")
+    # the same vehicles fly every flight: one fleet for all of them
+    with fleet(team, *guided, log=work / f"{kind}-fleet.log"):
         for flight in FLIGHTS:
             out = work / f"{kind}-{flight}"
-            began = time.monotonic()
-            proc = subprocess.run(
-                [sys.executable, "-m", "gcs.cli", "fly", "--team", str(team), "--out", str(out),
-                 "--no-figures", "--status", "off"],
-                capture_output=True, text=True, timeout=900, check=False)
-            row = {"team": kind, "flight": flight, "exit": proc.returncode,
-                   "wall_s": time.monotonic() - began}
-            if (out / "report.json").exists():
+            f = fly(team, out, timeout_s=900.0)
+            row = {"team": kind, "flight": flight, "exit": f.exit, "wall_s": f.wall_s}
+            if f.report is not None:
                 row |= figures(out, kind, max_rate)
             else:
-                row["outcome"] = (proc.stderr.strip().splitlines() or ["no report"])[-1]
+                row["outcome"] = (f.stderr.strip().splitlines() or ["no report"])[-1]
             print(json.dumps(row), flush=True)
             rows.append(row)
-    finally:
-        fleet.terminate()
-        fleet.wait(timeout=20)
-        log.close()
     return rows
 
 

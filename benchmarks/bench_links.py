@@ -43,6 +43,8 @@ from flightkit import jitcache
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
 from benchmarks.docsection import write_section  # noqa: E402
+from benchmarks.fleet import fleet  # noqa: E402
+from benchmarks.fleet import fly as gcs_fly  # noqa: E402
 from gcs.config import load_team  # noqa: E402
 from gcs.control.position import phi  # noqa: E402
 from gcs.mission.cascade import (  # noqa: E402
@@ -112,22 +114,12 @@ def team_file(work: Path, mode: str, gains: CascadeGains, delay_s: float, latenc
 
 
 def fly(team: Path, out: Path, mode: str) -> dict:
-    emu = subprocess.Popen(
-        [sys.executable, "-m", "vehicle_emulator", "--fleet", "--team", str(team),
-         "--log-level", "WARNING"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        proc = subprocess.run(
-            [sys.executable, "-m", "gcs.cli", "fly", "--team", str(team), "--mode", mode,
-             "--out", str(out), "--no-figures", "--status", "off", "--end-action", "hold"],
-            capture_output=True, text=True, timeout=600)
-    finally:
-        emu.terminate()
-        emu.wait(timeout=20)
-    report = out / "report.json"
-    if not report.exists():
-        last = (proc.stderr.strip().splitlines() or [""])[-1]
-        return {"exit": proc.returncode, "report": None, "why": last}
-    return {"exit": proc.returncode, "report": json.loads(report.read_text()), "why": ""}
+    with fleet(team):
+        flight = gcs_fly(team, out, "--mode", mode, "--end-action", "hold", timeout_s=600.0)
+    if flight.report is None:
+        last = (flight.stderr.strip().splitlines() or [""])[-1]
+        return {"exit": flight.exit, "report": None, "why": last}
+    return {"exit": flight.exit, "report": flight.report, "why": ""}
 
 
 def sim(team: Path, out: Path) -> dict | None:

@@ -20,8 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -34,6 +32,8 @@ from flightkit import jitcache
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
 from benchmarks.docsection import write_section  # noqa: E402
+from benchmarks.fleet import fleet  # noqa: E402
+from benchmarks.fleet import fly as gcs_fly  # noqa: E402
 from tests.harness import free_udp_port_block  # noqa: E402
 from vehicle_emulator.calibration.replay import data_dir  # noqa: E402
 
@@ -100,28 +100,14 @@ def fly(team: Path, out: Path, personality: str, mode: str = "rates") -> dict:
     """The fleet first, as the SITL vehicles were up before the ground station started: today's
     `gcs fly` arms once, and PX4 refuses to arm for its first 3 s after boot."""
     extra = ardupilot_args(team) if personality == "ardupilot" else []
-    emu = subprocess.Popen(
-        [sys.executable, "-m", "vehicle_emulator", "--fleet", "--team", str(team),
-         "--log-level", "WARNING", *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    try:
-        ready = emu.stdout.readline() if emu.stdout else ""
-        if not ready.startswith("vehicle-emu: ready"):
-            raise SystemExit(f"vehicle-emu did not start: {ready!r}")
+    with fleet(team, *extra):
         time.sleep(BOOTED_S)
-        proc = subprocess.run(
-            [sys.executable, "-m", "gcs.cli", "fly", "--team", str(team), "--mode", mode,
-             "--out", str(out), "--no-figures", "--status", "off"],
-            capture_output=True, text=True, timeout=600)
-    finally:
-        emu.terminate()
-        emu.wait(timeout=20)
-    report = out / "report.json"
-    if not report.exists():
-        raise SystemExit(f"gcs fly exited {proc.returncode} without a report:\n"
-                         f"{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}")
-    return {"exit": proc.returncode, "report": json.loads(report.read_text()),
-            "last_line": (proc.stdout.strip().splitlines() or [""])[0]}
+        flight = gcs_fly(team, out, "--mode", mode, timeout_s=600.0)
+    if flight.report is None:
+        raise SystemExit(f"gcs fly exited {flight.exit} without a report:\n"
+                         f"{flight.stdout[-2000:]}\n{flight.stderr[-2000:]}")
+    return {"exit": flight.exit, "report": flight.report,
+            "last_line": (flight.stdout.strip().splitlines() or [""])[0]}
 
 
 def figures(report: dict) -> dict:

@@ -14,10 +14,8 @@ the air at its start with its own EKF origin, as `make demo` flies it) on free l
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -26,6 +24,7 @@ import numpy as np
 import yaml
 
 from benchmarks.docsection import write_section
+from benchmarks.fleet import fly as gcs_fly
 from tests.harness import free_udp_port_block
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -52,16 +51,12 @@ def team_on_free_ports(work: Path, duration_s: float) -> Path:
 def fly(team: Path, out: Path, mode: str) -> dict:
     """One flight: `gcs fly --mode MODE --emulators` (the fleet started and stopped by gcs fly),
     holding at the end; the report, or SystemExit when none was written."""
-    proc = subprocess.run(
-        [sys.executable, "-m", "gcs.cli", "fly", "--team", str(team), "--mode", mode,
-         "--emulators", "--end-action", "hold", "--out", str(out), "--no-figures",
-         "--status", "off"],
-        capture_output=True, text=True, timeout=900, check=False)
-    report = out / "report.json"
-    if not report.exists():
-        raise SystemExit(f"gcs fly --mode {mode} exited {proc.returncode} without a report:\n"
-                         f"{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}")
-    return {"exit": proc.returncode, "report": json.loads(report.read_text())}
+    flight = gcs_fly(team, out, "--mode", mode, "--emulators", "--end-action", "hold",
+                      timeout_s=900.0)
+    if flight.report is None:
+        raise SystemExit(f"gcs fly --mode {mode} exited {flight.exit} without a report:\n"
+                         f"{flight.stdout[-2000:]}\n{flight.stderr[-2000:]}")
+    return {"exit": flight.exit, "report": flight.report}
 
 
 def figures(report: dict) -> dict:

@@ -24,7 +24,6 @@ import platform
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +35,8 @@ jitcache.configure()  # numba's cache, before the compiled modules below are imp
 
 from benchmarks.bench_edges import time_grid  # noqa: E402
 from benchmarks.docsection import write_section  # noqa: E402
+from benchmarks.fleet import fleet  # noqa: E402
+from benchmarks.fleet import fly as gcs_fly  # noqa: E402
 from benchmarks.make_grid import team_text  # noqa: E402
 from gcs.control.position import phi  # noqa: E402
 
@@ -97,35 +98,15 @@ def reference_tick() -> tuple[float, float]:
 
 def fly(team: Path, work: Path) -> dict:
     emu_stats = work / "emu.json"
-    emu = subprocess.Popen(
-        [sys.executable, "-m", "vehicle_emulator", "--fleet", "--team", str(team),
-         "--streams", "requested", "--stats-json", str(emu_stats), "--log-level", "WARNING"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    out = work / "fly"
-    try:
-        time.sleep(2.0)  # the fleet binds its ports (gcs fly would wait for it anyway)
-        t0, cpu0 = time.monotonic(), cpu_times()
-        # its output to a file, not a pipe read at the end: a flight that stops 240 vehicles
-        # logs more than a pipe holds, and a writer blocked on a full pipe stops flying
-        log_path = work / "gcs.log"
-        with open(log_path, "w") as log:
-            gcs = subprocess.Popen(
-                [sys.executable, "-m", "gcs.cli", "fly", "--team", str(team), "--out", str(out),
-                 "--mode", "rates", "--end-action", "hold", "--no-figures", "--status", "off"],
-                stdout=log, stderr=subprocess.STDOUT)
-            _, status, usage = os.wait4(gcs.pid, 0)
-        wall, steal = time.monotonic() - t0, steal_pct(cpu0, cpu_times())
-        output = log_path.read_text()
-    finally:
-        emu.terminate()
-        emu.wait(timeout=30)
-    code = os.waitstatus_to_exitcode(status)
-    report_path = out / "report.json"
-    report = json.loads(report_path.read_text()) if report_path.exists() else None
+    with fleet(team, "--streams", "requested", "--stats-json", str(emu_stats)):
+        cpu0 = cpu_times()
+        flight = gcs_fly(team, work / "fly", "--mode", "rates", "--end-action", "hold",
+                          merged=True, timeout_s=3600.0)
+        steal = steal_pct(cpu0, cpu_times())
     emu_figures = json.loads(emu_stats.read_text()) if emu_stats.exists() else {}
-    last = (output.strip().splitlines() or [""])[-1]
-    return {"exit": code, "why": last, "report": report, "emu": emu_figures,
-            "gcs_cpu_s": usage.ru_utime + usage.ru_stime, "gcs_wall_s": wall, "steal": steal}
+    last = (flight.stdout.strip().splitlines() or [""])[-1]
+    return {"exit": flight.exit, "why": last, "report": flight.report, "emu": emu_figures,
+            "gcs_cpu_s": flight.cpu_s, "gcs_wall_s": flight.wall_s, "steal": steal}
 
 
 def sim(team: Path, work: Path) -> dict | None:

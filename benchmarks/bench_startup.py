@@ -31,6 +31,7 @@ from pathlib import Path
 import yaml
 
 from benchmarks.bench_sim import update_section
+from flightkit.fleet_protocol import READY_PREFIX
 from tests.harness import free_udp_port, free_udp_port_block
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -98,7 +99,7 @@ def measure(work: Path, cold: dict[str, float], warm: dict[str, float]) -> None:
     def emu(env: dict[str, str]) -> dict[str, float]:
         seen = _until([py, "-m", "vehicle_emulator", "--id", "1", "--bind",
                        f"127.0.0.1:{free_udp_port()}", "--remote", f"127.0.0.1:{free_udp_port()}"],
-                      env, {"ready": "vehicle-emu: ready:"}, stop_after="ready")
+                      env, {"ready": READY_PREFIX}, stop_after="ready")
         return {"emu_ready": seen["ready"]}
 
     def sim(env: dict[str, str]) -> dict[str, float]:
