@@ -23,6 +23,7 @@ import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from flightkit.fleet_protocol import READY_PREFIX
 
@@ -49,18 +50,24 @@ def fleet(team: Path, *options: str, log: Path | int | None = subprocess.DEVNULL
           stop_timeout_s: float = 30.0) -> Iterator[Fleet]:
     """`PYTHON -m vehicle_emulator --fleet --team TEAM --log-level LOG_LEVEL OPTIONS...` for the
     ``with`` body, entered once the fleet has printed its ready line on stdout (SystemExit if it
-    exits or stays silent for ``ready_timeout_s``). Its stderr: the file ``log`` (a Path), else
-    as Popen's ``stderr`` (DEVNULL: discarded; None: this process's). ``cwd`` is the checkout
+    exits or stays silent for ``ready_timeout_s``, with the end of its stderr). Its stderr: the
+    file ``log`` (a Path), else as Popen's ``stderr`` (DEVNULL: discarded once the fleet is
+    ready; None: this process's). ``cwd`` is the checkout
     whose vehicle_emulator runs (`-m` imports from the working directory first; None: this
     one). ``python`` may add interpreter options (``-m cProfile -o FILE``). On exit SIGTERM (the
     fleet then writes its --stats-json), killed after ``stop_timeout_s``."""
     cmd = [*python, "-m", "vehicle_emulator", "--fleet", "--team", str(team),
            "--log-level", log_level, *options]
     with contextlib.ExitStack() as stack:
-        err = stack.enter_context(open(log, "w")) if isinstance(log, Path) else log
+        if isinstance(log, Path):
+            err = stack.enter_context(open(log, "w+"))
+        elif log == subprocess.DEVNULL:  # kept until the end to say why a fleet never got ready
+            err = stack.enter_context(tempfile.TemporaryFile("w+", errors="replace"))
+        else:
+            err = log
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, text=True, cwd=cwd)
         try:
-            line = _wait_ready(proc, ready_timeout_s, log)
+            line = _wait_ready(proc, ready_timeout_s, err)
             yield Fleet(proc, line)
         finally:
             proc.terminate()
@@ -71,9 +78,10 @@ def fleet(team: Path, *options: str, log: Path | int | None = subprocess.DEVNULL
                 proc.wait()
 
 
-def _wait_ready(proc: subprocess.Popen, timeout_s: float, log: Path | int | None) -> str:
+def _wait_ready(proc: subprocess.Popen, timeout_s: float, err: Any) -> str:
     """The fleet's ready line. A thread reads its stdout to the end, so a fleet that prints
-    more never blocks on a full pipe."""
+    more never blocks on a full pipe. SystemExit with the end of ``err`` (its stderr, when a
+    file) if none comes."""
     found: list[str] = []
     ready = threading.Event()
 
@@ -87,9 +95,12 @@ def _wait_ready(proc: subprocess.Popen, timeout_s: float, log: Path | int | None
 
     threading.Thread(target=read, daemon=True).start()
     if not ready.wait(timeout_s) or not found:
-        where = f": see {log}" if isinstance(log, Path) else ""
         state = "running" if proc.poll() is None else f"exited {proc.returncode}"
-        raise SystemExit(f"vehicle-emu --fleet printed no ready line ({state}){where}")
+        tail = ""
+        if hasattr(err, "seek"):
+            err.seek(0)
+            tail = ":\n" + "\n".join(err.read().splitlines()[-10:])
+        raise SystemExit(f"vehicle-emu --fleet printed no ready line ({state}){tail}")
     return found[0]
 
 
