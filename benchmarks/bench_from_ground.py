@@ -56,7 +56,14 @@ HEADING = "## From the ground, twice"
 #: the section of the px4-sih-2026-12-04 team's rows and SIH's recorded one
 SIH_HEADING = "## From the ground, twice: the px4 personality against the 2026-12-04 SIH flights"
 TEAMS = {"px4": ("px4",) * 4, "ardupilot": ("ardupilot",) * 4,
-         "mixed": ("px4", "ardupilot", "px4", "ardupilot"), "px4-sih-2026-12-04": ("px4",) * 4}
+         "mixed": ("px4", "ardupilot", "px4", "ardupilot"), "px4-sih-2026-12-04": ("px4",) * 4,
+         "px4-sih": ("px4",) * 4}
+#: the bundled team file for four real PX4 SIH vehicles (the docs' defaults): the kind px4-sih
+#: flies it against the personality, booted where SIH boots (all four at its home)
+SIH_CONFIG = "configs/square4_px4sih.yaml"
+#: the section where flights of that file against real vehicles (--records) and the
+#: personality's stand side by side
+REAL_HEADING = "## Real PX4 SIH and the px4 personality: one team file, from the ground, twice"
 #: the team file of the 2026-12-04 flights of four real PX4 SIH vehicles, flown as it was then
 #: (the law read the reported velocity: fly.velocity_from_position_s 0), and what SIH gave
 SIH_TEAM = "flights/2026-12-04/team_px4sih.yaml"
@@ -75,6 +82,8 @@ def team_file(kind: str, work: Path, duration_s: float) -> Path:
     if kind == "px4-sih-2026-12-04":
         data = yaml.safe_load((data_dir() / SIH_TEAM).read_text())
         data["fly"].update(SIH_FLOWN["fly"])
+    elif kind == "px4-sih":
+        data = yaml.safe_load((ROOT / SIH_CONFIG).read_text())
     else:
         data = yaml.safe_load((ROOT / "configs" / "square4.yaml").read_text())
     data["name"] = f"square4-{kind}"
@@ -83,7 +92,9 @@ def team_file(kind: str, work: Path, duration_s: float) -> Path:
     data["emulator"] = {"origin": "own"}
     gcs_base, bind_base = free_udp_port_block(4), free_udp_port_block(4)
     for k, (v, autopilot) in enumerate(zip(data["vehicles"], TEAMS[kind], strict=True)):
-        v["emulator"] = {"autopilot": autopilot, "boot_position_enu_m": [*BOOT_XY_M[k], 0.0]}
+        boot = (v["emulator"]["boot_position_enu_m"] if kind == "px4-sih"
+                else [*BOOT_XY_M[k], 0.0])
+        v["emulator"] = {"autopilot": autopilot, "boot_position_enu_m": boot}
         v["link"] = ({"local_port": gcs_base + k, "remote_port": bind_base + k}
                      if autopilot == "px4" else {"local_port": gcs_base + k, "learn_remote": True})
     path = work / f"{kind}.yaml"
@@ -197,11 +208,44 @@ def recorded_sih_row(work: Path) -> dict:
             **figures(out, "px4-sih-2026-12-04", max_rate)}
 
 
+def recorded_rows(label: str, folder: Path) -> list[dict]:
+    """Flights of configs/square4_px4sih.yaml flown elsewhere (real vehicles): each subfolder
+    of ``folder`` holding a `gcs fly --out` (report.json, flight.tlog), in name order, through
+    the same figures, the rows' team cell ``label``."""
+    max_rate = float(yaml.safe_load((ROOT / SIH_CONFIG).read_text())["fly"]["rates"].get(
+        "max_rate_radps", 1.0))
+    flights = sorted(d for d in folder.iterdir() if (d / "report.json").exists())
+    if not flights:
+        raise SystemExit(f"--records {label}={folder}: no subfolder holds a report.json")
+    return [{"team": label, "flight": d.name, "exit": 0 if figs["outcome"] ==
+             "formation complete" else 1, **figs}
+            for d in flights for figs in [figures(d, "px4-sih", max_rate)]]
+
+
 def _cell(x: float, fmt: str) -> str:
     return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, fmt)
 
 
+def real_intro(rows: list[dict]) -> str:
+    labels = sorted({r["team"] for r in rows} - {"px4-sih"})
+    records = " ".join(f'--records "{label}"=DIR' for label in labels)
+    return (
+        f"`python -m benchmarks.bench_from_ground --team px4-sih {records}` on "
+        f"{platform.machine()}, Python {platform.python_version()}: `{SIH_CONFIG}` (Scenario I "
+        "written for four PX4 v1.16 SIH vehicles after docs/gcs.md \"Flying PX4 / ArduPilot\", "
+        "the docs' defaults) flown from the ground twice without restarting the vehicles: by "
+        "`gcs fly --team " + SIH_CONFIG + " --out DIR/fN` (N = 1, 2) against four real PX4 "
+        "v1.16.0 SIH SITL vehicles (airframe 10040, `px4 -i 0..3` in one loopback-only network "
+        "namespace, COM_RC_IN_MODE 4, COM_RCL_EXCEPT 4, NAV_DLL_ACT 0; the rows of --records), "
+        "and by this script against one `vehicle-emu --fleet --team` of the same file (the px4 "
+        "personality, booted where SIH boots; the rows px4-sih). The figures are those of "
+        "\"From the ground, twice\".")
+
+
 def section(rows: list[dict], duration_s: float, heading: str = HEADING) -> str:
+    if heading == REAL_HEADING:
+        lines = [heading, "", real_intro(rows), ""] + table(rows)
+        return "\n".join(lines) + "\n"
     lines = [
         heading, "",
         f"`python -m benchmarks.bench_from_ground` on {platform.machine()}, Python "
@@ -224,6 +268,12 @@ def section(rows: list[dict], duration_s: float, heading: str = HEADING) -> str:
         "SIH, recorded\" is that day's first flight through the same figures (the second "
         "ended in preflight; five first flights that day held 0.26-0.59 / 0.53-0.95 m).",
         "",
+    ] + table(rows)
+    return "\n".join(lines) + "\n"
+
+
+def table(rows: list[dict]) -> list[str]:
+    lines = [
         "| team | flight | exit | mode | formation error mean / max, t >= 30 s [m] | mass error "
         "at 20 s | rate limit active after 10 s | heading error after 10 s | late ticks |",
         "|---|---|---|---|---|---|---|---|---|",
@@ -238,7 +288,7 @@ def section(rows: list[dict], duration_s: float, heading: str = HEADING) -> str:
             f"{_cell(r['fe_mean_30'], '.3f')} / {_cell(r['fe_max_30'], '.3f')} | "
             f"{_cell(r['mass_pct_20'], '.1f')} % | {_cell(r['limited_pct'], '.2f')} % | "
             f"{_cell(r['heading_deg'], '.1f')} deg | {r['late_pct']:.2f} % |")
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 def main() -> None:
@@ -246,11 +296,17 @@ def main() -> None:
     ap.add_argument("--team", choices=sorted(TEAMS), action="append")
     ap.add_argument("--duration-s", type=float, default=60.0)
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--records", action="append", default=[], metavar="LABEL=DIR",
+                    help=f"flights of {SIH_CONFIG} flown against real vehicles (one `gcs fly "
+                         "--out` per subfolder of DIR), shown beside the px4-sih team's rows")
     ap.add_argument("--keep", type=Path, metavar="DIR",
                     help="fly in DIR and keep each flight's records there (default: a temporary "
                          "folder, removed)")
     args = ap.parse_args()
     rows: list[dict] = []
+    for spec in args.records:
+        label, _, folder = spec.partition("=")
+        rows += recorded_rows(label, Path(folder))
     with tempfile.TemporaryDirectory() as tmp:
         work = args.keep or Path(tmp)
         work.mkdir(parents=True, exist_ok=True)
@@ -258,10 +314,12 @@ def main() -> None:
             if kind == "px4-sih-2026-12-04":
                 rows.append(recorded_sih_row(work))
             rows += fly_team(kind, work, args.duration_s)
-    # the SIH team file (and SIH's own row) has its section; the shipped teams share the other
+    # the SIH team files (with SIH's own rows) have their sections; the shipped teams share one
     sih = {"px4-sih-2026-12-04", SIH_RECORDED}
-    for heading, part in ((HEADING, [r for r in rows if r["team"] not in sih]),
-                          (SIH_HEADING, [r for r in rows if r["team"] in sih])):
+    real = {"px4-sih"} | {spec.partition("=")[0] for spec in args.records}
+    for heading, part in ((HEADING, [r for r in rows if r["team"] not in sih | real]),
+                          (SIH_HEADING, [r for r in rows if r["team"] in sih]),
+                          (REAL_HEADING, [r for r in rows if r["team"] in real])):
         if not part:
             continue
         text = section(part, args.duration_s, heading)

@@ -516,7 +516,20 @@ def test_position_mode_is_prepared_without_law_criterion_or_hover_estimate():
         prepare(team, FlyOptions(out_dir=OUT, mode="position", law="baseline"))
 
 
-@pytest.mark.parametrize("config", ["square4.yaml", "square4_massdrop.yaml", "grid16.yaml"])
+def test_the_px4_sih_team_file_flies_the_sitl_ports_with_the_docs_defaults():
+    # GIVEN the shipped team file for four PX4 SIH SITL vehicles
+    team = load_team(CONFIGS / "square4_px4sih.yaml")
+    # THEN each vehicle i talks to PX4's instance i-1 on its default ports, from the ground,
+    # settling at the default go-to-start tolerance, with the mass from the hover
+    assert [(v.link.local_port, v.link.remote_port) for v in team.vehicles] == [
+        (14540 + i, 14580 + i) for i in range(4)]
+    assert team.fly.start == "takeoff" and team.fly.go_to_start.tolerance_m == 0.3
+    # AND gcs fly takes it as it is: rates at the declared 10 ms
+    assert prepare(team, FlyOptions(out_dir=OUT)).mode == "rates"
+
+
+@pytest.mark.parametrize("config", ["square4.yaml", "square4_massdrop.yaml", "grid16.yaml",
+                                    "square4_px4sih.yaml"])
 @pytest.mark.parametrize("delay_s", [0.0, 0.01, 0.05, 0.1, 0.2, 1.0])
 def test_fly_mode_auto_never_picks_position(config, delay_s):
     # GIVEN a shipped team at a declared link delay from none to one where no law mode passes
