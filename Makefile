@@ -39,9 +39,8 @@ sim: install
 	$(BIN)/gcs sim --team $(TEAM) --out runs/sim
 
 # Every benchmark whose figures docs/benchmarks.md quotes and that finishes in a few minutes
-# (about 17 min in all on 2 cores), each rewriting its section of the doc as quoted there;
-# bench_emulator only prints (its "Vehicle emulator" figures are copied by hand). bench_load and
-# bench_actuators_busy run one busy loop per core beside the flights.
+# (about 17 min in all on 2 cores), each rewriting its section of the doc as quoted there.
+# bench_load and bench_actuators_busy run one busy loop per core beside the flights.
 bench: install
 	$(BIN)/python -m benchmarks.bench_sim --write docs/benchmarks.md
 	$(BIN)/python -m benchmarks.bench_startup
