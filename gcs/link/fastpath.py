@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -102,14 +103,54 @@ def _x25(buf: np.ndarray, start: int, end: int, extra: int) -> int:
     return crc
 
 
+class Datagrams(NamedTuple):
+    """One batch of received datagrams: datagram d is ``buf[offsets[d]:offsets[d] +
+    lengths[d]]``, from address ``addr_codes[d]`` (the port's codes), received at
+    ``rx_times[d]`` (GCS clock); ``wall_us``: the wall clock for the tlog's records."""
+
+    buf: np.ndarray
+    offsets: np.ndarray
+    lengths: np.ndarray
+    addr_codes: np.ndarray
+    rx_times: np.ndarray
+    wall_us: int
+
+
+class Routing(NamedTuple):
+    """Which slot a frame belongs to: ``slot_of_sysid`` (-1: no vehicle), each slot's compid and
+    address code; the dialect's CRC extras and each message id's table column (`kind_table`)."""
+
+    slot_of_sysid: np.ndarray
+    compid_of_slot: np.ndarray
+    addr_of_slot: np.ndarray
+    crc_extra: np.ndarray
+    kinds: np.ndarray
+
+
+class TableArrays(NamedTuple):
+    """The arrays of a `HotTable` that :func:`scan` fills (``HotTable.arrays``)."""
+
+    lpn: np.ndarray
+    attq: np.ndarray
+    imu: np.ndarray
+    misc: np.ndarray
+    rx: np.ndarray
+    count: np.ndarray
+    interval: np.ndarray
+    raw: np.ndarray
+    rawlen: np.ndarray
+    seq_last: np.ndarray
+    seq: np.ndarray
+    last_any: np.ndarray
+    accepted: np.ndarray
+    touched: np.ndarray
+    clock: np.ndarray
+
+
 @njit(cache=True)
-def scan(buf, offsets, lengths, addr_codes, rx_times, wall_us,  # noqa: ANN001, PLR0913, PLR0915
-         slot_of_sysid, compid_of_slot, addr_of_slot, crc_extra, kinds,
-         lpn, attq, imu, misc, rx, count, interval, raw, rawlen,
-         seq_last, seq, last_any, accepted, touched, clock, tlog, slow):
-    """Walk datagrams ``buf[offsets[d]:offsets[d] + lengths[d]]`` received at ``rx_times[d]`` (GCS
-    clock) from address ``addr_codes[d]``; returns ``(n_slow, tlog_len,
-    tlog_records)``.
+def scan(batch, routing, table, tlog, slow):  # noqa: ANN001, PLR0915
+    """Walk the datagrams of ``batch`` (`Datagrams`), each frame to its slot by ``routing``
+    (`Routing`) into ``table`` (`TableArrays`); returns ``(n_slow, tlog_len, tlog_records)``.
 
     Accepted frames update the slot's sequence counters, ``last_any``, ``accepted``; hot ones
     also ``touched`` (the caller zeroes it), their values, ``rx``/``count``/``interval`` (rate
@@ -120,6 +161,10 @@ def scan(buf, offsets, lengths, addr_codes, rx_times, wall_us,  # noqa: ANN001, 
     rows ``(datagram, start, end, seq_counted)``: byte ranges for the pymavlink path, frames
     merged while contiguous and alike. Slot values: ``slot_of_sysid`` -1 for no vehicle.
     """
+    buf, offsets, lengths, addr_codes, rx_times, wall_us = batch
+    slot_of_sysid, compid_of_slot, addr_of_slot, crc_extra, kinds = routing
+    (lpn, attq, imu, misc, rx, count, interval, raw, rawlen, seq_last, seq, last_any, accepted,
+     touched, clock) = table
     n_slow = 0
     t_len = 0
     n_hot = 0
@@ -303,6 +348,13 @@ class HotTable:
         #: by the filter so the team's stamps are mapped at once
         self.clock_line = np.full((n, 4), np.nan)
 
+    @property
+    def arrays(self) -> TableArrays:
+        """The arrays :func:`scan` fills, by name."""
+        return TableArrays(self.lpn, self.attq, self.imu, self.misc, self.rx_s, self.count,
+                           self.interval_s, self.raw, self.rawlen, self.seq_last, self.seq,
+                           self.last_any_rx_s, self.accepted, self.touched, self.clock)
+
     def frame(self, slot: int, kind: int) -> bytes | None:
         """The latest frame of message ``kind`` (column) from ``slot`` (None: none yet)."""
         if self.count[slot, kind] == 0:
@@ -458,10 +510,8 @@ def warm_up() -> None:
     table = HotTable(n)
     slot_of_sysid = np.full(256, -1, dtype=np.int64)
     frame = out[0, : lengths[0]]
-    scan(frame, np.zeros(1, np.int64), np.array([frame.shape[0]], np.int64),
-         np.zeros(1, np.int64), np.zeros(1), 0, slot_of_sysid, table.compid_of_slot,
-         table.addr_of_slot,
-         crc_extra_table(), kind_table(), table.lpn, table.attq, table.imu, table.misc,
-         table.rx_s, table.count, table.interval_s, table.raw, table.rawlen, table.seq_last,
-         table.seq, table.last_any_rx_s, table.accepted, table.touched, table.clock,
-         np.zeros(64, np.uint8), np.zeros((4, 4), np.int64))
+    batch = Datagrams(frame, np.zeros(1, np.int64), np.array([frame.shape[0]], np.int64),
+                      np.zeros(1, np.int64), np.zeros(1), 0)
+    routing = Routing(slot_of_sysid, table.compid_of_slot, table.addr_of_slot,
+                      crc_extra_table(), kind_table())
+    scan(batch, routing, table.arrays, np.zeros(64, np.uint8), np.zeros((4, 4), np.int64))

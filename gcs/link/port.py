@@ -53,7 +53,14 @@ from gcs.link.codec import (
     MavlinkCodec,
     MAVLinkMessage,
 )
-from gcs.link.fastpath import HotTable, crc_extra_table, kind_table, scan
+from gcs.link.fastpath import (
+    Datagrams,
+    HotTable,
+    Routing,
+    crc_extra_table,
+    kind_table,
+    scan,
+)
 from gcs.link.tlog import TlogWriter
 from gcs.link.udp import MAX_BATCH_DATAGRAMS, Address, UdpEndpoint, UdpStats
 
@@ -338,12 +345,10 @@ class MavlinkPort:
             self._slow = np.zeros((2 * (size // 12 + len(offs)), 4), dtype=np.int64)
         data = np.frombuffer(buffer, dtype=np.uint8, count=total)
         n_slow, t_len, n_hot = scan(
-            data, offs, lens, addr_codes, rx, int(time.time() * 1e6),
-            self._slot_of_sysid, table.compid_of_slot, table.addr_of_slot, self._crc_extra,
-            self._kinds,
-            table.lpn, table.attq, table.imu, table.misc, table.rx_s, table.count, table.interval_s,
-            table.raw, table.rawlen, table.seq_last, table.seq, table.last_any_rx_s,
-            table.accepted, table.touched, table.clock, self._tlog_buf, self._slow)
+            Datagrams(data, offs, lens, addr_codes, rx, int(time.time() * 1e6)),
+            Routing(self._slot_of_sysid, table.compid_of_slot, table.addr_of_slot,
+                    self._crc_extra, self._kinds),
+            table.arrays, self._tlog_buf, self._slow)
         if n_hot:
             if self._tlog is not None:
                 self._tlog.write_records(self._tlog_buf[:t_len].tobytes(), n_hot)

@@ -32,7 +32,9 @@ from gcs.link.fastpath import (
     TABLE_NAMES,
     TARGET_THRUST,
     UNLEARNED,
+    Datagrams,
     HotRow,
+    Routing,
     crc_extra_table,
     encode_set_attitude_target,
     kind_table,
@@ -77,11 +79,10 @@ class _Scanner:
         slow = np.zeros((len(buf) // 12 + len(datagrams), 4), dtype=np.int64)
         t = self.t
         n_slow, t_len, _ = scan(
-            np.frombuffer(buf, dtype=np.uint8), offs, lens, addr, np.full(len(datagrams), rx_s),
-            1_700_000_000_000_000,
-            self.slot_of_sysid, t.compid_of_slot, t.addr_of_slot, self.crc, self.kinds, t.lpn,
-            t.attq, t.imu, t.misc, t.rx_s, t.count, t.interval_s, t.raw, t.rawlen, t.seq_last,
-            t.seq, t.last_any_rx_s, t.accepted, t.touched, t.clock, tlog, slow)
+            Datagrams(np.frombuffer(buf, dtype=np.uint8), offs, lens, addr,
+                      np.full(len(datagrams), rx_s), 1_700_000_000_000_000),
+            Routing(self.slot_of_sysid, t.compid_of_slot, t.addr_of_slot, self.crc, self.kinds),
+            t.arrays, tlog, slow)
         return ([(int(d), buf[s:e], int(c)) for d, s, e, c in slow[:n_slow]],
                 tlog[:t_len].tobytes())
 
