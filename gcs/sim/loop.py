@@ -17,6 +17,8 @@ the law's edge list (gcs.control.formation.EdgeList), so a law step costs O(n + 
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -26,6 +28,53 @@ from gcs.control.derivatives import force_derivatives, levant_advance
 from gcs.control.formation import reference_velocity
 from gcs.control.geometry import is_nonsingular
 from gcs.control.law import DERIVATIVE_LEVANT, attitude_stage, position_stage
+
+
+class TeamState(NamedTuple):
+    """The team's true state (advanced in place) and its mass drops (the faults)."""
+
+    p: np.ndarray
+    v: np.ndarray
+    rot: np.ndarray
+    w: np.ndarray
+    mass: np.ndarray
+    inertia: np.ndarray
+    drop_step: np.ndarray  # plant step of each vehicle's mass drop, -1 for none
+    drop_factor: np.ndarray
+
+
+class LawInputs(NamedTuple):
+    """The law's states (mhat, rhohat: advanced in place) and its fixed inputs."""
+
+    mhat: np.ndarray
+    rhohat: np.ndarray
+    nominal_mass: np.ndarray
+    graph: object  # gcs.control.formation.EdgeList
+    offsets: np.ndarray
+    ref_c: np.ndarray
+    ref_a: np.ndarray
+    ref_w: np.ndarray
+    ref_ph: np.ndarray
+    gains: object  # gcs.control.law's gains tuple
+    adaptive: bool
+
+
+class SampledLoop(NamedTuple):
+    """What the sampled kernel keeps between chunks beside the law: the derivative's method
+    and Levant state, the mode and rate loop, the held outputs, the last tick's diagnostics."""
+
+    derivative: int
+    levant_state: np.ndarray
+    u_prev: np.ndarray
+    levant_l: float
+    levant_h: float
+    mode: int
+    rate_loop_gain: float
+    thrust_hold: np.ndarray
+    torque_hold: np.ndarray
+    rate_cmd: np.ndarray
+    diag: np.ndarray
+
 
 MODE_ACTUATORS = 0  #: the paper's torque (26) is applied directly
 MODE_RATES = 1  #: the body-rate command is tracked by an idealised onboard rate loop
@@ -95,50 +144,18 @@ def _apply_mass_drops(step, drop_step, drop_factor, mass):
 
 
 @njit(cache=True)
-def run_sampled(
-    first_step,
-    n_steps,
-    dt_s,
-    ctrl_every,
-    log_every,
-    p,
-    v,
-    rot,
-    w,
-    mass,
-    inertia,
-    drop_step,
-    drop_factor,
-    mhat,
-    rhohat,
-    nominal_mass,
-    graph,
-    offsets,
-    ref_c,
-    ref_a,
-    ref_w,
-    ref_ph,
-    gains,
-    adaptive,
-    derivative,
-    levant_state,
-    u_prev,
-    levant_l,
-    levant_h,
-    mode,
-    rate_loop_gain,
-    thrust_hold,
-    torque_hold,
-    rate_cmd,
-    diag,
-    log,
-    log_row0,
-):
+def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loop, log, log_row0):
     """Advance plant and law by `n_steps` plant steps from step index `first_step`.
 
     `diag` (n, 6) carries the last tick's (attitude error, |omega^e|, kappa, ux, uy, uz) between
-    chunks. Returns the minimum u_z seen and the count of singular command forces.
+    chunks. Returns the minimum u_z seen and the count of singular command forces. ``team``,
+    ``law``, ``loop``: `TeamState`, `LawInputs`, `SampledLoop`.
     """
+    p, v, rot, w, mass, inertia, drop_step, drop_factor = team
+    (mhat, rhohat, nominal_mass, graph, offsets, ref_c, ref_a, ref_w, ref_ph, gains,
+     adaptive) = law
+    (derivative, levant_state, u_prev, levant_l, levant_h, mode, rate_loop_gain, thrust_hold,
+     torque_hold, rate_cmd, diag) = loop
     n = p.shape[0]
     ctrl_dt = ctrl_every * dt_s
     min_uz = np.inf
@@ -302,35 +319,13 @@ def _oracle_rates(
 
 
 @njit(cache=True)
-def run_oracle(
-    first_step,
-    n_steps,
-    dt_s,
-    log_every,
-    p,
-    v,
-    rot,
-    w,
-    mass,
-    inertia,
-    drop_step,
-    drop_factor,
-    mhat,
-    rhohat,
-    nominal_mass,
-    graph,
-    offsets,
-    ref_c,
-    ref_a,
-    ref_w,
-    ref_ph,
-    gains,
-    adaptive,
-    log,
-    log_row0,
-):
+def run_oracle(first_step, n_steps, dt_s, log_every, team, law, log, log_row0):
     """Classic RK4 on the full closed-loop state (p, v, R, omega, mhat, rhohat) with the law
-    evaluated in every stage (exact derivatives, true masses). Returns the minimum u_z."""
+    evaluated in every stage (exact derivatives, true masses). Returns the minimum u_z.
+    ``team``, ``law``: `TeamState`, `LawInputs`."""
+    p, v, rot, w, mass, inertia, drop_step, drop_factor = team
+    (mhat, rhohat, nominal_mass, graph, offsets, ref_c, ref_a, ref_w, ref_ph, gains,
+     adaptive) = law
     min_uz = np.inf
     for step in range(first_step, first_step + n_steps):
         _apply_mass_drops(step, drop_step, drop_factor, mass)

@@ -16,7 +16,17 @@ from gcs.control.gains import LawGains
 from gcs.control.geometry import rotation_from_rpy
 from gcs.control.law import DERIVATIVE_METHODS
 from gcs.flightlog import FlightLog, estimates_record
-from gcs.sim.loop import LOG_FIELDS, MODE_ACTUATORS, MODE_RATES, N_LOG, run_oracle, run_sampled
+from gcs.sim.loop import (
+    LOG_FIELDS,
+    MODE_ACTUATORS,
+    MODE_RATES,
+    N_LOG,
+    LawInputs,
+    SampledLoop,
+    TeamState,
+    run_oracle,
+    run_sampled,
+)
 
 _MODES = {ControlMode.ACTUATORS: MODE_ACTUATORS, ControlMode.RATES: MODE_RATES}
 _COL = {name: i for i, name in enumerate(LOG_FIELDS)}
@@ -156,20 +166,20 @@ def simulate(
     while done < n_steps + 1:
         count = min(chunk, n_steps + 1 - done)
         row0 = done // log_every
-        # The plant, fault and law arguments both kernels share, in their order.
-        shared = (p, v, rot, w, mass, inertia, drop_step, drop_factor, mhat, rhohat, nominal,
-                  graph, offsets, ref_c, ref_a, ref_w, ref_ph, gains, adaptive)
+        state = TeamState(p, v, rot, w, mass, inertia, drop_step, drop_factor)
+        law_in = LawInputs(mhat, rhohat, nominal, graph, offsets, ref_c, ref_a, ref_w, ref_ph,
+                           gains, adaptive)
         if options.oracle:
-            chunk_min = run_oracle(done, count, dt_s, log_every, *shared, log, row0)
+            chunk_min = run_oracle(done, count, dt_s, log_every, state, law_in, log, row0)
             singular = 0
         else:
-            chunk_min, singular = run_sampled(
-                done, count, dt_s, ctrl_every, log_every, *shared,
+            sampled = SampledLoop(
                 DERIVATIVE_METHODS[derivative], levant_state, u_prev,
                 team.controller.derivative.levant_lipschitz,
                 team.controller.derivative.levant_substep_s, _MODES[mode],
-                options.rate_loop_gain_radps, thrust_hold, torque_hold, rate_cmd, diag, log, row0,
-            )
+                options.rate_loop_gain_radps, thrust_hold, torque_hold, rate_cmd, diag)
+            chunk_min, singular = run_sampled(
+                done, count, dt_s, ctrl_every, log_every, state, law_in, sampled, log, row0)
         min_uz = min(min_uz, chunk_min)
         if singular or not np.isfinite(p).all():
             raise SimulationError(

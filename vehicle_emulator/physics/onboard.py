@@ -315,42 +315,17 @@ class Onboard:
 
 
 @njit(cache=True)
-def onboard_step(
-    step,
-    dt,
-    mode,
-    on_ground,
-    thrust_cmd,
-    rate_cmd,
-    att_cmd,
-    yaw_rate_ff,
-    torque_cmd,
-    pos_sp,
-    vel_ff,
-    pos_mask,
-    yaw_sp,
-    hover,
-    att_sp,
-    rate_sp,
-    thrust_sp,
-    torque_sp,
-    rate_int,
-    vel_int,
-    pos,
-    vel,
-    rot,
-    omega,
-    inertia,
-    tmax,
-    sf_body,
-    cal_par,
-    cal_st,
-):
+def onboard_step(step, dt, cmd, loops, body, on_ground, inertia, tmax, sf_body, cal_par, cal_st):
     """Physics step ``step`` of every calibrated vehicle (rate loop not nominal) whose control
     period it starts (``step % ctrl_div[i] == 0``; in between, thrust_sp and torque_sp hold): an
     IMU sample, the latched estimates, the cascade and the personality's rate loop. One call per
     physics step for the whole fleet (the fleet kernel's), so the parameter and state tuples
-    are unpacked once per step, not per vehicle."""
+    are unpacked once per step, not per vehicle. ``cmd``, ``loops``, ``body``: the fleet's
+    `Commands`, `LoopState` and `Body` (fleet_arrays.py)."""
+    (mode, thrust_cmd, rate_cmd, att_cmd, yaw_rate_ff, torque_cmd, pos_sp, vel_ff, pos_mask,
+     yaw_sp, hover) = cmd
+    att_sp, rate_sp, thrust_sp, torque_sp, rate_int, _omega_prev, vel_int = loops
+    pos, vel, rot, omega = body
     (
         loop, _damping, _decay, _drag, _scale, ctrl_div, noise_on, gyro_std, accel_std, off_std,
         gyro_coef, dterm_coef, accel_coef, imu_mode, pos_delay, out_delay, gain_p, gain_i,

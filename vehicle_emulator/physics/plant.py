@@ -37,6 +37,7 @@ from flightkit.physics import (
 )
 from vehicle_emulator.config.personality import Personality, personality_of
 from vehicle_emulator.config.team import VehicleSpec
+from vehicle_emulator.physics.fleet_arrays import Airframe, Body, Commands, LoopState, Outputs
 from vehicle_emulator.physics.inner import attitude_control, position_control, rate_control
 from vehicle_emulator.physics.onboard import Onboard, onboard_step
 
@@ -67,54 +68,17 @@ def torque_max_nm(arm_length_m: np.ndarray, anti_torque_m: np.ndarray, f_max_n: 
 
 
 @njit(cache=True)
-def _step_kernel(
-    steps,
-    step0,
-    dt,
-    mode,
-    thrust_cmd,
-    rate_cmd,
-    att_cmd,
-    yaw_rate_ff,
-    torque_cmd,
-    pos_sp,
-    vel_ff,
-    pos_mask,
-    yaw_sp,
-    hover,
-    att_sp,
-    rate_sp,
-    thrust_sp,
-    torque_sp,
-    rate_int,
-    omega_prev,
-    vel_int,
-    pos,
-    vel,
-    rot,
-    omega,
-    mass,
-    inertia,
-    arm,
-    anti,
-    fmax,
-    tmax,
-    motor_tau,
-    airmode,
-    eff,
-    rotor_cmd,
-    rotor_f,
-    thrust_n,
-    torque_n,
-    on_ground,
-    impact_speed,
-    touchdowns,
-    sf_body,
-    charge_c,
-    t_sp_n,
-    cal_par,
-    cal_st,
-):
+def _step_kernel(steps, step0, dt, cmd, loops, body, frame, out, cal_par, cal_st):
+    """``steps`` physics steps of the fleet from step ``step0``: ``cmd`` (`Commands`), ``loops``
+    (`LoopState`), ``body`` (`Body`), ``frame`` (`Airframe`), ``out`` (`Outputs`), the
+    personalities' parameters and states (onboard.py)."""
+    (mode, thrust_cmd, rate_cmd, att_cmd, yaw_rate_ff, torque_cmd, pos_sp, vel_ff, pos_mask,
+     yaw_sp, hover) = cmd
+    att_sp, rate_sp, thrust_sp, torque_sp, rate_int, omega_prev, vel_int = loops
+    pos, vel, rot, omega = body
+    mass, inertia, arm, anti, fmax, tmax, motor_tau, airmode, eff = frame
+    (rotor_cmd, rotor_f, thrust_n, torque_n, on_ground, impact_speed, touchdowns, sf_body,
+     charge_c, t_sp_n) = out
     n = pos.shape[0]
     rotor_eff = np.empty((n, 4))
     loop = cal_par[0]
@@ -127,12 +91,8 @@ def _step_kernel(
         calibrated = calibrated or loop[i] != 0
     for st in range(steps):
         if calibrated:
-            onboard_step(
-                step0 + st, dt, mode, on_ground, thrust_cmd, rate_cmd, att_cmd, yaw_rate_ff,
-                torque_cmd, pos_sp, vel_ff, pos_mask, yaw_sp, hover, att_sp, rate_sp, thrust_sp,
-                torque_sp, rate_int, vel_int, pos, vel, rot, omega, inertia, tmax, sf_body,
-                cal_par, cal_st,
-            )
+            onboard_step(step0 + st, dt, cmd, loops, body, on_ground, inertia, tmax, sf_body,
+                         cal_par, cal_st)
         for i in range(n):
             m = mode[i]
             landed = on_ground[i]
@@ -374,50 +334,21 @@ class FleetPlant:
         if steps <= 0:
             return
         _step_kernel(
-            int(steps),
-            self.steps_done,
-            self.dt_s,
-            self.mode,
-            self.thrust_cmd_norm,
-            self.rate_cmd_flu_radps,
-            self.attitude_cmd,
-            self.yaw_rate_ff_radps,
-            self.torque_cmd_norm,
-            self.position_sp_enu_m,
-            self.velocity_ff_enu_mps,
-            self.position_mask,
-            self.yaw_sp_enu_rad,
-            self.hover_thrust_norm,
-            self.attitude_sp,
-            self.rate_sp_flu_radps,
-            self.thrust_sp_norm,
-            self.torque_sp_nm,
-            self.rate_integral,
-            self.omega_prev,
-            self.velocity_integral,
-            self.position_enu_m,
-            self.velocity_enu_mps,
-            self.rotation,
-            self.omega_flu_radps,
-            self.mass_kg,
-            self.inertia_kgm2,
-            self.arm_length_m,
-            self.anti_torque_m,
-            self.rotor_thrust_max_n,
-            self.torque_max_nm,
-            self.motor_time_constant_s,
-            self.airmode,
-            self.rotor_efficiency,
-            self.rotor_cmd_n,
-            self.rotor_thrust_n,
-            self.thrust_n,
-            self.torque_nm,
-            self.on_ground,
-            self.impact_speed_mps,
-            self.touchdowns,
-            self.specific_force_flu_mps2,
-            self.charge_used_c,
-            self._thrust_sp_n,
+            int(steps), self.steps_done, self.dt_s,
+            Commands(self.mode, self.thrust_cmd_norm, self.rate_cmd_flu_radps, self.attitude_cmd,
+                     self.yaw_rate_ff_radps, self.torque_cmd_norm, self.position_sp_enu_m,
+                     self.velocity_ff_enu_mps, self.position_mask, self.yaw_sp_enu_rad,
+                     self.hover_thrust_norm),
+            LoopState(self.attitude_sp, self.rate_sp_flu_radps, self.thrust_sp_norm,
+                      self.torque_sp_nm, self.rate_integral, self.omega_prev,
+                      self.velocity_integral),
+            Body(self.position_enu_m, self.velocity_enu_mps, self.rotation, self.omega_flu_radps),
+            Airframe(self.mass_kg, self.inertia_kgm2, self.arm_length_m, self.anti_torque_m,
+                     self.rotor_thrust_max_n, self.torque_max_nm, self.motor_time_constant_s,
+                     self.airmode, self.rotor_efficiency),
+            Outputs(self.rotor_cmd_n, self.rotor_thrust_n, self.thrust_n, self.torque_nm,
+                    self.on_ground, self.impact_speed_mps, self.touchdowns,
+                    self.specific_force_flu_mps2, self.charge_used_c, self._thrust_sp_n),
             self.onboard.params(),
             self.onboard.states(),
         )
