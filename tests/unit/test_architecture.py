@@ -6,6 +6,7 @@ from __future__ import annotations
 import ast
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -243,6 +244,55 @@ def test_each_emulator_room_imports_only_the_rooms_below_it():
              if p.is_dir() and (p / "__init__.py").exists()}
     assert rooms == set(EMULATOR_ROOMS)
     assert upward_imports(ROOT / "vehicle_emulator", EMULATOR_ROOMS) == {}
+
+
+def flightkit_users(package: Path) -> set[tuple[str, str]]:
+    """(flightkit module, file relative to ``package``) for every import of flightkit in it."""
+    found = set()
+    for path in package.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                parts = node.module.split(".")
+                if parts[0] != "flightkit":
+                    continue
+                names = [parts[1]] if len(parts) > 1 else [a.name for a in node.names]
+                found |= {(name, str(path.relative_to(package))) for name in names}
+    return found
+
+
+def documented_imports(text: str) -> tuple[dict[str, set[tuple[str, str]]], tuple[str, ...]]:
+    """From docs/architecture.md's package diagram: per program, (flightkit module, file) as
+    drawn (left column gcs, right column vehicle_emulator), and the rooms in drawn order
+    (each imports only those to its right)."""
+    block = text[text.index("   gcs ---"):text.index("   vehicle_emulator's rooms")].splitlines()
+    split = block[0].index("<")
+    drawn: dict[str, set[tuple[str, str]]] = {"gcs": set(), "vehicle_emulator": set()}
+    for line in block[1:]:
+        for m in re.finditer(r"(\w+) \(([^)]*)\)", line):
+            program = "gcs" if m.start() < split else "vehicle_emulator"
+            drawn[program] |= {(m.group(1), f.strip()) for f in m.group(2).split(",")}
+    chain = re.search(r"^\s+(\w+/(?: -> \w+/)+)\s*$", text, re.MULTILINE)
+    assert chain is not None, "no rooms line in the diagram"
+    rooms = tuple(r.strip().rstrip("/") for r in chain.group(1).split("->"))
+    return drawn, rooms[::-1]
+
+
+def test_the_architecture_diagram_matches_the_imports():
+    drawn, rooms = documented_imports((ROOT / "docs" / "architecture.md").read_text())
+    for program in ("gcs", "vehicle_emulator"):
+        assert drawn[program] == flightkit_users(ROOT / program), program
+    assert rooms == EMULATOR_ROOMS
+
+
+def test_the_diagram_check_can_fail():
+    # GIVEN the diagram with one importer moved and two rooms swapped THEN both are caught
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    drawn, rooms = documented_imports(text.replace("physics (config/team.py)",
+                                                   "physics (fleet/team.py)")
+                                      .replace("fleet/ -> autopilots/", "autopilots/ -> fleet/"))
+    assert ("physics", "config/team.py") not in drawn["vehicle_emulator"]
+    assert drawn["vehicle_emulator"] != flightkit_users(ROOT / "vehicle_emulator")
+    assert rooms != EMULATOR_ROOMS
 
 
 def test_the_room_check_can_fail(tmp_path):
