@@ -27,7 +27,7 @@ from gcs.config.modes import (
     FlyAction,
     fly_mode,
 )
-from gcs.config.schema import ConfigError, TeamConfig
+from gcs.config.schema import ConfigError, TeamConfig, whole_ratio
 from gcs.config.yamlnode import Node
 
 
@@ -218,8 +218,7 @@ def read_fly(node: Node) -> FlyConfig:
         )
     for name in FLY_CONTROL_MODES:
         rate = fly.tick_rate_hz(name)
-        ratio = rate / fly.log_rate_hz
-        if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-9 * ratio:
+        if whole_ratio(rate, fly.log_rate_hz) is None:
             node.child("log_rate_hz").fail(
                 f"must divide fly.{name}.tick_rate_hz {rate:g} (a whole number of ticks per "
                 f"sample), got {fly.log_rate_hz:g}"

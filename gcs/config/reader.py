@@ -42,6 +42,7 @@ from gcs.config.schema import (
     VehicleConfig,
     initial_phi,
     proposition2_min_mhat,
+    whole_ratio,
 )
 from gcs.config.yamlnode import MISSING, Dumper, Node, kind_of, parse_yaml
 from gcs.control.gains import LawGains
@@ -321,7 +322,7 @@ def _team(root: Node) -> TeamConfig:
         sim_node.child("controller_rate_hz").number(1000.0, gt=0.0),
     )
     ratio = sim.plant_rate_hz / sim.controller_rate_hz
-    if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-9 * ratio:
+    if whole_ratio(sim.plant_rate_hz, sim.controller_rate_hz) is None:
         sim_node.child("controller_rate_hz").fail(
             f"must divide plant_rate_hz {sim.plant_rate_hz:g} (an integer number of plant steps "
             f"per control tick), got {sim.controller_rate_hz:g} (ratio {ratio:.6g})"

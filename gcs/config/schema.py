@@ -175,6 +175,17 @@ class GraphConfig:
     edges: tuple[Edge, ...]
 
 
+def whole_ratio(high_hz: float, low_hz: float) -> int | None:
+    """``high_hz / low_hz`` when it is a whole number >= 1 (to 1e-9 of itself), else None: the one
+    rule every pair of a team's rates obeys (plant steps per control tick, ticks per time-series
+    sample)."""
+    if not (high_hz > 0.0 and low_hz > 0.0):
+        return None
+    ratio = high_hz / low_hz
+    whole = round(ratio)
+    return whole if whole >= 1 and abs(ratio - whole) <= 1e-9 * ratio else None
+
+
 @dataclass(frozen=True, slots=True)
 class SimConfig:
     plant_rate_hz: float = 1000.0

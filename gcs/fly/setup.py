@@ -27,6 +27,7 @@ from gcs.config.modes import (
     as_strings,
     fly_mode,
 )
+from gcs.config.schema import whole_ratio
 from gcs.control.gains import LawGains
 from gcs.flightlog import AUTOPILOT_CONTROLLER, FlightLog
 from gcs.fly.delay import DelayJudge, TorqueDelayJudge
@@ -230,8 +231,8 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
     rate = options.tick_rate_hz or fly.tick_rate_hz(mode)
     if not 0.0 < rate <= 1000.0:
         raise FlightSetupError(f"tick rate {rate:g} Hz: expected 0 < rate <= 1000")
-    ratio = rate / fly.log_rate_hz
-    if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-9 * ratio:
+    log_every = whole_ratio(rate, fly.log_rate_hz)
+    if log_every is None:
         raise FlightSetupError(
             f"tick rate {rate:g} Hz must be a multiple of fly.log_rate_hz {fly.log_rate_hz:g}")
     # position mode: the team file's gains only to build the (unused) law object
@@ -310,7 +311,7 @@ def prepare(team: TeamConfig, options: FlyOptions) -> FlightSetup:
         **({"prime_s": HOVER_WINDOW_S + 0.5} if from_hover else {}),
     )
     return FlightSetup(team, mode, law, rate, gains, plan, required,
-                       round(rate / fly.log_rate_hz), stability, judge, mode_choice)
+                       log_every, stability, judge, mode_choice)
 
 
 def go_to_start_plan(team: TeamConfig) -> GoToStartPlan | None:

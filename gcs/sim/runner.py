@@ -11,6 +11,7 @@ import numpy as np
 
 from gcs.config import TORQUE_MODES, ConfigError, ControlMode, TeamConfig
 from gcs.config.modes import as_strings
+from gcs.config.schema import whole_ratio
 from gcs.control.formation import edge_list, reference_velocity
 from gcs.control.gains import LawGains
 from gcs.control.geometry import rotation_from_rpy
@@ -70,10 +71,10 @@ def law_gains(team: TeamConfig) -> LawGains:
 
 
 def _steps_per(rate_hz: float, plant_hz: float, what: str) -> int:
-    ratio = plant_hz / rate_hz
-    if rate_hz <= 0 or ratio < 1 or abs(ratio - round(ratio)) > 1e-9:
+    steps = whole_ratio(plant_hz, rate_hz)
+    if steps is None:
         raise ConfigError(f"{what} {rate_hz} Hz must divide the plant rate {plant_hz} Hz")
-    return int(round(ratio))
+    return steps
 
 
 def simulate(
