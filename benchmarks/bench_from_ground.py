@@ -44,6 +44,7 @@ from flightkit import jitcache
 
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
+from benchmarks.calibration.fit_heading_estimate import heading_mismatch  # noqa: E402
 from benchmarks.docsection import write_section  # noqa: E402
 from benchmarks.fleet import fleet, fly  # noqa: E402
 from tests.harness import free_udp_port_block  # noqa: E402
@@ -73,6 +74,10 @@ SIH_FLOWN = {"fly": {"velocity_from_position_s": 0.0}}
 # where each vehicle boots (team frame ENU, on the ground): a 50 m diamond around the formation
 BOOT_XY_M = ((25.0, 0.0), (0.0, -25.0), (-25.0, 0.0), (0.0, 25.0))
 FLIGHTS = ("first", "second")
+#: per phase (hold: the 10 s before the formation; formation: from 10 s to its end), RMS over
+#: the vehicles: the heading's 1 s drift beyond its yaw rate and the roll/pitch rate
+PHASE_FIGURES = ("heading_d1_hold_deg", "heading_d1_formation_deg", "rp_rate_hold_dps",
+                 "rp_rate_formation_dps")
 
 
 def team_file(kind: str, work: Path, duration_s: float) -> Path:
@@ -111,7 +116,7 @@ def tlog_figures(tlog: Path, sysids: list[int], max_rate: float, formation_s: fl
     conn = mavutil.mavlink_connection(str(tlog))
     last_pos = {k: -math.inf for k in sysids}
     setpoints: dict[int, list[tuple[float, float]]] = {k: [] for k in sysids}
-    yaws: dict[int, list[tuple[float, float]]] = {k: [] for k in sysids}
+    yaws: dict[int, list[tuple[float, ...]]] = {k: [] for k in sysids}
     types = ["SET_POSITION_TARGET_LOCAL_NED", "SET_ATTITUDE_TARGET", "ATTITUDE_QUATERNION"]
     while (msg := conn.recv_match(type=types)) is not None:
         t = msg._timestamp
@@ -120,7 +125,9 @@ def tlog_figures(tlog: Path, sysids: list[int], max_rate: float, formation_s: fl
             k = msg.get_srcSystem()
             if k in yaws:
                 q1, q2, q3, q4 = msg.q1, msg.q2, msg.q3, msg.q4
-                yaws[k].append((t, math.atan2(2 * (q1 * q4 + q2 * q3), 1 - 2 * (q3 * q3 + q4 * q4))))
+                yaws[k].append((t, math.atan2(2 * (q1 * q4 + q2 * q3), 1 - 2 * (q3 * q3 + q4 * q4)),
+                                msg.time_boot_ms * 1e-3, msg.yawspeed,
+                                math.hypot(msg.rollspeed, msg.pitchspeed)))
         elif msg.target_system in sysids:
             k = msg.target_system
             if kind == "SET_POSITION_TARGET_LOCAL_NED":
@@ -128,11 +135,14 @@ def tlog_figures(tlog: Path, sysids: list[int], max_rate: float, formation_s: fl
             else:
                 setpoints[k].append((t, math.hypot(msg.body_roll_rate, msg.body_pitch_rate)))
     heading, limited = {}, {}
+    phases: dict[str, dict[int, float]] = {key: {} for key in PHASE_FIGURES}
     for k in sysids:
         sp = np.array([s for s in setpoints[k] if s[0] > last_pos[k]])
         yw = np.array(yaws[k])
         if len(sp) == 0 or len(yw) == 0:
             heading[k] = limited[k] = math.nan
+            for key in PHASE_FIGURES:
+                phases[key][k] = math.nan
             continue
         t0 = sp[0, 0]
         t1 = min(sp[-1, 0], t0 + formation_s)
@@ -142,7 +152,17 @@ def tlog_figures(tlog: Path, sysids: list[int], max_rate: float, formation_s: fl
         late = yw[(yw[:, 0] >= t0 + 10.0) & (yw[:, 0] <= t1)]
         err = np.angle(np.exp(1j * (late[:, 1] - start)))
         heading[k] = float(np.degrees(np.abs(err).max())) if len(err) else math.nan
-    return {"heading_deg": heading, "limited_pct": limited}
+        # the 10 s before the formation (the autopilot holding the start) against the formation
+        # from 10 s on: how far the heading moves in 1 s beyond its yaw rate's integral (the
+        # estimate's own motion), and the roll/pitch rate RMS
+        hold = yw[(yw[:, 0] >= t0 - 10.0) & (yw[:, 0] < t0)]
+        for name, part in (("hold", hold), ("formation", late)):
+            drift = heading_mismatch(part[:, 2], part[:, 1], part[:, 3])[1] if len(part) > 50 \
+                else math.nan
+            phases[f"heading_d1_{name}_deg"][k] = float(drift)
+            phases[f"rp_rate_{name}_dps"][k] = (float(np.degrees(np.sqrt(np.mean(part[:, 4] ** 2))))
+                                                if len(part) else math.nan)
+    return {"heading_deg": heading, "limited_pct": limited, **phases}
 
 
 def figures(out: Path, kind: str, max_rate: float) -> dict:
@@ -168,6 +188,9 @@ def figures(out: Path, kind: str, max_rate: float) -> dict:
         "limited_pct": (float(np.nanmax(list(tl["limited_pct"].values())))
                         if mode == "rates" else math.nan),
         "heading_deg": float(np.nanmax(list(tl["heading_deg"].values()))),
+        # RMS over the vehicles
+        **{key: float(np.sqrt(np.nanmean(np.square(list(tl[key].values())))))
+           for key in PHASE_FIGURES},
         "late_pct": float(report["tick"]["late_pct"]),
         "outcome": report["extra"]["outcome"]["reason"].splitlines()[0],
     }
@@ -239,12 +262,16 @@ def real_intro(rows: list[dict]) -> str:
         "namespace, COM_RC_IN_MODE 4, COM_RCL_EXCEPT 4, NAV_DLL_ACT 0; the rows of --records), "
         "and by this script against one `vehicle-emu --fleet --team` of the same file (the px4 "
         "personality, booted where SIH boots; the rows px4-sih). The figures are those of "
-        "\"From the ground, twice\".")
+        "\"From the ground, twice\", and two per phase, RMS over the vehicles, in the 10 s "
+        "before the formation (hold: PX4 holding the start position) and in the formation from "
+        "10 s on: the heading's drift in 1 s beyond its yaw rate's integral (D(1 s) of "
+        "`benchmarks.calibration.fit_heading_estimate`: the estimate's own motion) and the "
+        "roll/pitch rate RMS.")
 
 
 def section(rows: list[dict], duration_s: float, heading: str = HEADING) -> str:
     if heading == REAL_HEADING:
-        lines = [heading, "", real_intro(rows), ""] + table(rows)
+        lines = [heading, "", real_intro(rows), ""] + table(rows, phases=True)
         return "\n".join(lines) + "\n"
     lines = [
         heading, "",
@@ -272,22 +299,31 @@ def section(rows: list[dict], duration_s: float, heading: str = HEADING) -> str:
     return "\n".join(lines) + "\n"
 
 
-def table(rows: list[dict]) -> list[str]:
+def table(rows: list[dict], phases: bool = False) -> list[str]:
+    """The rows as a Markdown table; ``phases``: with the PHASE_FIGURES columns (hold /
+    formation)."""
+    extra_head = (" heading drift in 1 s, hold / formation | roll/pitch rate RMS, hold / "
+                  "formation |" if phases else "")
     lines = [
         "| team | flight | exit | mode | formation error mean / max, t >= 30 s [m] | mass error "
-        "at 20 s | rate limit active after 10 s | heading error after 10 s | late ticks |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "at 20 s | rate limit active after 10 s | heading error after 10 s | late ticks |"
+        + extra_head,
+        "|---|---|---|---|---|---|---|---|---|" + ("---|---|" if phases else ""),
     ]
     for r in rows:
         if "fe_max_30" not in r:
             lines.append(f"| {r['team']} | {r['flight']} | {r['exit']} | | {r['outcome']} | | | "
-                         "| |")
+                         "| |" + (" | |" if phases else ""))
             continue
+        extra = (f" {_cell(r['heading_d1_hold_deg'], '.2f')} / "
+                 f"{_cell(r['heading_d1_formation_deg'], '.2f')} deg | "
+                 f"{_cell(r['rp_rate_hold_dps'], '.1f')} / "
+                 f"{_cell(r['rp_rate_formation_dps'], '.1f')} deg/s |" if phases else "")
         lines.append(
             f"| {r['team']} | {r['flight']} | {r['exit']} | {r['mode']} | "
             f"{_cell(r['fe_mean_30'], '.3f')} / {_cell(r['fe_max_30'], '.3f')} | "
             f"{_cell(r['mass_pct_20'], '.1f')} % | {_cell(r['limited_pct'], '.2f')} % | "
-            f"{_cell(r['heading_deg'], '.1f')} deg | {r['late_pct']:.2f} % |")
+            f"{_cell(r['heading_deg'], '.1f')} deg | {r['late_pct']:.2f} % |" + extra)
     return lines
 
 
