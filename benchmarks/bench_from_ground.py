@@ -343,7 +343,9 @@ def main() -> None:
     args = ap.parse_args()
     rows: list[dict] = []
     for spec in args.records:
-        label, _, folder = spec.partition("=")
+        label, sep, folder = spec.partition("=")
+        if not (label and sep and folder and Path(folder).is_dir()):
+            raise SystemExit(f"--records {spec!r}: expected LABEL=DIR with DIR a folder")
         rows += recorded_rows(label, Path(folder))
     with tempfile.TemporaryDirectory() as tmp:
         work = args.keep or Path(tmp)
