@@ -2,10 +2,12 @@
 
 Every problem raises ConfigError with one line "<file>: <key path>: <problem>" (plus "(line N)"
 when the value came from a YAML file). The schema is documented in docs/configuration.md; the
-paper's Scenario I is configs/square4.yaml. Modules: modes (the named choices: control modes,
-stop actions), schema (the dataclasses), fly_schema (the `fly:` section's dataclasses), yamlnode
-(YAML with line numbers -> a node that checks values), fly_section (reading the `fly:` section),
-reader (the other sections and the entry points), describe (what `gcs check` prints).
+paper's Scenario I is configs/square4.yaml. Modules: declare (each key declared once, on its
+dataclass field, and the section reader built on those declarations), modes (the named choices:
+control modes, stop actions), schema, fly_schema and fault_schema (the dataclasses), yamlnode
+(YAML with line numbers -> a node that checks values), fly_section and fault_section (the rules
+between the `fly:` keys; one fault), reader (what depends on other sections, and the entry
+points), describe (what `gcs check` prints).
 """
 
 from gcs.config.describe import describe

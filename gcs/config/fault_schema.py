@@ -4,18 +4,22 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from gcs.config.declare import key
+from gcs.config.modes import FAULT_KINDS, JITTER_KINDS
+
 # Faults: each kind is its own dataclass with kind, vehicle (an id) and at_s (s from the formation
-# start) first. The emulator (vehicle_emulator/config/team.py) reads the same keys.
+# start) first, read by fault_section with the team's ids and the mission's length; the kind's own
+# keys are declared here. The emulator (vehicle_emulator/config/team.py) reads the same keys.
 
 
 @dataclass(frozen=True, slots=True)
 class FaultConfig:
     """Mass drop: at at_s the plant loses `fraction` of its mass (kind "mass_drop")."""
 
-    kind: str
-    vehicle: int
-    at_s: float
-    fraction: float
+    kind: str = key(choices=FAULT_KINDS)
+    vehicle: int = key()  # one of the team's ids
+    at_s: float = key(ge=0.0)  # at or before the mission's end
+    fraction: float = key(gt=0.0, lt=1.0)
 
     def summary(self) -> str:
         return (
@@ -27,10 +31,10 @@ class FaultConfig:
 class LinkLossFault:
     """At at_s the vehicle's MAVLink link goes down for duration_s (kind "link_loss")."""
 
-    kind: str
-    vehicle: int
-    at_s: float
-    duration_s: float
+    kind: str = key(choices=FAULT_KINDS)
+    vehicle: int = key()  # one of the team's ids
+    at_s: float = key(ge=0.0)  # at or before the mission's end
+    duration_s: float = key(gt=0.0)
 
     def summary(self) -> str:
         return f"vehicle {self.vehicle} link down for {self.duration_s:g} s at t = {self.at_s:g} s"
@@ -42,15 +46,15 @@ class PacketLossFault:
     delayed by latency_ms + a jitter term (`jitter` 'uniform': U[0, jitter_ms]; 'normal':
     |N(0, jitter_ms^2)|) + the emulator's reorder hold with `reorder_probability`."""
 
-    kind: str
-    vehicle: int
-    at_s: float
-    probability: float
-    latency_ms: float = 0.0
-    jitter_ms: float = 0.0
-    jitter: str = "uniform"  # one of JITTER_KINDS
-    reorder_probability: float = 0.0
-    duration_s: float = 0.0
+    kind: str = key(choices=FAULT_KINDS)
+    vehicle: int = key()  # one of the team's ids
+    at_s: float = key(ge=0.0)  # at or before the mission's end
+    probability: float = key(0.0, ge=0.0, le=1.0)
+    latency_ms: float = key(0.0, ge=0.0, le=10000.0)
+    jitter_ms: float = key(0.0, ge=0.0, le=10000.0)
+    jitter: str = key("uniform", choices=JITTER_KINDS)
+    reorder_probability: float = key(0.0, ge=0.0, le=1.0)
+    duration_s: float = key(0.0, ge=0.0, le=1e6)  # 0: to the end
 
     def summary(self) -> str:
         jitter = f" + {self.jitter} jitter {self.jitter_ms:g} ms" if self.jitter_ms else ""
@@ -68,11 +72,11 @@ class PacketLossFault:
 class MotorEfficiencyFault:
     """From at_s rotor `motor` (1..4) gives `efficiency` (0..1) of its commanded thrust."""
 
-    kind: str
-    vehicle: int
-    at_s: float
-    motor: int
-    efficiency: float
+    kind: str = key(choices=FAULT_KINDS)
+    vehicle: int = key()  # one of the team's ids
+    at_s: float = key(ge=0.0)  # at or before the mission's end
+    motor: int = key(ge=1, le=4)
+    efficiency: float = key(ge=0.0, le=1.0)
 
     def summary(self) -> str:
         return (

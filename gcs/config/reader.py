@@ -1,91 +1,42 @@
-"""Team configuration reader: the team-level sections (controller, reference velocity, vehicles,
-graph, frame) -> the schema's dataclasses; the public entry points. The YAML layer and the
-value checks are in yamlnode, the `fly:` section in fly_section, `faults:` in fault_section."""
+"""Team configuration reader: the whole file read by its declarations (declare.read_section),
+with what depends on other sections worked out here (the vehicles with the gains, the graph and
+the faults with the ids, a link's default ports, `mhat: from_hover`) and the rules between
+sections; the public entry points. The YAML layer and the value checks are in yamlnode, the rules
+between the `fly:` keys in fly_section, one fault in fault_section."""
 
 from __future__ import annotations
 
-import dataclasses
-import enum
 import os
 from pathlib import Path
 from typing import Any
 
 import yaml
 
+from gcs.config.declare import read_field, read_section, read_value, to_plain
 from gcs.config.fault_section import read_fault
 from gcs.config.fly_section import read_fly
-from gcs.config.modes import DERIVATIVE_METHODS, LAWS, MODES, ControlMode
 from gcs.config.schema import (
-    FRAME_VEHICLES,
     GAIN_NAMES,
     GRAVITY_MPS2,
     THRUST_MARGIN,
-    ZERO3,
-    Airframe,
-    AxisReference,
     ConfigError,
-    ControllerConfig,
-    Cosine,
-    DerivativeConfig,
     Edge,
     Estimates,
-    FrameConfig,
     Gains,
     GraphConfig,
-    InitialState,
     LinkConfig,
-    MissionConfig,
     PlantParams,
-    ReferenceVelocity,
-    SimConfig,
     TeamConfig,
     VehicleConfig,
     initial_phi,
     proposition2_min_mhat,
     whole_ratio,
 )
-from gcs.config.yamlnode import MISSING, Dumper, Node, kind_of, parse_yaml
+from gcs.config.yamlnode import Dumper, Node, kind_of, parse_yaml
 from gcs.control.gains import LawGains
 
 # --------------------------------------------------------------------------------------------
 # Sections.
-
-
-def _controller(node: Node) -> ControllerConfig:
-    node.keys("law mode gains", "derivative")
-    g = node.child("gains").keys(" ".join(n for n in GAIN_NAMES if n != "k_eps_yaw"), "k_eps_yaw")
-    values = {name: g.child(name).number(gt=0.0) for name in GAIN_NAMES if name != "k_eps_yaw"}
-    values["k_eps_yaw"] = g.child("k_eps_yaw").number(values["k_eps"], gt=0.0)  # default k_eps
-    gains = Gains(**values)
-    d = node.child("derivative")
-    if not d.absent:
-        d.keys("", "method levant_lipschitz levant_substep_s")
-    derivative = DerivativeConfig(
-        d.child("method").string("model", DERIVATIVE_METHODS),
-        d.child("levant_lipschitz").number(1e4, gt=0.0),
-        d.child("levant_substep_s").number(1e-4, gt=0.0),
-    )
-    return ControllerConfig(
-        node.child("law").string(choices=LAWS),
-        ControlMode(node.child("mode").string(choices=MODES)),
-        gains,
-        derivative,
-    )
-
-
-def _axis(node: Node) -> AxisReference:
-    node.keys("", "constant cosines")
-    cosines = []
-    for c in node.child("cosines").items("cosines {amplitude, period_s, phase_rad}"):
-        c.keys("amplitude period_s", "phase_rad")
-        cosines.append(
-            Cosine(
-                c.child("amplitude").number(),
-                c.child("period_s").number(gt=0.0),
-                c.child("phase_rad").number(0.0),
-            )
-        )
-    return AxisReference(node.child("constant").number(0.0), tuple(cosines))
 
 
 # vehicle-emu's personalities and origin rules (its `emulator:` sections; the ground station
@@ -118,90 +69,51 @@ def _emulator_section(node: Node, allowed: str) -> None:
 def _estimates(est: Node, plant: Node, gains: Gains) -> Estimates:
     """vehicles[].estimates; `mhat: from_hover` needs a mass for its stand-in and Proposition 2's
     mbar: the plant's mass_kg or mass_bound_kg."""
-    inertia = est.child("inertia_kgm2").vec3(gt=0.0)
-    bound = est.child("mass_bound_kg").number(None, gt=0.0)
     node = est.child("mhat")
     if node.value != "from_hover":
         if isinstance(node.value, str):
             node.fail(f"expected a number > 0 or 'from_hover', got {node.value!r}")
-        return Estimates(node.number(gt=0.0), inertia, bound)
-    mass = plant.child("mass_kg").number(gt=0.0) if not plant.absent else bound
-    if mass is None:
-        node.fail("from_hover needs estimates.mass_bound_kg (Proposition 2's mbar, checked "
-                  "against the hover estimate) or a plant")
-    # the stand-in: what the hover would give with v(0) = 0 (phi(0) = 2)
-    return Estimates(2.0 * mass / gains.alpha_m, inertia, bound, from_hover=True)
+        return read_section(est, Estimates, given={"mhat": lambda _: node.number(gt=0.0)})
+
+    def stand_in(read: dict[str, Any]) -> float:
+        """What the hover would give with v(0) = 0 (phi(0) = 2)."""
+        mass = (read_section(plant, PlantParams).mass_kg if not plant.absent
+                else read["mass_bound_kg"])
+        if mass is None:
+            node.fail("from_hover needs estimates.mass_bound_kg (Proposition 2's mbar, checked "
+                      "against the hover estimate) or a plant")
+        return 2.0 * mass / gains.alpha_m
+
+    return read_section(est, Estimates, given={"mhat": stand_in, "from_hover": lambda _: True})
 
 
-def _vehicle(node: Node, gains: Gains) -> VehicleConfig:
-    node.keys(
-        "id sysid offset_enu_m initial estimates airframe",
-        "link plant nominal_mass_kg nominal_inertia_kgm2 emulator",
-    )
-    _emulator_section(node.child("emulator"),
-                      "autopilot origin_enu_m boot_position_enu_m autopilot_params")
-    vehicle_id = node.child("id").integer(ge=1)
-    sysid = node.child("sysid").integer(ge=1, le=255)
-    ini = node.child("initial").keys(
-        "position_enu_m", "velocity_enu_mps attitude_rpy_rad body_rates_radps"
-    )
-    est = node.child("estimates").keys("mhat inertia_kgm2", "mass_bound_kg")
-    air = node.child("airframe").keys(
-        "arm_length_m anti_torque_m rotor_thrust_max_n", "motor_time_constant_s"
-    )
-    link, default_link = node.child("link"), LinkConfig.px4_sitl(sysid)
-    if not link.absent:
-        link.keys("", "local_port remote_host remote_port learn_remote")
-    learn = link.child("learn_remote").boolean(False)
-    if learn and link.child("remote_port").absent and not link.child("remote_host").absent:
-        link.child("remote_host").fail(
+def _link(node: Node, sysid: int) -> LinkConfig:
+    """vehicles[].link; absent keys: PX4 SITL's ports for the sysid, or with learn_remote the
+    vehicle's address from its first message."""
+    px4 = LinkConfig.px4_sitl(sysid)
+    if node.absent:
+        return px4
+    learn = read_field(node, LinkConfig, "learn_remote")
+    if learn and node.child("remote_port").absent and not node.child("remote_host").absent:
+        node.child("remote_host").fail(
             "has no effect without remote_port: with learn_remote: true the vehicle's address is "
             "learned from its first message (give remote_port too to send there until then)"
         )
-    plant = node.child("plant")
-    if not plant.absent:
-        plant.keys("mass_kg inertia_kgm2")
-    vehicle = VehicleConfig(
-        id=vehicle_id,
-        sysid=sysid,
-        offset_enu_m=node.child("offset_enu_m").vec3(),
-        initial=InitialState(
-            *(
-                ini.child(k).vec3(ZERO3 if k != "position_enu_m" else MISSING)
-                for k in (
-                    "position_enu_m",
-                    "velocity_enu_mps",
-                    "attitude_rpy_rad",
-                    "body_rates_radps",
-                )
-            )
-        ),
-        estimates=_estimates(est, plant, gains),
-        airframe=Airframe(
-            *(
-                air.child(k).number(gt=0.0)
-                for k in ("arm_length_m", "anti_torque_m", "rotor_thrust_max_n")
-            ),
-            air.child("motor_time_constant_s").number(0.0, ge=0.0),
-        ),
-        link=LinkConfig(
-            link.child("local_port").integer(default_link.local_port, ge=0, le=65535),
-            link.child("remote_host").string(
-                None if learn and link.child("remote_port").absent else default_link.remote_host
-            ),
-            link.child("remote_port").integer(
-                None if learn else default_link.remote_port, ge=1, le=65535
-            ),
-            learn,
-        ),
-        plant=None
-        if plant.absent
-        else PlantParams(
-            plant.child("mass_kg").number(gt=0.0), plant.child("inertia_kgm2").vec3(gt=0.0)
-        ),
-        nominal_mass_kg=node.child("nominal_mass_kg").number(None, gt=0.0),
-        nominal_inertia_kgm2=node.child("nominal_inertia_kgm2").vec3(None, gt=0.0),
-    )
+    if learn:
+        host = None if node.child("remote_port").absent else px4.remote_host
+        px4 = LinkConfig(px4.local_port, host, None, True)
+    return read_section(node, LinkConfig, px4)
+
+
+def _vehicle(node: Node, gains: Gains) -> VehicleConfig:
+    _emulator_section(node.child("emulator"),
+                      "autopilot origin_enu_m boot_position_enu_m autopilot_params")
+    est, plant, air = node.child("estimates"), node.child("plant"), node.child("airframe")
+    vehicle = read_section(node, VehicleConfig, extra_keys=("emulator",), given={
+        "estimates": lambda _: _estimates(est, plant, gains),
+        "link": lambda read: _link(node.child("link"), read["sysid"]),
+    })
+    sysid = vehicle.sysid
     who = f"vehicle {vehicle.id}, sysid {sysid}"
     if vehicle.plant is not None:
         m = vehicle.plant.mass_kg
@@ -240,17 +152,21 @@ def _unique(nodes: list[Node], key: str, values: list[Any], what: str) -> None:
         seen[value] = k
 
 
+_WEIGHT = Edge.__dataclass_fields__["weight"]
+
+
 def _graph(node: Node, ids: list[int]) -> GraphConfig:
     node.keys("edges")
     edges: list[Edge] = []
     seen: dict[frozenset[int], int] = {}
     for e in node.child("edges").items("edges [i, j] or [i, j, weight]"):
         if isinstance(e.value, dict):
-            e.keys("i j", "weight")
-            ends, weight = [e.child("i"), e.child("j")], e.child("weight").number(1.0, gt=0.0)
+            weight = read_section(e, Edge).weight
+            ends = [e.child("i"), e.child("j")]
         elif isinstance(e.value, list | tuple) and len(e.value) in (2, 3):
             ends = [e.item(0), e.item(1)]
-            weight = e.item(2).number(gt=0.0) if len(e.value) == 3 else 1.0
+            weight = (read_value(e.item(2), float, _WEIGHT.metadata, _WEIGHT.default)
+                      if len(e.value) == 3 else _WEIGHT.default)
         else:
             e.fail(f"expected an edge [i, j] or [i, j, weight], got {kind_of(e.value)}")
         i, j = (end.integer() for end in ends)
@@ -280,74 +196,57 @@ def _graph(node: Node, ids: list[int]) -> GraphConfig:
     return GraphConfig(tuple(edges))
 
 
-def _frame(node: Node) -> FrameConfig:
-    """The optional `frame:` section (docs/configuration.md)."""
-    d = FrameConfig()
-    if node.absent:
-        return d
-    node.keys("", "origin vehicles max_origin_distance_m")
-    origin = node.child("origin")
-    if origin.absent:
-        lat_lon_alt = d.origin
-    else:
-        lat_lon_alt = origin.vec3()
-        for k, (name, low, high) in enumerate((("latitude", -90.0, 90.0),
-                                               ("longitude", -180.0, 180.0),
-                                               ("altitude", -1000.0, 20000.0))):
-            if not low <= lat_lon_alt[k] <= high:
-                origin.fail(f"[lat_deg, lon_deg, alt_m]: {name} {lat_lon_alt[k]!r} outside "
-                            f"[{low:g}, {high:g}]")
-    return FrameConfig(
-        lat_lon_alt,
-        node.child("vehicles").string(d.vehicles, FRAME_VEHICLES),
-        node.child("max_origin_distance_m").number(d.max_origin_distance_m, gt=0.0),
-    )
-
-
 def _team(root: Node) -> TeamConfig:
-    root.keys(
-        "name mission controller reference_velocity graph vehicles",
-        "sim faults fly emulator frame",
-    )
     _emulator_section(root.child("emulator"), "autopilot origin autopilot_params")
-    name = root.child("name").string()
-    mission = MissionConfig(
-        root.child("mission").keys("duration_s").child("duration_s").number(gt=0.0)
-    )
-    sim_node = root.child("sim")
-    if not sim_node.absent:
-        sim_node.keys("", "plant_rate_hz controller_rate_hz")
-    sim = SimConfig(
-        sim_node.child("plant_rate_hz").number(1000.0, gt=0.0),
-        sim_node.child("controller_rate_hz").number(1000.0, gt=0.0),
-    )
+    def vehicles(read: dict[str, Any]) -> tuple[VehicleConfig, ...]:
+        nodes = root.child("vehicles").items("vehicles", min_len=1)
+        out = tuple(_vehicle(node, read["controller"].gains) for node in nodes)
+        _check_vehicles(nodes, out, read["controller"].law)
+        return out
+
+    def faults(read: dict[str, Any]) -> tuple[Any, ...]:
+        ids, duration_s = [v.id for v in read["vehicles"]], read["mission"].duration_s
+        return tuple(read_fault(f, ids, duration_s) for f in root.child("faults").items("faults"))
+
+    team = read_section(root, TeamConfig, extra_keys=("emulator",), given={
+        "source_path": lambda _: root.source,
+        "vehicles": vehicles,
+        "graph": lambda read: _graph(root.child("graph"), [v.id for v in read["vehicles"]]),
+        "faults": faults,
+        "fly": lambda _: read_fly(root.child("fly")),
+    })
+    _check_rates(root, team)
+    return team
+
+
+def _check_rates(root: Node, team: TeamConfig) -> None:
+    """The rules between the simulation's rates, the law's derivatives and gains and the
+    reference velocity."""
+    sim, d, gains = team.sim, team.controller.derivative, team.controller.gains
     ratio = sim.plant_rate_hz / sim.controller_rate_hz
     if whole_ratio(sim.plant_rate_hz, sim.controller_rate_hz) is None:
-        sim_node.child("controller_rate_hz").fail(
+        root.child("sim.controller_rate_hz").fail(
             f"must divide plant_rate_hz {sim.plant_rate_hz:g} (an integer number of plant steps "
             f"per control tick), got {sim.controller_rate_hz:g} (ratio {ratio:.6g})"
         )
-    ctrl_node = root.child("controller")
-    controller = _controller(ctrl_node)
-    d = controller.derivative
     if d.method == "levant" and d.levant_substep_s > sim.controller_dt_s:
-        ctrl_node.child("derivative.levant_substep_s").fail(
+        root.child("controller.derivative.levant_substep_s").fail(
             f"expected <= the control period 1/{sim.controller_rate_hz:g} Hz = "
             f"{sim.controller_dt_s:g} s, got {d.levant_substep_s!r}"
         )
-    ref_node = root.child("reference_velocity").keys("x y z")
-    reference = ReferenceVelocity(*(_axis(ref_node.child(a)) for a in "xyz"))
-    gains, varrho = controller.gains, reference.max_abs_acceleration_z()
+    varrho = team.reference_velocity.max_abs_acceleration_z()
     bound = (GRAVITY_MPS2 - varrho) / (2.0 * gains.sigma_a)
     if not gains.alpha_p < bound:
-        ctrl_node.child("gains.alpha_p").fail(
+        root.child("controller.gains.alpha_p").fail(
             f"needs alpha_p < (g - varrho)/(2 sigma_a) = ({GRAVITY_MPS2:g} - {varrho:.6g})/"
             f"(2 * {gains.sigma_a:g}) = {bound:.6g} with varrho = sup|v_r,z'|, "
             f"got {gains.alpha_p!r}"
         )
 
-    nodes = root.child("vehicles").items("vehicles", min_len=1)
-    vehicles = tuple(_vehicle(node, gains) for node in nodes)
+
+def _check_vehicles(nodes: list[Node], vehicles: tuple[VehicleConfig, ...], law: str) -> None:
+    """The rules between the vehicles: unique ids, sysids, endpoints, offsets and starts; the
+    baseline law's nominal masses."""
     _unique(nodes, "id", [v.id for v in vehicles], "vehicle id")
     _unique(nodes, "sysid", [v.sysid for v in vehicles], "sysid")
     # Vehicles with the same local_port share that GCS port, told apart by their (unique) sysids;
@@ -374,31 +273,12 @@ def _team(root: Node) -> TeamConfig:
         [v.initial.position_enu_m for v in vehicles],
         "initial position (collision)",
     )
-    if controller.law == "baseline":
+    if law == "baseline":
         for node, v in zip(nodes, vehicles, strict=True):
             if v.nominal_mass_kg is None:
                 node.child("nominal_mass_kg").fail(
                     f"required by the baseline law (vehicle {v.id}, sysid {v.sysid})"
                 )
-    ids = [v.id for v in vehicles]
-    graph = _graph(root.child("graph"), ids)
-
-    faults = [read_fault(f, ids, mission.duration_s) for f in root.child("faults").items("faults")]
-    fly = read_fly(root.child("fly"))
-    frame = _frame(root.child("frame"))
-    return TeamConfig(
-        name,
-        root.source,
-        mission,
-        controller,
-        reference,
-        graph,
-        sim,
-        vehicles,
-        tuple(faults),
-        fly,
-        frame,
-    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -431,30 +311,18 @@ def load_team(path: str | os.PathLike[str]) -> TeamConfig:
 
 def team_to_dict(team: TeamConfig) -> dict[str, Any]:
     """Plain data that team_from_dict reads back to an equal TeamConfig (None fields left out;
-    a mode or an action as its string)."""
+    a mode or an action as its string; each key under its declared name)."""
 
-    def plain(x: Any) -> Any:
-        if isinstance(x, enum.Enum):
-            return x.value
+    def special(x: Any) -> Any:
         if isinstance(x, LawGains):
             return {name: getattr(x, name) for name in GAIN_NAMES}
         if isinstance(x, Estimates):
             out = {"mhat": "from_hover" if x.from_hover else x.mhat,
-                   "inertia_kgm2": plain(x.inertia_kgm2)}
+                   "inertia_kgm2": list(x.inertia_kgm2)}
             return out | ({} if x.mass_bound_kg is None else {"mass_bound_kg": x.mass_bound_kg})
-        if dataclasses.is_dataclass(x):
-            return {
-                f.name: plain(getattr(x, f.name))
-                for f in dataclasses.fields(x)
-                if getattr(x, f.name) is not None
-            }
-        return [plain(v) for v in x] if isinstance(x, tuple) else x
+        return None
 
-    data = plain(team)
-    del data["source_path"]
-    fly = data["fly"]
-    data["fly"] = {"mode": fly.pop("control_mode")} | fly  # the field's YAML key
-    return data
+    return to_plain(team, special)
 
 
 def team_to_yaml(team: TeamConfig) -> str:

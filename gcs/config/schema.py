@@ -12,10 +12,11 @@ import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gcs.config.declare import key
 from gcs.config.fault_schema import (  # noqa: F401  (re-exported: this module's before the split)
     Fault,
     FaultConfig,
@@ -56,6 +57,9 @@ from gcs.config.modes import (  # noqa: F401  (re-exported: this module's before
     as_strings,
 )
 from gcs.control.gains import LawGains
+
+if TYPE_CHECKING:
+    from gcs.config.yamlnode import Node
 
 GRAVITY_MPS2 = 9.81
 THRUST_MARGIN = 1.2  # max collective thrust must be >= THRUST_MARGIN * m g when a plant is given
@@ -98,45 +102,55 @@ Gains = LawGains
 GAIN_NAMES = tuple(name for name in LawGains._fields if name != "gravity_mps2")
 
 
+def _gains(node: Node, default: Any) -> Gains:
+    """controller.gains: every gain of the law > 0; k_eps_yaw (the rates mode's yaw feedback)
+    defaults to k_eps."""
+    own = [name for name in GAIN_NAMES if name != "k_eps_yaw"]
+    node.keys(" ".join(own), "k_eps_yaw")
+    values = {name: node.child(name).number(gt=0.0) for name in own}
+    values["k_eps_yaw"] = node.child("k_eps_yaw").number(values["k_eps"], gt=0.0)
+    return Gains(**values)
+
+
 @dataclass(frozen=True, slots=True)
 class DerivativeConfig:
     """How u' and u'' are obtained: "model" (from the state and estimates) or "levant" (28)."""
 
-    method: str
-    levant_lipschitz: float = 1e4
-    levant_substep_s: float = 1e-4
+    method: str = key("model", choices=DERIVATIVE_METHODS)
+    levant_lipschitz: float = key(1e4, gt=0.0)
+    levant_substep_s: float = key(1e-4, gt=0.0)
 
 
 @dataclass(frozen=True, slots=True)
 class ControllerConfig:
-    law: str  # "adaptive" | "baseline"
-    mode: ControlMode  # one of MODES: rates, actuators or attitude (gcs fly only)
-    gains: Gains
-    derivative: DerivativeConfig
+    law: str = key(choices=LAWS)
+    mode: ControlMode = key(choices=MODES)  # rates, actuators or attitude (gcs fly only)
+    gains: Gains = key(read=_gains)
+    derivative: DerivativeConfig = key(DerivativeConfig())
 
 
 @dataclass(frozen=True, slots=True)
 class Cosine:
     """amplitude * cos(2 pi t / period_s + phase_rad), amplitude in m/s."""
 
-    amplitude: float
-    period_s: float
-    phase_rad: float = 0.0
+    amplitude: float = key()
+    period_s: float = key(gt=0.0)
+    phase_rad: float = key(0.0)
 
 
 @dataclass(frozen=True, slots=True)
 class AxisReference:
-    constant: float = 0.0
-    cosines: tuple[Cosine, ...] = ()
+    constant: float = key(0.0)
+    cosines: tuple[Cosine, ...] = key(())
 
 
 @dataclass(frozen=True, slots=True)
 class ReferenceVelocity:
     """v_r(t) [m/s, ENU] = constant + sum amplitude cos(omega t + phase), per axis."""
 
-    x: AxisReference
-    y: AxisReference
-    z: AxisReference
+    x: AxisReference = key()
+    y: AxisReference = key()
+    z: AxisReference = key()
 
     def max_abs_acceleration_z(self) -> float:
         """varrho = sum |amp| 2 pi / period_s over z [m/s^2]: sup|v_r,z'| (exact for one cosine)."""
@@ -165,14 +179,14 @@ class ReferenceVelocity:
 class Edge:
     """Undirected edge between vehicle ids i and j with weight a_ij = a_ji."""
 
-    i: int
-    j: int
-    weight: float = 1.0
+    i: int = key()
+    j: int = key()
+    weight: float = key(1.0, gt=0.0)
 
 
 @dataclass(frozen=True, slots=True)
 class GraphConfig:
-    edges: tuple[Edge, ...]
+    edges: tuple[Edge, ...] = key()  # [i, j], [i, j, weight] or {i, j, weight} (reader.py)
 
 
 def whole_ratio(high_hz: float, low_hz: float) -> int | None:
@@ -188,8 +202,8 @@ def whole_ratio(high_hz: float, low_hz: float) -> int | None:
 
 @dataclass(frozen=True, slots=True)
 class SimConfig:
-    plant_rate_hz: float = 1000.0
-    controller_rate_hz: float = 1000.0
+    plant_rate_hz: float = key(1000.0, gt=0.0)
+    controller_rate_hz: float = key(1000.0, gt=0.0)
 
     @property
     def plant_dt_s(self) -> float:
@@ -206,17 +220,17 @@ class SimConfig:
 
 @dataclass(frozen=True, slots=True)
 class MissionConfig:
-    duration_s: float
+    duration_s: float = key(gt=0.0)
 
 
 @dataclass(frozen=True, slots=True)
 class Airframe:
     """Quadrotor geometry of eq. (51): d_i = arm_length_m, C_i = anti_torque_m."""
 
-    arm_length_m: float
-    anti_torque_m: float
-    rotor_thrust_max_n: float
-    motor_time_constant_s: float = 0.0  # first-order rotor lag in the emulator; 0: none
+    arm_length_m: float = key(gt=0.0)
+    anti_torque_m: float = key(gt=0.0)
+    rotor_thrust_max_n: float = key(gt=0.0)
+    motor_time_constant_s: float = key(0.0, ge=0.0)  # first-order rotor lag in the emulator
 
     @property
     def max_thrust_n(self) -> float:
@@ -227,29 +241,29 @@ class Airframe:
 class PlantParams:
     """True parameters: for the simulated plant and emulator only, never for the controller."""
 
-    mass_kg: float
-    inertia_kgm2: Vec3  # diag(Jx, Jy, Jz), body frame
+    mass_kg: float = key(gt=0.0)
+    inertia_kgm2: Vec3 = key(gt=0.0)  # diag(Jx, Jy, Jz), body frame
 
 
 @dataclass(frozen=True, slots=True)
 class InitialState:
-    position_enu_m: Vec3
-    velocity_enu_mps: Vec3 = ZERO3
-    attitude_rpy_rad: Vec3 = ZERO3
-    body_rates_radps: Vec3 = ZERO3
+    position_enu_m: Vec3 = key()
+    velocity_enu_mps: Vec3 = key(ZERO3)
+    attitude_rpy_rad: Vec3 = key(ZERO3)
+    body_rates_radps: Vec3 = key(ZERO3)
 
 
 @dataclass(frozen=True, slots=True)
 class Estimates:
     """Initial adaptive states: mhat = mhat_i(0) of (24) (NOT a mass: alpha_m mhat/phi is)."""
 
-    mhat: float
-    inertia_kgm2: Vec3  # rhohat(0) = Jhat(0) diagonal
-    mass_bound_kg: float | None = None  # mbar_i of Proposition 2
+    mhat: float = key()  # a number > 0 or from_hover (reader.py)
+    inertia_kgm2: Vec3 = key(gt=0.0)  # rhohat(0) = Jhat(0) diagonal
+    mass_bound_kg: float | None = key(None, gt=0.0)  # mbar_i of Proposition 2
     # `mhat: from_hover`: gcs fly takes mhat_i(0) from the thrust the vehicle reports while it
     # holds (ATTITUDE_TARGET); mhat above is then the stand-in phi(0) m / alpha_m (m: the plant
     # mass, else mass_bound_kg) that gcs sim flies and that the flight replaces
-    from_hover: bool = False
+    from_hover: bool = key(False, internal=True)
 
 
 @dataclass(frozen=True, slots=True)
@@ -261,10 +275,11 @@ class LinkConfig:
     with the same nonzero ``local_port`` share that GCS port, told apart by sysid.
     """
 
-    local_port: int
-    remote_host: str | None  # None only with learn_remote and no remote_port
-    remote_port: int | None  # None only with learn_remote
-    learn_remote: bool = False
+    local_port: int = key(ge=0, le=65535)
+    # None only with learn_remote and no remote_port
+    remote_host: str | None = key()
+    remote_port: int | None = key(ge=1, le=65535)  # None only with learn_remote
+    learn_remote: bool = key(False)
 
     @classmethod
     def px4_sitl(cls, sysid: int) -> LinkConfig:
@@ -274,17 +289,17 @@ class LinkConfig:
 
 @dataclass(frozen=True, slots=True)
 class VehicleConfig:
-    id: int
-    sysid: int
-    offset_enu_m: Vec3  # theta_i, so theta_ij = theta_i - theta_j
-    initial: InitialState
-    estimates: Estimates
-    airframe: Airframe
-    link: LinkConfig
-    plant: PlantParams | None = None
-    nominal_mass_kg: float | None = None  # the non-adaptive baseline's mass
+    id: int = key(ge=1)
+    sysid: int = key(ge=1, le=255)
+    offset_enu_m: Vec3 = key()  # theta_i, so theta_ij = theta_i - theta_j
+    initial: InitialState = key()
+    estimates: Estimates = key()  # read with the plant and gains (reader.py)
+    airframe: Airframe = key()
+    link: LinkConfig = key(optional=True)  # absent: PX4 SITL's ports for the sysid (reader.py)
+    plant: PlantParams | None = key(None)
+    nominal_mass_kg: float | None = key(None, gt=0.0)  # the non-adaptive baseline's mass
     # The baseline's frozen inertia (Jhat is not adapted); None: the initial estimate.
-    nominal_inertia_kgm2: Vec3 | None = None
+    nominal_inertia_kgm2: Vec3 | None = key(None, gt=0.0)
 
     @property
     def baseline_inertia_kgm2(self) -> Vec3:
@@ -304,6 +319,15 @@ class VehicleConfig:
 
 
 FRAME_VEHICLES = ("own", "shared")
+
+
+def _on_earth(node: Node, lat_lon_alt: Vec3) -> None:
+    for k, (name, low, high) in enumerate((("latitude", -90.0, 90.0),
+                                           ("longitude", -180.0, 180.0),
+                                           ("altitude", -1000.0, 20000.0))):
+        if not low <= lat_lon_alt[k] <= high:
+            node.fail(f"[lat_deg, lon_deg, alt_m]: {name} {lat_lon_alt[k]!r} outside "
+                      f"[{low:g}, {high:g}]")
 #: PX4 SITL's default home: the bundled emulator's team-frame origin (lat deg, lon deg, alt m)
 DEFAULT_FRAME_ORIGIN = (47.397742, 8.545594, 488.0)
 
@@ -312,27 +336,31 @@ DEFAULT_FRAME_ORIGIN = (47.397742, 8.545594, 488.0)
 class FrameConfig:
     """The `frame:` section: how `gcs fly` ties each vehicle's local frame to the team frame."""
 
-    origin: tuple[float, float, float] = DEFAULT_FRAME_ORIGIN  # lat deg, lon deg, alt m
+    origin: Vec3 = key(DEFAULT_FRAME_ORIGIN, check=_on_earth)  # lat deg, lon deg, alt m
     # own: each vehicle's LOCAL_POSITION_NED is relative to its own EKF origin, read from the
     # vehicle (GPS_GLOBAL_ORIGIN, else HOME_POSITION); shared: every vehicle's local frame is the
     # team frame (no origin needed)
-    vehicles: str = "own"
-    max_origin_distance_m: float = 1000.0  # a vehicle's origin this far from `origin`: refused
+    vehicles: str = key("own", choices=FRAME_VEHICLES)
+    # a vehicle's origin this far from `origin`: refused
+    max_origin_distance_m: float = key(1000.0, gt=0.0)
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, kw_only=True)
 class TeamConfig:
-    name: str
-    source_path: str
-    mission: MissionConfig
-    controller: ControllerConfig
-    reference_velocity: ReferenceVelocity
-    graph: GraphConfig
-    sim: SimConfig
-    vehicles: tuple[VehicleConfig, ...]
-    faults: tuple[Fault, ...] = ()
-    fly: FlyConfig = FlyConfig()
-    frame: FrameConfig = FrameConfig()
+    """The whole team file (each section's keys declared by its dataclass; the vehicles, the
+    graph and the faults are read with what they depend on: gains, ids, the mission's length)."""
+
+    name: str = key()
+    mission: MissionConfig = key()
+    controller: ControllerConfig = key()
+    reference_velocity: ReferenceVelocity = key()
+    graph: GraphConfig = key()
+    vehicles: tuple[VehicleConfig, ...] = key()
+    sim: SimConfig = key(SimConfig())
+    faults: tuple[Fault, ...] = key(())
+    fly: FlyConfig = key(FlyConfig())
+    frame: FrameConfig = key(FrameConfig())
+    source_path: str = key("<dict>", internal=True)
 
     @property
     def n(self) -> int:

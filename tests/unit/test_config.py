@@ -293,8 +293,8 @@ ERRORS = [
         "nmae",
         "x",
         r"^<dict>: nmae: unknown key; did you mean 'name'\? allowed keys: name, "
-        r"mission, controller, reference_velocity, graph, vehicles, sim, faults, fly, emulator, "
-        r"frame$",
+        r"mission, controller, reference_velocity, graph, vehicles, sim, faults, fly, frame, "
+        r"emulator$",
     ),
     (
         "vehicles.2.plant.mas_kg",
