@@ -7,7 +7,7 @@ start every link, both directions, gets `packet_loss` with the case's latency, 0
 jitter and loss probability. The gains are what a user gets by following the ground station:
 `fly.link_delay_s` is set to latency + jitter (the most a packet waits), and where the paper's
 gains (alpha_p 2, c_p 4, k_eps 6, k_eps_yaw 4) fail the cascade criterion there, its proposal is
-flown (gcs/mission/cascade.py `stable_gains`); the initial mass comes from the hover
+flown (gcs/control/cascade.py `stable_gains`); the initial mass comes from the hover
 (`fly.initial_mass: from_hover`, the bundled default). Beside each, `gcs sim` of the same team and
 gains in-process (no link; rates only: gcs sim does not model an on-board attitude loop).
 
@@ -46,14 +46,14 @@ from benchmarks.docsection import write_section  # noqa: E402
 from benchmarks.fleet import fleet  # noqa: E402
 from benchmarks.fleet import fly as gcs_fly  # noqa: E402
 from gcs.config import load_team  # noqa: E402
-from gcs.control.position import phi  # noqa: E402
-from gcs.mission.cascade import (  # noqa: E402
+from gcs.control.cascade import (  # noqa: E402
     NOMINAL_RESPONSE,
     CascadeGains,
     laplacian_eigenvalues,
     stable_gains,
     verdict,
 )
+from gcs.control.position import phi  # noqa: E402
 from tests.harness import free_udp_port_block  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

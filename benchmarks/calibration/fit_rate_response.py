@@ -2,7 +2,7 @@
 
     python -m benchmarks.calibration.fit_rate_response [--no-write]
 
-The criterion (gcs/mission/cascade.py) models the autopilot's rate loop as a second order plus
+The criterion (gcs/control/cascade.py) models the autopilot's rate loop as a second order plus
 a dead time, G(s) = wn^2 / (s^2 + 2 zeta wn s + wn^2) e^{-s T}. This script fits that model in
 least squares to the four recorded PX4 v1.16.0 SIH roll and pitch doublets over their whole
 traces (ATTITUDE_QUATERNION rates on the vehicle's sample times, tests/data/sitl/px4/
@@ -31,7 +31,7 @@ jitcache.configure()  # numba's cache, before the compiled modules below are imp
 
 from benchmarks.calibration.fit_emulator import kernel_doublets, recorded_rates  # noqa: E402
 from benchmarks.docsection import publish  # noqa: E402
-from gcs.mission.cascade import PX4_RESPONSE  # noqa: E402
+from gcs.control.cascade import PX4_RESPONSE  # noqa: E402
 from vehicle_emulator.calibration import replay as rp  # noqa: E402
 from vehicle_emulator.config.personality import PERSONALITIES  # noqa: E402
 

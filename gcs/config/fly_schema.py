@@ -41,7 +41,7 @@ class FlyModeConfig:
     # rates mode: limit of the yaw-rate command, on its own
     max_yaw_rate_radps: float = key(0.5, gt=0.0)
     # the gains flown in this mode where the autopilot's own loops need softer ones than the
-    # paper's (gcs/mission/cascade.py); None: controller.gains
+    # paper's (gcs/control/cascade.py); None: controller.gains
     k_eps: float | None = key(None, gt=0.0)  # rates mode
     k_eps_yaw: float | None = key(None, gt=0.0)  # rates mode
     alpha_p: float | None = key(None, gt=0.0)
@@ -117,7 +117,7 @@ class GoToStartConfig:
 @dataclass(frozen=True, slots=True)
 class ResponseConfig:
     """`fly.response`: how the vehicles' own loops answer a setpoint, for the cascade criterion
-    (gcs/mission/cascade.py AutopilotResponse; absent: each autopilot's recorded default)."""
+    (gcs/control/cascade.py AutopilotResponse; absent: each autopilot's recorded default)."""
 
     rate_damping: float = key(gt=0.0)
     rate_natural_radps: float = key(gt=0.0)

@@ -1,9 +1,10 @@
 """The team file's named choices: control modes, stop actions and the other keys' option lists.
 
-ControlMode and FlyAction are StrEnums whose values are the team file's strings, so a member
-formats, compares, hashes and serialises (json) as its string. Where a message or the command line
-lists choices, `as_strings` gives the plain strings (a member's repr names its class). No imports
-from the rest of gcs: the config schema, the mission logic and the flight read their modes here.
+ControlMode (gcs/control/modes.py, with the law whose loops it names) and FlyAction are StrEnums
+whose values are the team file's strings, so a member formats, compares, hashes and serialises
+(json) as its string. Where a message or the command line lists choices, `as_strings` gives the
+plain strings (a member's repr names its class). No imports from the rest of gcs but that enum:
+the config schema, the mission logic and the flight read their modes here.
 """
 
 from __future__ import annotations
@@ -11,17 +12,9 @@ from __future__ import annotations
 import enum
 from collections.abc import Iterable
 
+from gcs.control.modes import ControlMode
 
-class ControlMode(enum.StrEnum):
-    """What the ground station sends each vehicle, and so which of its loops the law closes."""
-
-    RATES = "rates"  # thrust + body rates (the autopilot's rate loop)
-    ACTUATORS = "actuators"  # thrust + the law's torque (26)
-    ATTITUDE = "attitude"  # thrust + the command attitude (14); gcs fly only
-    #: gcs fly's baseline: no law, each vehicle gets its slot of the moving formation as a
-    #: position setpoint and the autopilot closes every loop (gcs/control/slots.py; never chosen
-    #: by auto)
-    POSITION = "position"
+__all__ = ["ControlMode", "FlyAction"]  # ControlMode is re-exported: the team file's choice
 
 
 class FlyAction(enum.StrEnum):

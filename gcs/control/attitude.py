@@ -133,7 +133,7 @@ def rate_command(eps: np.ndarray, wc_body: np.ndarray, k_eps: float,
     attitude feedback (for small errors eps ~ 2 x rotation vector, so the error decays at 2 k_eps).
     The autopilot's rate loop tracks it; the inertia adaptation (27) has no role in this mode.
     The yaw axis has its own gain k_eps_yaw (an autopilot's yaw-rate loop is several times slower
-    than its roll and pitch; gcs/mission/cascade.py).
+    than its roll and pitch; gcs/control/cascade.py).
     """
     out = wc_body - k_eps * eps
     out[:, 2] = wc_body[:, 2] - k_eps_yaw * eps[:, 2]

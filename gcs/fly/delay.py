@@ -4,7 +4,7 @@ loop's of actuators mode).
 
 `prepare` checks each control mode at the configured delay (`fly.link_delay_s`). In preflight the
 links' TIMESYNC round trips (gcs.link.clock) say what the delay is; where it exceeds the
-configured one, the criterion (gcs/mission/cascade.py) is evaluated again at the measured delay
+configured one, the criterion (gcs/control/cascade.py) is evaluated again at the measured delay
 and a mode that fails there is refused with one line, naming the setting that passes.
 
 The measured one-way delay is half the lower quartile of the link's latest round trips (8, 4 s at
@@ -41,9 +41,9 @@ from typing import Protocol
 import numpy as np
 
 from gcs.config.modes import ControlMode
+from gcs.control.cascade import AutopilotResponse, CascadeGains, cascade_margins, passes, verdict
+from gcs.control.stability import MIN_DECAY_PER_S, delays_ticks, torque_margins
 from gcs.mission.autopilots import PROFILES
-from gcs.mission.cascade import AutopilotResponse, CascadeGains, cascade_margins, passes, verdict
-from gcs.mission.stability import MIN_DECAY_PER_S, delays_ticks, torque_margins
 
 #: Measured delays are rounded up to this step before the criterion is evaluated [s].
 DELAY_STEP_S = 0.005
@@ -141,7 +141,7 @@ class DelayJudge:
 
 
 class TorqueDelayJudge:
-    """Actuators mode's discrete-time criterion (gcs/mission/stability.py) again at each link's
+    """Actuators mode's discrete-time criterion (gcs/control/stability.py) again at each link's
     measured delay, per vehicle (its inertia sets how much delay its torque loop tolerates).
 
     The criterion covers the ground station's own lag (MAX_LOOP_DELAY_S); a link whose round trip

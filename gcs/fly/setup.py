@@ -28,12 +28,7 @@ from gcs.config.modes import (
     fly_mode,
 )
 from gcs.config.schema import whole_ratio
-from gcs.control.gains import LawGains
-from gcs.flightlog import AUTOPILOT_CONTROLLER, FlightLog
-from gcs.fly.delay import DelayJudge, TorqueDelayJudge
-from gcs.fly.measure import HOVER_RATE_HZ, HOVER_WINDOW_S
-from gcs.mission.autopilots import PROFILES
-from gcs.mission.cascade import (
+from gcs.control.cascade import (
     AutopilotResponse,
     CascadeGains,
     cascade_margins,
@@ -41,15 +36,20 @@ from gcs.mission.cascade import (
     passes,
     verdict,
 )
-from gcs.mission.goto import GoToStartPlan
-from gcs.mission.plan import MissionPlan, Outcome
-from gcs.mission.safety import SafetyRules
-from gcs.mission.stability import (
+from gcs.control.gains import LawGains
+from gcs.control.stability import (
     MIN_DECAY_PER_S,
     delays_ticks,
     describe_margins,
     torque_margins,
 )
+from gcs.flightlog import AUTOPILOT_CONTROLLER, FlightLog
+from gcs.fly.delay import DelayJudge, TorqueDelayJudge
+from gcs.fly.measure import HOVER_RATE_HZ, HOVER_WINDOW_S
+from gcs.mission.autopilots import PROFILES
+from gcs.mission.goto import GoToStartPlan
+from gcs.mission.plan import MissionPlan, Outcome
+from gcs.mission.safety import SafetyRules
 
 MAX_POSITION_RATE_HZ = 100.0
 #: EXTENDED_SYS_STATE (landed state: preflight, takeoff, stopping); ArduPilot sends it only when
@@ -106,7 +106,7 @@ class FlyResult:
 
 def cascade_check(team: TeamConfig, mode: ControlMode, gains: LawGains,
                   rate_hz: float) -> tuple[str, dict[int, str], DelayJudge]:
-    """The cascade criterion of `mode` for every autopilot gcs fly flies (gcs/mission/cascade.py).
+    """The cascade criterion of `mode` for every autopilot gcs fly flies (gcs/control/cascade.py).
 
     With `fly.response` the vehicles' loops are known: a failure raises FlightSetupError before
     anything is opened. Otherwise each autopilot's recorded default applies, and a failure is

@@ -30,8 +30,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from gcs.config.modes import ControlMode
+from gcs.control.cascade import ARDUPILOT_RESPONSE, PX4_RESPONSE, AutopilotResponse
 from gcs.link.enums import mode_name
-from gcs.mission.cascade import ARDUPILOT_RESPONSE, PX4_RESPONSE, AutopilotResponse
 
 PX4_AUTOPILOT = 12  # MAV_AUTOPILOT_PX4
 ARDUPILOT_AUTOPILOT = 3  # MAV_AUTOPILOT_ARDUPILOTMEGA

@@ -115,7 +115,7 @@ class SafetyRules:
     geofence_max_enu_m: tuple[float, float, float] | None = None
     #: message type -> minimum rate [Hz] required in preflight
     required_rates_hz: Mapping[str, float] = field(default_factory=dict)
-    #: HEARTBEAT.autopilot -> why the control mode is not stable on it (gcs/mission/cascade.py)
+    #: HEARTBEAT.autopilot -> why the control mode is not stable on it (gcs/control/cascade.py)
     loop_refusals: Mapping[int, str] = field(default_factory=dict)
 
 

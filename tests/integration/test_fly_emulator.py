@@ -26,7 +26,7 @@ import pytest
 import yaml
 from pymavlink import mavutil
 
-from gcs.mission.cascade import NOMINAL_RESPONSE
+from gcs.control.cascade import NOMINAL_RESPONSE
 from tests.harness import free_udp_port_block
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(420)]
@@ -264,7 +264,7 @@ def test_scenario_one_actuators_mode_at_250_hz(tmp_path):
     computed on the ground from telemetry 2-3 ticks old and held by the vehicle between ticks.
 
     The torque gains (2, 2) are the stiffest the discrete-time criterion passes with 1-4 ticks
-    of delay (gcs/mission/stability.py); the gains it passed with 1-2 ticks, (24, 3), tipped a
+    of delay (gcs/control/stability.py); the gains it passed with 1-2 ticks, (24, 3), tipped a
     vehicle past fly.max_tilt_rad in two CI runs, one of them on a quiet machine. Run alone (make
     test): beside two busy loops the host stops every process for ~100 ms 10-28 times a flight,
     the vehicles fly those stops on a held torque, and 1 of 8 such flights ended 1.2 m out

@@ -23,8 +23,8 @@ OWN = ("flightkit", "gcs", "vehicle_emulator")
 #: other sans-IO parts import pymavlink (codec.py, statustext.py) or a default clock (codec.py,
 #: telemetry.py), or the UDP layer's address type (address.py).
 PURE = {
-    "gcs/control/*.py": "the paper's law, the formation slots",
-    "gcs/mission/*.py": "the flight sequence as a state machine, safety and stability checks",
+    "gcs/control/*.py": "the paper's law, the formation slots, the law's stability over a link",
+    "gcs/mission/*.py": "the flight sequence as a state machine, safety checks",
     "gcs/frames.py": "NED/FRD <-> ENU/FLU conversions",
     "gcs/geodesy.py": "one team frame from the vehicles' origins",
     "gcs/link/clock.py": "a vehicle's clock and true sample times",

@@ -1,4 +1,4 @@
-"""The cascade criterion (gcs/mission/cascade.py): its stability verdicts against a direct
+"""The cascade criterion (gcs/control/cascade.py): its stability verdicts against a direct
 time-domain simulation of the delayed loops, its margins against closed forms, and the gains it
 proposes."""
 
@@ -10,8 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gcs.fly.delay import unmeasured_delay_lines
-from gcs.mission.cascade import (
+from gcs.control.cascade import (
     ARDUPILOT_RESPONSE,
     PX4_RESPONSE,
     AutopilotResponse,
@@ -22,6 +21,7 @@ from gcs.mission.cascade import (
     stable_gains,
     verdict,
 )
+from gcs.fly.delay import unmeasured_delay_lines
 
 PAPER = CascadeGains(alpha_p=2.0, c_p=4.0, k_eps=8.0, k_eps_yaw=8.0)
 RING4 = np.array([[2, -1, 0, -1], [-1, 2, -1, 0], [0, -1, 2, -1], [-1, 0, -1, 2]], float)  # D - A
@@ -213,7 +213,7 @@ def test_the_delay_judge_is_asked_only_when_a_preflight_decides_and_from_the_set
 def test_the_predicted_attitude_loop_verdict_matches_a_time_domain_simulation(k):
     # 100 ms each way on the nominal autopilot, the law reading the attitude predicted over the
     # sample's age plus the uplink: tau = 2 x 100 ms + half a tick
-    from gcs.mission.cascade import NOMINAL_RESPONSE, prediction_horizon_s
+    from gcs.control.cascade import NOMINAL_RESPONSE, prediction_horizon_s
 
     link = 0.1
     margins = cascade_margins("rates", CascadeGains(1.0, 1.0, k, 0.5), NOMINAL_RESPONSE, [0.0],
@@ -264,7 +264,7 @@ def _vertical_loop_grows(alpha_p: float, c_p: float, lam: float, d_down: float, 
 def test_the_position_loop_verdict_with_and_without_prediction_matches_a_simulation(
         link, predicted, alpha_p, c_p):
     # the vertical loop on an ideal autopilot (thrust applied at once) over `link` each way
-    from gcs.mission.cascade import prediction_horizon_s
+    from gcs.control.cascade import prediction_horizon_s
 
     tick = 1e4
     margins = cascade_margins("rates", CascadeGains(alpha_p, c_p, 1.0, 0.5), IDEAL, [2.0], tick,
@@ -276,7 +276,7 @@ def test_the_position_loop_verdict_with_and_without_prediction_matches_a_simulat
 
 
 def test_prediction_buys_stiffness_at_a_lasting_delay_and_makes_attitude_mode_the_tolerant_one():
-    from gcs.mission.cascade import NOMINAL_RESPONSE
+    from gcs.control.cascade import NOMINAL_RESPONSE
 
     def stiffness(mode, response, delay, predicted):
         g = stable_gains(mode, PAPER, response, [0.0, 2.0, 4.0], 100.0, delay, predicted)

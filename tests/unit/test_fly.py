@@ -13,6 +13,7 @@ import pytest
 from flightkit.physics import rotors_from_wrench, wrench_from_rotors
 from gcs.config import load_team
 from gcs.config.fly_schema import ResponseConfig
+from gcs.control.cascade import CascadeGains, laplacian_eigenvalues, verdict
 from gcs.control.formation import edge_list, reference_velocity
 from gcs.control.geometry import rotation_from_rpy
 from gcs.control.law import TeamLaw, TeamMeasurement
@@ -37,7 +38,6 @@ from gcs.fly.stats import (
     round_trip_report,
 )
 from gcs.mission.autopilots import PROFILES
-from gcs.mission.cascade import CascadeGains, laplacian_eigenvalues, verdict
 from gcs.sim.runner import law_gains
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -53,7 +53,7 @@ def test_rates_setup_uses_the_file_and_checks_the_criterion():
     assert setup.requested_rates_hz == {"ATTITUDE_QUATERNION": 100.0, "LOCAL_POSITION_NED": 100.0,
                                         "EXTENDED_SYS_STATE": 5.0, "HIGHRES_IMU": 100.0,
                                         "ATTITUDE_TARGET": 10.0}
-    # fly.rates flies the cascade criterion's gains, not the paper's (gcs/mission/cascade.py)
+    # fly.rates flies the cascade criterion's gains, not the paper's (gcs/control/cascade.py)
     assert (setup.gains.k_eps, setup.gains.k_eps_yaw, setup.gains.alpha_p, setup.gains.c_p) == (
         1.5, 1.0, 2.0, 2.0)
     # judged with the delay compensation the law flies with (fly.predict, on by default)

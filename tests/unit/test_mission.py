@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_autopilots import fly_with_failures
 
+from gcs.control.stability import delays_ticks, torque_loop_radius, torque_margins
 from gcs.fly.records import log_notes as log_mission_notes
 from gcs.mission.machine import (
     EXIT_ABORTED,
@@ -26,7 +27,6 @@ from gcs.mission.machine import (
     Phase,
 )
 from gcs.mission.safety import SafetyRules, VehicleStatus, flight_problems, preflight_problems
-from gcs.mission.stability import delays_ticks, torque_loop_radius, torque_margins
 
 ROOT = Path(__file__).resolve().parents[2]
 IDS = (1, 2, 3)

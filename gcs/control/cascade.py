@@ -52,7 +52,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gcs.config.modes import ControlMode
+from gcs.control.modes import ControlMode
 
 MIN_MODULUS_MARGIN = 0.4
 MAX_EIGENVALUES = 16  # distinct Laplacian eigenvalues checked (large teams: a spread of them)

@@ -8,7 +8,7 @@ alpha_omega theta' (the 1/2 is -eps/(4 - tr(I - R^e)) at R^e = I). The Gamma rho
 left out: it is exact when rhohat = J, and its error feeds back only through rhohat - J, which
 actuators mode keeps small by adapting slowly (fly.actuators.alpha_rho; docs/control-law.md, "The
 torque loop over a link"). (The rates and attitude modes, whose innermost loops the autopilot
-closes, are checked by the cascade criterion of gcs/mission/cascade.py over each autopilot's
+closes, are checked by the cascade criterion of gcs/control/cascade.py over each autopilot's
 measured response.)
 
 It is discretised exactly (ZOH) with a pure measurement delay of d = 1 .. D ticks, D the ticks in
