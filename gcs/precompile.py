@@ -15,93 +15,10 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import tempfile
 import time
-from pathlib import Path
 
-from flightkit.jitcache import compiling, is_compiled
-
-#: First-run compile times on a quiet 2-core machine (docs/benchmarks.md, "Start-up"), for the
-#: notice: measured 17.6-29.7 s law, 7.8-14.7 s simulator after it, 27 s simulator alone
-#: (2026-12-04).
-LAW_COMPILE_S = 25.0
-SIM_COMPILE_S = 27.0  # alone
-SIM_AFTER_LAW_S = 12.0  # when the law's kernels are cached already
-
-# Two vehicles are enough: numba specialises on array types, not sizes. Both laws and both
-# derivative methods are compiled (placeholders filled in by `_team`).
-_TEAM_YAML = """\
-name: compile
-mission: {{duration_s: 1.0}}
-controller:
-  law: {law}
-  mode: rates
-  gains: {{c_p: 4.0, alpha_p: 2.0, alpha_m: 1.0, sigma_a: 1.0, alpha_eps: 32.0,
-          alpha_omega: 32.0, c_eps: 0.5, alpha_rho: 0.5, k_eps: 8.0}}
-  derivative: {{method: {derivative}}}
-reference_velocity:
-  x: {{constant: 0.0, cosines: [{{amplitude: 0.3, period_s: 23.0}}]}}
-  y: {{constant: 0.0}}
-  z: {{constant: 0.2}}
-graph: {{edges: [[1, 2]]}}
-fly: {{actuators: {{tick_rate_hz: 250, alpha_eps: 2.0, alpha_omega: 2.0, alpha_rho: 0.03}}}}
-vehicles:
-  - id: 1
-    sysid: 1
-    offset_enu_m: [1.0, 0.0, 0.0]
-    initial: {{position_enu_m: [1.0, 0.0, 10.0]}}
-    estimates: {{mhat: 1.0, inertia_kgm2: [0.08, 0.08, 0.08]}}
-    nominal_mass_kg: 0.85
-    airframe: {{arm_length_m: 0.2, anti_torque_m: 0.016, rotor_thrust_max_n: 6.0}}
-    plant: {{mass_kg: 0.85, inertia_kgm2: [0.04856, 0.04856, 0.08801]}}
-  - id: 2
-    sysid: 2
-    offset_enu_m: [-1.0, 0.0, 0.0]
-    initial: {{position_enu_m: [-1.0, 0.0, 10.0]}}
-    estimates: {{mhat: 4.0, inertia_kgm2: [0.08, 0.08, 0.08]}}
-    nominal_mass_kg: 1.2
-    airframe: {{arm_length_m: 0.25, anti_torque_m: 0.016, rotor_thrust_max_n: 8.0}}
-    plant: {{mass_kg: 1.2, inertia_kgm2: [0.1522, 0.1522, 0.3]}}
-"""
-
-_VARIANTS = [(law, derivative) for law in ("adaptive", "baseline")
-             for derivative in ("model", "levant")]
-
-
-def _team(law: str, derivative: str):  # -> TeamConfig
-    from gcs.config import team_from_yaml
-
-    return team_from_yaml(_TEAM_YAML.format(law=law, derivative=derivative), "<gcs compile>")
-
-
-def compile_law(prog: str = "gcs", force: bool = True) -> None:
-    """Compile the law as `gcs fly` runs it (its warm-up in `Flight`), every law and method;
-    with force=False, only when the cache does not hold it yet."""
-    from gcs.fly.flight import Flight
-    from gcs.fly.setup import FlyOptions, prepare
-
-    if not force and is_compiled("law"):
-        return
-    with (compiling("law", "the control law", LAW_COMPILE_S, prog),
-          tempfile.TemporaryDirectory() as tmp):
-        options = FlyOptions(out_dir=Path(tmp))  # the law is the same in every mode
-        for law, derivative in _VARIANTS:
-            Flight(prepare(_team(law, derivative), options), options)
-
-
-def compile_sim(prog: str = "gcs", force: bool = True) -> None:
-    """Compile the in-process closed loop of `gcs sim` (both modes, laws and methods); with
-    force=False, only when the cache does not hold it yet."""
-    from gcs.config.modes import SIM_MODES
-    from gcs.sim.runner import SimOptions, simulate
-
-    if not force and is_compiled("sim"):
-        return
-    estimate = SIM_AFTER_LAW_S if is_compiled("law") else SIM_COMPILE_S
-    with compiling("sim", "the simulator", estimate, prog):
-        for law, derivative in _VARIANTS:
-            for mode in SIM_MODES:
-                simulate(_team(law, derivative), SimOptions(duration_s=0.01, mode=mode))
+from gcs.fly.warmup import compile_law
+from gcs.sim.warmup import compile_sim
 
 
 def _font_cache() -> None:

@@ -20,10 +20,10 @@ from gcs.config.modes import FLY_ACTIONS, FLY_MODES, as_strings
 from gcs.fly.flight import Flight
 from gcs.fly.sched import SchedulingError, apply_scheduling
 from gcs.fly.setup import FlightSetupError, FlyOptions, prepare
+from gcs.fly.status import StatusView
+from gcs.fly.warmup import compile_law
 from gcs.mission.plan import EXIT_ABORTED, EXIT_INTERRUPTED, EXIT_OK
-from gcs.precompile import compile_law
 from gcs.report import summary_table
-from gcs.status import StatusView
 
 logger = logging.getLogger(__name__)
 

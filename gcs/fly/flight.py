@@ -9,7 +9,7 @@ One asyncio event loop owns everything through an `asyncio.TaskGroup`:
   vectorised `TeamLaw.step`, and sends each streaming vehicle its setpoint (gcs/fly/setpoints.py),
 * one task per command the machine asks for (gcs/fly/commander.py; its result goes back to the
   machine),
-* the live status (gcs/status.py) and, on a terminal, the abort key.
+* the live status (gcs/fly/status.py) and, on a terminal, the abort key.
 
 Each vehicle is commanded through its autopilot's profile (gcs.mission.autopilots: PX4 OFFBOARD /
 ArduPilot GUIDED_NOGPS, their hold, land and takeoff recipes), which the machine fixes at preflight

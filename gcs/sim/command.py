@@ -11,9 +11,9 @@ from gcs.config import TeamConfig, load_team
 from gcs.flightlog import FlightLog
 from gcs.flightlog_csv import load_timeseries, save_timeseries
 from gcs.plots import write_comparison_figures, write_figures
-from gcs.precompile import compile_sim
 from gcs.report import build_report, summary_table, write_report
 from gcs.sim.runner import SimOptions, SimResult, SimulationError, simulate
+from gcs.sim.warmup import compile_sim
 
 REPORT_NAME = "report.json"
 TIMESERIES_NAME = "timeseries.csv"

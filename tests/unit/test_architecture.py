@@ -246,6 +246,73 @@ def test_each_emulator_room_imports_only_the_rooms_below_it():
     assert upward_imports(ROOT / "vehicle_emulator", EMULATOR_ROOMS) == {}
 
 
+#: gcs's layers, top first: a module imports only layers below its own (a package's modules may
+#: import each other). cli composes the commands; precompile compiles through fly and sim; the
+#: two programs' packages; what they share (the flight sequence, records, figures); the link and
+#: the log; the team file and the metrics; the law; the frames.
+GCS_LAYERS = (
+    ("cli",),
+    ("precompile",),
+    ("fly", "sim"),
+    ("mission", "plots", "report", "flightlog_builder", "flightlog_csv"),
+    ("flightlog", "link"),
+    ("metrics", "config"),
+    ("control",),
+    ("frames", "geodesy"),
+)
+
+
+def gcs_unit(module: str, names: list[str]) -> list[str]:
+    """The gcs units (a package or a top-level module) that an import of ``module`` reaches."""
+    parts = module.split(".")
+    if parts[0] != "gcs":
+        return []
+    return [parts[1]] if len(parts) > 1 else names
+
+
+def gcs_upward_imports(package: Path, layers: tuple[tuple[str, ...], ...]) -> dict[str, list[str]]:
+    """The modules of ``package`` that import a unit of their own layer (other than their own
+    unit) or of a layer above it."""
+    rank = {unit: k for k, layer in enumerate(layers) for unit in layer}
+    found: dict[str, list[str]] = {}
+    for path in sorted(package.rglob("*.py")):
+        own = path.relative_to(package).parts[0].removesuffix(".py")
+        if own == "__init__":
+            continue
+        bad = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                reached = [u for a in node.names for u in gcs_unit(a.name, [])]
+            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                reached = gcs_unit(node.module, [a.name for a in node.names])
+            else:
+                continue
+            bad |= {u for u in reached if u != own and rank.get(u, -1) <= rank[own]}
+        if bad:
+            found[str(path.relative_to(package.parent))] = sorted(bad)
+    return found
+
+
+def test_gcs_imports_only_downward():
+    # GIVEN gcs's layers THEN every unit is in one and no module imports across or upward
+    units = {p.name.removesuffix(".py") for p in (ROOT / "gcs").iterdir()
+             if (p.suffix == ".py" or (p / "__init__.py").exists()) and p.name != "__init__.py"}
+    assert units == {u for layer in GCS_LAYERS for u in layer}
+    assert gcs_upward_imports(ROOT / "gcs", GCS_LAYERS) == {}
+
+
+def test_the_gcs_layer_check_can_fail(tmp_path):
+    # GIVEN a status module in mission that imports fly, and a fly module that imports the CLI
+    (tmp_path / "gcs" / "mission").mkdir(parents=True)
+    (tmp_path / "gcs" / "fly").mkdir()
+    (tmp_path / "gcs" / "mission" / "status.py").write_text("from gcs.fly import stats\n")
+    (tmp_path / "gcs" / "fly" / "command.py").write_text(
+        "def f():\n    from gcs import cli\n    import gcs.sim.runner\n")
+    # THEN both are named, each with what it reaches
+    assert gcs_upward_imports(tmp_path / "gcs", GCS_LAYERS) == {
+        "gcs/fly/command.py": ["cli", "sim"], "gcs/mission/status.py": ["fly"]}
+
+
 def flightkit_users(package: Path) -> set[tuple[str, str]]:
     """(flightkit module, file relative to ``package``) for every import of flightkit in it."""
     found = set()

@@ -7,7 +7,7 @@ import math
 
 from rich.console import Console
 
-from gcs.status import StatusSnapshot, VehicleLine, plain_line, render_table
+from gcs.fly.status import StatusSnapshot, VehicleLine, plain_line, render_table
 
 
 def _snapshot(lost: bool = False) -> StatusSnapshot:
