@@ -8,7 +8,6 @@ from typing import Any
 
 import numpy as np
 
-from gcs import frames
 from gcs.config import ControlMode, TeamConfig
 from gcs.control.law import TeamCommand
 from gcs.control.slots import SlotTargets
@@ -55,7 +54,7 @@ class Setpoints:
         # the rows of the last streaming set (the set, as a list, as an array)
         self._streaming_rows: tuple[frozenset[int] | None, list[int], np.ndarray] = (
             None, [], np.zeros(0, dtype=np.intp))
-        self._goto_yaw_ned: dict[int, float] = {}  # heading held while going to start [rad]
+        self._goto_yaw_enu: dict[int, float] = {}  # heading held while going to start [rad]
 
     def send(self, c: TeamCommand, streaming: frozenset[int]) -> None:
         """Thrust / max thrust; actuators: thrust-preserving torque limit of (51), then torque /
@@ -118,41 +117,42 @@ class Setpoints:
             vid = self.ids[i]
             if vid not in targets or self.ties.ties[i] is None:
                 continue
-            if vid not in self._goto_yaw_ned:
+            if vid not in self._goto_yaw_enu:
                 if hold is None:
-                    hold = self.yaw_ned(sample, "hold")
-                self._goto_yaw_ned[vid] = float(hold[i])
+                    hold = self.yaw_enu(sample, "hold")
+                self._goto_yaw_enu[vid] = float(hold[i])
             position, velocity = targets[vid]
-            self._send_position_target(i, position, velocity, self._goto_yaw_ned[vid])
+            self._send_position_target(i, position, velocity, self._goto_yaw_enu[vid])
 
     def _send_position_target(self, i: int, position_enu_m: Any, velocity_enu_mps: Any,
-                              yaw_ned_rad: float, acceleration_enu_mps2: Any = None) -> None:
-        """SET_POSITION_TARGET_LOCAL_NED to vehicle i: a team-frame target in its own local frame
-        (p_local = R_i^T (p_team - o_i), ENU -> NED), velocity (and acceleration) feed-forward
-        turned the same way (R_i^T v_team); a setpoint the link refuses stops the flight."""
+                              yaw_enu_rad: float, acceleration_enu_mps2: Any = None) -> None:
+        """A position target to vehicle i: a team-frame target in its own local frame
+        (p_local = R_i^T (p_team - o_i)), velocity (and acceleration) feed-forward turned the
+        same way (R_i^T v_team), `yaw_enu_rad` already local; a setpoint the link refuses stops
+        the flight."""
         tie = self.ties.ties[i]
         assert tie is not None  # preflight refuses an untied vehicle
-        ned = frames.ned_from_enu(tie.local_from_team(position_enu_m))
-        v_ned = frames.ned_from_enu(tie.vectors_local_from_team(velocity_enu_mps))
-        a_ned = (None if acceleration_enu_mps2 is None
-                 else frames.ned_from_enu(tie.vectors_local_from_team(acceleration_enu_mps2)))
+        position = tie.local_from_team(position_enu_m)
+        velocity = tie.vectors_local_from_team(velocity_enu_mps)
+        acceleration = (None if acceleration_enu_mps2 is None
+                        else tie.vectors_local_from_team(acceleration_enu_mps2))
         try:
-            self.proxies[i].setpoints.send_position_target(ned, v_ned, yaw_ned_rad, a_ned)
+            self.proxies[i].setpoints.send_position_target(position, velocity, yaw_enu_rad,
+                                                           acceleration)
         except SetpointError as exc:
             self.setpoint_errors += 1
             self.machine.request_abort(str(exc), operator=False)
 
-    def yaw_ned(self, sample: TeamSample, heading: str | float) -> np.ndarray:
-        """(n,) the yaw of a position setpoint [rad, from north, clockwise] in each vehicle's
+    def yaw_enu(self, sample: TeamSample, heading: str | float) -> np.ndarray:
+        """(n,) the yaw of a position setpoint [rad, from east, anticlockwise] in each vehicle's
         local frame for a `fly.heading` policy: 'hold' its heading now, 'paper' east, a number
         that compass heading (gcs.fly.measure.command_heading_rad)."""
-        yaw_enu = command_heading_rad(heading, self.ties.rotations_to_local(sample.rotation))
-        return frames.yaw_ned_from_enu(yaw_enu)
+        return command_heading_rad(heading, self.ties.rotations_to_local(sample.rotation))
 
-    def send_slots(self, targets: SlotTargets, yaw_ned_rad: np.ndarray,
+    def send_slots(self, targets: SlotTargets, yaw_enu_rad: np.ndarray,
                    streaming: frozenset[int]) -> None:
         """Formation slots (position mode): vehicle i's slot to it if it is streaming."""
         for i in range(self.n):
             if self.ids[i] in streaming:
                 self._send_position_target(i, targets.position_enu_m[i], targets.velocity_enu_mps,
-                                           float(yaw_ned_rad[i]), targets.acceleration_enu_mps2)
+                                           float(yaw_enu_rad[i]), targets.acceleration_enu_mps2)

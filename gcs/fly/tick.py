@@ -218,7 +218,7 @@ class Tick:
         self._from_hover = setup.law == "adaptive" and any(v.estimates.from_hover
                                                            for v in team.vehicles)
         self.slots: FormationSlots | None = None  # position mode: fixed at the formation start
-        self._slot_yaw_ned = np.zeros(self.n)  # position mode: the heading each slot holds
+        self._slot_yaw_enu = np.zeros(self.n)  # position mode: the heading each slot holds
         # Before the formation starts (PRIME), vehicles get level, zero-rate setpoints at the
         # law's own initial mass estimate times g (what the law itself would ask at rest).
         kappa0 = (np.asarray(team.nominal_masses_kg(), dtype=float) if setup.law == "baseline"
@@ -291,7 +291,7 @@ class Tick:
             except ValueError as exc:
                 self.machine.request_abort(f"t = 0 s: {exc}", operator=False)
                 return
-            self._slot_yaw_ned = self.setpoints.yaw_ned(sample, self.team.fly.heading)
+            self._slot_yaw_enu = self.setpoints.yaw_enu(sample, self.team.fly.heading)
         if self.slots is None:  # the start failed: the flight is stopping, the failsafes act
             return
         t = (k - self._k0) * self.period_s
@@ -304,7 +304,7 @@ class Tick:
                                      np.zeros(self.n, dtype=np.int64))
             if log:
                 self.log(t, sample, targets.velocity_enu_mps, None)
-        self.setpoints.send_slots(targets, self._slot_yaw_ned, streaming)
+        self.setpoints.send_slots(targets, self._slot_yaw_enu, streaming)
 
     def _prime_slots(self, sample: TeamSample, streaming: frozenset[int]) -> None:
         """Position mode's PRIME: the slots of a formation starting now (no vehicle acts on them
@@ -315,7 +315,7 @@ class Tick:
         except ValueError as exc:
             self.machine.request_abort(f"prime: {exc}", operator=False)
             return
-        self.setpoints.send_slots(targets, self.setpoints.yaw_ned(sample, self.team.fly.heading),
+        self.setpoints.send_slots(targets, self.setpoints.yaw_enu(sample, self.team.fly.heading),
                                   streaming)
 
     def _log_unmeasured_delays(self) -> None:

@@ -97,22 +97,23 @@ class VehicleSetpoints:
             TYPE_MASK_ATTITUDE_THRUST, [float(x) for x in q], 0.0, 0.0, 0.0, thrust))
         self._n["setpoints_sent"] += 1
 
-    def send_position_target(self, position_ned_m: ArrayLike, velocity_ned_mps: ArrayLike,
-                             yaw_ned_rad: float,
-                             acceleration_ned_mps2: ArrayLike | None = None) -> None:
-        """SET_POSITION_TARGET_LOCAL_NED, MAV_FRAME_LOCAL_NED; unlike the other setpoints, every
-        argument is in the vehicle's own local NED frame (PX4's and ArduPilot's EKF origin), as
-        sent: position [m, NED], velocity feed-forward [m/s, NED], yaw [rad, from north,
-        clockwise] and, when given, acceleration feed-forward [m/s^2, NED] (type_mask 2048: yaw
-        rate ignored), else accelerations ignored too (type_mask 2496); returns immediately."""
-        pos = self._finite(position_ned_m, (3,), "position_ned_m")
-        vel = self._finite(velocity_ned_mps, (3,), "velocity_ned_mps")
-        yaw = self._finite(yaw_ned_rad, (), "yaw_ned_rad")
-        if acceleration_ned_mps2 is None:
+    def send_position_target(self, position_enu_m: ArrayLike, velocity_enu_mps: ArrayLike,
+                             yaw_enu_rad: float,
+                             acceleration_enu_mps2: ArrayLike | None = None) -> None:
+        """SET_POSITION_TARGET_LOCAL_NED, MAV_FRAME_LOCAL_NED: a target in the vehicle's own
+        local frame (its EKF origin), given in ENU like every setpoint here and sent as NED:
+        position [m], velocity feed-forward [m/s], yaw [rad, from east, anticlockwise] and, when
+        given, acceleration feed-forward [m/s^2] (type_mask 2048: yaw rate ignored), else
+        accelerations ignored too (type_mask 2496); returns immediately."""
+        pos = frames.ned_from_enu(self._finite(position_enu_m, (3,), "position_enu_m"))
+        vel = frames.ned_from_enu(self._finite(velocity_enu_mps, (3,), "velocity_enu_mps"))
+        yaw = frames.yaw_ned_from_enu(self._finite(yaw_enu_rad, (), "yaw_enu_rad"))
+        if acceleration_enu_mps2 is None:
             mask, acc = TYPE_MASK_POSITION_VELOCITY_YAW, np.zeros(3)
         else:
             mask = TYPE_MASK_POSITION_VELOCITY_ACCELERATION_YAW
-            acc = self._finite(acceleration_ned_mps2, (3,), "acceleration_ned_mps2")
+            acc = frames.ned_from_enu(
+                self._finite(acceleration_enu_mps2, (3,), "acceleration_enu_mps2"))
         self._send(self._codec.mav.set_position_target_local_ned_encode(
             self._time_boot_ms(), self._sysid, self._compid, MAV_FRAME_LOCAL_NED,
             mask, *(float(x) for x in pos), *(float(x) for x in vel),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -53,16 +54,18 @@ def test_rates_go_out_as_frd_and_thrust_is_clamped_and_counted() -> None:
                                   "thrust_clamped": 1, "torque_clamped": 0}
 
 
-def test_position_targets_are_sent_in_the_local_ned_frame_as_given() -> None:
+def test_position_targets_are_given_in_enu_and_sent_in_the_local_ned_frame() -> None:
     # GIVEN one vehicle's setpoints
     setpoints, box = sender()
-    # WHEN a NED position target with an acceleration feed-forward is sent
-    setpoints.send_position_target([1.0, 2.0, -3.0], [0.1, 0.0, 0.0], 0.5, [0.0, 0.0, -0.2])
-    # THEN no axis is converted: NED in, MAV_FRAME_LOCAL_NED out, yaw rate ignored
+    # WHEN an ENU position target with an acceleration feed-forward is sent, yaw 0.5 rad short
+    # of north (ENU yaw pi/2 - 0.5)
+    setpoints.send_position_target([2.0, 1.0, 3.0], [0.0, 0.1, 0.0], math.pi / 2 - 0.5,
+                                   [0.0, 0.0, 0.2])
+    # THEN it goes out as NED in MAV_FRAME_LOCAL_NED, yaw from north clockwise, yaw rate ignored
     (msg,) = box.sent
     assert (msg.coordinate_frame, msg.type_mask) == (1, 2048)
-    assert [msg.x, msg.y, msg.z, msg.vx, msg.afz, msg.yaw] == \
-        pytest.approx([1.0, 2.0, -3.0, 0.1, -0.2, 0.5])
+    assert [msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.afz, msg.yaw] == \
+        pytest.approx([1.0, 2.0, -3.0, 0.1, 0.0, -0.2, 0.5])
 
 
 class FakePort:
