@@ -40,8 +40,8 @@ delay's phase lag to second order at low frequency and raises the loop gain abov
 criterion weighs both.
 
 A loop passes when its closed loop is stable (every pole in the open left half plane) and its
-modulus margin min_w |1 + L(jw)| is at least `MIN_MODULUS_MARGIN` (0.5: gain margin >= 2 and
-phase margin >= 29 deg whatever the number of crossings).
+modulus margin min_w |1 + L(jw)| is at least `MIN_MODULUS_MARGIN` (0.4: gain margin >= 1/(1 - 0.4)
+= 1.67 and phase margin >= 2 asin(0.2) = 23 deg whatever the number of crossings).
 """
 
 from __future__ import annotations
