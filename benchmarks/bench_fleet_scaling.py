@@ -27,39 +27,33 @@ ROOT = Path(__file__).resolve().parents[1]
 HEADING = "## Emulator fleet at 1 kHz"
 ANALYSIS = """
 Where the time goes at 240 vehicles (cProfile of the fleet under this load, and
-`bench_fleet_inprocess.py`): the physics is not the problem. The plant, the onboard models and
-PX4's rate loop for the whole fleet are one numba call per tick (two 1 ms RK4 steps: about 8 %
-of a core at 240 vehicles); the autopilot logic at 50 Hz is Python per vehicle (about 6 %:
-`refresh_status`, `observe`, `Autopilot.tick`; since 2026-12-03 the tick gathers every
-vehicle's observation from the fleet's arrays at once and writes the status by column, with the
-battery model over the whole fleet: 3.9 us a vehicle per autopilot tick for the two, against
-7.7 us for each node's own `observe` and `refresh_status`, timed in-process the same hour;
-`tests/unit/test_emulator_runner.py` checks the values are the same); telemetry is built and
-framed in batches (about 3 %). What cost the most was the input: 24,000 SET_ATTITUDE_TARGETs a second, each one asyncio
-callback, one pass of pymavlink's byte-by-byte parser with its Python X.25 CRC (about 10 us) and
-the setpoint check. Now the sockets are read in bulk (`server.LinkPoller`: one epoll reader for
-all of them, ready sockets drained, at most 8 datagrams a socket and 512 a wake-up, so that a
-backlog is worked off between ticks instead of holding the physics up) and the hot frames are
-checked in one numba call (`codec.HotDecoder`: about 1.5 us a message against pymavlink's 8-10
-us); sends go straight to the socket. Turning off what the ground station does not read
-(`--streams requested`: SYS_STATUS, TIMESYNC requests, BATTERY_STATUS, HOME_POSITION; and
-ATTITUDE, ODOMETRY and the 50 Hz GLOBAL_POSITION_INT until it has turned them off) removes 5 %
-of the messages once the ground station has set its rates, and little CPU: they mostly ride in
-datagrams that leave anyway. The rates the ground station asks for stay: three messages at
-100 Hz per vehicle, one datagram per vehicle per 10 ms.
+`bench_fleet_inprocess.py`): not in the physics. The plant, the onboard models and PX4's rate
+loop for the whole fleet are one numba call per tick (two 1 ms RK4 steps: about 8 % of a
+core); the 50 Hz autopilot logic is Python per vehicle (about 6 %; the tick gathers every
+vehicle's observation from the fleet's arrays at once and writes the status and battery by
+column: 3.9 us a vehicle, against 7.7 us for each node's own `observe` and `refresh_status`,
+which `tests/unit/test_emulator_runner.py` checks give the same values); telemetry is built
+and framed in batches (about 3 %). The input costs the most: 24,000 SET_ATTITUDE_TARGETs a
+second. The sockets are read in bulk (`server.LinkPoller`: one epoll reader for all of them,
+at most 8 datagrams a socket and 512 a wake-up, so a backlog is worked off between ticks
+instead of holding the physics up), the hot frames are checked in one numba call
+(`codec.HotDecoder`: about 1.5 us a message against pymavlink's 8-10 us), and sends go
+straight to the socket. `--streams requested` (no SYS_STATUS, TIMESYNC requests,
+BATTERY_STATUS or HOME_POSITION; ATTITUDE, ODOMETRY and the 50 Hz GLOBAL_POSITION_INT only
+until the ground station turns them off) removes 5 % of the messages and little CPU: they
+mostly ride in datagrams that leave anyway. The three 100 Hz messages the ground station asks
+for leave in one datagram per vehicle per 10 ms.
 
-What is left is mostly per datagram and cannot be batched in Python: one `recvfrom` per
-setpoint and one `sendto` per telemetry datagram (48,000 socket calls a second at 240 vehicles,
-about 8-12 % of a core in the kernel alone, with Python's call around each), because every
-vehicle has its own socket (its own port, as PX4 SITL instances do) and Python has neither
-`recvmmsg` nor `sendmmsg`, which would anyway batch only within one socket; and the per-setpoint
-Python of the vehicle's handler (target and echo checks, PX4's type_mask rules, the autopilot's
-offboard bookkeeping: about 4 us). Below about 40 % of a core at 240 vehicles it would need
-fewer datagrams, not faster ones: all vehicles behind one emulator socket with several
-vehicles' messages in one datagram (MAVLink allows it; the ground station would have to send
-its setpoints to that one address and tell vehicles apart by sysid only), or the setpoint
-handling and the socket calls in a compiled extension. At small fleets the fixed cost of the
-500 Hz tick loop and of each wake-up dominates (an idle 16-vehicle fleet: 7 % of a core).
+What is left is per datagram and cannot be batched in Python: one `recvfrom` per setpoint and
+one `sendto` per telemetry datagram (48,000 socket calls a second at 240 vehicles, 8-12 % of a
+core in the kernel alone), as every vehicle has its own socket (its own port, as PX4 SITL
+instances do) and Python has neither `recvmmsg` nor `sendmmsg`; and about 4 us of Python per
+setpoint in the vehicle's handler (target and echo checks, PX4's type_mask rules, offboard
+bookkeeping). Below about 40 % of a core at 240 vehicles needs fewer datagrams (all vehicles
+behind one emulator socket, several vehicles' messages per datagram, the ground station
+telling them apart by sysid only) or the setpoint handling and socket calls in a compiled
+extension. At small fleets the fixed cost of the 500 Hz tick loop and its wake-ups dominates
+(an idle 16-vehicle fleet: 7 % of a core).
 """
 
 

@@ -275,27 +275,31 @@ def section(rows: list[dict], duration_s: float, heading: str = HEADING) -> str:
     if heading == REAL_HEADING:
         lines = [heading, "", real_intro(rows), ""] + table(rows, phases=True)
         return "\n".join(lines) + "\n"
+    where = f"on {platform.machine()}, Python {platform.python_version()}"
+    if heading == SIH_HEADING:
+        intro = (
+            f"`python -m benchmarks.bench_from_ground --team px4-sih-2026-12-04` {where}, "
+            f"flown and measured as in \"From the ground, twice\" ({duration_s:g} s of "
+            "formation): the team file of the 2026-12-04 flights of four real PX4 v1.16.0 SIH "
+            f"vehicles (`{SIH_TEAM}` in the recordings: alpha_p 1, c_p 2, go-to-start tolerance "
+            "0.5 m) as it was then, reading the reported velocity "
+            "(`fly.velocity_from_position_s: 0`), against the px4 personality. \"real PX4 SIH, "
+            "recorded\" is that day's first flight through the same figures (the second ended in "
+            "preflight; five first flights that day held 0.26-0.59 / 0.53-0.95 m).")
+        return "\n".join([heading, "", intro, ""] + table(rows)) + "\n"
     lines = [
         heading, "",
-        f"`python -m benchmarks.bench_from_ground` on {platform.machine()}, Python "
-        f"{platform.python_version()}: configs/square4.yaml (Scenario I) as shipped, flown by "
-        "`gcs fly --team FILE` with no other option (`fly.mode: auto`), against one "
-        "`vehicle-emu --fleet` whose vehicles boot on the ground on a 50 m diamond, each with "
-        "its own EKF origin below it (so the team frame is tied through four origins up to "
-        "50 m apart), ArduPilot vehicles on their own source port (learned). Each flight: go "
-        f"to start, {duration_s:g} s of formation, land, disarm; then the same vehicles fly "
-        "again. Formation error: the largest over the pairs (report.json), t >= 30 s. Mass: "
-        "max over vehicles of |mhat - m| / m at 20 s (ArduPilot: m / 1.069, the "
-        "thrust-equivalent mass). Rate limit: share of setpoints after 10 s with the roll/pitch "
-        "rate command at its limit, worst vehicle, and heading: largest |yaw - yaw at the "
-        "formation start| (ATTITUDE_QUATERNION), both from t = 10 s to the formation's end "
-        "(the landing after it not included). The px4-sih-2026-12-04 team "
-        "is the team file of the 2026-12-04 flights of four real PX4 v1.16.0 SIH vehicles "
-        f"(`{SIH_TEAM}` in the recordings: alpha_p 1, c_p 2, go-to-start tolerance 0.5 m) "
-        "flown as it was then, reading the reported velocity "
-        "(`fly.velocity_from_position_s: 0`), against the px4 personality; the row \"real PX4 "
-        "SIH, recorded\" is that day's first flight through the same figures (the second "
-        "ended in preflight; five first flights that day held 0.26-0.59 / 0.53-0.95 m).",
+        f"`python -m benchmarks.bench_from_ground` {where}: configs/square4.yaml (Scenario I) as "
+        "shipped, flown by `gcs fly --team FILE` with no other option (`fly.mode: auto`) "
+        "against one `vehicle-emu --fleet` booted on the ground on a 50 m diamond, each vehicle "
+        "with its own EKF origin below it (the team frame tied through four origins up to 50 m "
+        "apart; ArduPilot vehicles on their own source port, learned). Each flight: go to "
+        f"start, {duration_s:g} s of formation, land, disarm; then the same vehicles fly again. "
+        "Formation error: the largest over the pairs (report.json), t >= 30 s. Mass: max over "
+        "vehicles of |mhat - m| / m at 20 s (ArduPilot: of m / 1.069, the thrust-equivalent "
+        "mass). From t = 10 s to the formation's end (not the landing): rate limit, the share "
+        "of setpoints with the roll/pitch rate command at its limit, worst vehicle; heading, "
+        "the largest |yaw - yaw at the formation start| (ATTITUDE_QUATERNION).",
         "",
     ] + table(rows)
     return "\n".join(lines) + "\n"

@@ -154,25 +154,22 @@ def _bundled_rates_gains() -> str:
 def section(results: dict[str, dict[str, dict]]) -> str:
     lines = [
         HEADING, "",
-        "`benchmarks/bench_personalities.py` (rerun: `.venv/bin/python -m "
-        "benchmarks.bench_personalities`). Today's `gcs fly --mode rates` flies the team "
-        "file of each recorded SITL formation flight (the team's recordings, kept outside this "
-        "repository) against "
-        "`vehicle-emu` with that autopilot's personality and with `nominal`; the first row of "
-        "each table is the recorded SITL flight itself (flown with the paper's gains, k_eps 8 "
-        "and the recorded initial estimates). Ours fly what gcs fly flies today: the bundled "
-        f"configs' `fly.rates` gains ({_bundled_rates_gains()}; the paper's are "
-        "refused by the cascade criterion on both autopilots, docs/gcs.md) and "
-        "`fly.initial_mass: from_hover`, with the go-to-start phase off (the recorded flights "
-        "started where the takeoff left them). Same code, same figures for all rows. Errors "
-        "in m and m/s; mass error = max over vehicles of |estimate - truth| at 10 s [kg] "
-        "(ArduPilot: the thrust-equivalent mass m / 1.069 is what its reported thrust gives); "
-        "rate limit = share of formation ticks where the 1 rad/s body-rate limit was active "
-        "(mean over vehicles). Takeoff to 5 m instead of the recorded 2.5 m. The px4 row is "
-        "the floor the personality's EKF2-like estimate wander leaves at these gains (noise "
-        "off: the nominal row). The ardupilot rows get what the team's ArduCopter "
-        "flight set up around today's `gcs fly`: fixed ports (a forced bind; SITL needed a UDP "
-        "relay), GUID_OPTIONS 8, the message-intervals file, vehicles past their boot.",
+        "`.venv/bin/python -m benchmarks.bench_personalities`: today's `gcs fly --mode rates` "
+        "flies the team file of each recorded SITL formation flight (the team's recordings, "
+        "kept outside this repository) against `vehicle-emu` with that autopilot's personality "
+        "and with `nominal`; each table's first row is the recorded SITL flight (the paper's "
+        "gains, k_eps 8, the recorded initial estimates) through the same figures. Ours fly the "
+        f"bundled configs' `fly.rates` gains ({_bundled_rates_gains()}; the cascade criterion "
+        "refuses the paper's on both autopilots, docs/gcs.md), `fly.initial_mass: from_hover`, "
+        "no go-to-start (the recorded flights started where the takeoff left them) and a "
+        "takeoff to 5 m instead of 2.5 m. Errors in m and m/s; mass error = max over vehicles "
+        "of |estimate - truth| at 10 s [kg] (ArduPilot: of the thrust-equivalent mass m / "
+        "1.069); rate limit = share of formation ticks with the 1 rad/s body-rate limit active "
+        "(mean over vehicles). The px4 row is the floor the personality's EKF2-like estimate "
+        "wander leaves at these gains (without it: the nominal row). The ardupilot rows have "
+        "what the team's ArduCopter flight set up around `gcs fly`: fixed ports (a forced "
+        "bind; SITL needed a UDP relay), GUID_OPTIONS 8, the message-intervals file, vehicles "
+        "past their boot.",
         "",
     ]
     for autopilot, runs in results.items():
