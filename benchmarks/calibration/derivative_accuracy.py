@@ -22,7 +22,7 @@ from flightkit.physics import rk4_step  # noqa: E402
 from gcs.config import load_team  # noqa: E402
 from gcs.control.derivatives import force_derivatives, levant_advance  # noqa: E402
 from gcs.control.formation import edge_list, reference_velocity  # noqa: E402
-from gcs.control.law import attitude_stage, position_stage  # noqa: E402
+from gcs.control.law import TeamMeasurement, attitude_stage, position_stage  # noqa: E402
 from gcs.sim.loop import _acceleration  # noqa: E402
 from gcs.sim.runner import law_gains  # noqa: E402
 
@@ -51,17 +51,14 @@ def main() -> int:
     for step in range(60_000):
         t = step * dt
         ref = reference_velocity(t, *ref_args)
-        u, a, s, ve, ph, kap, t_n, mrate = position_stage(
-            p, v, rot, mhat, m, adj, off, ref, gains, True
-        )
+        stage = position_stage(p, v, rot, mhat, m, adj, off, ref, gains, True)
+        u, kap, t_n, mrate = stage.force_n, stage.kappa, stage.thrust_n, stage.mhat_rate
         acc_meas = _acceleration(rot, thrust_hold, m, gains.gravity_mps2)
-        du_m, ddu_m = force_derivatives(
-            v, acc_meas, rot, w, u, a, s, ve, ph, kap, mhat, mrate, 1.0 / kap, adj, ref, gains, True
-        )
+        du_m, ddu_m = force_derivatives(TeamMeasurement(p, v, acc_meas, rot, w), stage, mhat,
+                                        1.0 / kap, adj, ref, gains, True)
         acc_true = _acceleration(rot, t_n, m, gains.gravity_mps2)
-        du_x, ddu_x = force_derivatives(
-            v, acc_true, rot, w, u, a, s, ve, ph, kap, mhat, mrate, 1.0 / m, adj, ref, gains, True
-        )
+        du_x, ddu_x = force_derivatives(TeamMeasurement(p, v, acc_true, rot, w), stage, mhat,
+                                        1.0 / m, adj, ref, gains, True)
         if u_prev is None:
             levant[:, :, 0] = u
         else:

@@ -15,29 +15,24 @@ The command angular velocity (docs/control-law.md) needs u' and u''. Two ways to
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
 
 from gcs.control.formation import EdgeList
 from gcs.control.gains import LawGains
-from gcs.control.position import ddsat, dsat
+from gcs.control.position import PositionStage, ddsat, dsat
+
+if TYPE_CHECKING:
+    from gcs.control.law import TeamMeasurement
 
 
 @njit(cache=True)
 def force_derivatives(
-    velocity_mps: np.ndarray,
-    acceleration_mps2: np.ndarray,
-    rotation: np.ndarray,
-    omega_radps: np.ndarray,
-    force_n: np.ndarray,
-    accel_cmd: np.ndarray,
-    s: np.ndarray,
-    ve: np.ndarray,
-    phi_values: np.ndarray,
-    kappa: np.ndarray,
+    meas: TeamMeasurement,
+    stage: PositionStage,
     mhat: np.ndarray,
-    mhat_rate: np.ndarray,
     jerk_gain: np.ndarray,
     graph: EdgeList,
     reference_mps: np.ndarray,
@@ -46,11 +41,18 @@ def force_derivatives(
 ) -> tuple[np.ndarray, np.ndarray]:
     """u' and u'' (n, 3) of the command force u = kappa a (23), given v' of every vehicle.
 
-    Inputs are the outputs of position.force_law (accel_cmd = a, s, ve, phi, kappa) and
-    position.mass_estimator_rate (mhat_rate); omega is body FLU, everything else world ENU.
+    ``meas`` (gcs.control.law.TeamMeasurement) gives v, v' (its acceleration), R and omega; its
+    position is not read. ``stage`` is position_stage's output (position.PositionStage: u, a, s,
+    ve, phi, kappa from position.force_law, mhat' from position.mass_estimator_rate); omega is
+    body FLU, everything else world ENU.
     With the baseline (adaptive=False) kappa is constant, so kappa' = kappa'' = 0. The graph
     terms s' and s'' sum over row i of the edge list, as s does in position.sliding_variable.
     """
+    velocity_mps = meas.velocity_mps
+    acceleration_mps2 = meas.acceleration_mps2
+    rotation = meas.rotation
+    omega_radps = meas.omega_radps
+    force_n, accel_cmd, s, ve, phi_values, kappa, _thrust, mhat_rate = stage
     n = velocity_mps.shape[0]
     row_start, neighbour, weight = graph.row_start, graph.neighbour, graph.weight
     sig = gains.sigma_a

@@ -9,6 +9,7 @@ the tick length are arguments.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -23,7 +24,7 @@ from gcs.control.geometry import (
     is_nonsingular,
     turn_about_thrust_axis,
 )
-from gcs.control.position import force_law, mass_estimator_rate, thrust
+from gcs.control.position import PositionStage, force_law, mass_estimator_rate, thrust
 
 DERIVATIVE_MODEL = 0  #: closed-form u', u'' with v' measured and the law's own mass estimate
 DERIVATIVE_LEVANT = 1  #: Levant's differentiator (28) on the sampled u
@@ -46,7 +47,8 @@ def position_stage(
     """Command force u (23), thrust T = |u| (12) and mhat' (24) for the team; `graph` is the
     formation.EdgeList of the weights a_ij.
 
-    Returns (u, a, s, ve, phi, kappa, thrust_n, mhat_rate); mhat_rate is zero for the baseline.
+    Returns a position.PositionStage (u, a, s, ve, phi, kappa, thrust_n, mhat_rate); mhat_rate
+    is zero for the baseline.
     """
     u, a, s, ve, ph, kappa = force_law(
         position_m,
@@ -64,7 +66,7 @@ def position_stage(
         mhat_rate = mass_estimator_rate(velocity_mps, rotation, t_n, mhat, ph, gains)
     else:
         mhat_rate = np.zeros_like(mhat)
-    return u, a, s, ve, ph, kappa, t_n, mhat_rate
+    return PositionStage(u, a, s, ve, ph, kappa, t_n, mhat_rate)
 
 
 @njit(cache=True)
@@ -85,12 +87,12 @@ def attitude_stage(rotation, omega_radps, force_n, dforce, ddforce, rhohat, gain
     return rc, wc, dwc, tau, rho_rate, omega_cmd, eps, tr_err, we
 
 
-@dataclass(frozen=True, slots=True)
-class TeamMeasurement:
+class TeamMeasurement(NamedTuple):
     """What the law may use at one tick, per vehicle (rows in team order).
 
     position_m, velocity_mps, acceleration_mps2: world ENU (acceleration = measured specific force
-    rotated to world, minus g e3); rotation: body FLU -> world ENU; omega_radps: body FLU.
+    rotated to world, minus g e3); rotation: body FLU -> world ENU; omega_radps: body FLU. A
+    named tuple: the compiled derivatives.force_derivatives takes it whole.
     """
 
     position_m: np.ndarray
@@ -193,7 +195,7 @@ class TeamLaw:
         thrust: the I&I update (24) assumes the thrust it commands is the one applied); rhohat
         is held in any case without `estimate_inertia`."""
         g = self.gains
-        u, a, s, ve, ph, kappa, t_n, mhat_rate = position_stage(
+        stage = position_stage(
             meas.position_m,
             meas.velocity_mps,
             meas.rotation,
@@ -205,6 +207,7 @@ class TeamLaw:
             g,
             self.adaptive,
         )
+        u, kappa, t_n, mhat_rate = stage.force_n, stage.kappa, stage.thrust_n, stage.mhat_rate
         bad = np.flatnonzero(~is_nonsingular(u))
         if bad.size:
             i = int(bad[0])
@@ -230,25 +233,8 @@ class TeamLaw:
             du = np.ascontiguousarray(self._levant[:, :, 1])
             ddu = np.ascontiguousarray(self._levant[:, :, 2])
         else:
-            du, ddu = force_derivatives(
-                meas.velocity_mps,
-                meas.acceleration_mps2,
-                meas.rotation,
-                meas.omega_radps,
-                u,
-                a,
-                s,
-                ve,
-                ph,
-                kappa,
-                self.mhat,
-                mhat_rate,
-                1.0 / kappa,
-                self.active_graph,
-                reference_mps,
-                g,
-                self.adaptive,
-            )
+            du, ddu = force_derivatives(meas, stage, self.mhat, 1.0 / kappa, self.active_graph,
+                                        reference_mps, g, self.adaptive)
         rc, wc, dwc, tau, rho_rate, omega_cmd, eps, tr_err, we = attitude_stage(
             meas.rotation, meas.omega_radps, u, du, ddu, self.rhohat, g, self.adaptive,
             self.heading_rad,

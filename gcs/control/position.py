@@ -12,11 +12,28 @@ ddsat = -(2 / sigma_a) tanh(x / sigma_a) dsat (sigma_a = 1 in the paper).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
 from gcs.control.formation import EdgeList
 from gcs.control.gains import LawGains
+
+
+class PositionStage(NamedTuple):
+    """The position stage's outputs for the team (gcs.control.law.position_stage), world ENU:
+    the command force u (23), its a, s, ve, phi, kappa = alpha_m mhat / phi, the thrust
+    T = |u| (12) and mhat' (24) (zero for the baseline)."""
+
+    force_n: np.ndarray
+    accel_cmd: np.ndarray
+    s: np.ndarray
+    ve: np.ndarray
+    phi: np.ndarray
+    kappa: np.ndarray
+    thrust_n: np.ndarray
+    mhat_rate: np.ndarray
 
 
 @njit(cache=True)

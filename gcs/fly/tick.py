@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import asyncio
 import copy
-import dataclasses
 import logging
 import math
 import time
@@ -379,8 +378,7 @@ class Tick:
         each prediction with what the vehicles report for that instant."""
         held = sample.measurement()
         if self.consistency.on:
-            held = dataclasses.replace(held, velocity_mps=self.consistency.velocity(
-                held.velocity_mps))
+            held = held._replace(velocity_mps=self.consistency.velocity(held.velocity_mps))
         if self.figures.audit is None:
             return held
         # each link's least one-way delay: the table's copy of the clock filters' (a column)

@@ -27,7 +27,12 @@ from flightkit.physics import orthonormalise, rk4_step
 from gcs.control.derivatives import force_derivatives, levant_advance
 from gcs.control.formation import reference_velocity
 from gcs.control.geometry import is_nonsingular
-from gcs.control.law import DERIVATIVE_LEVANT, attitude_stage, position_stage
+from gcs.control.law import (
+    DERIVATIVE_LEVANT,
+    TeamMeasurement,
+    attitude_stage,
+    position_stage,
+)
 
 
 class TeamState(NamedTuple):
@@ -74,6 +79,18 @@ class SampledLoop(NamedTuple):
     torque_hold: np.ndarray
     rate_cmd: np.ndarray
     diag: np.ndarray
+
+
+class OracleState(NamedTuple):
+    """The closed-loop state the verification mode integrates: the team's p, v, R, omega and the
+    law's mhat, rhohat (one RK4 stage's, or the team's and the law's own arrays)."""
+
+    p: np.ndarray
+    v: np.ndarray
+    rot: np.ndarray
+    w: np.ndarray
+    mhat: np.ndarray
+    rhohat: np.ndarray
 
 
 MODE_ACTUATORS = 0  #: the paper's torque (26) is applied directly
@@ -169,9 +186,10 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
         t = step * dt_s
         if step % ctrl_every == 0:
             ref = reference_velocity(t, ref_c, ref_a, ref_w, ref_ph)
-            u, a, s, ve, ph, kappa, t_n, mhat_rate = position_stage(
+            stage = position_stage(
                 p, v, rot, mhat, nominal_mass, graph, offsets, ref, gains, adaptive
             )
+            u, kappa, t_n, mhat_rate = stage.force_n, stage.kappa, stage.thrust_n, stage.mhat_rate
             ok = is_nonsingular(u)
             for i in range(n):
                 if not ok[i]:
@@ -194,24 +212,9 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
             else:
                 # Measured acceleration: the plant's specific force under the held thrust.
                 acc = _acceleration(rot, thrust_hold, mass, gains.gravity_mps2)
+                meas = TeamMeasurement(p, v, acc, rot, w)
                 du, ddu = force_derivatives(
-                    v,
-                    acc,
-                    rot,
-                    w,
-                    u,
-                    a,
-                    s,
-                    ve,
-                    ph,
-                    kappa,
-                    mhat,
-                    mhat_rate,
-                    1.0 / kappa,
-                    graph,
-                    ref,
-                    gains,
-                    adaptive,
+                    meas, stage, mhat, 1.0 / kappa, graph, ref, gains, adaptive
                 )
             rc, wc, dwc, tau, rho_rate, omega_cmd, eps, tr_err, we = attitude_stage(
                 rot, w, u, du, ddu, rhohat, gains, adaptive, np.zeros(u.shape[0])
@@ -265,52 +268,22 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
 
 
 @njit(cache=True)
-def _oracle_rates(
-    t,
-    p,
-    v,
-    rot,
-    w,
-    mhat,
-    rhohat,
-    mass,
-    inertia,
-    nominal_mass,
-    graph,
-    offsets,
-    ref_c,
-    ref_a,
-    ref_w,
-    ref_ph,
-    gains,
-    adaptive,
-):
-    """Closed-loop vector field with the exact u', u'' (the oracle of docs/control-law.md).
-    Returns the state derivatives and the law's diagnostics at this state."""
-    ref = reference_velocity(t, ref_c, ref_a, ref_w, ref_ph)
-    u, a, s, ve, ph, kappa, t_n, mhat_rate = position_stage(
-        p, v, rot, mhat, nominal_mass, graph, offsets, ref, gains, adaptive
+def _oracle_rates(t, x, team, law):
+    """Closed-loop vector field with the exact u', u'' (the oracle of docs/control-law.md) at
+    time ``t`` and state ``x`` (`OracleState`), which stands for the state fields of ``team``
+    (`TeamState`: its mass and inertia are read) and ``law`` (`LawInputs`: its fixed inputs are
+    read). Returns the state derivatives and the law's diagnostics at this state."""
+    p, v, rot, w, mhat, rhohat = x
+    mass, inertia = team.mass, team.inertia
+    gains, adaptive, graph = law.gains, law.adaptive, law.graph
+    ref = reference_velocity(t, law.ref_c, law.ref_a, law.ref_w, law.ref_ph)
+    stage = position_stage(
+        p, v, rot, mhat, law.nominal_mass, graph, law.offsets, ref, gains, adaptive
     )
+    u, kappa, t_n, mhat_rate = stage.force_n, stage.kappa, stage.thrust_n, stage.mhat_rate
     acc = _acceleration(rot, t_n, mass, gains.gravity_mps2)
-    du, ddu = force_derivatives(
-        v,
-        acc,
-        rot,
-        w,
-        u,
-        a,
-        s,
-        ve,
-        ph,
-        kappa,
-        mhat,
-        mhat_rate,
-        1.0 / mass,
-        graph,
-        ref,
-        gains,
-        adaptive,
-    )
+    meas = TeamMeasurement(p, v, acc, rot, w)
+    du, ddu = force_derivatives(meas, stage, mhat, 1.0 / mass, graph, ref, gains, adaptive)
     rc, wc, dwc, tau, rho_rate, omega_cmd, eps, tr_err, we = attitude_stage(
         rot, w, u, du, ddu, rhohat, gains, adaptive, np.zeros(u.shape[0])
     )
@@ -319,31 +292,25 @@ def _oracle_rates(
 
 
 @njit(cache=True)
+def _advanced(x, k, c):
+    """The state x + c k (`OracleState`) of an RK4 stage, k the rates `_oracle_rates` returned."""
+    return OracleState(x.p + c * k[0], x.v + c * k[1], x.rot + c * k[2], x.w + c * k[3],
+                       x.mhat + c * k[4], x.rhohat + c * k[5])
+
+
+@njit(cache=True)
 def run_oracle(first_step, n_steps, dt_s, log_every, team, law, log, log_row0):
     """Classic RK4 on the full closed-loop state (p, v, R, omega, mhat, rhohat) with the law
     evaluated in every stage (exact derivatives, true masses). Returns the minimum u_z.
     ``team``, ``law``: `TeamState`, `LawInputs`."""
-    p, v, rot, w, mass, inertia, drop_step, drop_factor = team
-    (mhat, rhohat, nominal_mass, graph, offsets, ref_c, ref_a, ref_w, ref_ph, gains,
-     adaptive) = law
+    p, v, rot, w, mass, _inertia, drop_step, drop_factor = team
+    mhat, rhohat = law.mhat, law.rhohat
+    x = OracleState(p, v, rot, w, mhat, rhohat)  # the arrays themselves: advanced in place
     min_uz = np.inf
     for step in range(first_step, first_step + n_steps):
         _apply_mass_drops(step, drop_step, drop_factor, mass)
         t = step * dt_s
-        args = (
-            mass,
-            inertia,
-            nominal_mass,
-            graph,
-            offsets,
-            ref_c,
-            ref_a,
-            ref_w,
-            ref_ph,
-            gains,
-            adaptive,
-        )
-        k1 = _oracle_rates(t, p, v, rot, w, mhat, rhohat, *args)
+        k1 = _oracle_rates(t, x, team, law)
         for i in range(p.shape[0]):
             min_uz = min(min_uz, k1[6][i, 2])
         if step % log_every == 0:
@@ -361,36 +328,9 @@ def run_oracle(first_step, n_steps, dt_s, log_every, team, law, log, log_row0):
                 k1[6],
             )
         h = 0.5 * dt_s
-        k2 = _oracle_rates(
-            t + h,
-            p + h * k1[0],
-            v + h * k1[1],
-            rot + h * k1[2],
-            w + h * k1[3],
-            mhat + h * k1[4],
-            rhohat + h * k1[5],
-            *args,
-        )
-        k3 = _oracle_rates(
-            t + h,
-            p + h * k2[0],
-            v + h * k2[1],
-            rot + h * k2[2],
-            w + h * k2[3],
-            mhat + h * k2[4],
-            rhohat + h * k2[5],
-            *args,
-        )
-        k4 = _oracle_rates(
-            t + dt_s,
-            p + dt_s * k3[0],
-            v + dt_s * k3[1],
-            rot + dt_s * k3[2],
-            w + dt_s * k3[3],
-            mhat + dt_s * k3[4],
-            rhohat + dt_s * k3[5],
-            *args,
-        )
+        k2 = _oracle_rates(t + h, _advanced(x, k1, h), team, law)
+        k3 = _oracle_rates(t + h, _advanced(x, k2, h), team, law)
+        k4 = _oracle_rates(t + dt_s, _advanced(x, k3, dt_s), team, law)
         c = dt_s / 6.0
         p += c * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
         v += c * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])

@@ -10,7 +10,7 @@ from flightkit.physics import TABLE_I, orthonormalise
 from gcs.control.derivatives import levant_advance
 from gcs.control.formation import adjacency_from_edges, edge_list
 from gcs.control.gains import PAPER_GAINS
-from gcs.sim.loop import _oracle_rates
+from gcs.sim.loop import LawInputs, OracleState, TeamState, _oracle_rates
 
 
 def _levant_track(signal, d1, d2, t_end, dt, lipschitz, substep):
@@ -98,10 +98,12 @@ def _scenario_state():
 def test_exact_force_derivatives_match_finite_differences_along_the_closed_loop(adaptive):
     # GIVEN the closed loop of Scenario I at a generic (non-equilibrium) state
     p, v, rot, w, mhat, rhohat, m, j, adj, off, ref_c, ref = _scenario_state()
-    args = (m, j, m.copy(), adj, off, ref_c, ref[1], ref[2], ref[3], PAPER_GAINS, adaptive)
+    team = TeamState(p, v, rot, w, m, j, np.full(4, -1), np.ones(4))
+    law = LawInputs(mhat, rhohat, m.copy(), adj, off, ref_c, ref[1], ref[2], ref[3], PAPER_GAINS,
+                    adaptive)
 
     def rates(t, x):
-        return _oracle_rates(t, *x, *args)
+        return _oracle_rates(t, OracleState(*x), team, law)
 
     def rk4(t, x, h):
         def add(x, k, c):
@@ -134,7 +136,7 @@ def test_exact_force_derivatives_match_finite_differences_along_the_closed_loop(
     # THEN the closed form of spec 2.9 at the middle sample agrees
     from gcs.control.derivatives import force_derivatives
     from gcs.control.formation import reference_velocity
-    from gcs.control.law import position_stage
+    from gcs.control.law import TeamMeasurement, position_stage
     from gcs.sim.loop import _acceleration
 
     x_mid = (p, v, rot, w, mhat, rhohat)
@@ -144,29 +146,11 @@ def test_exact_force_derivatives_match_finite_differences_along_the_closed_loop(
         t_mid += h / 20
     pm, vm, rm, wm, mh, rh = x_mid
     refm = reference_velocity(t_mid, ref_c, ref[1], ref[2], ref[3])
-    uu, a, s, ve, ph, kappa, t_n, mhat_rate = position_stage(
-        pm, vm, rm, mh, m, adj, off, refm, PAPER_GAINS, adaptive
-    )
-    acc = _acceleration(rm, t_n, m, PAPER_GAINS.gravity_mps2)
-    du, ddu = force_derivatives(
-        vm,
-        acc,
-        rm,
-        wm,
-        uu,
-        a,
-        s,
-        ve,
-        ph,
-        kappa,
-        mh,
-        mhat_rate,
-        1.0 / m,
-        adj,
-        refm,
-        PAPER_GAINS,
-        adaptive,
-    )
+    stage = position_stage(pm, vm, rm, mh, m, adj, off, refm, PAPER_GAINS, adaptive)
+    uu = stage.force_n
+    acc = _acceleration(rm, stage.thrust_n, m, PAPER_GAINS.gravity_mps2)
+    du, ddu = force_derivatives(TeamMeasurement(pm, vm, acc, rm, wm), stage, mh, 1.0 / m, adj,
+                                refm, PAPER_GAINS, adaptive)
     assert np.allclose(uu, u[2], atol=1e-12)
     assert np.abs(du - du_fd).max() / np.abs(du_fd).max() < 1e-6
     assert np.abs(ddu - ddu_fd).max() / np.abs(ddu_fd).max() < 1e-3

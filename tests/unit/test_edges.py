@@ -122,12 +122,12 @@ def test_the_edge_list_law_equals_the_dense_sums(n, density, isolated, seed, sta
     # WHEN the staleness rule is applied to the edge list and the law evaluated on it
     stale = drop_stale_neighbours(graph, fresh, weight)
     active = graph._replace(weight=weight)
-    u, acmd, s, ve, ph, kappa, t_n, mhat_rate = position_stage(
+    stage = position_stage(
         st["p"], st["v"], st["rot"], st["mhat"], st["mhat"], active, st["theta"], st["ref"], G,
         True)
-    du, ddu = force_derivatives(st["v"], st["acc"], st["rot"], st["w"], u, acmd, s, ve, ph,
-                                kappa, st["mhat"], mhat_rate, 1.0 / kappa, active, st["ref"], G,
-                                True)
+    u, acmd, s, ve, ph, kappa, t_n, mhat_rate = stage
+    meas = TeamMeasurement(st["p"], st["v"], st["acc"], st["rot"], st["w"])
+    du, ddu = force_derivatives(meas, stage, st["mhat"], 1.0 / kappa, active, st["ref"], G, True)
     # THEN every output is the dense formula's with row i keeping a_ij only for fresh j
     ref = dense_law(a * fresh[None, :], st)
     got = {"u": u, "a": acmd, "s": s, "ve": ve, "phi": ph, "kappa": kappa, "thrust": t_n,
