@@ -15,6 +15,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -37,6 +38,7 @@ from gcs.link.fastpath import (
     SENSORS_HEALTH,
     SENSORS_PRESENT,
     SYS_STATUS,
+    TableArrays,
 )
 from gcs.link.samples import (
     AttitudeQuaternion,
@@ -61,6 +63,23 @@ _LANDED_STATES = frozenset(int(s) for s in LandedState)
 _LINK_TEXT = {state: state.value for state in LinkState}  # Enum.value is a slow descriptor
 
 
+class Gathered(NamedTuple):
+    """The team's latest telemetry as the vehicles sent it (NED/FRD, MAVLink units), before
+    `team_sample` converts it: NaN values and -inf times where nothing was received yet."""
+
+    position_ned_m: np.ndarray  # LOCAL_POSITION_NED
+    velocity_ned_mps: np.ndarray
+    quat_wxyz: np.ndarray  # ATTITUDE_QUATERNION (identity until a valid one)
+    rates_frd_radps: np.ndarray
+    force_frd_mps2: np.ndarray  # HIGHRES_IMU's specific force
+    position_rx_s: np.ndarray  # receive times [s, GCS clock]
+    attitude_rx_s: np.ndarray
+    position_taken_s: np.ndarray  # when the vehicle took them [s, GCS clock]
+    attitude_taken_s: np.ndarray
+    imu_rx_s: np.ndarray
+    have_quat: np.ndarray  # a valid quaternion arrived
+
+
 def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
                 fallback: TeamSample | None = None,
                 ties: tuple[np.ndarray, np.ndarray] | None = None,
@@ -73,20 +92,22 @@ def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
     for the messages it has nothing of yet (before a vehicle's address is learned, its messages
     take the slow path)."""
     n = len(proxies)
-    pos = np.full((n, 3), np.nan)
-    vel = np.full((n, 3), np.nan)
-    q = np.tile(np.array(_IDENTITY_Q), (n, 1))
-    rates = np.full((n, 3), np.nan)
-    force = np.full((n, 3), np.nan)
-    prx = np.full(n, -math.inf)
-    arx = np.full(n, -math.inf)
-    ptaken = np.full(n, -math.inf)  # when the vehicle took them (gcs.link.clock)
-    ataken = np.full(n, -math.inf)
-    irx = np.full(n, -math.inf)
-    have_q = np.zeros(n, dtype=bool)
+    raw = Gathered(
+        position_ned_m=np.full((n, 3), np.nan),
+        velocity_ned_mps=np.full((n, 3), np.nan),
+        quat_wxyz=np.tile(np.array(_IDENTITY_Q), (n, 1)),
+        rates_frd_radps=np.full((n, 3), np.nan),
+        force_frd_mps2=np.full((n, 3), np.nan),
+        position_rx_s=np.full(n, -math.inf),
+        attitude_rx_s=np.full(n, -math.inf),
+        position_taken_s=np.full(n, -math.inf),  # when the vehicle took them (gcs.link.clock)
+        attitude_taken_s=np.full(n, -math.inf),
+        imu_rx_s=np.full(n, -math.inf),
+        have_quat=np.zeros(n, dtype=bool),
+    )
+    pos, vel, q, rates, force, prx, arx, ptaken, ataken, irx, have_q = raw
     if table is not None:
-        need_p, need_a, need_f = _from_table(proxies, table, pos, vel, q, rates, force, prx, arx,
-                                             ptaken, ataken, irx, have_q)
+        need_p, need_a, need_f = _from_table(proxies, table, raw)
     else:
         need_p = need_a = need_f = range(n)
     for i in need_p:
@@ -147,19 +168,15 @@ def team_sample(proxies: Sequence[VehicleProxy], now_s: float,
                       finite, delay, transit, ptaken, ataken)
 
 
-def _from_table(proxies: Sequence[VehicleProxy], table: HotTable, pos: np.ndarray,
-                vel: np.ndarray, q: np.ndarray, rates: np.ndarray, force: np.ndarray,
-                prx: np.ndarray, arx: np.ndarray, ptaken: np.ndarray, ataken: np.ndarray,
-                irx: np.ndarray, have_q: np.ndarray) -> tuple[list[int], list[int], list[int]]:
-    """Fill, message by message, the rows the hot table has that message of (in place);
-    returns the rows it lacks LOCAL_POSITION_NED, ATTITUDE_QUATERNION, HIGHRES_IMU of (read
+def _from_table(proxies: Sequence[VehicleProxy], table: HotTable,
+                raw: Gathered) -> tuple[list[int], list[int], list[int]]:
+    """Fill, message by message, the rows of ``raw`` the hot table has that message of (in
+    place); returns the rows it lacks LOCAL_POSITION_NED, ATTITUDE_QUATERNION, HIGHRES_IMU of (read
     from the proxies' caches). Per message, not per vehicle: a vehicle whose IMU stream is not
     on yet (the preflight asks for the streams one by one) still has its position and attitude
     read from the arrays, not decoded by pymavlink at every tick (240 vehicles: ~10 ms)."""
     need = np.empty((len(proxies), 3), dtype=np.bool_)
-    _gather(_own_rows(tuple(proxies)), table.count, table.lpn, table.attq, table.imu,
-            table.rx_s, table.clock_line, pos, vel, q, rates, force, prx, arx, ptaken, ataken,
-            irx, have_q, need)
+    _gather(_own_rows(tuple(proxies)), table.arrays, table.clock_line, raw, need)
     if not need.any():  # the usual tick: the table has every vehicle's three messages
         return [], [], []
     return tuple(np.flatnonzero(need[:, k]).tolist() for k in range(3))
@@ -173,14 +190,14 @@ def _own_rows(proxies: tuple[VehicleProxy, ...]) -> np.ndarray:
 
 
 @njit(cache=True)
-def _gather(own: np.ndarray, count: np.ndarray, lpn: np.ndarray, attq: np.ndarray,
-            imu: np.ndarray, rx_s: np.ndarray, clock_line: np.ndarray, pos: np.ndarray,
-            vel: np.ndarray, q: np.ndarray, rates: np.ndarray, force: np.ndarray,
-            prx: np.ndarray, arx: np.ndarray, ptaken: np.ndarray, ataken: np.ndarray,
-            irx: np.ndarray, have_q: np.ndarray, need: np.ndarray) -> None:
+def _gather(own: np.ndarray, table: TableArrays, clock_line: np.ndarray, raw: Gathered,
+            need: np.ndarray) -> None:
     """`_from_table`'s work, row by row in one call (a numpy pass per quantity cost ~0.3 ms a
-    tick at 240 vehicles, three times that beside the fleet). ``need[i, k]``: row i lacks
-    message k of (LOCAL_POSITION_NED, ATTITUDE_QUATERNION, HIGHRES_IMU)."""
+    tick at 240 vehicles, three times that beside the fleet): rows ``own`` of the hot table's
+    arrays (`TableArrays`) and clock lines into ``raw``. ``need[i, k]``: row i lacks message k
+    of (LOCAL_POSITION_NED, ATTITUDE_QUATERNION, HIGHRES_IMU)."""
+    count, lpn, attq, imu, rx_s = table.count, table.lpn, table.attq, table.imu, table.rx
+    pos, vel, q, rates, force, prx, arx, ptaken, ataken, irx, have_q = raw
     for i in range(own.shape[0]):
         line = clock_line[i]
         need[i, 0] = not (own[i] and count[i, LPN] > 0)
@@ -232,10 +249,10 @@ def warm_up() -> None:
     """Compile (or load from numba's cache) the team sample's kernel before a flight."""
     table = HotTable(1)
     n1 = np.zeros((1, 3))
-    _gather(np.zeros(1, dtype=np.bool_), table.count, table.lpn, table.attq, table.imu,
-            table.rx_s, table.clock_line, n1, n1.copy(), np.zeros((1, 4)), n1.copy(), n1.copy(),
-            np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1),
-            np.zeros(1, dtype=np.bool_), np.empty((1, 3), dtype=np.bool_))
+    raw = Gathered(n1, n1.copy(), np.zeros((1, 4)), n1.copy(), n1.copy(), np.zeros(1),
+                   np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1, dtype=np.bool_))
+    _gather(np.zeros(1, dtype=np.bool_), table.arrays, table.clock_line, raw,
+            np.empty((1, 3), dtype=np.bool_))
 
 
 @functools.lru_cache(maxsize=256)

@@ -347,13 +347,10 @@ class HotTable:
         #: each slot's clock filter's line (a, b, t_ref, least delay: gcs.link.clock), kept here
         #: by the filter so the team's stamps are mapped at once
         self.clock_line = np.full((n, 4), np.nan)
-
-    @property
-    def arrays(self) -> TableArrays:
-        """The arrays :func:`scan` fills, by name."""
-        return TableArrays(self.lpn, self.attq, self.imu, self.misc, self.rx_s, self.count,
-                           self.interval_s, self.raw, self.rawlen, self.seq_last, self.seq,
-                           self.last_any_rx_s, self.accepted, self.touched, self.clock)
+        #: the arrays :func:`scan` fills, by name (built once: they are only changed in place)
+        self.arrays = TableArrays(self.lpn, self.attq, self.imu, self.misc, self.rx_s, self.count,
+                                  self.interval_s, self.raw, self.rawlen, self.seq_last, self.seq,
+                                  self.last_any_rx_s, self.accepted, self.touched, self.clock)
 
     def frame(self, slot: int, kind: int) -> bytes | None:
         """The latest frame of message ``kind`` (column) from ``slot`` (None: none yet)."""

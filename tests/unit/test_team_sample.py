@@ -8,7 +8,7 @@ import time
 
 import numpy as np
 
-from gcs.fly.telemetry import _from_table, team_sample
+from gcs.fly.telemetry import Gathered, _from_table, team_sample
 from gcs.link.fastpath import ATTQ, IMU, LPN, HotTable
 
 
@@ -87,8 +87,8 @@ def test_the_gather_fills_every_row_the_table_has_as_the_reference_does() -> Non
     prx, arx, ptaken, ataken, irx = (np.full(n, -math.inf) for _ in range(5))
     have_q = np.zeros(n, dtype=bool)
     # WHEN the team's rows are gathered
-    need = _from_table(proxies, table, pos, vel, q, rates, force, prx, arx, ptaken, ataken,
-                       irx, have_q)
+    need = _from_table(proxies, table, Gathered(pos, vel, q, rates, force, prx, arx, ptaken,
+                                                 ataken, irx, have_q))
     # THEN every row is what the reference says, and untouched where the table has nothing
     for i in range(n):
         ref = _reference(table, own, i)
