@@ -17,6 +17,7 @@ from flightkit.physics import GRAVITY_MPS2
 from vehicle_emulator.calibration.replay import sitl_airframe
 from vehicle_emulator.config.personality import PERSONALITIES, Dynamics, RateLoop, Sensors
 from vehicle_emulator.config.team import default_vehicle
+from vehicle_emulator.physics import fleet_arrays as fa
 from vehicle_emulator.physics import sensors as sn
 from vehicle_emulator.physics.inner import (
     PX4_I_FACTOR_RADPS,
@@ -85,59 +86,73 @@ def test_second_order_step_is_the_exact_zero_order_hold_discretisation(wn, zeta,
 NO_LIMIT = np.zeros((1, 3))  # the mixer made every axis's torque (physics.rotors_from_wrench_into)
 
 
-def _px4_arrays(n=1):
+def _px4_gains(n=1):
     d = PERSONALITIES["px4"].dynamics
-    return dict(
+    return fa.Px4RateGains(
         gain_p=np.tile(d.rate_p, (n, 1)), gain_i=np.tile(d.rate_i, (n, 1)),
         gain_d=np.tile(d.rate_d, (n, 1)), int_limit=np.tile(d.rate_int_limit, (n, 1)),
-        accel_per_unit=np.tile(d.accel_per_unit_radps2, (n, 1)),
+        yaw_alpha=np.ones(n), accel_per_unit_radps2=np.tile(d.accel_per_unit_radps2, (n, 1)),
     )
+
+
+def _loops(rate_sp, rate_int):
+    """One vehicle's LoopState with the rate setpoint and integral given (the rest unused)."""
+    z = np.zeros((1, 3))
+    return fa.LoopState(np.eye(3)[None].copy(), np.asarray(rate_sp, dtype=float), np.zeros(1),
+                     z.copy(), rate_int, z.copy(), z.copy())
+
+
+def _imu(rate_meas=None, gyro_raw=None):
+    """One vehicle's ImuState with the filtered and raw gyro given (zeros otherwise)."""
+    z = np.zeros((1, 3))
+    return fa.ImuState(np.zeros((1, 3, 2)), np.zeros((1, 3, 2)), np.zeros((1, 3, 2)),
+                    z.copy() if gyro_raw is None else gyro_raw, z.copy(),
+                    z.copy() if rate_meas is None else rate_meas, z.copy(), z.copy(), z.copy())
+
+
+def _outputs(torque_out, yaw_lpf, limited):
+    return fa.RateOutputs(torque_out, yaw_lpf, limited, np.zeros((1, 3)), np.zeros(1))
 
 
 def test_px4_rate_control_is_pids_normalised_torque_times_authority():
     # GIVEN a rate error of (0.5, -0.2, 0.1) rad/s, no integral, no derivative, yaw filter open
-    g = _px4_arrays()
+    g = _px4_gains()
     sp, meas = np.array([[0.5, -0.2, 0.1]]), np.zeros((1, 3))
     integ, yaw, out = np.zeros((1, 3)), np.zeros(1), np.zeros((1, 3))
     inertia = np.array([[0.025, 0.025, 0.030]])
-    px4_rate_control(0, sp, meas, np.zeros((1, 3)), integ, yaw, g["gain_p"], g["gain_i"],
-                     g["gain_d"], g["int_limit"], np.ones(1), g["accel_per_unit"], inertia,
-                     NO_LIMIT, False, 0.004, out)
+    px4_rate_control(0, _loops(sp, integ), _imu(meas), g, inertia, _outputs(out, yaw, NO_LIMIT),
+                     False, 0.004)
     # THEN torque = J * accel_per_unit * P e (the integral only counts from the next call)
-    np.testing.assert_allclose(out[0], inertia[0] * g["accel_per_unit"][0] * g["gain_p"][0]
+    np.testing.assert_allclose(out[0], inertia[0] * g.accel_per_unit_radps2[0] * g.gain_p[0]
                                * sp[0])
     # and the integral grew by i_factor * I e dt
     f = 1 - (sp[0] / PX4_I_FACTOR_RADPS) ** 2
-    np.testing.assert_allclose(integ[0], f * g["gain_i"][0] * sp[0] * 0.004)
+    np.testing.assert_allclose(integ[0], f * g.gain_i[0] * sp[0] * 0.004)
     # WHEN the error is huge THEN the output clips at 1 (normalised) and the integral at its limit
     integ[:] = 0.29
-    px4_rate_control(0, np.array([[50.0, 50.0, 50.0]]), meas, np.zeros((1, 3)), integ, yaw,
-                     g["gain_p"], g["gain_i"], g["gain_d"], g["int_limit"], np.ones(1),
-                     g["accel_per_unit"], inertia, NO_LIMIT, False, 1.0, out)
-    np.testing.assert_allclose(out[0], inertia[0] * g["accel_per_unit"][0])
-    assert np.all(integ[0] <= g["int_limit"][0] + 1e-12)
+    px4_rate_control(0, _loops([[50.0, 50.0, 50.0]], integ), _imu(meas), g, inertia,
+                     _outputs(out, yaw, NO_LIMIT), False, 1.0)
+    np.testing.assert_allclose(out[0], inertia[0] * g.accel_per_unit_radps2[0])
+    assert np.all(integ[0] <= g.int_limit[0] + 1e-12)
     # and landed, the integral does not move
     before = integ.copy()
-    px4_rate_control(0, sp, meas, np.zeros((1, 3)), integ, yaw, g["gain_p"], g["gain_i"],
-                     g["gain_d"], g["int_limit"], np.ones(1), g["accel_per_unit"], inertia,
-                     NO_LIMIT, True, 0.004, out)
+    px4_rate_control(0, _loops(sp, integ), _imu(meas), g, inertia, _outputs(out, yaw, NO_LIMIT),
+                     True, 0.004)
     np.testing.assert_array_equal(integ, before)
 
 
 def test_px4_yaw_torque_goes_through_a_first_order_low_pass():
-    g = _px4_arrays()
-    g["gain_i"][:] = 0.0
     alpha = sn.one_pole_alpha(2.0, 0.004)
+    g = _px4_gains()._replace(yaw_alpha=np.array([alpha]))
+    g.gain_i[:] = 0.0
     yaw, out = np.zeros(1), np.zeros((1, 3))
     inertia = np.array([[0.025, 0.025, 0.030]])
     seen = []
     for _ in range(50):
-        px4_rate_control(0, np.array([[0.0, 0.0, 1.0]]), np.zeros((1, 3)), np.zeros((1, 3)),
-                         np.zeros((1, 3)), yaw, g["gain_p"], g["gain_i"], g["gain_d"],
-                         g["int_limit"], np.array([alpha]), g["accel_per_unit"], inertia,
-                         NO_LIMIT, False, 0.004, out)
+        px4_rate_control(0, _loops([[0.0, 0.0, 1.0]], np.zeros((1, 3))), _imu(), g, inertia,
+                         _outputs(out, yaw, NO_LIMIT), False, 0.004)
         seen.append(out[0, 2])
-    full = inertia[0, 2] * g["accel_per_unit"][0, 2] * g["gain_p"][0, 2]
+    full = inertia[0, 2] * g.accel_per_unit_radps2[0, 2] * g.gain_p[0, 2]
     k = np.arange(1, 51)
     np.testing.assert_allclose(seen, full * (1 - (1 - alpha) ** k), rtol=1e-12)
 
@@ -145,15 +160,14 @@ def test_px4_yaw_torque_goes_through_a_first_order_low_pass():
 def test_px4_integral_never_winds_further_into_a_saturation_the_mixer_reports():
     # GIVEN rate errors of +0.5 on every axis, roll saturated positive (the mixer made less
     # than asked), pitch negative, yaw free
-    g = _px4_arrays()
+    g = _px4_gains()
     inertia = np.array([[0.025, 0.025, 0.030]])
     limited = np.array([[1.0, -1.0, 0.0]])
     integ, out = np.full((1, 3), 0.05), np.zeros((1, 3))
     for sp in ([[0.5, 0.5, 0.5]], [[-0.5, -0.5, -0.5]]):
         before = integ.copy()
-        px4_rate_control(0, np.array(sp), np.zeros((1, 3)), np.zeros((1, 3)), integ, np.zeros(1),
-                         g["gain_p"], g["gain_i"], g["gain_d"], g["int_limit"], np.ones(1),
-                         g["accel_per_unit"], inertia, limited, False, 0.004, out)
+        px4_rate_control(0, _loops(sp, integ), _imu(), g, inertia,
+                         _outputs(out, np.zeros(1), limited), False, 0.004)
         step = integ[0] - before[0]
         # THEN the roll integral does not grow positive, nor pitch negative; yaw integrates
         if sp[0][0] > 0:
@@ -162,21 +176,23 @@ def test_px4_integral_never_winds_further_into_a_saturation_the_mixer_reports():
             assert step[0] < 0.0 and step[1] == 0.0 and step[2] < 0.0
 
 
+_STILL = fa.Body(np.zeros((1, 3)), np.zeros((1, 3)), np.eye(3)[None].copy(), np.zeros((1, 3)))
+
+
 def test_reference_model_integral_only_shrinks_on_a_saturated_axis():
     # GIVEN ArduPilot's tracking loop with a positive integral on every axis and the body not
     # turning, so the tracking error keeps the sign of the command
-    arr = _reference_arrays()
-    z = np.zeros((1, 3))
+    gains, delay_buf, delay_idx = _reference_arrays()
     for cmd, shrinks in (((0.5, 0.5, 0.5), False), ((-0.5, -0.5, -0.5), True)):
         st_int = np.full((1, 3), 1.0)
         ref = np.zeros((1, 3, 2))
         ref[0, :, 0] = cmd  # the reference already at the command: error = cmd - 0
-        reference_rate_control(0, np.array([cmd]), z, z, z, np.array([cmd], dtype=float), ref,
-                               np.zeros((1, 3)), st_int, arr["accel_max"], arr["ref_gain"],
-                               arr["ref_phi"], arr["ref_gamma"], arr["angle_p"], arr["track"],
-                               arr["delay_n"], arr["delay_buf"], arr["delay_idx"],
-                               np.array([[0.023, 0.023, 0.046]]), np.array([[0.0, 1.0, -1.0]]),
-                               False, 0.002, np.zeros((1, 3)))
+        st = fa.ReferenceState(np.array([cmd], dtype=float), ref, np.zeros((1, 3)), st_int,
+                            delay_buf, delay_idx)
+        reference_rate_control(0, _loops([cmd], np.zeros((1, 3))), _imu(), _STILL, gains, st,
+                               np.array([[0.023, 0.023, 0.046]]),
+                               _outputs(np.zeros((1, 3)), np.zeros(1),
+                                        np.array([[0.0, 1.0, -1.0]])), False, 0.002)
         # THEN the free axis integrates either way; a limited one (either sign: ArduPilot's
         # flags are per axis) only when that shrinks the integral
         assert bool(st_int[0, 0] > 1.0) is (not shrinks) and bool(st_int[0, 0] < 1.0) is shrinks
@@ -187,28 +203,28 @@ def test_reference_model_integral_only_shrinks_on_a_saturated_axis():
 
 
 def _reference_arrays(accel=(19.2, 19.2, 4.7), delay=(0, 0, 0), wn=300.0, zeta=1.0, dt=0.002):
+    """(ReferenceGains, delay_buf, delay_idx) of one vehicle."""
     phi, gamma = second_order_step(wn, zeta, dt)
-    return dict(
-        accel_max=np.array([accel]), ref_gain=np.ones((1, 3)),
+    gains = fa.ReferenceGains(
+        accel_max_radps2=np.array([accel]), ref_gain=np.ones((1, 3)),
         ref_phi=np.tile(phi, (1, 3, 1)), ref_gamma=np.tile(gamma, (1, 3, 1)),
-        angle_p=np.zeros((1, 3)), track=np.array([[40.0, 200.0]]),
-        delay_n=np.array([delay]), delay_buf=np.zeros((1, 3, 32)), delay_idx=np.zeros(1, int),
+        angle_p=np.zeros((1, 3)), track=np.array([[40.0, 200.0]]), delay_periods=np.array([delay]),
     )
+    return gains, np.zeros((1, 3, 32)), np.zeros(1, int)
 
 
 def _reference_run(arr, cmd, steps, dt=0.002):
-    st = dict(shaped=np.zeros((1, 3)), ref=np.zeros((1, 3, 2)), angle_err=np.zeros((1, 3)),
-              track_int=np.zeros((1, 3)))
+    gains, delay_buf, delay_idx = arr
+    st = fa.ReferenceState(np.zeros((1, 3)), np.zeros((1, 3, 2)), np.zeros((1, 3)),
+                        np.zeros((1, 3)), delay_buf, delay_idx)
     out, shaped, ref = np.zeros((1, 3)), [], []
-    z = np.zeros((1, 3))
+    loops = _loops([cmd], np.zeros((1, 3)))
     for _ in range(steps):
-        reference_rate_control(0, np.array([cmd]), z, z, z, st["shaped"], st["ref"],
-                               st["angle_err"], st["track_int"], arr["accel_max"],
-                               arr["ref_gain"], arr["ref_phi"], arr["ref_gamma"], arr["angle_p"],
-                               arr["track"], arr["delay_n"], arr["delay_buf"], arr["delay_idx"],
-                               np.array([[0.023, 0.023, 0.046]]), NO_LIMIT, False, dt, out)
-        shaped.append(st["shaped"][0].copy())
-        ref.append(st["ref"][0, :, 0].copy())
+        reference_rate_control(0, loops, _imu(), _STILL, gains, st,
+                               np.array([[0.023, 0.023, 0.046]]),
+                               _outputs(out, np.zeros(1), NO_LIMIT), False, dt)
+        shaped.append(st.shaped_radps[0].copy())
+        ref.append(st.ref[0, :, 0].copy())
     return np.array(shaped), np.array(ref)
 
 
@@ -407,9 +423,10 @@ def test_attitude_estimate_errors_are_gauss_markov_of_their_order(order):
     rng = np.array([sn.noise_seed(3, 1)])
     yaw = np.empty(steps)
     for s in range(steps):
-        sn.estimate_errors(0, dt, np.array([True]), att_std, att_phi, smooth, zeros, np.ones(1),
-                           zeros, np.ones(1), np.ones(1), np.ones(1), rng, stage, err, vel_parts,
-                           vel_err, pos_err)
+        sn.estimate_errors(0, dt, np.array([True]),
+                           fa.EstimateNoise(att_std, att_phi, smooth, zeros, np.ones(1), zeros,
+                                         np.ones(1), np.ones(1), np.ones(1)),
+                           rng, fa.EstimateErrors(stage, err, vel_parts, vel_err, pos_err))
         yaw[s] = err[0, 2]
     # THEN its std is the stated one and its autocorrelation at lag tau is exp(-1) (first
     # order) or 2 exp(-1) (second order: (1 + w/tau) exp(-w/tau)); the other axes stay at 0
@@ -434,9 +451,10 @@ def test_velocity_error_is_a_fast_error_plus_a_slow_drift_kept_out_of_the_positi
     north = np.empty(steps)
     slow = np.empty(steps)
     for s in range(steps):
-        sn.estimate_errors(0, dt, np.array([True]), zeros, np.ones((1, 3)), zeros, vel_std,
-                           phis[0], drift, phis[1], np.ones(1), np.zeros(1), rng, stage, err,
-                           vel_parts, vel_err, pos_err)
+        sn.estimate_errors(0, dt, np.array([True]),
+                           fa.EstimateNoise(zeros, np.ones((1, 3)), zeros, vel_std, phis[0], drift,
+                                         phis[1], np.ones(1), np.zeros(1)),
+                           rng, fa.EstimateErrors(stage, err, vel_parts, vel_err, pos_err))
         north[s], slow[s] = vel_err[0, 1], vel_parts[0, 1, 1]  # ENU: north is y
     # THEN the error is the sum of the two, its variance theirs added, the drift's
     # autocorrelation at its tau exp(-1), and the position, east and up carry none of it

@@ -20,6 +20,16 @@ import numpy as np
 from numba import njit
 
 from flightkit.physics import GRAVITY_MPS2
+from vehicle_emulator.physics.fleet_arrays import (
+    Body,
+    Commands,
+    ImuState,
+    LoopState,
+    Px4RateGains,
+    RateOutputs,
+    ReferenceGains,
+    ReferenceState,
+)
 from vehicle_emulator.physics.frames import quat_from_matrix
 
 # Gains (rad/s^2 per rad/s for rates; 1/s for attitude and position; 1/s^2 for velocity I).
@@ -121,26 +131,20 @@ def attitude_from_thrust_vector(
 
 
 @njit(cache=True)
-def position_control(
-    i: int,
-    position: np.ndarray,
-    velocity: np.ndarray,
-    rotation: np.ndarray,
-    pos_sp: np.ndarray,
-    vel_ff: np.ndarray,
-    pos_mask: np.ndarray,
-    yaw_sp_enu: np.ndarray,
-    vel_int: np.ndarray,
-    hover_thrust_norm: np.ndarray,
-    landed: bool,
-    dt: float,
-    rotation_sp_out: np.ndarray,
-) -> float:
-    """Attitude setpoint into ``rotation_sp_out[i]``; returns normalised collective thrust.
+def position_control(i: int, body: Body, cmd: Commands, loops: LoopState, landed: bool,
+                     dt: float) -> float:
+    """Attitude setpoint into ``loops.att_sp[i]``; returns normalised collective thrust.
 
+    ``body`` (`Body`): the position, velocity and attitude the loop flies on; ``cmd``
+    (`Commands`): position setpoint, velocity feed-forward, mask, yaw setpoint and hover
+    thrust; ``loops`` (`LoopState`): the velocity integrator and the attitude setpoint.
     ``pos_mask[i, k]`` 1 uses the position error on axis k, 0 flies the velocity ``vel_ff`` only
     (landing: z masked with a downward velocity).
     """
+    position, velocity, rotation = body.pos, body.vel, body.rot
+    pos_sp, vel_ff, pos_mask = cmd.pos_sp, cmd.vel_ff, cmd.pos_mask
+    yaw_sp_enu, hover_thrust_norm = cmd.yaw_sp, cmd.hover
+    vel_int, rotation_sp_out = loops.vel_int, loops.att_sp
     vs = np.empty(3)
     for k in range(3):
         vs[k] = POS_P[k] * (pos_sp[i, k] - position[i, k]) * pos_mask[i, k] + vel_ff[i, k]
@@ -183,32 +187,21 @@ PX4_I_FACTOR_RADPS = math.radians(400.0)  # RateControl: I gain fades with the r
 
 
 @njit(cache=True)
-def px4_rate_control(
-    i: int,
-    rate_sp: np.ndarray,
-    rate_meas: np.ndarray,
-    dgyro: np.ndarray,
-    rate_int: np.ndarray,
-    yaw_lpf: np.ndarray,
-    gain_p: np.ndarray,
-    gain_i: np.ndarray,
-    gain_d: np.ndarray,
-    int_limit: np.ndarray,
-    yaw_alpha: np.ndarray,
-    accel_per_unit: np.ndarray,
-    inertia: np.ndarray,
-    limited: np.ndarray,
-    landed: bool,
-    dt: float,
-    torque_out: np.ndarray,
-) -> None:
+def px4_rate_control(i: int, loops: LoopState, imu: ImuState, gains: Px4RateGains,
+                     inertia: np.ndarray, out: RateOutputs, landed: bool, dt: float) -> None:
     """PX4's RateControl::update on the filtered gyro ``rate_meas[i]`` (FLU; PX4 runs it in FRD,
     which flips the signs of both sides alike): normalised torque ``P e + I - D dgyro``, the I term
     fading with |e| (i_factor) and clamped, frozen while landed and, on an axis the mixer
     saturated (``limited[i]``: +1 short of the demand, -1 beyond it), never integrating further
     into that saturation (PX4's control-allocator saturation flags); yaw through the
     MC_YAW_TQ_CUTOFF first-order low pass; each axis clipped to +-1, then scaled to N m by
-    ``accel_per_unit`` times the vehicle's inertia into ``torque_out[i]``."""
+    ``accel_per_unit`` times the vehicle's inertia into ``torque_out[i]``. ``loops``
+    (`LoopState`): rate_sp, rate_int; ``imu`` (`ImuState`): rate_meas, dgyro; ``gains``
+    (`Px4RateGains`); ``out`` (`RateOutputs`): torque_out, yaw_lpf, limited."""
+    rate_sp, rate_int = loops.rate_sp, loops.rate_int
+    rate_meas, dgyro = imu.rate_meas_radps, imu.dgyro_radps2
+    gain_p, gain_i, gain_d, int_limit, yaw_alpha, accel_per_unit = gains
+    torque_out, yaw_lpf, limited = out.torque_nm, out.yaw_torque_lpf, out.limited
     for k in range(3):
         e = rate_sp[i, k] - rate_meas[i, k]
         u = gain_p[i, k] * e + rate_int[i, k] - gain_d[i, k] * dgyro[i, k]
@@ -229,32 +222,12 @@ def px4_rate_control(
 
 
 @njit(cache=True)
-def reference_rate_control(
-    i: int,
-    rate_sp: np.ndarray,
-    rate_meas: np.ndarray,
-    gyro_raw: np.ndarray,
-    omega: np.ndarray,
-    shaped: np.ndarray,
-    ref: np.ndarray,
-    angle_err: np.ndarray,
-    track_int: np.ndarray,
-    accel_max: np.ndarray,
-    ref_gain: np.ndarray,
-    ref_phi: np.ndarray,
-    ref_gamma: np.ndarray,
-    angle_p: np.ndarray,
-    track: np.ndarray,
-    delay_n: np.ndarray,
-    delay_buf: np.ndarray,
-    delay_idx: np.ndarray,
-    inertia: np.ndarray,
-    limited: np.ndarray,
-    landed: bool,
-    dt: float,
-    torque_out: np.ndarray,
-) -> None:
-    """A fitted closed-loop model of an autopilot's rate response, per body axis (FLU): the
+def reference_rate_control(i: int, loops: LoopState, imu: ImuState, body: Body,
+                           gains: ReferenceGains, st: ReferenceState, inertia: np.ndarray,
+                           out: RateOutputs, landed: bool, dt: float) -> None:
+    """A fitted closed-loop model of an autopilot's rate response, per body axis (FLU), from
+    ``loops.rate_sp``, the raw gyro ``imu.gyro_raw`` and the true ``body.omega``, with the
+    model ``gains`` (`ReferenceGains`) and its state ``st`` (`ReferenceState`): the
     command slews at most ``accel_max`` (ArduPilot's ATC_ACCEL_*_MAX input shaping) to
     ``shaped``; the angle error ``angle_err`` integrates shaped minus raw gyro rate (an attitude
     estimate's error, not the filtered rate's); the reference
@@ -263,9 +236,13 @@ def reference_rate_control(
     ``delay_idx[i]``), stepped exactly (``ref_phi`` (2x2 row-major), ``ref_gamma``); the body
     follows it
     through a stiff loop on the raw gyro with the reference acceleration fed forward, plus the
-    gyroscopic term: torque = J (rate' + kp e + ki int e) + w x J w into ``torque_out[i]``. On an
-    axis the mixer saturated (``limited[i, k]`` nonzero) the integral may only shrink
+    gyroscopic term: torque = J (rate' + kp e + ki int e) + w x J w into ``out.torque[i]``. On
+    an axis the mixer saturated (``out.limited[i, k]`` nonzero) the integral may only shrink
     (ArduPilot's AC_PID with the motors' limit flags)."""
+    rate_sp, gyro_raw, omega = loops.rate_sp, imu.gyro_raw_radps, body.omega
+    accel_max, ref_gain, ref_phi, ref_gamma, angle_p, track, delay_n = gains
+    shaped, ref, angle_err, track_int, delay_buf, delay_idx = st
+    torque_out, limited = out.torque_nm, out.limited
     kp, ki = track[i, 0], track[i, 1]
     for k in range(3):
         step = accel_max[i, k] * dt

@@ -20,6 +20,20 @@ from numba import njit
 
 from vehicle_emulator.config.personality import Personality, RateLoop
 from vehicle_emulator.physics import sensors as sn
+from vehicle_emulator.physics.fleet_arrays import (
+    Body,
+    Commands,
+    EstimateErrors,
+    EstimateNoise,
+    ImuModel,
+    ImuState,
+    OnboardParams,
+    OnboardStates,
+    Px4RateGains,
+    RateOutputs,
+    ReferenceGains,
+    ReferenceState,
+)
 from vehicle_emulator.physics.inner import (
     attitude_control,
     position_control,
@@ -41,8 +55,8 @@ class Onboard:
         n, dt = plant.n, plant.dt_s
         self.n = n
         self.sysid = plant.sysid
-        self._params: tuple | None = None
-        self._states: tuple | None = None
+        self._params: OnboardParams | None = None
+        self._states: OnboardStates | None = None
         dyn = [p.dynamics for p in personalities]
         sen = [p.sensors for p in personalities]
         f = np.float64
@@ -207,59 +221,40 @@ class Onboard:
         """EMU_SEED for vehicle i: restart its sensor-noise stream from (seed, sysid)."""
         self.noise_rng[i] = sn.noise_seed(seed, int(self.sysid[i]))
 
-    def params(self) -> tuple:
-        """The parameter arrays, in onboard_step's (and the fleet kernel's) order (built once:
+    def params(self) -> OnboardParams:
+        """The parameter arrays, as onboard_step (and the fleet kernel) takes them (built once:
         the arrays are only ever changed in place)."""
         if self._params is None:
             self._params = self._param_tuple()
         return self._params
 
-    def states(self) -> tuple:
-        """The state arrays, in onboard_step's order (built once, like params)."""
+    def states(self) -> OnboardStates:
+        """The state arrays, as onboard_step takes them (built once, like params)."""
         if self._states is None:
             self._states = self._state_tuple()
         return self._states
 
-    def _param_tuple(self) -> tuple:
-        return (
+    def _param_tuple(self) -> OnboardParams:
+        return OnboardParams(
             self.rate_loop,
             self.angular_damping_per_s,
             self.drag_decay,
             self.linear_drag_per_s,
             self.thrust_scale,
             self.control_div,
-            self.noise_on,
-            self.gyro_noise_std,
-            self.accel_noise_std,
-            self.off_noise_std,
-            self.gyro_coef,
-            self.dterm_coef,
-            self.accel_coef,
-            self.imu_mode,
+            ImuModel(self.noise_on, self.gyro_noise_std, self.accel_noise_std, self.off_noise_std,
+                     self.gyro_coef, self.dterm_coef, self.accel_coef, self.imu_mode),
             self.position_delay,
             self.output_delay,
-            self.rate_gain_p,
-            self.rate_gain_i,
-            self.rate_gain_d,
-            self.rate_int_limit,
-            self.yaw_alpha,
-            self.accel_per_unit,
-            self.accel_max,
-            self.ref_gain,
-            self.ref_phi,
-            self.ref_gamma,
-            self.angle_p,
-            self.track_gains,
-            self.ref_delay,
-            self.attitude_error_std,
-            self.attitude_error_phi,
-            self.attitude_error_smooth,
-            self.velocity_error_std,
-            self.velocity_error_phi,
-            self.velocity_drift_std,
-            self.velocity_drift_phi,
-            self.position_error_phi,
-            self.position_error_share,
+            Px4RateGains(self.rate_gain_p, self.rate_gain_i, self.rate_gain_d,
+                         self.rate_int_limit, self.yaw_alpha, self.accel_per_unit),
+            ReferenceGains(self.accel_max, self.ref_gain, self.ref_phi, self.ref_gamma,
+                           self.angle_p, self.track_gains, self.ref_delay),
+            EstimateNoise(self.attitude_error_std, self.attitude_error_phi,
+                          self.attitude_error_smooth, self.velocity_error_std,
+                          self.velocity_error_phi, self.velocity_drift_std,
+                          self.velocity_drift_phi, self.position_error_phi,
+                          self.position_error_share),
             self.disturbance_std,
             self.gyro_integration_phi,
             self.gyro_bias_std,
@@ -269,26 +264,17 @@ class Onboard:
             self.hold_wander_ar,
         )
 
-    def _state_tuple(self) -> tuple:
-        return (
+    def _state_tuple(self) -> OnboardStates:
+        return OnboardStates(
             self.noise_rng,
-            self.gyro_filter_state,
-            self.dterm_filter_state,
-            self.accel_filter_state,
-            self.gyro_raw,
-            self.accel_raw,
-            self.rate_meas_flu_radps,
-            self.dgyro,
-            self.gyro_imu_flu_radps,
-            self.accel_imu_flu_mps2,
-            self.yaw_torque_lpf,
-            self.shaped_rate,
-            self.reference,
-            self.angle_error,
-            self.track_integral,
-            self.torque_next_nm,
-            self.thrust_next_norm,
-            self._torque_new,
+            ImuState(self.gyro_filter_state, self.dterm_filter_state, self.accel_filter_state,
+                     self.gyro_raw, self.accel_raw, self.rate_meas_flu_radps, self.dgyro,
+                     self.gyro_imu_flu_radps, self.accel_imu_flu_mps2),
+            # torque_limited: the fleet kernel's mixer writes it (plant.py)
+            RateOutputs(self._torque_new, self.yaw_torque_lpf, self.torque_limited,
+                        self.torque_next_nm, self.thrust_next_norm),
+            ReferenceState(self.shaped_rate, self.reference, self.angle_error,
+                           self.track_integral, self._delay_buffer, self._delay_index),
             self.rotation_est,
             self.position_est_enu_m,
             self.velocity_est_enu_mps,
@@ -297,21 +283,22 @@ class Onboard:
             self.attitude_sample_step,
             self.position_sample_step,
             self._position_prev_step,
-            self._delay_buffer,
-            self._delay_index,
-            self.attitude_error_stage,
-            self.attitude_error,
-            self.velocity_error_parts,
-            self.velocity_error,
-            self.position_error,
+            EstimateErrors(self.attitude_error_stage, self.attitude_error,
+                           self.velocity_error_parts, self.velocity_error, self.position_error),
             self.integration_error,
             self.gyro_bias,
             self.disturbance_state,
             self.hold_wander_state,
             self.hold_wander_enu_m,
             self._wandered_sp,
-            self.torque_limited,  # last: the fleet kernel's mixer writes it (plant.py)
         )
+
+
+@njit(cache=True)
+def _with_position_sp(cmd, pos_sp):
+    """``cmd`` (`Commands`) with the position setpoints ``pos_sp`` (the hold wander's)."""
+    return Commands(cmd.mode, cmd.thrust_cmd, cmd.rate_cmd, cmd.att_cmd, cmd.yaw_rate_ff,
+                    cmd.torque_cmd, pos_sp, cmd.vel_ff, cmd.pos_mask, cmd.yaw_sp, cmd.hover)
 
 
 @njit(cache=True)
@@ -321,44 +308,35 @@ def onboard_step(step, dt, cmd, loops, body, on_ground, inertia, tmax, sf_body, 
     IMU sample, the latched estimates, the cascade and the personality's rate loop. One call per
     physics step for the whole fleet (the fleet kernel's), so the parameter and state tuples
     are unpacked once per step, not per vehicle. ``cmd``, ``loops``, ``body``: the fleet's
-    `Commands`, `LoopState` and `Body` (fleet_arrays.py)."""
+    `Commands`, `LoopState` and `Body`; ``cal_par``, ``cal_st``: `OnboardParams` and
+    `OnboardStates` (fleet_arrays.py)."""
     (mode, thrust_cmd, rate_cmd, att_cmd, yaw_rate_ff, torque_cmd, pos_sp, vel_ff, pos_mask,
      yaw_sp, hover) = cmd
     att_sp, rate_sp, thrust_sp, torque_sp, rate_int, _omega_prev, vel_int = loops
     pos, vel, rot, omega = body
-    (
-        loop, _damping, _decay, _drag, _scale, ctrl_div, noise_on, gyro_std, accel_std, off_std,
-        gyro_coef, dterm_coef, accel_coef, imu_mode, pos_delay, out_delay, gain_p, gain_i,
-        gain_d, int_limit, yaw_alpha, accel_per_unit, accel_max, ref_gain, ref_phi, ref_gamma,
-        angle_p, track, ref_delay, att_err_std, att_phi, att_smooth, vel_err_std, vel_phi,
-        drift_std, drift_phi, pos_phi, pos_share, disturbance, integ_phi, bias_std, bias_phi,
-        dist_ar, wander_std, wander_ar,
-    ) = cal_par
-    (
-        rng, gyro_state, dterm_state, accel_state, gyro_raw, accel_raw, rate_meas, dgyro,
-        gyro_imu, accel_imu, yaw_lpf, shaped, ref, angle_err, track_int, torque_next,
-        thrust_next, torque_new, rot_est, pos_est, vel_est, pos_prev, vel_prev, att_step,
-        pos_step, pos_prev_step, delay_buf, delay_idx, att_stage, att_err, vel_parts, vel_err,
-        pos_err,
-        integ_err, gyro_bias, dist_state, wander_state, wander, wandered_sp, limited,
-    ) = cal_st
+    (loop, _damping, _decay, _drag, _scale, ctrl_div, imu_model, pos_delay, out_delay, px4,
+     ref_gains, est_noise, disturbance, integ_phi, bias_std, bias_phi, dist_ar, wander_std,
+     wander_ar) = cal_par
+    (rng, imu, rate_out, ref_state, rot_est, pos_est, vel_est, pos_prev, vel_prev, att_step,
+     pos_step, pos_prev_step, errors, integ_err, gyro_bias, dist_state, wander_state, wander,
+     wandered_sp) = cal_st
+    noise_on = imu_model.noise_on
+    gyro_raw, gyro_imu = imu.gyro_raw_radps, imu.gyro_imu_radps
+    torque_new, yaw_lpf, _limited, torque_next, thrust_next = rate_out
+    shaped, ref, angle_err, track_int, _delay_buf, _delay_idx = ref_state
+    att_err, vel_err, pos_err = errors.attitude_rad, errors.velocity_mps, errors.position_m
+    estimated = Body(pos_est, vel_est, rot_est, omega)  # what the cascade flies on
+    wandered = _with_position_sp(cmd, wandered_sp)
     for i in range(loop.shape[0]):
         if loop[i] == 0 or step % ctrl_div[i] != 0:
             continue
         m = mode[i]
         landed = on_ground[i]
         dt_c = ctrl_div[i] * dt
-        sn.sample_sensors(
-            i, dt_c, noise_on, m != 0, omega, sf_body, gyro_std, accel_std, off_std, gyro_coef,
-            dterm_coef, accel_coef, imu_mode, rng, gyro_state, dterm_state, accel_state, gyro_raw,
-            accel_raw, rate_meas, dgyro, gyro_imu, accel_imu,
-        )
+        sn.sample_sensors(i, dt_c, m != 0, omega, sf_body, imu_model, rng, imu)
         # estimates as the autopilot reports them (truth plus the estimate errors), with their
         # sample steps; LOCAL_POSITION_NED optionally one period older
-        sn.estimate_errors(
-            i, dt_c, noise_on, att_err_std, att_phi, att_smooth, vel_err_std, vel_phi, drift_std,
-            drift_phi, pos_phi, pos_share, rng, att_stage, att_err, vel_parts, vel_err, pos_err,
-        )
+        sn.estimate_errors(i, dt_c, noise_on, est_noise, rng, errors)
         sn.gyro_integration_errors(i, dt_c, noise_on, integ_phi, gyro_raw, omega, integ_err)
         sn.gyro_bias_step(i, noise_on, bias_std, bias_phi, rng, gyro_bias, gyro_imu)
         e0 = att_err[i, 0] + integ_err[i, 0]
@@ -404,14 +382,12 @@ def onboard_step(step, dt, cmd, loops, body, on_ground, inertia, tmax, sf_body, 
                 torque_sp[i, k] = torque_cmd[i, k] * tmax[i, k]
             continue
         if m == 5:  # the autopilot's own position loop flies on its estimates, as PX4's does
-            sp = pos_sp
+            sp = cmd
             if noise_on[i] and not landed and wander_ar[i, 2] != 0.0:
-                sp = wandered_sp
-                sn.hold_wander(i, rng, wander_std, wander_ar, wander_state, wander, pos_sp, sp)
-            thr = position_control(
-                i, pos_est, vel_est, rot_est, sp, vel_ff, pos_mask, yaw_sp, vel_int, hover,
-                landed, dt_c, att_sp,
-            )
+                sp = wandered
+                sn.hold_wander(i, rng, wander_std, wander_ar, wander_state, wander, pos_sp,
+                               wandered_sp)
+            thr = position_control(i, estimated, sp, loops, landed, dt_c)
             attitude_control(i, rot_est, att_sp, yaw_rate_ff, rate_sp)
         elif m == 3:
             thr = thrust_cmd[i]
@@ -422,16 +398,10 @@ def onboard_step(step, dt, cmd, loops, body, on_ground, inertia, tmax, sf_body, 
             for k in range(3):
                 rate_sp[i, k] = rate_cmd[i, k]
         if loop[i] == 1:
-            px4_rate_control(
-                i, rate_sp, rate_meas, dgyro, rate_int, yaw_lpf, gain_p, gain_i, gain_d, int_limit,
-                yaw_alpha, accel_per_unit, inertia, limited, landed, dt_c, torque_new,
-            )
+            px4_rate_control(i, loops, imu, px4, inertia, rate_out, landed, dt_c)
         else:
-            reference_rate_control(
-                i, rate_sp, rate_meas, gyro_raw, omega, shaped, ref, angle_err, track_int,
-                accel_max, ref_gain, ref_phi, ref_gamma, angle_p, track, ref_delay, delay_buf,
-                delay_idx, inertia, limited, landed, dt_c, torque_new,
-            )
+            reference_rate_control(i, loops, imu, body, ref_gains, ref_state, inertia,
+                                   rate_out, landed, dt_c)
         if noise_on[i] and m != 0 and (disturbance[i, 0] != 0.0 or disturbance[i, 1] != 0.0
                                        or disturbance[i, 2] != 0.0):  # process noise
             d0, d1 = sn.gauss_pair(rng, i)

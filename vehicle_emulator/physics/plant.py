@@ -71,7 +71,7 @@ def torque_max_nm(arm_length_m: np.ndarray, anti_torque_m: np.ndarray, f_max_n: 
 def _step_kernel(steps, step0, dt, cmd, loops, body, frame, out, cal_par, cal_st):
     """``steps`` physics steps of the fleet from step ``step0``: ``cmd`` (`Commands`), ``loops``
     (`LoopState`), ``body`` (`Body`), ``frame`` (`Airframe`), ``out`` (`Outputs`), the
-    personalities' parameters and states (onboard.py)."""
+    personalities' parameters and states (`OnboardParams`, `OnboardStates`; onboard.py)."""
     (mode, thrust_cmd, rate_cmd, att_cmd, yaw_rate_ff, torque_cmd, pos_sp, vel_ff, pos_mask,
      yaw_sp, hover) = cmd
     att_sp, rate_sp, thrust_sp, torque_sp, rate_int, omega_prev, vel_int = loops
@@ -81,11 +81,11 @@ def _step_kernel(steps, step0, dt, cmd, loops, body, frame, out, cal_par, cal_st
      charge_c, t_sp_n) = out
     n = pos.shape[0]
     rotor_eff = np.empty((n, 4))
-    loop = cal_par[0]
-    damping = cal_par[1]
-    drag_decay = cal_par[2]
-    drag_k = cal_par[3]
-    thrust_scale = cal_par[4]
+    loop = cal_par.rate_loop
+    damping = cal_par.angular_damping_per_s
+    drag_decay = cal_par.drag_decay
+    drag_k = cal_par.linear_drag_per_s
+    thrust_scale = cal_par.thrust_scale
     calibrated = False
     for i in range(n):
         calibrated = calibrated or loop[i] != 0
@@ -114,21 +114,7 @@ def _step_kernel(steps, step0, dt, cmd, loops, body, frame, out, cal_par, cal_st
                     torque_sp[i, k] = torque_cmd[i, k] * tmax[i, k]
             else:
                 if m == 5:
-                    thrust_sp[i] = position_control(
-                        i,
-                        pos,
-                        vel,
-                        rot,
-                        pos_sp,
-                        vel_ff,
-                        pos_mask,
-                        yaw_sp,
-                        vel_int,
-                        hover,
-                        landed,
-                        dt,
-                        att_sp,
-                    )
+                    thrust_sp[i] = position_control(i, body, cmd, loops, landed, dt)
                     attitude_control(i, rot, att_sp, yaw_rate_ff, rate_sp)
                 elif m == 3:
                     thrust_sp[i] = thrust_cmd[i]
@@ -144,7 +130,7 @@ def _step_kernel(steps, step0, dt, cmd, loops, body, frame, out, cal_par, cal_st
             t_sp_n[i] = thrust_sp[i] * t_max
         # the axes the mixer could not deliver: the calibrated rate loops' anti-windup
         rotors_from_wrench_into(t_sp_n, torque_sp, arm, anti, fmax, rotor_cmd, airmode,
-                                cal_st[-1])
+                                cal_st.rate_out.limited)
         for i in range(n):
             tau = motor_tau[i]
             a = 1.0 if tau <= 0.0 else 1.0 - math.exp(-dt / tau)

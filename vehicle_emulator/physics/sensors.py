@@ -109,38 +109,19 @@ def biquad(coef: np.ndarray, state: np.ndarray, x: float) -> float:
 
 
 @njit(cache=True)
-def sample_sensors(
-    i,
-    dt_c,
-    noise_on,
-    motors_on,
-    omega,
-    sf,
-    gyro_std,
-    accel_std,
-    off_std,
-    gyro_coef,
-    dterm_coef,
-    accel_coef,
-    imu_mode,
-    rng,
-    gyro_state,
-    dterm_state,
-    accel_state,
-    gyro_raw,
-    accel_raw,
-    rate_meas,
-    dgyro,
-    gyro_imu,
-    accel_imu,
-):
-    """One IMU sample of vehicle i (FLU), time step ``dt_c``: the raw samples ``gyro_raw[i]`` and
-    ``accel_raw[i]`` (the previous ones on entry), the filtered rate ``rate_meas[i]`` (what the
+def sample_sensors(i, dt_c, motors_on, omega, sf, imu, rng, st):
+    """One IMU sample of vehicle i (FLU), time step ``dt_c``, of the true body rate ``omega[i]``
+    and specific force ``sf[i]``, with the model ``imu`` (fleet_arrays.ImuModel) into ``st``
+    (fleet_arrays.ImuState): the raw samples ``gyro_raw[i]`` and ``accel_raw[i]`` (the previous
+    ones on entry), the filtered rate ``rate_meas[i]`` (what the
     rate loop and ATTITUDE see), the filtered derivative ``dgyro[i]`` of the raw gyro (PX4's D
     term), and HIGHRES_IMU's ``gyro_imu[i]``/``accel_imu[i]``:
     ``imu_mode`` 0 the raw sample, 1 the mean of the last two raw samples, 2 the filtered gyro
     and accelerometer. Noise: white, ``gyro_std``/``accel_std`` per axis with the motors on,
     ``off_std`` (gyro, accel) with them off, none when ``noise_on[i]`` is False."""
+    noise_on, gyro_std, accel_std, off_std, gyro_coef, dterm_coef, accel_coef, imu_mode = imu
+    (gyro_state, dterm_state, accel_state, gyro_raw, accel_raw, rate_meas, dgyro, gyro_imu,
+     accel_imu) = st
     ng = (0.0, 0.0, 0.0)
     na = (0.0, 0.0, 0.0)
     std_sum = gyro_std[i, 0] + gyro_std[i, 1] + gyro_std[i, 2] + accel_std[i, 0]
@@ -176,10 +157,11 @@ def sample_sensors(
 
 
 @njit(cache=True)
-def estimate_errors(i, dt_c, noise_on, att_std, att_phi, att_smooth, vel_std, vel_phi,
-                    drift_std, drift_phi, pos_phi, pos_share, rng, att_stage, att_err, vel_parts,
-                    vel_err, pos_err):
-    """Advance vehicle i's estimate errors by one control period: Gauss-Markov attitude errors
+def estimate_errors(i, dt_c, noise_on, noise, rng, errors):
+    """Advance vehicle i's estimate errors ``errors`` (fleet_arrays.EstimateErrors: att_stage,
+    att_err, vel_parts, vel_err, pos_err) by one control period with the sizes and factors
+    ``noise`` (fleet_arrays.EstimateNoise: att_std, att_phi, att_smooth, vel_std, vel_phi,
+    drift_std, drift_phi, pos_phi, pos_share): Gauss-Markov attitude errors
     (roll, pitch, yaw; body axes; factors ``att_phi[i, k]`` per axis), first order where
     ``att_smooth[i, k]`` is 0, else second order (two equal poles: a unit first-order stage
     ``att_stage`` low-passed once more with gain ``att_smooth``, smooth at short lags), and
@@ -191,6 +173,9 @@ def estimate_errors(i, dt_c, noise_on, att_std, att_phi, att_smooth, vel_std, ve
     and decays by ``pos_phi`` per period (share 1: position and velocity estimates agree; 0: the
     reported velocity carries an error the reported position does not show). Off (held at zero)
     without noise."""
+    (att_std, att_phi, att_smooth, vel_std, vel_phi, drift_std, drift_phi, pos_phi,
+     pos_share) = noise
+    att_stage, att_err, vel_parts, vel_err, pos_err = errors
     if not noise_on[i]:
         for k in range(3):
             att_err[i, k] = 0.0
