@@ -77,31 +77,13 @@ def test_fleet_kernel_matches_the_numpy_conversions(q, p, v):
     }
     none = np.zeros((0, 3))
     frames.fleet_to_ned_frd(
-        r,
-        w,
-        pos,
-        vel,
-        sf,
+        frames.Reported(r, w, pos, vel, sf),
         r,
         w,
         np.arange(1),
         np.zeros(0, dtype=np.int64),
-        none,
-        none,
-        none,
-        none,
-        none,
-        out["r"],
-        out["q"],
-        out["e"],
-        out["w"],
-        out["p"],
-        out["v"],
-        out["vb"],
-        out["a"],
-        out["qs"],
-        out["rs"],
-        out["y"],
+        frames.TelemetryNoise(none, none, none, none, none),
+        frames.NedFrd(*out.values()),
     )
     r_ned = frames.rotation_ned_frd_from_enu_flu(r)
     assert np.allclose(out["r"], r_ned)

@@ -56,12 +56,15 @@ NOISE_GYRO_RADPS = 0.003
 NOISE_ACC_MPS2 = 0.05
 
 _NEED_POSITION = frozenset({"LOCAL_POSITION_NED"})
-_NO_NOISE = {key: np.zeros((0, 3)) for key in ("att", "gyro", "pos", "vel", "acc")}
+_NO_NOISE = frames.TelemetryNoise(*(np.zeros((0, 3)) for _ in range(5)))
 @njit(cache=True)
-def _select_sources(rows, model, rot, rot_est, omega, rate_meas, pos, pos_est, vel, vel_est, sf,
-                    accel_imu, out_rot, out_w, out_pos, out_vel, out_sf):
-    """Per vehicle of ``rows``, what telemetry reports: the true state (nominal) or the sensor
-    model's measurements and estimates (``model[i]``)."""
+def _select_sources(rows, model, truth, est, out):
+    """Per vehicle of ``rows``, what telemetry reports into ``out``: the true state ``truth``
+    (nominal) or the sensor model's measurements and estimates ``est`` (``model[i]``); all
+    three `frames.Reported`."""
+    rot, omega, pos, vel, sf = truth
+    rot_est, rate_meas, pos_est, vel_est, accel_imu = est
+    out_rot, out_w, out_pos, out_vel, out_sf = out
     for i in rows:
         cal = model[i]
         for a in range(3):
@@ -120,7 +123,7 @@ class Telemetry(TelemetryPayloads):
         self._hot_compid = self.encoders[hotstreams.NAMES[0]].compid
         self._hot_out = np.empty((n, hotstreams.ROW_BYTES), dtype=np.uint8)
         self._hot_len = np.zeros(n, dtype=np.int64)
-        self._d: dict[str, np.ndarray] | None = None
+        self._d: dict[str, Any] | None = None
         self._builders = {
             "HEARTBEAT": self._heartbeat,
             "ATTITUDE": self._attitude,
@@ -280,77 +283,43 @@ class Telemetry(TelemetryPayloads):
                 "rate_sp_frd": np.empty((n, 3)),
                 "yaw_ned": np.empty(n),
             }
+            d["ned"] = frames.NedFrd(d["r_ned"], d["q"], d["eul"], d["w_frd"], d["pos_ned"],
+                                     d["vel_ned"], d["vel_frd"], d["acc_frd"], d["q_sp"],
+                                     d["rate_sp_frd"], d["yaw_ned"])
         noisy = rows[status.noise[rows]]
         if noisy.size:
             k = noisy.size
-            nz = {
-                "att": self.rng.normal(0.0, NOISE_ATT_RAD, (k, 3)),
-                "gyro": self.rng.normal(0.0, NOISE_GYRO_RADPS, (k, 3)),
-                "pos": self.rng.normal(0.0, NOISE_POS_M, (k, 3)),
-                "vel": self.rng.normal(0.0, NOISE_VEL_MPS, (k, 3)),
-                "acc": self.rng.normal(0.0, NOISE_ACC_MPS2, (k, 3)),
-            }
+            nz = frames.TelemetryNoise(
+                self.rng.normal(0.0, NOISE_ATT_RAD, (k, 3)),
+                self.rng.normal(0.0, NOISE_GYRO_RADPS, (k, 3)),
+                self.rng.normal(0.0, NOISE_POS_M, (k, 3)),
+                self.rng.normal(0.0, NOISE_VEL_MPS, (k, 3)),
+                self.rng.normal(0.0, NOISE_ACC_MPS2, (k, 3)),
+            )
         else:
             nz = _NO_NOISE
         ob = plant.onboard
         model = ob.sensor_model
         modelled = bool(model.any())
+        if d.get("sources_of") is not plant:  # the plant's arrays, bundled once
+            d["sources_of"] = plant
+            d["truth"] = frames.Reported(plant.rotation, plant.omega_flu_radps,
+                                         plant.position_enu_m, plant.velocity_enu_mps,
+                                         plant.specific_force_flu_mps2)
+            d["est"] = frames.Reported(ob.rotation_est, ob.rate_meas_flu_radps,
+                                       ob.position_est_enu_m, ob.velocity_est_enu_mps,
+                                       ob.accel_imu_flu_mps2)
         if modelled:
-            if "src_rot" not in d or d["src_rot"].shape[0] != n:
-                d["src_rot"], d["src_w"] = np.empty((n, 3, 3)), np.empty((n, 3))
-                d["src_pos"], d["src_vel"] = np.empty((n, 3)), np.empty((n, 3))
-                d["src_sf"], d["gimu_frd"] = np.empty((n, 3)), np.empty((n, 3))
-            _select_sources(
-                rows,
-                model,
-                plant.rotation,
-                ob.rotation_est,
-                plant.omega_flu_radps,
-                ob.rate_meas_flu_radps,
-                plant.position_enu_m,
-                ob.position_est_enu_m,
-                plant.velocity_enu_mps,
-                ob.velocity_est_enu_mps,
-                plant.specific_force_flu_mps2,
-                ob.accel_imu_flu_mps2,
-                d["src_rot"],
-                d["src_w"],
-                d["src_pos"],
-                d["src_vel"],
-                d["src_sf"],
-            )
-            src = (d["src_rot"], d["src_w"], d["src_pos"], d["src_vel"], d["src_sf"])
+            if "src" not in d or d["src"].pos_m.shape[0] != n:
+                d["src"] = frames.Reported(np.empty((n, 3, 3)), np.empty((n, 3)),
+                                           np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)))
+                d["gimu_frd"] = np.empty((n, 3))
+            _select_sources(rows, model, d["truth"], d["est"], d["src"])
+            src = d["src"]
         else:
-            src = (
-                plant.rotation,
-                plant.omega_flu_radps,
-                plant.position_enu_m,
-                plant.velocity_enu_mps,
-                plant.specific_force_flu_mps2,
-            )
-        frames.fleet_to_ned_frd(
-            *src,
-            plant.attitude_sp,
-            plant.rate_sp_flu_radps,
-            rows,
-            noisy,
-            nz["att"],
-            nz["gyro"],
-            nz["pos"],
-            nz["vel"],
-            nz["acc"],
-            d["r_ned"],
-            d["q"],
-            d["eul"],
-            d["w_frd"],
-            d["pos_ned"],
-            d["vel_ned"],
-            d["vel_frd"],
-            d["acc_frd"],
-            d["q_sp"],
-            d["rate_sp_frd"],
-            d["yaw_ned"],
-        )
+            src = d["truth"]
+        frames.fleet_to_ned_frd(src, plant.attitude_sp, plant.rate_sp_flu_radps, rows, noisy, nz,
+                                d["ned"])
         if modelled:  # HIGHRES_IMU gyro: the IMU's own (PX4: raw means), FLU -> FRD
             g = d["gimu_frd"]
             g[rows] = d["w_frd"][rows]
@@ -363,4 +332,4 @@ class Telemetry(TelemetryPayloads):
         d["t_att_us"] = (att_s * 1e6).astype(np.int64)
         d["t_pos_ms"] = (pos_s * 1e3).astype(np.int64)
         d["t_pos_us"] = (pos_s * 1e6).astype(np.int64)
-        d["z_up"] = np.ascontiguousarray(src[2][:, 2])  # one layout for frame_streams
+        d["z_up"] = np.ascontiguousarray(src.pos_m[:, 2])  # one layout for frame_streams

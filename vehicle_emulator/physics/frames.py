@@ -16,6 +16,7 @@ Every function is batched: vectors ``(n, 3)`` (or ``(3,)``), rotations ``(n, 3, 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -29,6 +30,9 @@ F_FLU_FRD: FloatArray = np.diag([1.0, -1.0, -1.0])
 __all__ = [
     "F_FLU_FRD",
     "P_ENU_NED",
+    "NedFrd",
+    "Reported",
+    "TelemetryNoise",
     "enu_from_local_ned",
     "enu_to_ned",
     "fleet_to_ned_frd",
@@ -243,37 +247,55 @@ def quat_from_matrix(m: np.ndarray) -> tuple[float, float, float, float]:
     return w, x, y, z
 
 
+class Reported(NamedTuple):
+    """What a vehicle's telemetry reports, per vehicle (ENU world, FLU body): attitude R_enu_flu,
+    body rates, position, velocity, specific force (the truth, or the sensor model's)."""
+
+    rot: FloatArray
+    omega_radps: FloatArray
+    pos_m: FloatArray
+    vel_mps: FloatArray
+    sf_mps2: FloatArray
+
+
+class TelemetryNoise(NamedTuple):
+    """White telemetry noise, one row per noisy vehicle: attitude (body rotation vector), body
+    rates, position, velocity, specific force."""
+
+    att_rad: FloatArray
+    gyro_radps: FloatArray
+    pos_m: FloatArray
+    vel_mps: FloatArray
+    acc_mps2: FloatArray
+
+
+class NedFrd(NamedTuple):
+    """The telemetry quantities in MAVLink's frames (NED world, FRD body) per vehicle:
+    R_ned_frd, its quaternion (w, x, y, z) and Euler angles, body rates, position, velocity
+    (world and body), specific force, the attitude and rate setpoints, heading."""
+
+    r_ned: FloatArray
+    q: FloatArray
+    eul_rad: FloatArray
+    w_frd_radps: FloatArray
+    pos_ned_m: FloatArray
+    vel_ned_mps: FloatArray
+    vel_frd_mps: FloatArray
+    acc_frd_mps2: FloatArray
+    q_sp: FloatArray
+    rate_sp_frd_radps: FloatArray
+    yaw_ned_rad: FloatArray
+
+
 @njit(cache=True)
-def fleet_to_ned_frd(
-    rot,
-    omega,
-    pos,
-    vel,
-    sf,
-    att_sp,
-    rate_sp,
-    rows,
-    noisy,
-    n_att,
-    n_gyro,
-    n_pos,
-    n_vel,
-    n_acc,
-    r_ned,
-    q,
-    eul,
-    w_frd,
-    pos_ned,
-    vel_ned,
-    vel_frd,
-    acc_frd,
-    q_sp,
-    rate_sp_frd,
-    yaw_ned,
-):
-    """ENU/FLU fleet state -> NED/FRD telemetry quantities (see frames.py for the maps), for
-    the vehicles ``rows`` (the others' outputs are left as they were); ``noisy`` (a subset of
-    ``rows``) get the noise rows ``n_*[k]`` for ``noisy[k]``."""
+def fleet_to_ned_frd(src, att_sp, rate_sp, rows, noisy, noise, out):
+    """ENU/FLU fleet state ``src`` (`Reported`) and setpoints -> NED/FRD telemetry quantities
+    ``out`` (`NedFrd`; see frames.py for the maps), for the vehicles ``rows`` (the others'
+    outputs are left as they were); ``noisy`` (a subset of ``rows``) get the noise rows
+    (`TelemetryNoise`) ``noise.*[k]`` for ``noisy[k]``."""
+    rot, omega, pos, vel, sf = src
+    n_att, n_gyro, n_pos, n_vel, n_acc = noise
+    r_ned, q, eul, w_frd, pos_ned, vel_ned, vel_frd, acc_frd, q_sp, rate_sp_frd, yaw_ned = out
     for i in rows:
         r = rot[i]
         # R_ned_frd = P R F: rows swapped (0<->1), row 2 negated; columns 1, 2 negated
