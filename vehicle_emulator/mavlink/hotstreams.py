@@ -14,6 +14,8 @@ general path frames in the same collect follow them in the vehicle's datagram.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -33,15 +35,60 @@ _SCRATCH_BYTES = 64  # the largest payload (HIGHRES_IMU, 63 bytes), 8-byte align
 _IMU_FIELDS = 0x3F | 0x200 | 0x800 | 0x1000  # acc, gyro, abs pressure, pressure alt, temperature
 
 
+class Schedule(NamedTuple):
+    """The telemetry schedule (vehicle x message: next due time and interval [s]), the three
+    streams' columns of it, and the per-message sent counters."""
+
+    next_due_s: np.ndarray
+    interval_s: np.ndarray
+    cols: np.ndarray
+    sent: np.ndarray
+
+
+class Senders(NamedTuple):
+    """Per vehicle: its link is up, its system id and outgoing sequence number; the streams'
+    component id."""
+
+    enabled: np.ndarray
+    sysid: np.ndarray
+    compid: int
+    seq: np.ndarray
+
+
+class StreamValues(NamedTuple):
+    """What the three streams carry, per vehicle (NED/FRD, MAVLink units; `Telemetry._derive`):
+    attitude quaternion, body rates and their sample time; position (relative to the EKF
+    origin), velocity, their sample time and the first one the estimator had a position at;
+    specific force, the IMU's gyro and its sample time; the altitude (home altitude plus the
+    height up) for the barometer fields."""
+
+    q: np.ndarray
+    w_frd_radps: np.ndarray
+    t_att_ms: np.ndarray
+    pos_ned_m: np.ndarray
+    origin_ned_m: np.ndarray
+    vel_ned_mps: np.ndarray
+    t_pos_ms: np.ndarray
+    position_from_ms: np.ndarray
+    acc_frd_mps2: np.ndarray
+    gyro_frd_radps: np.ndarray
+    t_att_us: np.ndarray
+    z_up_m: np.ndarray
+    home_alt_m: float
+
+
 @njit(cache=True)
-def frame_streams(now_s, next_due, interval, cols, enabled, position_from_ms, q, w_frd,
-                  t_att_ms, pos_ned, origin_ned, vel_ned, t_pos_ms, acc_frd, gyro_frd,
-                  t_att_us, z_up, home_alt_m, sysid, compid, seq, table, out, out_len, sent):
-    """Per vehicle: each of the three streams (columns ``cols`` of the schedule) that is due at
-    ``now_s`` moves on one interval (to ``now_s`` + interval if that is not ahead, as the
-    general path does) and, if the vehicle's link is up (and, for LOCAL_POSITION_NED, its
-    estimator had a position at the sample), is framed into ``out[i]``; ``out_len[i]`` is the
-    bytes written, ``sent[cols[m]]`` counts them, ``seq`` advances per frame."""
+def frame_streams(now_s, schedule, senders, values, table, out, out_len):
+    """Per vehicle: each of the three streams (columns ``cols`` of the `Schedule`) that is due
+    at ``now_s`` moves on one interval (to ``now_s`` + interval if that is not ahead, as the
+    general path does) and, if the vehicle's link is up (`Senders`; and, for
+    LOCAL_POSITION_NED, its estimator had a position at the sample), is framed from `values`
+    (`StreamValues`) into ``out[i]`` with the CRC ``table``; ``out_len[i]`` is the bytes
+    written, ``sent[cols[m]]`` counts them, ``seq`` advances per frame."""
+    next_due, interval, cols, sent = schedule
+    enabled, sysid, compid, seq = senders
+    (q, w_frd, t_att_ms, pos_ned, origin_ned, vel_ned, t_pos_ms, position_from_ms, acc_frd,
+     gyro_frd, t_att_us, z_up, home_alt_m) = values
     scratch = np.zeros(_SCRATCH_BYTES, dtype=np.uint8)
     f4 = scratch.view(np.float32)
     u4 = scratch.view(np.uint32)

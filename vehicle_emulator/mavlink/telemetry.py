@@ -121,6 +121,8 @@ class Telemetry(TelemetryPayloads):
         self.fused = True
         self._hot_cols = np.array([self.index[nm] for nm in hotstreams.NAMES], dtype=np.int64)
         self._hot_compid = self.encoders[hotstreams.NAMES[0]].compid
+        self._hot_schedule = hotstreams.Schedule(self.next_due_s, self.interval_s, self._hot_cols,
+                                                  self.sent)
         self._hot_out = np.empty((n, hotstreams.ROW_BYTES), dtype=np.uint8)
         self._hot_len = np.zeros(n, dtype=np.int64)
         self._d: dict[str, Any] | None = None
@@ -254,12 +256,13 @@ class Telemetry(TelemetryPayloads):
         returns each vehicle's bytes of them."""
         d = self._d
         assert d is not None
-        hotstreams.frame_streams(
-            now_s, self.next_due_s, self.interval_s, self._hot_cols, enabled,
-            status.position_from_ms, d["q"], d["w_frd"], d["t_att_ms"], d["pos_ned"],
-            status.origin_ned_m, d["vel_ned"], d["t_pos_ms"], d["acc_frd"], d["gimu_frd"],
-            d["t_att_us"], d["z_up"], self.origin_lla[2], status.sysid, self._hot_compid, self.seq,
-            CRC_TABLE, self._hot_out, self._hot_len, self.sent)
+        values = hotstreams.StreamValues(
+            d["q"], d["w_frd"], d["t_att_ms"], d["pos_ned"], status.origin_ned_m, d["vel_ned"],
+            d["t_pos_ms"], status.position_from_ms, d["acc_frd"], d["gimu_frd"], d["t_att_us"],
+            d["z_up"], self.origin_lla[2])
+        senders = hotstreams.Senders(enabled, status.sysid, self._hot_compid, self.seq)
+        hotstreams.frame_streams(now_s, self._hot_schedule, senders, values, CRC_TABLE,
+                                 self._hot_out, self._hot_len)
         return self._hot_len
 
     # --- derived quantities, once per collect --------------------------------------------------
