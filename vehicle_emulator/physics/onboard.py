@@ -42,7 +42,7 @@ from vehicle_emulator.physics.inner import (
     second_order_step,
 )
 
-__all__ = ["REF_DELAY_MAX", "Onboard", "onboard_step"]
+__all__ = ["REF_DELAY_MAX", "Onboard", "named_params", "named_states", "onboard_step"]
 
 REF_DELAY_MAX = 32  # control periods of dead time the reference model can hold
 
@@ -57,6 +57,7 @@ class Onboard:
         self.sysid = plant.sysid
         self._params: OnboardParams | None = None
         self._states: OnboardStates | None = None
+        self._plain: tuple[tuple, tuple] | None = None
         dyn = [p.dynamics for p in personalities]
         sen = [p.sensors for p in personalities]
         f = np.float64
@@ -234,6 +235,15 @@ class Onboard:
             self._states = self._state_tuple()
         return self._states
 
+    def plain(self) -> tuple[tuple, tuple]:
+        """params() and states() as plain nested tuples, for the fleet kernel's call (built
+        once): numba types a plain tuple of arrays in C but a named one in Python, which for
+        these 85 arrays cost some 16 us a call; the kernel names them again (`named_params`,
+        `named_states`) at no cost."""
+        if self._plain is None:
+            self._plain = (_plain(self.params()), _plain(self.states()))
+        return self._plain
+
     def _param_tuple(self) -> OnboardParams:
         return OnboardParams(
             self.rate_loop,
@@ -292,6 +302,27 @@ class Onboard:
             self.hold_wander_enu_m,
             self._wandered_sp,
         )
+
+
+def _plain(bundle: tuple) -> tuple:
+    """A (nested) named tuple as plain tuples, field for field."""
+    return tuple(_plain(v) if isinstance(v, tuple) else v for v in bundle)
+
+
+@njit(cache=True)
+def named_params(t):
+    """`OnboardParams` of Onboard.plain()'s parameter tuple."""
+    return OnboardParams(t[0], t[1], t[2], t[3], t[4], t[5], ImuModel(*t[6]), t[7], t[8],
+                         Px4RateGains(*t[9]), ReferenceGains(*t[10]), EstimateNoise(*t[11]),
+                         t[12], t[13], t[14], t[15], t[16], t[17], t[18])
+
+
+@njit(cache=True)
+def named_states(t):
+    """`OnboardStates` of Onboard.plain()'s state tuple."""
+    return OnboardStates(t[0], ImuState(*t[1]), RateOutputs(*t[2]), ReferenceState(*t[3]), t[4],
+                         t[5], t[6], t[7], t[8], t[9], t[10], t[11], EstimateErrors(*t[12]),
+                         t[13], t[14], t[15], t[16], t[17], t[18])
 
 
 @njit(cache=True)

@@ -39,7 +39,7 @@ from vehicle_emulator.config.personality import Personality, personality_of
 from vehicle_emulator.config.team import VehicleSpec
 from vehicle_emulator.physics.fleet_arrays import Airframe, Body, Commands, LoopState, Outputs
 from vehicle_emulator.physics.inner import attitude_control, position_control, rate_control
-from vehicle_emulator.physics.onboard import Onboard, onboard_step
+from vehicle_emulator.physics.onboard import Onboard, named_params, named_states, onboard_step
 
 __all__ = ["ControlMode", "FleetPlant", "IDLE_THRUST_NORM", "torque_max_nm"]
 
@@ -71,7 +71,8 @@ def torque_max_nm(arm_length_m: np.ndarray, anti_torque_m: np.ndarray, f_max_n: 
 def _step_kernel(steps, step0, dt, cmd, loops, body, frame, out, cal_par, cal_st):
     """``steps`` physics steps of the fleet from step ``step0``: ``cmd`` (`Commands`), ``loops``
     (`LoopState`), ``body`` (`Body`), ``frame`` (`Airframe`), ``out`` (`Outputs`), the
-    personalities' parameters and states (`OnboardParams`, `OnboardStates`; onboard.py)."""
+    personalities' parameters and states (Onboard.plain(): `OnboardParams`, `OnboardStates` as
+    plain tuples, named here; onboard.py)."""
     (mode, thrust_cmd, rate_cmd, att_cmd, yaw_rate_ff, torque_cmd, pos_sp, vel_ff, pos_mask,
      yaw_sp, hover) = cmd
     att_sp, rate_sp, thrust_sp, torque_sp, rate_int, omega_prev, vel_int = loops
@@ -81,6 +82,8 @@ def _step_kernel(steps, step0, dt, cmd, loops, body, frame, out, cal_par, cal_st
      charge_c, t_sp_n) = out
     n = pos.shape[0]
     rotor_eff = np.empty((n, 4))
+    cal_par = named_params(cal_par)
+    cal_st = named_states(cal_st)
     loop = cal_par.rate_loop
     damping = cal_par.angular_damping_per_s
     drag_decay = cal_par.drag_decay
@@ -335,7 +338,6 @@ class FleetPlant:
             Outputs(self.rotor_cmd_n, self.rotor_thrust_n, self.thrust_n, self.torque_nm,
                     self.on_ground, self.impact_speed_mps, self.touchdowns,
                     self.specific_force_flu_mps2, self.charge_used_c, self._thrust_sp_n),
-            self.onboard.params(),
-            self.onboard.states(),
+            *self.onboard.plain(),
         )
         self.steps_done += int(steps)
