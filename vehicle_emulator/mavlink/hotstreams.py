@@ -84,7 +84,8 @@ def frame_streams(now_s, schedule, senders, values, table, out, out_len):
     general path does) and, if the vehicle's link is up (`Senders`; and, for
     LOCAL_POSITION_NED, its estimator had a position at the sample), is framed from `values`
     (`StreamValues`) into ``out[i]`` with the CRC ``table``; ``out_len[i]`` is the bytes
-    written, ``sent[cols[m]]`` counts them, ``seq`` advances per frame."""
+    written, ``sent[cols[m]]`` counts them, ``seq`` advances per frame. Each bundle may come
+    as a plain tuple of its fields, as Telemetry passes them (numba types those faster)."""
     next_due, interval, cols, sent = schedule
     enabled, sysid, compid, seq = senders
     (q, w_frd, t_att_ms, pos_ned, origin_ned, vel_ned, t_pos_ms, position_from_ms, acc_frd,

@@ -56,12 +56,12 @@ NOISE_GYRO_RADPS = 0.003
 NOISE_ACC_MPS2 = 0.05
 
 _NEED_POSITION = frozenset({"LOCAL_POSITION_NED"})
-_NO_NOISE = frames.TelemetryNoise(*(np.zeros((0, 3)) for _ in range(5)))
+_NO_NOISE = tuple(frames.TelemetryNoise(*(np.zeros((0, 3)) for _ in range(5))))
 @njit(cache=True)
 def _select_sources(rows, model, truth, est, out):
     """Per vehicle of ``rows``, what telemetry reports into ``out``: the true state ``truth``
     (nominal) or the sensor model's measurements and estimates ``est`` (``model[i]``); all
-    three `frames.Reported`."""
+    three `frames.Reported` (or plain tuples of its fields)."""
     rot, omega, pos, vel, sf = truth
     rot_est, rate_meas, pos_est, vel_est, accel_imu = est
     out_rot, out_w, out_pos, out_vel, out_sf = out
@@ -121,8 +121,11 @@ class Telemetry(TelemetryPayloads):
         self.fused = True
         self._hot_cols = np.array([self.index[nm] for nm in hotstreams.NAMES], dtype=np.int64)
         self._hot_compid = self.encoders[hotstreams.NAMES[0]].compid
-        self._hot_schedule = hotstreams.Schedule(self.next_due_s, self.interval_s, self._hot_cols,
-                                                  self.sent)
+        # the kernels' bundles go as plain tuples: numba types a plain tuple of arrays in C but a
+        # named one in Python (some 10 us a collect for these and _derive's at 24 vehicles)
+        self._hot_schedule = tuple(hotstreams.Schedule(self.next_due_s, self.interval_s,
+                                                        self._hot_cols, self.sent))
+        self._hot_senders: tuple | None = None
         self._hot_out = np.empty((n, hotstreams.ROW_BYTES), dtype=np.uint8)
         self._hot_len = np.zeros(n, dtype=np.int64)
         self._d: dict[str, Any] | None = None
@@ -260,8 +263,11 @@ class Telemetry(TelemetryPayloads):
             d["q"], d["w_frd"], d["t_att_ms"], d["pos_ned"], status.origin_ned_m, d["vel_ned"],
             d["t_pos_ms"], status.position_from_ms, d["acc_frd"], d["gimu_frd"], d["t_att_us"],
             d["z_up"], self.origin_lla[2])
-        senders = hotstreams.Senders(enabled, status.sysid, self._hot_compid, self.seq)
-        hotstreams.frame_streams(now_s, self._hot_schedule, senders, values, CRC_TABLE,
+        senders = self._hot_senders
+        if senders is None or senders[0] is not enabled or senders[1] is not status.sysid:
+            senders = self._hot_senders = tuple(
+                hotstreams.Senders(enabled, status.sysid, self._hot_compid, self.seq))
+        hotstreams.frame_streams(now_s, self._hot_schedule, senders, tuple(values), CRC_TABLE,
                                  self._hot_out, self._hot_len)
         return self._hot_len
 
@@ -286,19 +292,19 @@ class Telemetry(TelemetryPayloads):
                 "rate_sp_frd": np.empty((n, 3)),
                 "yaw_ned": np.empty(n),
             }
-            d["ned"] = frames.NedFrd(d["r_ned"], d["q"], d["eul"], d["w_frd"], d["pos_ned"],
-                                     d["vel_ned"], d["vel_frd"], d["acc_frd"], d["q_sp"],
-                                     d["rate_sp_frd"], d["yaw_ned"])
+            d["ned"] = tuple(frames.NedFrd(d["r_ned"], d["q"], d["eul"], d["w_frd"], d["pos_ned"],
+                                           d["vel_ned"], d["vel_frd"], d["acc_frd"], d["q_sp"],
+                                           d["rate_sp_frd"], d["yaw_ned"]))
         noisy = rows[status.noise[rows]]
         if noisy.size:
             k = noisy.size
-            nz = frames.TelemetryNoise(
+            nz = tuple(frames.TelemetryNoise(
                 self.rng.normal(0.0, NOISE_ATT_RAD, (k, 3)),
                 self.rng.normal(0.0, NOISE_GYRO_RADPS, (k, 3)),
                 self.rng.normal(0.0, NOISE_POS_M, (k, 3)),
                 self.rng.normal(0.0, NOISE_VEL_MPS, (k, 3)),
                 self.rng.normal(0.0, NOISE_ACC_MPS2, (k, 3)),
-            )
+            ))
         else:
             nz = _NO_NOISE
         ob = plant.onboard
@@ -306,16 +312,17 @@ class Telemetry(TelemetryPayloads):
         modelled = bool(model.any())
         if d.get("sources_of") is not plant:  # the plant's arrays, bundled once
             d["sources_of"] = plant
-            d["truth"] = frames.Reported(plant.rotation, plant.omega_flu_radps,
-                                         plant.position_enu_m, plant.velocity_enu_mps,
-                                         plant.specific_force_flu_mps2)
-            d["est"] = frames.Reported(ob.rotation_est, ob.rate_meas_flu_radps,
-                                       ob.position_est_enu_m, ob.velocity_est_enu_mps,
-                                       ob.accel_imu_flu_mps2)
+            d["truth"] = tuple(frames.Reported(plant.rotation, plant.omega_flu_radps,
+                                               plant.position_enu_m, plant.velocity_enu_mps,
+                                               plant.specific_force_flu_mps2))
+            d["est"] = tuple(frames.Reported(ob.rotation_est, ob.rate_meas_flu_radps,
+                                             ob.position_est_enu_m, ob.velocity_est_enu_mps,
+                                             ob.accel_imu_flu_mps2))
         if modelled:
-            if "src" not in d or d["src"].pos_m.shape[0] != n:
-                d["src"] = frames.Reported(np.empty((n, 3, 3)), np.empty((n, 3)),
-                                           np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)))
+            if "src" not in d or d["src"][0].shape[0] != n:
+                d["src"] = tuple(frames.Reported(np.empty((n, 3, 3)), np.empty((n, 3)),
+                                                 np.empty((n, 3)), np.empty((n, 3)),
+                                                 np.empty((n, 3))))
                 d["gimu_frd"] = np.empty((n, 3))
             _select_sources(rows, model, d["truth"], d["est"], d["src"])
             src = d["src"]
@@ -335,4 +342,5 @@ class Telemetry(TelemetryPayloads):
         d["t_att_us"] = (att_s * 1e6).astype(np.int64)
         d["t_pos_ms"] = (pos_s * 1e3).astype(np.int64)
         d["t_pos_us"] = (pos_s * 1e6).astype(np.int64)
-        d["z_up"] = np.ascontiguousarray(src.pos_m[:, 2])  # one layout for frame_streams
+        # Reported.pos_m's heights, in one layout for frame_streams
+        d["z_up"] = np.ascontiguousarray(src[2][:, 2])

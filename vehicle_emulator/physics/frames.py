@@ -292,7 +292,8 @@ def fleet_to_ned_frd(src, att_sp, rate_sp, rows, noisy, noise, out):
     """ENU/FLU fleet state ``src`` (`Reported`) and setpoints -> NED/FRD telemetry quantities
     ``out`` (`NedFrd`; see frames.py for the maps), for the vehicles ``rows`` (the others'
     outputs are left as they were); ``noisy`` (a subset of ``rows``) get the noise rows
-    (`TelemetryNoise`) ``noise.*[k]`` for ``noisy[k]``."""
+    (`TelemetryNoise`) ``noise.*[k]`` for ``noisy[k]``. Each bundle may come as a plain tuple
+    of its fields, as Telemetry passes them (numba types those faster)."""
     rot, omega, pos, vel, sf = src
     n_att, n_gyro, n_pos, n_vel, n_acc = noise
     r_ned, q, eul, w_frd, pos_ned, vel_ned, vel_frd, acc_frd, q_sp, rate_sp_frd, yaw_ned = out

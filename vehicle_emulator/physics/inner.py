@@ -130,7 +130,7 @@ def attitude_from_thrust_vector(
     m[0, 2], m[1, 2], m[2, 2] = zx, zy, zz
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def position_control(i: int, body: Body, cmd: Commands, loops: LoopState, landed: bool,
                      dt: float) -> float:
     """Attitude setpoint into ``loops.att_sp[i]``; returns normalised collective thrust.
@@ -186,7 +186,7 @@ def position_control(i: int, body: Body, cmd: Commands, loops: LoopState, landed
 PX4_I_FACTOR_RADPS = math.radians(400.0)  # RateControl: I gain fades with the rate error
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def px4_rate_control(i: int, loops: LoopState, imu: ImuState, gains: Px4RateGains,
                      inertia: np.ndarray, out: RateOutputs, landed: bool, dt: float) -> None:
     """PX4's RateControl::update on the filtered gyro ``rate_meas[i]`` (FLU; PX4 runs it in FRD,
@@ -221,7 +221,7 @@ def px4_rate_control(i: int, loops: LoopState, imu: ImuState, gains: Px4RateGain
         torque_out[i, k] = inertia[i, k] * accel_per_unit[i, k] * u
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def reference_rate_control(i: int, loops: LoopState, imu: ImuState, body: Body,
                            gains: ReferenceGains, st: ReferenceState, inertia: np.ndarray,
                            out: RateOutputs, landed: bool, dt: float) -> None:

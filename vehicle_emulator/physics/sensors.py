@@ -108,7 +108,7 @@ def biquad(coef: np.ndarray, state: np.ndarray, x: float) -> float:
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def sample_sensors(i, dt_c, motors_on, omega, sf, imu, rng, st):
     """One IMU sample of vehicle i (FLU), time step ``dt_c``, of the true body rate ``omega[i]``
     and specific force ``sf[i]``, with the model ``imu`` (fleet_arrays.ImuModel) into ``st``
@@ -156,7 +156,7 @@ def sample_sensors(i, dt_c, motors_on, omega, sf, imu, rng, st):
         accel_raw[i, k] = a
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def estimate_errors(i, dt_c, noise_on, noise, rng, errors):
     """Advance vehicle i's estimate errors ``errors`` (fleet_arrays.EstimateErrors: att_stage,
     att_err, vel_parts, vel_err, pos_err) by one control period with the sizes and factors
