@@ -184,6 +184,19 @@ class EmulatorProcess:
 
 
 @contextlib.contextmanager
+def _explained(emu: EmulatorProcess) -> Iterator[EmulatorProcess]:
+    """Yield a started emulator; a failure in the block is explained from its log, and the
+    emulator is stopped whatever happens."""
+    try:
+        yield emu
+    except Exception as exc:
+        emu.explain(exc)
+        raise
+    finally:
+        emu.stop()
+
+
+@contextlib.contextmanager
 def run_emulator(
     args: Sequence[str],
     remote_port: int | None = None,
@@ -202,14 +215,8 @@ def run_emulator(
     cmd += ["--remote", f"127.0.0.1:{remote_port}"]
     with open(log_path, "w") as log:
         proc = subprocess.Popen(cmd, stderr=log, stdout=log)
-    emu = EmulatorProcess(proc, bind_port, remote_port, log_path)
-    try:
+    with _explained(EmulatorProcess(proc, bind_port, remote_port, log_path)) as emu:
         yield emu
-    except Exception as exc:
-        emu.explain(exc)
-        raise
-    finally:
-        emu.stop()
 
 
 @contextlib.contextmanager
@@ -224,8 +231,7 @@ def run_emulator_ready(
            "--bind", f"127.0.0.1:{bind_port}", "--remote", f"127.0.0.1:{remote_port}"]
     with open(log_path, "w") as log:
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
-    emu = EmulatorProcess(proc, bind_port, remote_port, log_path)
-    try:
+    with _explained(EmulatorProcess(proc, bind_port, remote_port, log_path)) as emu:
         ready = threading.Event()
 
         def read_stdout() -> None:  # drains stdout to the end so the emulator never blocks
@@ -239,11 +245,6 @@ def run_emulator_ready(
             raise TimeoutError(f"vehicle-emu printed no ready line within {timeout_s} s "
                                f"(log {log_path})")
         yield emu
-    except Exception as exc:
-        emu.explain(exc)
-        raise
-    finally:
-        emu.stop()
 
 
 @dataclass

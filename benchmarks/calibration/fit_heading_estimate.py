@@ -22,7 +22,6 @@ estimate: the reported heading against the reported yaw rate" section of docs/be
 
 from __future__ import annotations
 
-import argparse
 import math
 from pathlib import Path
 
@@ -38,7 +37,9 @@ from benchmarks.calibration.fit_velocity_consistency import (  # noqa: E402
     HOVER_S,
     WINDOWS_S,
     mismatch_rms,
+    mismatch_table,
     recorded_tlog,
+    write_requested,
 )
 from benchmarks.docsection import publish  # noqa: E402
 from vehicle_emulator.calibration import replay as rp  # noqa: E402
@@ -121,22 +122,12 @@ def _row(label: str, d: np.ndarray) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--no-write", action="store_true", help="print only")
-    args = ap.parse_args(argv)
+    write = write_requested(argv, __doc__)
     hover, formation, emulated = recorded_hover(), recorded_formation(), emulated_hover()
     s = PX4_SENSORS
-    lines = [
-        HEADING, "",
-        "`python -m benchmarks.calibration.fit_heading_estimate` (the script's docstring says what is "
-        "compared). D(w): RMS over windows of w seconds of the reported heading's change minus "
-        "the reported yaw rate's integral [deg].", "",
-        "| source | " + " | ".join(f"D({w:g} s)" for w in WINDOWS_S) + " | D(5 s) / D(1 s) |",
-        "|---|" + "---|" * (len(WINDOWS_S) + 1),
-        _row("SIH, hover (1 vehicle, 20 s)", hover),
-        _row("SIH, formation (4 vehicles, 60 s)", formation),
-        _row("px4 personality, the hover replayed (4 vehicles)", emulated),
-        "",
+    lines = mismatch_table(
+        HEADING, "fit_heading_estimate", "the reported heading's change minus the reported yaw "
+        "rate's integral [deg]", _row, (hover, formation, emulated), "D(5 s) / D(1 s)") + [
         "SIH's heading moves without a yaw rate to show for it (its estimator's heading "
         f"correction), smoothly: D grows {hover[-1] / hover[1]:.1f} and "
         f"{formation[-1] / formation[1]:.1f} times from 1 s to 5 s, more than a random walk's "
@@ -153,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
         "deg against SIH's 1.2 deg (the section \"From the ground, twice: the px4 personality "
         "against the 2026-12-04 SIH flights\" has today's).",
     ]
-    publish(DOC, HEADING, "\n".join(lines) + "\n", write=not args.no_write)
+    publish(DOC, HEADING, "\n".join(lines) + "\n", write=write)
     return 0
 
 

@@ -25,7 +25,7 @@ import argparse
 import contextlib
 import gzip
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -122,23 +122,42 @@ def _ratio_range(emulated: np.ndarray, *recorded: np.ndarray) -> str:
     return f"{r.min():.1f}-{r.max():.1f}"
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+#: The table's rows: the two recordings and the personality, in this order.
+SOURCES = ("SIH, hover (1 vehicle, 20 s)", "SIH, formation (4 vehicles, 60 s)",
+           "px4 personality, the hover replayed (4 vehicles)")
+
+
+def mismatch_table(heading: str, script: str, what: str, row: Callable[[str, np.ndarray], str],
+                   figures: Sequence[np.ndarray], extra_column: str = "") -> list[str]:
+    """The section's heading, its command and the D(w) table of `figures` (one per SOURCES):
+    what both calibration scripts of a reported quantity against its rate write first."""
+    columns = [f"D({w:g} s)" for w in WINDOWS_S] + ([extra_column] if extra_column else [])
+    return [
+        heading, "",
+        f"`python -m benchmarks.calibration.{script}` (the script's docstring says what is "
+        f"compared). D(w): RMS over windows of w seconds of {what}.", "",
+        "| source | " + " | ".join(columns) + " |",
+        "|---|" + "---|" * len(columns),
+        *(row(label, d) for label, d in zip(SOURCES, figures, strict=True)),
+        "",
+    ]
+
+
+def write_requested(argv: list[str] | None, doc: str) -> bool:
+    """The command line of a calibration script: False with --no-write (print only)."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     ap.add_argument("--no-write", action="store_true", help="print only")
-    args = ap.parse_args(argv)
+    return not ap.parse_args(argv).no_write
+
+
+def main(argv: list[str] | None = None) -> int:
+    write = write_requested(argv, __doc__)
     hover, formation, emulated = recorded_hover(), recorded_formation(), emulated_hover()
     s = PX4_SENSORS
-    lines = [
-        HEADING, "",
-        "`python -m benchmarks.calibration.fit_velocity_consistency` (the script's docstring says what is "
-        "compared). D(w): RMS over windows of w seconds of the reported position's change minus "
-        "the reported velocity's integral, per axis (north / east / down) [m].", "",
-        "| source | " + " | ".join(f"D({w:g} s)" for w in WINDOWS_S) + " |",
-        "|---|" + "---|" * len(WINDOWS_S),
-        _row("SIH, hover (1 vehicle, 20 s)", hover),
-        _row("SIH, formation (4 vehicles, 60 s)", formation),
-        _row("px4 personality, the hover replayed (4 vehicles)", emulated),
-        "",
+    lines = mismatch_table(
+        HEADING, "fit_velocity_consistency", "the reported position's change minus the reported "
+        "velocity's integral, per axis (north / east / down) [m]", _row,
+        (hover, formation, emulated)) + [
         f"The personality's velocity error (1 sigma "
         f"{' / '.join(f'{x:g}' for x in s.velocity_error_std_mps)} m/s north / east / up, "
         f"{s.velocity_error_tau_s:g} s, plus a drift of "
@@ -155,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
         "`gcs fly` reads the position's rate instead at low frequency "
         "(`fly.velocity_from_position_s`, docs/gcs.md \"The law's velocity\").",
     ]
-    publish(DOC, HEADING, "\n".join(lines) + "\n", write=not args.no_write)
+    publish(DOC, HEADING, "\n".join(lines) + "\n", write=write)
     return 0
 
 
