@@ -247,12 +247,14 @@ def test_each_emulator_room_imports_only_the_rooms_below_it():
 
 
 #: gcs's layers, top first: a module imports only layers below its own (a package's modules may
-#: import each other). cli composes the commands; precompile compiles through fly and sim; the
-#: two programs' packages; what they share (the flight sequence, records, figures); the link and
-#: the log; the team file and the metrics; the law; the frames.
+#: import each other). cli composes the commands; precompile compiles through fly and sim; sweep
+#: runs many sims and reads their results; the two programs' packages; what they share (the
+#: flight sequence, records, figures); the link and the log; the team file and the metrics; the
+#: law; the frames.
 GCS_LAYERS = (
     ("cli",),
     ("precompile",),
+    ("sweep",),
     ("fly", "sim"),
     ("mission", "plots", "report", "flightlog_builder", "flightlog_csv"),
     ("flightlog", "link"),
