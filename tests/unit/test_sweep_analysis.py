@@ -133,6 +133,19 @@ def test_quantile_bins_step_where_success_steps(threshold, expected):
         assert bins.lows[b] == pytest.approx(0.5 + 0.1 * b, abs=0.01)
 
 
+def test_each_run_lies_in_its_bins_range_ties_at_an_edge_included():
+    # GIVEN 150 runs, a third of them at exactly 1.0 (a quantile edge)
+    mass = np.concatenate([np.full(50, 1.0), np.linspace(0.5, 0.99, 50),
+                           np.linspace(1.01, 2.0, 50)])
+    bins = analysis.bin_parameter(results({MASS: mass}), MASS)
+    # THEN run r lies in [low, high) of its bin (the last bin closed)
+    low, high = bins.lows[bins.index], bins.highs[bins.index]
+    last = bins.index == len(bins.labels) - 1
+    assert bins.quantiles and np.all(low <= mass)
+    assert np.all((mass < high) | (last & (mass == high)))
+    assert np.sum(bins.lows == 1.0) == 1
+
+
 def test_few_runs_get_fewer_quantile_bins_and_nan_values_no_bin():
     # GIVEN 35 distinct masses and 3 NaN
     mass = np.concatenate([np.linspace(0.5, 1.5, 35), [np.nan] * 3])
