@@ -9,9 +9,9 @@ jitter and loss probability. The gains are what a user gets by following the gro
 gains (alpha_p 2, c_p 4, k_eps 6, k_eps_yaw 4) fail the cascade criterion there, its proposal is
 flown (gcs/control/cascade.py `stable_gains`); the initial mass comes from the hover
 (`fly.initial_mass: from_hover`, the bundled default). Beside each, `gcs sim` of the same team and
-gains in-process (no link; rates only: gcs sim does not model an on-board attitude loop).
+gains in-process (no link; rates only, as this benchmark has always compared them).
 
-Each case is flown with delay compensation (`fly.predict: true`, gcs/fly/predict.py; the criterion
+Each case is flown with delay compensation (`fly.predict: true`, gcs/control/predict.py; the criterion
 then judges the compensated loops) and without it; the gains are the criterion's for that setting.
 
 Figures: formation error at 30 s and 60 s, its max for t >= 30 s, the largest mass-estimate error

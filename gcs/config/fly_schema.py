@@ -177,7 +177,7 @@ class FlyConfig:
     max_data_age_s: float = key(0.3, gt=0.0, le=10.0)
     # TIMESYNC round-trip requests; 0: none
     timesync_period_s: float = key(0.5, ge=0.0, le=60.0)
-    # the law reads the states predicted to when its setpoints act (gcs/fly/predict.py)
+    # the law reads the states predicted to when its setpoints act (gcs/control/predict.py)
     predict: bool = key(True)
     # the law's velocity takes the reported position's rate below 1 / this [s]; 0: the reported
     # velocity as it is (gcs/fly/consistent.py)

@@ -204,6 +204,11 @@ def whole_ratio(high_hz: float, low_hz: float) -> int | None:
 class SimConfig:
     plant_rate_hz: float = key(1000.0, gt=0.0)
     controller_rate_hz: float = key(1000.0, gt=0.0)
+    # the ground station's links in gcs sim (gcs/sim/link.py): one-way delay each way [s],
+    # loss probability each way, and the seed of the losses
+    link_delay_s: float = key(0.0, ge=0.0, le=1.0)
+    link_loss: float = key(0.0, ge=0.0, lt=1.0)
+    link_seed: int = key(0, ge=0)
 
     @property
     def plant_dt_s(self) -> float:

@@ -28,7 +28,7 @@ written out (exact e^{-sT} on the frequency grid, Pade (3,3) for the poles):
   velocity loop), in the linear range of sat: a = -alpha_p (c_p lambda e + 2 e'), so
   L_pos = alpha_p (c_p lambda + 2 s) / s^2 e^{-s d_down} T(s); vertically with the thrust lag.
 
-With delay compensation (`fly.predict`, gcs/fly/predict.py) the law reads each state predicted
+With delay compensation (`fly.predict`, gcs/control/predict.py) the law reads each state predicted
 over the horizon tau = d_down + link delay (the sample's age plus the uplink) from the sample and
 its derivatives: the attitude by its rates, the position by its velocity and acceleration, the
 velocity by its acceleration. Linearised, a measured signal x(t - d_down) becomes

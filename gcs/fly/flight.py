@@ -38,6 +38,7 @@ import numpy as np
 
 from flightkit.latecompile import watch_late_compiles
 from gcs.config import ControlMode, FlyAction, TeamConfig
+from gcs.control.predict import PredictionAudit
 from gcs.fly.commander import Commander
 from gcs.fly.consistent import VelocityConsistency
 from gcs.fly.origins import (
@@ -45,7 +46,6 @@ from gcs.fly.origins import (
     origin_from_gps_global_origin,
     origin_from_home_position,
 )
-from gcs.fly.predict import PredictionAudit
 from gcs.fly.records import TLOG_NAME, Figures, Records, flight_log_builder
 from gcs.fly.sched import Scheduling
 from gcs.fly.setpoints import Setpoints
@@ -118,7 +118,7 @@ class Flight:
         self.figures = Figures(
             flight_log_builder(setup, rhohat, inertia_estimated), TickStats(setup.tick_rate_hz),
             AgeStats(self.n), np.zeros(self.n, dtype=np.int64),
-            # delay compensation (gcs/fly/predict.py) and its measured error
+            # delay compensation (gcs/control/predict.py) and its measured error
             PredictionAudit(self.n) if team.fly.predict and not position_mode else None,
             VelocityConsistency(self.n, 0.0 if position_mode
                                 else team.fly.velocity_from_position_s))

@@ -44,7 +44,7 @@ class TeamSample:
     how long after it was taken the later-arriving of the two arrived (the link's delay, what the
     delay rule judges; a silent link leaves it unchanged, the receive age grows instead);
     position_taken_s, attitude_taken_s (n,) when the vehicle took its position and its attitude,
-    on the ground station's clock (-inf before the first; gcs.fly.predict reads them).
+    on the ground station's clock (-inf before the first; gcs.control.predict reads them).
     """
 
     position_m: np.ndarray

@@ -12,12 +12,12 @@ from typing import Any
 import numpy as np
 
 from gcs.config import ControlMode
+from gcs.control.predict import PredictionAudit
 from gcs.flightlog import estimates_record
 from gcs.flightlog_builder import FlightLogBuilder
 from gcs.flightlog_csv import save_timeseries
 from gcs.fly.consistent import VelocityConsistency
 from gcs.fly.measure import HoverEstimate
-from gcs.fly.predict import PredictionAudit
 from gcs.fly.sched import Scheduling
 from gcs.fly.setup import FlightSetup, FlyOptions, FlyResult
 from gcs.fly.stats import (
@@ -86,7 +86,7 @@ class Figures:
     ticks: TickStats
     ages: AgeStats
     limited_ticks: np.ndarray  # per vehicle: formation ticks with the rate or torque limit applied
-    audit: PredictionAudit | None  # delay compensation (gcs/fly/predict.py) and its error
+    audit: PredictionAudit | None  # delay compensation (gcs/control/predict.py) and its error
     # the law's velocity filter (gcs/fly/consistent.py): the tick feeds and reads it, the report
     # states what it did
     consistency: VelocityConsistency

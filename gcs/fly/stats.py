@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from gcs.fly.predict import AuditFigures
+from gcs.control.predict import AuditFigures
 from gcs.link.clock import ClockEstimate
 
 MIN_LATE_THRESHOLD_S = 1.5e-3
@@ -166,7 +166,7 @@ def clock_report(est: ClockEstimate) -> dict[str, Any]:
 
 
 def prediction_report(f: AuditFigures | None) -> dict[str, Any]:
-    """The delay compensation of one vehicle (gcs.fly.predict): its horizons [ms] and the error
+    """The delay compensation of one vehicle (gcs.control.predict): its horizons [ms] and the error
     of its predicted states, beside the samples held without prediction, p50 / p99 / max
     (position [m], attitude [deg]); {"enabled": False} when fly.predict is off."""
     if f is None:

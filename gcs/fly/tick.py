@@ -22,6 +22,7 @@ from gcs.control.formation import reference_velocity
 from gcs.control.gains import GRAVITY_MPS2
 from gcs.control.law import SingularCommandError, TeamCommand, TeamLaw, TeamMeasurement
 from gcs.control.position import phi
+from gcs.control.predict import PredictionAudit, horizons_s, predict, uplink_delay_s
 from gcs.control.slots import FormationSlots
 from gcs.fly.collector import PacedCollector
 from gcs.fly.commander import Commander
@@ -39,7 +40,6 @@ from gcs.fly.measure import (
     normalised_thrust,
 )
 from gcs.fly.origins import TeamTies
-from gcs.fly.predict import PredictionAudit, horizons_s, predict, uplink_delay_s
 from gcs.fly.records import Figures, log_notes
 from gcs.fly.setpoints import Setpoints
 from gcs.fly.setup import FlightSetup, true_mass_kg
@@ -374,7 +374,7 @@ class Tick:
 
     def _law_input(self, sample: TeamSample, now_s: float) -> TeamMeasurement:
         """The samples as they are, or (fly.predict) predicted to when this tick's setpoints act:
-        now plus the team's uplink delay (gcs/fly/predict.py); in formation, the audit compares
+        now plus the team's uplink delay (gcs/control/predict.py); in formation, the audit compares
         each prediction with what the vehicles report for that instant."""
         held = sample.measurement()
         if self.consistency.on:

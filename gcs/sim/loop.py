@@ -33,6 +33,7 @@ from gcs.control.law import (
     attitude_stage,
     position_stage,
 )
+from gcs.sim.link import deliver, predict_to_act, receive, record, send
 
 
 class TeamState(NamedTuple):
@@ -79,6 +80,8 @@ class SampledLoop(NamedTuple):
     torque_hold: np.ndarray
     rate_cmd: np.ndarray
     diag: np.ndarray
+    rc_hold: np.ndarray  # (n, 3, 3) the command attitude the vehicle holds (attitude mode)
+    attitude_gain: np.ndarray  # (3,) the onboard attitude loop's P gains [1/s] (attitude mode)
 
 
 class OracleState(NamedTuple):
@@ -95,6 +98,8 @@ class OracleState(NamedTuple):
 
 MODE_ACTUATORS = 0  #: the paper's torque (26) is applied directly
 MODE_RATES = 1  #: the body-rate command is tracked by an idealised onboard rate loop
+#: the command attitude R^c is tracked by an onboard P attitude loop feeding that rate loop
+MODE_ATTITUDE = 2
 
 #: Indices of the per-sample log columns written by the kernels (per vehicle).
 LOG_FIELDS = (
@@ -161,18 +166,45 @@ def _apply_mass_drops(step, drop_step, drop_factor, mass):
 
 
 @njit(cache=True)
-def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loop, log, log_row0):
+def _rate_loop(i, w, inertia, rate_loop_gain, rate_cmd, torque_hold):
+    """Idealised onboard rate loop of vehicle i: first-order tracking of the rate command with
+    gyroscopic compensation, as a well-tuned autopilot would do (at the plant rate)."""
+    jx, jy, jz = inertia[i, 0], inertia[i, 1], inertia[i, 2]
+    wx, wy, wz = w[i, 0], w[i, 1], w[i, 2]
+    torque_hold[i, 0] = jx * rate_loop_gain * (rate_cmd[i, 0] - wx) + (jz - jy) * wy * wz
+    torque_hold[i, 1] = jy * rate_loop_gain * (rate_cmd[i, 1] - wy) + (jx - jz) * wz * wx
+    torque_hold[i, 2] = jz * rate_loop_gain * (rate_cmd[i, 2] - wz) + (jy - jx) * wx * wy
+
+
+@njit(cache=True)
+def _attitude_loop(i, rot, rc_hold, gain, rate_cmd):
+    """Onboard attitude loop of vehicle i: body rates -gain * eps / 2 toward the held R^c, eps
+    = vee(R^e - R^eT) of R^e = R^cT R (2 sin(angle) about the error's axis)."""
+    rc, r = rc_hold[i], rot[i]
+
+    def re(a, b):  # (R^cT R)[a, b]
+        return rc[0, a] * r[0, b] + rc[1, a] * r[1, b] + rc[2, a] * r[2, b]
+
+    rate_cmd[i, 0] = -0.5 * gain[0] * (re(2, 1) - re(1, 2))
+    rate_cmd[i, 1] = -0.5 * gain[1] * (re(0, 2) - re(2, 0))
+    rate_cmd[i, 2] = -0.5 * gain[2] * (re(1, 0) - re(0, 1))
+
+
+@njit(cache=True)
+def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loop, link, log,
+                log_row0):
     """Advance plant and law by `n_steps` plant steps from step index `first_step`.
 
     `diag` (n, 6) carries the last tick's (attitude error, |omega^e|, kappa, ux, uy, uz) between
     chunks. Returns the minimum u_z seen and the count of singular command forces. ``team``,
-    ``law``, ``loop``: `TeamState`, `LawInputs`, `SampledLoop`.
+    ``law``, ``loop``, ``link``: `TeamState`, `LawInputs`, `SampledLoop`, gcs.sim.link.SimLink
+    (inactive: the law reads the true state and its setpoints act at once).
     """
     p, v, rot, w, mass, inertia, drop_step, drop_factor = team
     (mhat, rhohat, nominal_mass, graph, offsets, ref_c, ref_a, ref_w, ref_ph, gains,
      adaptive) = law
     (derivative, levant_state, u_prev, levant_l, levant_h, mode, rate_loop_gain, thrust_hold,
-     torque_hold, rate_cmd, diag) = loop
+     torque_hold, rate_cmd, diag, rc_hold, attitude_gain) = loop
     n = p.shape[0]
     ctrl_dt = ctrl_every * dt_s
     min_uz = np.inf
@@ -184,10 +216,18 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
     for step in range(first_step, first_step + n_steps):
         _apply_mass_drops(step, drop_step, drop_factor, mass)
         t = step * dt_s
+        if link.active:
+            record(link, step, p, v, rot, w, thrust_hold, mass, gains.gravity_mps2)
         if step % ctrl_every == 0:
+            if link.active:
+                mp, mv, mrot, mw, macc = receive(link, step, step // ctrl_every)
+                if link.predict:
+                    predict_to_act(mp, mv, mrot, mw, macc, link, step, dt_s)
+            else:
+                mp, mv, mrot, mw = p, v, rot, w
             ref = reference_velocity(t, ref_c, ref_a, ref_w, ref_ph)
             stage = position_stage(
-                p, v, rot, mhat, nominal_mass, graph, offsets, ref, gains, adaptive
+                mp, mv, mrot, mhat, nominal_mass, graph, offsets, ref, gains, adaptive
             )
             u, kappa, t_n, mhat_rate = stage.force_n, stage.kappa, stage.thrust_n, stage.mhat_rate
             ok = is_nonsingular(u)
@@ -211,38 +251,35 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
                 ddu = levant_state[:, :, 2].copy()
             else:
                 # Measured acceleration: the plant's specific force under the held thrust.
-                acc = _acceleration(rot, thrust_hold, mass, gains.gravity_mps2)
-                meas = TeamMeasurement(p, v, acc, rot, w)
+                if not link.active:
+                    macc = _acceleration(rot, thrust_hold, mass, gains.gravity_mps2)
+                meas = TeamMeasurement(mp, mv, macc, mrot, mw)
                 du, ddu = force_derivatives(
                     meas, stage, mhat, 1.0 / kappa, graph, ref, gains, adaptive
                 )
             rc, wc, dwc, tau, rho_rate, omega_cmd, eps, tr_err, we = attitude_stage(
-                rot, w, u, du, ddu, rhohat, gains, adaptive, np.zeros(u.shape[0])
+                mrot, mw, u, du, ddu, rhohat, gains, adaptive, np.zeros(u.shape[0])
             )
             we_norm = _norms(we)
-            thrust_hold[:] = t_n
-            torque_hold[:, :] = tau
-            rate_cmd[:, :] = omega_cmd
+            if link.active:
+                send(link, step, step // ctrl_every, t_n, omega_cmd, tau, rc)
+            else:
+                thrust_hold[:] = t_n
+                torque_hold[:, :] = tau
+                rate_cmd[:, :] = omega_cmd
+                rc_hold[:, :, :] = rc
             for i in range(n):
                 mhat[i] += ctrl_dt * mhat_rate[i]
-                if mode != MODE_RATES:  # rhohat acts only through the torque (26)
+                if mode == MODE_ACTUATORS:  # rhohat acts only through the torque (26)
                     for k in range(3):
                         rhohat[i, k] += ctrl_dt * rho_rate[i, k]
-        if mode == MODE_RATES:
-            # Idealised onboard rate loop at the plant rate: first-order tracking of the rate
-            # command with gyroscopic compensation, as a well-tuned autopilot would do.
+        if link.active:
+            deliver(link, step, thrust_hold, rate_cmd, torque_hold, rc_hold)
+        if mode != MODE_ACTUATORS:
             for i in range(n):
-                jx, jy, jz = inertia[i, 0], inertia[i, 1], inertia[i, 2]
-                wx, wy, wz = w[i, 0], w[i, 1], w[i, 2]
-                torque_hold[i, 0] = (
-                    jx * rate_loop_gain * (rate_cmd[i, 0] - wx) + (jz - jy) * wy * wz
-                )
-                torque_hold[i, 1] = (
-                    jy * rate_loop_gain * (rate_cmd[i, 1] - wy) + (jx - jz) * wz * wx
-                )
-                torque_hold[i, 2] = (
-                    jz * rate_loop_gain * (rate_cmd[i, 2] - wz) + (jy - jx) * wx * wy
-                )
+                if mode == MODE_ATTITUDE:
+                    _attitude_loop(i, rot, rc_hold, attitude_gain, rate_cmd)
+                _rate_loop(i, w, inertia, rate_loop_gain, rate_cmd, torque_hold)
         if step % log_every == 0:
             _write_log(
                 log,

@@ -34,7 +34,7 @@ def _attitude_loop_diverges(k: float, r: AutopilotResponse, loop_delay_s: float,
     """Simulate theta' = w, w from the rate loop wn^2 / (s^2 + 2 zeta wn s + wn^2) driven by
     2 k (0 - theta) delayed by the loop delay plus the rate loop's dead time (Euler, 0.1 ms);
     with tau_s, the delayed attitude is carried forward by tau_s with the delayed rate,
-    theta + tau w (the predictor, gcs/fly/predict.py)."""
+    theta + tau w (the predictor, gcs/control/predict.py)."""
     dt = 1e-4
     lag = int(round((loop_delay_s + r.rate_dead_time_s) / dt))
     wn, z = r.rate_natural_radps, r.rate_damping

@@ -595,7 +595,7 @@ def test_fly_section_is_optional_and_defaults_are_documented():
     fc = fly.formation_check
     assert (fc.after_s, fc.max_error_m, fc.max_fraction) == (10.0, 1.0, 0.5)
     assert fly.link_timeout_s == 3.0  # tolerates a 1 Hz HEARTBEAT-only vehicle
-    assert fly.predict is True  # delay compensation on (gcs/fly/predict.py)
+    assert fly.predict is True  # delay compensation on (gcs/control/predict.py)
     assert fly.velocity_from_position_s == 0.2  # gcs/fly/consistent.py
     assert fly.scheduling == "auto"  # the best the OS permits (gcs/fly/sched.py)
     assert fly.control_mode == "auto"  # gcs fly picks rates or attitude (gcs/fly/setup.py)

@@ -1,4 +1,4 @@
-"""Delay compensation (gcs/fly/predict.py): the kinematic predictor and its in-flight audit."""
+"""Delay compensation (gcs/control/predict.py): the kinematic predictor and its in-flight audit."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from gcs.control.law import TeamMeasurement
-from gcs.fly.predict import (
+from gcs.control.predict import (
     MAX_HORIZON_S,
     PredictionAudit,
     horizons_s,
