@@ -18,10 +18,6 @@ EXIT_FAILED = 1
 EXIT_USAGE = 2
 
 
-def _add_team(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--team", required=True, type=Path, help="team config (YAML)")
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="gcs",
@@ -30,7 +26,12 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     sim = sub.add_parser("sim", help="simulate the team in-process and write records")
-    _add_team(sim)
+    source = sim.add_mutually_exclusive_group(required=True)
+    source.add_argument("--team", type=Path, help="team config (YAML)")
+    source.add_argument("--study", type=Path,
+                        help="study file (YAML) of gcs sweep: fly its run --run again")
+    sim.add_argument("--run", type=int, default=None,
+                     help="with --study: the run to fly (as numbered in the sweep's table)")
     sim.add_argument(
         "--controller",
         choices=("adaptive", "baseline", "both"),
@@ -42,9 +43,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sim.add_argument(
         "--mode",
-        choices=("actuators", "rates"),
+        choices=("actuators", "rates", "attitude"),
         default=None,
-        help="attitude loop: the paper's torque law or thrust + body rates",
+        help="attitude loop: the paper's torque law, thrust + body rates, or thrust + attitude "
+             "(an onboard P attitude loop on the rate loop)",
     )
     sim.add_argument(
         "--derivative",
@@ -61,6 +63,10 @@ def build_parser() -> argparse.ArgumentParser:
     from gcs.fly.command import add_parser as add_fly_parser
 
     add_fly_parser(sub)
+
+    from gcs.sweep.command import add_parser as add_sweep_parser
+
+    add_sweep_parser(sub)
 
     comp = sub.add_parser(
         "compile",
@@ -113,10 +119,21 @@ def main(argv: Sequence[str] | None = None) -> int:
                 print(f"gcs compile: {exc}", file=sys.stderr)
                 return EXIT_FAILED
             return EXIT_OK
+        if args.command == "sim" and args.study is not None:
+            from gcs.sweep.replay import run_replay
+
+            return run_replay(args)
         if args.command == "sim":
+            if args.run is not None:
+                print("gcs sim: --run needs --study (a sweep's study file)", file=sys.stderr)
+                return EXIT_USAGE
             from gcs.sim.command import run_sim
 
             return run_sim(args)
+        if args.command == "sweep":
+            from gcs.sweep.command import run_sweep
+
+            return run_sweep(args)
         if args.command == "fly":
             from gcs.fly.command import run_fly
 

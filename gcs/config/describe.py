@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
 
+from gcs.config.conditions import alpha_p_bound, proposition1_bounds
 from gcs.config.fly_schema import FlyModeConfig
 from gcs.config.fly_section import check_go_to_start
 from gcs.config.modes import ControlMode
@@ -139,7 +139,7 @@ def describe(team: TeamConfig) -> str:
         out.append(f"  {f.kind}: {f.summary()}{mass}")
 
     varrho = team.reference_velocity.max_abs_acceleration_z()
-    bound = (GRAVITY_MPS2 - varrho) / (2.0 * g.sigma_a)
+    bound = alpha_p_bound(team)
     out += [
         "sufficient conditions:",
         f"  alpha_p < (g - varrho)/(2 sigma_a): {g.alpha_p:g} < ({GRAVITY_MPS2:g} - "
@@ -174,17 +174,11 @@ def describe(team: TeamConfig) -> str:
         "  Proposition 1 (torque law (26)), c_eps < min{sqrt(a_eps/(2 Jbar)), "
         "a_om/(2 sqrt3 Jbar), 4 a_eps a_om/(a_om^2 + 8 sqrt3 a_eps Jbar)}:"
     )
-    s3 = math.sqrt(3.0)
     for v in team.vehicles:
         if v.plant is None:
             out.append(f"    vehicle {v.id}: skipped (no plant, Jbar unknown)")
             continue
-        jbar, ae, ao = max(v.plant.inertia_kgm2), g.alpha_eps, g.alpha_omega
-        b = (
-            math.sqrt(ae / (2 * jbar)),
-            ao / (2 * s3 * jbar),
-            4 * ae * ao / (ao**2 + 8 * s3 * ae * jbar),
-        )
+        jbar, b = max(v.plant.inertia_kgm2), proposition1_bounds(v, team)
         out.append(
             f"    vehicle {v.id} (Jbar {jbar:g}): {g.c_eps:g} < min{_v3(round(x, 4) for x in b)}"
             f" = {min(b):.4g}: {_ok(g.c_eps < min(b))}"

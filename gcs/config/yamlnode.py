@@ -11,8 +11,10 @@ from __future__ import annotations
 import difflib
 import math
 import numbers
+import os
 import re
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any, NoReturn
 
 import numpy as np
@@ -117,6 +119,15 @@ def _yaml_error(exc: yaml.MarkedYAMLError, source: str) -> ConfigError:
     err = ConfigError(source, where, exc.problem or exc.context or "syntax error")
     err.line = fault.line + 1
     return err
+
+
+def read_text(path: str | os.PathLike[str]) -> tuple[str, str]:
+    """(the path as given, the file's text); an unreadable file is one ConfigError."""
+    source = os.fspath(path)
+    try:
+        return source, Path(source).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(source, "(file)", f"cannot read: {exc}") from None
 
 
 def parse_yaml(text: str, source: str) -> Any:

@@ -43,7 +43,7 @@ def _progress_printer(
     return update, bar.stop
 
 
-def _write_run(result: SimResult, team: TeamConfig, out_dir: Path, figures: bool) -> None:
+def write_run(result: SimResult, team: TeamConfig, out_dir: Path, figures: bool) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
     log = result.log
     write_report(out_dir / REPORT_NAME, build_report(log))
@@ -53,7 +53,7 @@ def _write_run(result: SimResult, team: TeamConfig, out_dir: Path, figures: bool
         write_figures(log, out_dir, pairs=edges)
 
 
-def _run_one(team: TeamConfig, options: SimOptions, quiet: bool) -> SimResult:
+def run_one(team: TeamConfig, options: SimOptions, quiet: bool) -> SimResult:
     update, stop = _progress_printer(f"sim {team.name} ({options.law})", quiet)
     try:
         return simulate(team, options, update)
@@ -89,12 +89,12 @@ def run_sim(args: argparse.Namespace) -> int:
             duration_s=args.duration_s,
         )
         try:
-            result = _run_one(team, options, args.quiet)
+            result = run_one(team, options, args.quiet)
         except SimulationError as exc:
             print(f"gcs sim: {law}: {exc}", file=sys.stderr)
             return 1
         run_dir = out / law if len(laws) > 1 else out
-        _write_run(result, team, run_dir, figures=not args.no_figures)
+        write_run(result, team, run_dir, figures=not args.no_figures)
         logs[law] = result.log
         print(summary_table(result.log))
         print(

@@ -247,8 +247,8 @@ def test_each_emulator_room_imports_only_the_rooms_below_it():
 
 
 #: gcs's layers, top first: a module imports only layers below its own (a package's modules may
-#: import each other). cli composes the commands; precompile compiles through fly and sim; sweep
-#: runs many sims and reads their results; the two programs' packages; what they share (the
+#: import each other). cli composes the commands; precompile compiles through fly and sim; the
+#: sweep, which flies sim's runs in batches; the two programs' packages; what they share (the
 #: flight sequence, records, figures); the link and the log; the team file and the metrics; the
 #: law; the frames.
 GCS_LAYERS = (

@@ -1,0 +1,126 @@
+"""`gcs sweep` on the shipped studies: wall time and throughput (docs/benchmarks.md, "gcs
+sweep"), and each study's summary and figures (docs/sweep.md, "The shipped studies").
+
+    python -m benchmarks.bench_sweep [--executor local|ray] [--no-write]
+
+Each study is swept from an empty out directory by the command a user types (`gcs sweep --study
+FILE --out DIR --quiet`), timed from start to exit (start-up, kernels from the cache, the runs,
+the table and the analysis). Beside it, one Scenario I run of the first study alone in this
+process, and the same run inside a batch of 32, per run: what batching saves.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from flightkit import jitcache
+
+jitcache.configure()  # numba's cache, before the compiled modules below are imported
+
+from benchmarks.docsection import publish  # noqa: E402
+from gcs.sim.runner import simulate, simulate_batch  # noqa: E402
+from gcs.sweep.study import load_study  # noqa: E402
+from gcs.sweep.work import sim_options  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+STUDIES = ("configs/study_scenario1.yaml", "configs/study_link.yaml")
+SPEED_HEADING = "## gcs sweep"
+STUDIES_HEADING = "## The shipped studies"
+FIGURES = ROOT / "docs" / "figures" / "sweep"
+
+
+def sweep(study: str, out: Path, executor: str) -> float:
+    started = time.perf_counter()
+    done = subprocess.run([sys.executable, "-m", "gcs.cli", "sweep", "--study", study, "--out",
+                           str(out), "--quiet", "--executor", executor], cwd=ROOT,
+                          capture_output=True, text=True)
+    wall = time.perf_counter() - started
+    if done.returncode != 0:
+        raise SystemExit(f"gcs sweep --study {study} failed:\n{done.stderr}")
+    return wall
+
+
+def per_run_ms(study_path: str) -> tuple[float, float]:
+    """One run alone and the same runs in one batch of 32, ms per run (best of 3)."""
+    study = load_study(ROOT / study_path)
+    teams = [study.team(k)[0] for k in range(32)]
+    options = sim_options(study)
+    simulate(teams[0], options)
+    alone = min(_timed(lambda: [simulate(t, options) for t in teams[:8]]) / 8 for _ in range(3))
+    batch = min(_timed(lambda: simulate_batch(teams, options)) / 32 for _ in range(3))
+    return alone * 1e3, batch * 1e3
+
+
+def _timed(work) -> float:
+    started = time.perf_counter()
+    work()
+    return time.perf_counter() - started
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--executor", default="local", choices=("local", "ray"))
+    parser.add_argument("--no-write", action="store_true")
+    args = parser.parse_args()
+    rows, sections = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for study_path in STUDIES:
+            study = load_study(ROOT / study_path)
+            out = Path(tmp) / study.name
+            wall = sweep(study_path, out, args.executor)
+            summary = json.loads((out / "summary.json").read_text())
+            vehicle_s = study.runs * len(study.base["vehicles"]) * \
+                float(study.base["mission"]["duration_s"])
+            rows.append((study_path, study.runs, wall, vehicle_s / wall, summary))
+            sections.append(_study_section(study_path, study.name, out, summary))
+    alone_ms, batch_ms = per_run_ms(STUDIES[0])
+    cores = os.cpu_count()
+    lines = [
+        SPEED_HEADING, "",
+        f"`benchmarks/bench_sweep.py` (rerun: `.venv/bin/python -m benchmarks.bench_sweep`). "
+        f"Each shipped study swept from an empty out directory by `gcs sweep --study FILE --out "
+        f"DIR --quiet --executor {args.executor}` on this {cores}-core machine, timed from start "
+        "to exit (start-up, the runs, the table, the analysis and its figures). "
+        "Vehicle-seconds: runs x vehicles x simulated seconds.", "",
+        "| study | runs | wall [s] | vehicle-seconds per wall second | ok / diverged / error |",
+        "|---|---|---|---|---|",
+    ]
+    for path, runs, wall, rate, summary in rows:
+        status = summary.get("status_counts", {})
+        lines.append(f"| `{path}` | {runs} | {wall:.1f} | {rate:,.0f} | "
+                     f"{status.get('ok', 0)} / {status.get('diverged', 0)} / "
+                     f"{status.get('error', 0)} |")
+    lines += ["", f"Per run, Scenario I of `{STUDIES[0]}` in this process on one core: "
+              f"{alone_ms:.1f} ms alone, {batch_ms:.1f} ms inside a batch of 32 (best of 3)."]
+    publish(ROOT / "docs" / "benchmarks.md", SPEED_HEADING, "\n".join(lines) + "\n",
+            not args.no_write)
+    publish(ROOT / "docs" / "sweep.md", STUDIES_HEADING,
+            "\n".join([STUDIES_HEADING, "", "Produced by `.venv/bin/python -m "
+                       "benchmarks.bench_sweep` (each study swept as above; its summary and "
+                       "figures copied here).", ""] + sections) + "\n", not args.no_write)
+    return 0
+
+
+def _study_section(study_path: str, name: str, out: Path, summary: dict) -> str:
+    target = FIGURES / name
+    if target.exists():
+        shutil.rmtree(target)
+    target.mkdir(parents=True)
+    figures = sorted(out.glob("*.png"))
+    for png in figures:
+        shutil.copy(png, target / png.name)
+    body = (out / "summary.md").read_text().strip()
+    links = "\n".join(f"![{p.stem}](figures/sweep/{name}/{p.name})" for p in figures)
+    return f"### `{study_path}`\n\n`gcs sweep --study {study_path}`\n\n{body}\n\n{links}\n"
+
+
+if __name__ == "__main__":
+    sys.exit(main())
