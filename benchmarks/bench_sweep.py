@@ -25,8 +25,19 @@ from flightkit import jitcache
 
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
 
+import numpy as np  # noqa: E402
+import pyarrow.parquet as pq  # noqa: E402
+
 from benchmarks.docsection import publish  # noqa: E402
 from gcs.sim.runner import simulate, simulate_batch  # noqa: E402
+from gcs.sweep.analysis import (  # noqa: E402
+    bin_parameter,
+    binned_rate,
+    param_columns,
+    ran,
+    successes,
+)
+from gcs.sweep.plots import success_filename  # noqa: E402
 from gcs.sweep.study import load_study  # noqa: E402
 from gcs.sweep.work import sim_options  # noqa: E402
 
@@ -94,7 +105,7 @@ def main() -> int:
         "|---|---|---|---|---|",
     ]
     for path, runs, wall, rate, summary in rows:
-        status = summary.get("status_counts", {})
+        status = summary["status"]
         lines.append(f"| `{path}` | {runs} | {wall:.1f} | {rate:,.0f} | "
                      f"{status.get('ok', 0)} / {status.get('diverged', 0)} / "
                      f"{status.get('error', 0)} |")
@@ -109,17 +120,35 @@ def main() -> int:
     return 0
 
 
+def strongest(out: Path, count: int) -> list[str]:
+    """The `count` parameters along which the success rate moves most (largest spread of the
+    binned rate): the success figures worth a reader's look."""
+    table = pq.read_table(out / "runs.parquet")
+    success, counted = successes(table), ran(table)
+    spread = {}
+    for column in param_columns(table):
+        rate = binned_rate(bin_parameter(table, column), success, counted).rate
+        if np.isfinite(rate).sum() > 1:
+            spread[column] = float(np.nanmax(rate) - np.nanmin(rate))
+    return sorted(spread, key=lambda c: -spread[c])[:count]
+
+
 def _study_section(study_path: str, name: str, out: Path, summary: dict) -> str:
+    """The study's summary (headings one level down) and its ECDF, heat map and the success
+    figures of the parameters that matter most, copied under docs/figures/sweep/<name>/."""
     target = FIGURES / name
     if target.exists():
         shutil.rmtree(target)
     target.mkdir(parents=True)
-    figures = sorted(out.glob("*.png"))
+    figures = [out / success_filename(c) for c in strongest(out, 4)]
+    figures += [out / "ecdf_converge_time.png", out / "heatmap.png"]
     for png in figures:
         shutil.copy(png, target / png.name)
-    body = (out / "summary.md").read_text().strip()
+    lines = (out / "summary.md").read_text().strip().splitlines()
+    body = "\n".join(("###" + line) if line.startswith("#") else line for line in lines[1:])
     links = "\n".join(f"![{p.stem}](figures/sweep/{name}/{p.name})" for p in figures)
-    return f"### `{study_path}`\n\n`gcs sweep --study {study_path}`\n\n{body}\n\n{links}\n"
+    return (f"### `{study_path}`\n\n`gcs sweep --study {study_path}` "
+            f"({summary['runs_done']} runs)\n{body}\n\n{links}\n")
 
 
 if __name__ == "__main__":

@@ -78,8 +78,8 @@ def run_sweep(args: argparse.Namespace) -> int:
 
     study = load_study(args.study)
     total = study.runs if args.runs is None else min(args.runs, study.runs)
-    if total < 1:
-        print("gcs sweep: --runs must be >= 1", file=sys.stderr)
+    if total < 1 or (args.workers is not None and args.workers < 1):
+        print("gcs sweep: --runs and --workers must be >= 1", file=sys.stderr)
         return 2
     out = args.out if args.out is not None else Path("runs") / f"sweep-{study.name}"
     store = ResultStore(out, study)
@@ -112,6 +112,11 @@ def run_sweep(args: argparse.Namespace) -> int:
         print(f"gcs sweep: interrupted after {flown} runs; the same command resumes",
               file=sys.stderr)
         return 130
+    except Exception as exc:  # a worker or the cluster failed: what is written stays
+        stop()
+        print(f"gcs sweep: stopped after {flown} runs: {type(exc).__name__}: {exc}; the "
+              "finished batches are kept and the same command resumes", file=sys.stderr)
+        return 1
     finally:
         stop()
     wall_s = time.perf_counter() - started
@@ -142,5 +147,7 @@ def _analyse(study: Study, store: ResultStore, out: Path, total: int) -> list[Pa
         replay_template=replay_command(study, out),
         window_start_s=study.metrics.window_from_s,
         converged_below_m=study.metrics.converged_below_m,
+        heatmap_pair=(None if study.metrics.heatmap is None
+                      else tuple(f"param.{c}" for c in study.metrics.heatmap)),
     )
     return write_analysis(store.table(), meta, out)

@@ -74,6 +74,7 @@ class StudyMetrics:
     window_from_s: float  # max / mean formation error over t >= this
     converged_below_m: float
     log_rate_hz: float
+    heatmap: tuple[str, str] | None = None  # two parameter columns (without "param.")
 
 
 @dataclass(frozen=True, slots=True)
@@ -300,14 +301,14 @@ def load_study(path: str | os.PathLike[str]) -> Study:
         "parameters", min_len=1))
     m = root.child("metrics")
     if not m.absent:
-        m.keys("", "window_from_s converged_below_m log_rate_hz")
+        m.keys("", "window_from_s converged_below_m log_rate_hz heatmap")
     metrics = StudyMetrics(
         window_from_s=m.child("window_from_s").number(30.0, ge=0.0),
         converged_below_m=m.child("converged_below_m").number(0.01, gt=0.0),
         log_rate_hz=m.child("log_rate_hz").number(20.0, gt=0.0),
+        heatmap=_heatmap(m.child("heatmap")),
     )
-    digest = hashlib.sha256(text.encode() + b"\0" + team_text.encode()).hexdigest()
-    return Study(
+    study = Study(
         name=root.child("name").string(),
         source=source,
         team_path=team_path,
@@ -317,5 +318,22 @@ def load_study(path: str | os.PathLike[str]) -> Study:
         seed=root.child("seed").integer(ge=0),
         metrics=metrics,
         batch_runs=root.child("batch_runs").integer(32, ge=1, le=4096),
-        fingerprint=digest,
+        fingerprint=hashlib.sha256(text.encode() + b"\0" + team_text.encode()).hexdigest(),
     )
+    if metrics.heatmap is not None:
+        columns = {c.removeprefix("param.") for c in study.draw(0)[1]}
+        for k, name in enumerate(metrics.heatmap):
+            if name not in columns:
+                m.child("heatmap").item(k).fail(
+                    f"{name!r} is no parameter column of this study; its columns: "
+                    f"{', '.join(sorted(columns))}")
+    return study
+
+
+def _heatmap(node: Node) -> tuple[str, str] | None:
+    if node.absent:
+        return None
+    items = node.items("two parameter columns", min_len=2)
+    if len(items) != 2:
+        node.fail(f"expected two parameter columns, got {len(items)}")
+    return items[0].string(), items[1].string()

@@ -102,7 +102,7 @@ def test_a_replay_refuses_options_that_would_change_the_run(tmp_path):
 
 
 def test_an_interrupted_sweep_resumes_where_it_stopped(tmp_path):
-    study = small_study(tmp_path, runs=16, batch_runs=2)
+    study = small_study(tmp_path, runs=40, batch_runs=2)
     whole = sweep(study, tmp_path / "whole", "--workers", "2")
     assert whole.returncode == 0, whole.stderr
     # GIVEN a sweep on one worker, interrupted once its first batches are written
@@ -118,7 +118,7 @@ def test_an_interrupted_sweep_resumes_where_it_stopped(tmp_path):
     assert proc.returncode == 130, err
     assert "the same command resumes" in err
     kept = len(list((out / "parts").glob("*.parquet")))
-    assert 2 <= kept < 8
+    assert 2 <= kept < 20
     # WHEN the same command runs again
     again = sweep(study, out, "--workers", "2")
     # THEN it flies only what is missing, and the table is the uninterrupted one

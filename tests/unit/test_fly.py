@@ -396,8 +396,7 @@ def test_hover_thrust_gives_the_thrust_equivalent_mass_and_checks_proposition_2(
     assert h.estimate(1, 11.0, 20.0, 1.0, 2.0, None) is None
 
 
-def test_attitude_mode_is_prepared_for_gcs_fly_and_refused_by_gcs_sim(tmp_path):
-    from gcs.config import ConfigError
+def test_attitude_mode_is_prepared_for_gcs_fly_and_simulated_by_gcs_sim(tmp_path):
     from gcs.sim.runner import SimOptions, simulate
 
     team = load_team(CONFIGS / "square4.yaml")
@@ -405,8 +404,10 @@ def test_attitude_mode_is_prepared_for_gcs_fly_and_refused_by_gcs_sim(tmp_path):
     assert setup.mode == "attitude" and setup.tick_rate_hz == team.fly.attitude.tick_rate_hz
     assert setup.stability.startswith("attitude mode with alpha_p 1.5, c_p 0.6 at 100 Hz")
     assert (setup.gains.alpha_p, setup.gains.c_p) == (1.5, 0.6)
-    with pytest.raises(ConfigError, match="controller mode 'attitude': the vehicle's autopilot"):
-        simulate(team, SimOptions(mode="attitude", duration_s=0.1))
+    # gcs sim flies it on its onboard attitude loop (gcs/sim/loop.py), holding Jhat
+    log = simulate(team, SimOptions(mode="attitude", duration_s=0.5)).log
+    assert log.extra["mode"] == "attitude" and not log.extra["estimates"]["inertia_estimated"]
+    assert np.isfinite(log.position_enu_m).all()
 
 
 _KERNELS_AFTER_SETUP = """
@@ -418,7 +419,7 @@ jitcache.configure()
 from gcs.fly.flight import Flight
 from gcs.fly.setup import FlyOptions, prepare
 from gcs.config import load_team
-from gcs.fly import predict
+from gcs.control import predict
 from gcs import metrics
 
 with tempfile.TemporaryDirectory() as tmp:

@@ -191,3 +191,32 @@ def test_the_store_resumes_and_refuses_another_study(tmp_path):
     other = load_study(write_study(tmp_path, SMALL.replace("0.8, 1.0", "0.7, 1.0"), "o.yaml"))
     with pytest.raises(ConfigError, match="holds the results of another study"):
         ResultStore(tmp_path / "out", other).open()
+
+
+def test_a_heat_map_axis_must_be_a_parameter_column(tmp_path):
+    path = write_study(tmp_path, SMALL + "metrics:\n  heatmap: [vehicles.1.plant.mass_kg, "
+                       "vehicles.1.plant.mass]\n")
+    with pytest.raises(ConfigError, match=r"metrics.heatmap\[1\]: 'vehicles.1.plant.mass' is no "
+                                          "parameter column of this study"):
+        load_study(path)
+    ok = load_study(write_study(tmp_path, SMALL + "metrics:\n  heatmap: [vehicles.1.plant.mass_kg,"
+                                " vehicles.2.initial.position_enu_m.0]\n", "ok.yaml"))
+    assert ok.metrics.heatmap == ("vehicles.1.plant.mass_kg", "vehicles.2.initial.position_enu_m.0")
+
+
+def test_a_drawn_team_that_is_not_valid_is_an_error_row_and_the_others_fly(tmp_path):
+    # GIVEN vehicle 3 (4 x 3 N of thrust) drawn at 2.5-3.5x its 0.35 kg: from 2.91x it cannot
+    # lift 1.2 m g, so some runs are refused and the others fly
+    study = load_study(write_study(tmp_path, SMALL.replace(
+        "  - key: vehicles[*].plant.mass_kg\n    scale: {uniform: [0.8, 1.0]}\n",
+        "  - key: vehicles[3].plant.mass_kg\n    scale: {uniform: [2.5, 3.5]}\n")))
+    rows = fly_runs(study, list(range(8)))
+    refused = [r for r in rows if r["status"] == "error"]
+    flown = [r for r in rows if r["status"] == "ok"]
+    assert refused and flown
+    for r in refused:
+        assert r["param.vehicles.3.plant.mass_kg"] > 2.9 * 0.35
+        assert "rotor_thrust_max_n" in r["message"] and math.isnan(r["final_error_m"])
+    for r in flown:
+        assert r["param.vehicles.3.plant.mass_kg"] < 2.92 * 0.35
+        assert math.isfinite(r["final_error_m"])
