@@ -209,6 +209,9 @@ class SimConfig:
     link_delay_s: float = key(0.0, ge=0.0, le=1.0)
     link_loss: float = key(0.0, ge=0.0, lt=1.0)
     link_seed: int = key(0, ge=0)
+    # the vehicles' own loops in gcs sim: idealised (a 50 rad/s rate loop, no motor lag) or an
+    # autopilot's recorded response (gcs/control/cascade.py: rate loop, yaw, thrust lag)
+    autopilot: str = key("ideal", choices=("ideal", "px4", "ardupilot", "nominal"))
 
     @property
     def plant_dt_s(self) -> float:

@@ -96,6 +96,27 @@ class OracleState(NamedTuple):
     rhohat: np.ndarray
 
 
+class OnboardResponse(NamedTuple):
+    """An autopilot's own loops as gcs/control/cascade.py's recorded response models, flown on
+    the true plant: each body rate follows the rate command through its second order (roll,
+    pitch) or first order (yaw) after a dead time, the thrust its command through a first-order
+    lag. `active` False: the idealised loops (_rate_loop, no thrust lag)."""
+
+    active: bool
+    zeta: float
+    wn: float
+    yaw_tau: float
+    dead_steps: int  # roll/pitch dead time in plant steps
+    yaw_dead_steps: int
+    thrust_alpha: float  # 1 - exp(-dt / tau_T): the thrust lag per plant step
+    track_gain: float  # how hard the torque makes the body rates follow the reference [1/s]
+    ref: np.ndarray  # (n, 3) the reference body rates
+    ref_dot: np.ndarray  # (n, 3)
+    history: np.ndarray  # (L, n, 3) rate commands of the last L plant steps (the dead times)
+    thrust_applied: np.ndarray  # (n,)
+
+
+
 MODE_ACTUATORS = 0  #: the paper's torque (26) is applied directly
 MODE_RATES = 1  #: the body-rate command is tracked by an idealised onboard rate loop
 #: the command attitude R^c is tracked by an onboard P attitude loop feeding that rate loop
@@ -191,14 +212,41 @@ def _attitude_loop(i, rot, rc_hold, gain, rate_cmd):
 
 
 @njit(cache=True)
-def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loop, link, log,
-                log_row0):
+def _response_loop(i, step, dt_s, w, inertia, rate_cmd, torque_hold, r):
+    """Vehicle i's rate loop as the response model: advance the reference by one plant step on
+    the delayed command and make the torque follow it (with gyroscopic compensation)."""
+    depth = r.history.shape[0]
+    for k in range(3):
+        r.history[step % depth, i, k] = rate_cmd[i, k]
+    for k in range(3):
+        dead = r.yaw_dead_steps if k == 2 else r.dead_steps
+        u = r.history[max(step - dead, 0) % depth, i, k] if step - dead >= 0 else 0.0
+        if k == 2:
+            acc = (u - r.ref[i, k]) / r.yaw_tau
+        else:
+            acc = r.wn * r.wn * (u - r.ref[i, k]) - 2.0 * r.zeta * r.wn * r.ref_dot[i, k]
+            r.ref_dot[i, k] += dt_s * acc
+        r.ref[i, k] += dt_s * (r.ref_dot[i, k] if k < 2 else acc)
+        if k == 2:
+            r.ref_dot[i, k] = acc
+    jx, jy, jz = inertia[i, 0], inertia[i, 1], inertia[i, 2]
+    wx, wy, wz = w[i, 0], w[i, 1], w[i, 2]
+    g = r.track_gain
+    torque_hold[i, 0] = jx * (r.ref_dot[i, 0] + g * (r.ref[i, 0] - wx)) + (jz - jy) * wy * wz
+    torque_hold[i, 1] = jy * (r.ref_dot[i, 1] + g * (r.ref[i, 1] - wy)) + (jx - jz) * wz * wx
+    torque_hold[i, 2] = jz * (r.ref_dot[i, 2] + g * (r.ref[i, 2] - wz)) + (jy - jx) * wx * wy
+
+
+@njit(cache=True)
+def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loop, link, onboard,
+                log, log_row0):
     """Advance plant and law by `n_steps` plant steps from step index `first_step`.
 
     `diag` (n, 6) carries the last tick's (attitude error, |omega^e|, kappa, ux, uy, uz) between
     chunks. Returns the minimum u_z seen and the count of singular command forces. ``team``,
-    ``law``, ``loop``, ``link``: `TeamState`, `LawInputs`, `SampledLoop`, gcs.sim.link.SimLink
-    (inactive: the law reads the true state and its setpoints act at once).
+    ``law``, ``loop``, ``link``, ``onboard``: `TeamState`, `LawInputs`, `SampledLoop`,
+    gcs.sim.link.SimLink (inactive: the law reads the true state and its setpoints act at once),
+    `OnboardResponse` (inactive: the idealised rate loop, no thrust lag).
     """
     p, v, rot, w, mass, inertia, drop_step, drop_factor = team
     (mhat, rhohat, nominal_mass, graph, offsets, ref_c, ref_a, ref_w, ref_ph, gains,
@@ -216,8 +264,10 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
     for step in range(first_step, first_step + n_steps):
         _apply_mass_drops(step, drop_step, drop_factor, mass)
         t = step * dt_s
+        # the thrust acting on the plant: the held command, or its lagged response
+        thrust_now = onboard.thrust_applied if onboard.active else thrust_hold
         if link.active:
-            record(link, step, p, v, rot, w, thrust_hold, mass, gains.gravity_mps2)
+            record(link, step, p, v, rot, w, thrust_now, mass, gains.gravity_mps2)
         if step % ctrl_every == 0:
             if link.active:
                 mp, mv, mrot, mw, macc = receive(link, step, step // ctrl_every)
@@ -252,7 +302,7 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
             else:
                 # Measured acceleration: the plant's specific force under the held thrust.
                 if not link.active:
-                    macc = _acceleration(rot, thrust_hold, mass, gains.gravity_mps2)
+                    macc = _acceleration(rot, thrust_now, mass, gains.gravity_mps2)
                 meas = TeamMeasurement(mp, mv, macc, mrot, mw)
                 du, ddu = force_derivatives(
                     meas, stage, mhat, 1.0 / kappa, graph, ref, gains, adaptive
@@ -279,7 +329,14 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
             for i in range(n):
                 if mode == MODE_ATTITUDE:
                     _attitude_loop(i, rot, rc_hold, attitude_gain, rate_cmd)
-                _rate_loop(i, w, inertia, rate_loop_gain, rate_cmd, torque_hold)
+                if onboard.active:
+                    _response_loop(i, step, dt_s, w, inertia, rate_cmd, torque_hold, onboard)
+                else:
+                    _rate_loop(i, w, inertia, rate_loop_gain, rate_cmd, torque_hold)
+        if onboard.active:
+            for i in range(n):
+                onboard.thrust_applied[i] += onboard.thrust_alpha * (
+                    thrust_hold[i] - onboard.thrust_applied[i])
         if step % log_every == 0:
             _write_log(
                 log,
@@ -294,7 +351,7 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
                 thrust_hold,
                 u,
             )
-        rk4_step(p, v, rot, w, thrust_hold, torque_hold, mass, inertia, dt_s)
+        rk4_step(p, v, rot, w, thrust_now, torque_hold, mass, inertia, dt_s)
     for i in range(n):
         diag[i, 0] = tr_err[i]
         diag[i, 1] = we_norm[i]

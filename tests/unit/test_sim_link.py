@@ -119,3 +119,47 @@ def test_prediction_changes_what_a_delayed_law_reads():
     off = simulate(team_with(link_delay_s=0.03, predict=False, duration_s=10.0))
     assert not np.array_equal(on.log.position_enu_m, off.log.position_enu_m)
 
+
+
+def _rate_step(autopilot: str, axis: int, seconds: float = 1.5):
+    """Body rate k of a vehicle whose rate command steps to 1 rad/s at t = 0, under the
+    autopilot's response model (the rigid body integrated beside it, 1 kHz)."""
+    from gcs.sim.loop import _response_loop
+    from gcs.sim.runner import _Loop, _onboard
+
+    loop = _Loop(law="adaptive", mode="rates", derivative="model", oracle=False,
+                 rate_loop_gain_radps=50.0, levant_lipschitz=1.0, levant_substep_s=1e-4,
+                 plant_hz=1000.0, ctrl_hz=100.0, duration_s=1.0, log_every=1, ctrl_every=10,
+                 n_steps=1000, gains=None, reference=(), predict=False, autopilot=autopilot)
+    onboard = _onboard(loop, 1, np.array([9.81]))
+    inertia = np.array([[0.05, 0.05, 0.09]])
+    w, torque = np.zeros((1, 3)), np.zeros((1, 3))
+    cmd = np.zeros((1, 3))
+    cmd[0, axis] = 1.0
+    out = []
+    for step in range(int(seconds * 1000)):
+        _response_loop(0, step, 1e-3, w, inertia, cmd, torque, onboard)
+        w += 1e-3 * torque / inertia  # one axis moves: no gyroscopic coupling
+        out.append(w[0, axis])
+    return np.arange(1, len(out) + 1) * 1e-3, np.array(out)
+
+
+def test_the_px4_response_model_answers_a_rate_step_as_recorded():
+    # PX4's recorded fit (gcs/control/cascade.py): zeta 0.73, wn 19.1 rad/s, 4 ms dead time:
+    # overshoot exp(-zeta pi / sqrt(1 - zeta^2)) = 3.5 %, peak at 4 ms + pi / (wn sqrt(1 - zeta^2))
+    t, roll = _rate_step("px4", 0)
+    assert roll.max() - 1.0 == pytest.approx(0.035, abs=0.01)
+    assert t[roll.argmax()] == pytest.approx(0.004 + np.pi / (19.1 * np.sqrt(1 - 0.73**2)), abs=0.015)
+    # AND yaw: first order 0.59 s after 99 ms: 63 % at 0.689 s
+    t, yaw = _rate_step("px4", 2)
+    assert t[np.argmax(yaw >= 1 - np.exp(-1))] == pytest.approx(0.689, abs=0.01)
+
+
+def test_the_paper_gains_limit_cycle_on_px4s_loops_and_the_flown_ones_converge():
+    # docs/gcs.md: the paper's k_eps 8 limit-cycles on PX4's rate loop; fly.rates' gains do not
+    paper = simulate(team_with(autopilot="px4", duration_s=40.0), SimOptions(log_rate_hz=20))
+    soft = simulate(team_with(autopilot="px4", duration_s=40.0, gains={
+        "alpha_p": 2.0, "c_p": 2.0, "k_eps": 1.5, "k_eps_yaw": 1.0}), SimOptions(log_rate_hz=20))
+    e_paper = formation_error(paper.log.position_enu_m, paper.log.offsets_enu_m)
+    e_soft = formation_error(soft.log.position_enu_m, soft.log.offsets_enu_m)
+    assert e_paper[-200:].max() > 0.01 and e_soft[-200:].max() < 1e-3
