@@ -70,6 +70,45 @@ def per_run_ms(study_path: str) -> tuple[float, float]:
     return alone * 1e3, batch * 1e3
 
 
+#: What the same team flew on the px4 personality and on real PX4 SIH (docs/benchmarks.md,
+#: "Real PX4 SIH and the px4 personality"; docs/gcs.md, "The law's velocity"): formation error
+#: for t >= 30 s, mean / max [m].
+PX4_RECORDED = {
+    0.2: "personality 0.133 / 0.238, 0.133 / 0.217; real SIH (median of six) 0.152 / 0.308",
+    0.0: "personality (Scenario I from 10 m) 0.267 / 0.415, 0.329 / 0.525",
+}
+
+
+def px4_comparison(seeds: tuple[int, ...] = (1, 2, 3)) -> list[str]:
+    """configs/square4_px4sih.yaml's rates gains in gcs sim on sim.autopilot px4 (its loops and
+    telemetry errors, 4 ms of link), per fly.velocity_from_position_s, beside the recordings."""
+    import copy
+
+    from gcs.config import load_team, team_from_dict, team_to_dict
+    from gcs.metrics import formation_error
+    from gcs.sim.runner import SimOptions
+
+    base = team_to_dict(load_team(ROOT / "configs" / "square4_px4sih.yaml"))
+    rows = ["| fly.velocity_from_position_s | gcs sim, sim.autopilot px4, seeds "
+            f"{', '.join(map(str, seeds))}: mean / max [m] | flown |", "|---|---|---|"]
+    for t_s in (0.2, 0.0):
+        figures = []
+        for seed in seeds:
+            data = copy.deepcopy(base)
+            data["controller"]["mode"] = "rates"
+            rates = data["fly"]["rates"]
+            data["controller"]["gains"].update(
+                {k: rates[k] for k in ("alpha_p", "c_p", "k_eps", "k_eps_yaw")})
+            data["fly"]["velocity_from_position_s"] = t_s
+            data["sim"].update(controller_rate_hz=100, autopilot="px4", link_seed=seed,
+                               link_delay_s=0.004)
+            log = simulate(team_from_dict(data), SimOptions(log_rate_hz=50)).log
+            e = formation_error(log.position_enu_m, log.offsets_enu_m)[log.t_s >= 30]
+            figures.append(f"{e.mean():.3f} / {e.max():.3f}")
+        rows.append(f"| {t_s:g} s | {', '.join(figures)} | {PX4_RECORDED[t_s]} |")
+    return rows
+
+
 def _timed(work) -> float:
     started = time.perf_counter()
     work()
@@ -110,7 +149,11 @@ def main() -> int:
                      f"{status.get('ok', 0)} / {status.get('diverged', 0)} / "
                      f"{status.get('error', 0)} |")
     lines += ["", f"Per run, Scenario I of `{STUDIES[0]}` in this process on one core: "
-              f"{alone_ms:.1f} ms alone, {batch_ms:.1f} ms inside a batch of 32 (best of 3)."]
+              f"{alone_ms:.1f} ms alone, {batch_ms:.1f} ms inside a batch of 32 (best of 3).",
+              "", "`gcs sim` on PX4's loops and telemetry errors (`sim.autopilot: px4`, "
+              "docs/sweep.md) against what the same gains flew over MAVLink, formation error for "
+              "t >= 30 s, Scenario I at 100 Hz (the sim starts at the initial positions, the "
+              "flights from the ground):", "", *px4_comparison()]
     publish(ROOT / "docs" / "benchmarks.md", SPEED_HEADING, "\n".join(lines) + "\n",
             not args.no_write)
     publish(ROOT / "docs" / "sweep.md", STUDIES_HEADING,

@@ -212,6 +212,8 @@ class SimConfig:
     # the vehicles' own loops in gcs sim: idealised (a 50 rad/s rate loop, no motor lag) or an
     # autopilot's recorded response (gcs/control/cascade.py: rate loop, yaw, thrust lag)
     autopilot: str = key("ideal", choices=("ideal", "px4", "ardupilot", "nominal"))
+    # with px4 or ardupilot: the law reads that autopilot's telemetry errors (gcs/sim/noise.py)
+    telemetry_noise: bool = key(True)
 
     @property
     def plant_dt_s(self) -> float:

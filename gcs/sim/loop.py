@@ -34,6 +34,7 @@ from gcs.control.law import (
     position_stage,
 )
 from gcs.sim.link import deliver, predict_to_act, receive, record, send
+from gcs.sim.noise import add_telemetry_errors
 
 
 class TeamState(NamedTuple):
@@ -239,14 +240,15 @@ def _response_loop(i, step, dt_s, w, inertia, rate_cmd, torque_hold, r):
 
 @njit(cache=True)
 def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loop, link, onboard,
-                log, log_row0):
+                noise, log, log_row0):
     """Advance plant and law by `n_steps` plant steps from step index `first_step`.
 
     `diag` (n, 6) carries the last tick's (attitude error, |omega^e|, kappa, ux, uy, uz) between
     chunks. Returns the minimum u_z seen and the count of singular command forces. ``team``,
     ``law``, ``loop``, ``link``, ``onboard``: `TeamState`, `LawInputs`, `SampledLoop`,
     gcs.sim.link.SimLink (inactive: the law reads the true state and its setpoints act at once),
-    `OnboardResponse` (inactive: the idealised rate loop, no thrust lag).
+    `OnboardResponse` (inactive: the idealised rate loop, no thrust lag), gcs.sim.noise.SimNoise
+    (inactive: the law reads the state exactly).
     """
     p, v, rot, w, mass, inertia, drop_step, drop_factor = team
     (mhat, rhohat, nominal_mass, graph, offsets, ref_c, ref_a, ref_w, ref_ph, gains,
@@ -275,6 +277,9 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
                     predict_to_act(mp, mv, mrot, mw, macc, link, step, dt_s)
             else:
                 mp, mv, mrot, mw = p, v, rot, w
+            if noise.active:
+                mv, mrot, mw = add_telemetry_errors(noise, step // ctrl_every, mp, mv, mrot, mw,
+                                                    ctrl_dt)
             ref = reference_velocity(t, ref_c, ref_a, ref_w, ref_ph)
             stage = position_stage(
                 mp, mv, mrot, mhat, nominal_mass, graph, offsets, ref, gains, adaptive

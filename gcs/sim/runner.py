@@ -37,6 +37,7 @@ from gcs.sim.loop import (
     run_oracle,
     run_sampled,
 )
+from gcs.sim.noise import DRAWS, NOISE_MODELS, make_noise, noise_draws
 
 _MODES = {ControlMode.ACTUATORS: MODE_ACTUATORS, ControlMode.RATES: MODE_RATES,
           ControlMode.ATTITUDE: MODE_ATTITUDE}
@@ -120,6 +121,8 @@ class _Loop:
     reference: tuple  # reference velocity as arrays (c, a, w, phase)
     predict: bool  # the law reads delayed samples carried forward (fly.predict)
     autopilot: str  # sim.autopilot: the vehicles' own loops
+    noise: bool  # the law reads the autopilot's telemetry errors (gcs/sim/noise.py)
+    velocity_from_position_s: float  # fly.velocity_from_position_s, with the noise
 
     def same_as(self, other: _Loop) -> bool:
         for f in fields(self):
@@ -153,6 +156,7 @@ class _Team:
     delay_steps: np.ndarray  # (n,) the link's one-way delay in plant steps
     lost_down: np.ndarray  # (ticks, n) the link's lost samples (gcs.sim.link)
     lost_up: np.ndarray  # (ticks, n) and lost setpoints
+    noise_draws: np.ndarray  # (ticks, n, DRAWS) the telemetry errors' normals, or (1, n, DRAWS)
 
     @property
     def n(self) -> int:
@@ -193,6 +197,8 @@ def _loop_of(team: TeamConfig, options: SimOptions) -> _Loop:
             np.ascontiguousarray(x, dtype=float) for x in team.reference_velocity.as_arrays()),
         predict=team.fly.predict,
         autopilot=team.sim.autopilot,
+        noise=team.sim.telemetry_noise and team.sim.autopilot in NOISE_MODELS,
+        velocity_from_position_s=team.fly.velocity_from_position_s,
     )
 
 
@@ -219,7 +225,10 @@ def _team_of(team: TeamConfig, loop: _Loop) -> _Team:
             drop_factor[i] = 1.0 - fault.fraction
     ticks = loop.n_steps // loop.ctrl_every + 1
     lost_down, lost_up = lost_masks(ticks, n, team.sim.link_loss, team.sim.link_seed)
+    draws = (noise_draws(team.sim.link_seed, ticks, n) if loop.noise
+             else np.zeros((1, n, DRAWS)))
     return _Team(
+        noise_draws=draws,
         delay_steps=np.full(n, int(round(team.sim.link_delay_s * loop.plant_hz)), dtype=np.int64),
         lost_down=lost_down,
         lost_up=lost_up,
@@ -253,7 +262,8 @@ def _union(teams: Sequence[_Team]) -> _Team:
         first_edge += g.neighbour.shape[0]
     stacked = {
         f.name: np.concatenate([getattr(t, f.name) for t in teams],
-                               axis=1 if f.name.startswith("lost_") else 0)
+                               axis=1 if f.name in ("lost_down", "lost_up", "noise_draws")
+                               else 0)
         for f in fields(_Team) if f.name != "graph"
     }
     graph = EdgeList(np.ascontiguousarray(np.concatenate(starts)),
@@ -281,6 +291,9 @@ def _advance(
     attitude_gain = np.array(ATTITUDE_GAIN)
     link = make_link(team.delay_steps, team.lost_down, team.lost_up, loop.predict)
     onboard = _onboard(loop, n, thrust_hold)
+    noise = make_noise(NOISE_MODELS[loop.autopilot] if loop.noise else None,
+                       team.noise_draws.shape[0], n, loop.ctrl_every / loop.plant_hz,
+                       team.noise_draws, loop.velocity_from_position_s)
     if onboard.active:
         attitude_gain[:2] = RESPONSES[loop.autopilot].attitude_p_per_s
         attitude_gain[2] = YAW_ATTITUDE_GAIN[loop.autopilot]
@@ -306,7 +319,7 @@ def _advance(
                 attitude_gain)
             chunk_min, singular = run_sampled(
                 done, count, dt_s, loop.ctrl_every, log_every, state, law_in, sampled, link,
-                onboard, log, row0)
+                onboard, noise, log, row0)
         min_uz = min(min_uz, chunk_min)
         if singular or not np.isfinite(team.p).all():
             raise SimulationError(

@@ -130,7 +130,8 @@ def _rate_step(autopilot: str, axis: int, seconds: float = 1.5):
     loop = _Loop(law="adaptive", mode="rates", derivative="model", oracle=False,
                  rate_loop_gain_radps=50.0, levant_lipschitz=1.0, levant_substep_s=1e-4,
                  plant_hz=1000.0, ctrl_hz=100.0, duration_s=1.0, log_every=1, ctrl_every=10,
-                 n_steps=1000, gains=None, reference=(), predict=False, autopilot=autopilot)
+                 n_steps=1000, gains=None, reference=(), predict=False, autopilot=autopilot,
+                 noise=False, velocity_from_position_s=0.0)
     onboard = _onboard(loop, 1, np.array([9.81]))
     inertia = np.array([[0.05, 0.05, 0.09]])
     w, torque = np.zeros((1, 3)), np.zeros((1, 3))
@@ -157,9 +158,57 @@ def test_the_px4_response_model_answers_a_rate_step_as_recorded():
 
 def test_the_paper_gains_limit_cycle_on_px4s_loops_and_the_flown_ones_converge():
     # docs/gcs.md: the paper's k_eps 8 limit-cycles on PX4's rate loop; fly.rates' gains do not
-    paper = simulate(team_with(autopilot="px4", duration_s=40.0), SimOptions(log_rate_hz=20))
-    soft = simulate(team_with(autopilot="px4", duration_s=40.0, gains={
+    paper = simulate(team_with(autopilot="px4", telemetry_noise=False, duration_s=40.0),
+                     SimOptions(log_rate_hz=20))
+    soft = simulate(team_with(autopilot="px4", telemetry_noise=False, duration_s=40.0, gains={
         "alpha_p": 2.0, "c_p": 2.0, "k_eps": 1.5, "k_eps_yaw": 1.0}), SimOptions(log_rate_hz=20))
     e_paper = formation_error(paper.log.position_enu_m, paper.log.offsets_enu_m)
     e_soft = formation_error(soft.log.position_enu_m, soft.log.offsets_enu_m)
     assert e_paper[-200:].max() > 0.01 and e_soft[-200:].max() < 1e-3
+
+
+def test_the_px4_telemetry_errors_have_their_fitted_sizes():
+    from gcs.sim.noise import PX4_NOISE, add_telemetry_errors, make_noise, noise_draws
+
+    ticks = 60000
+    noise = make_noise(PX4_NOISE, ticks, 1, 0.01, noise_draws(4, ticks, 1))
+    p, v, rot, w = np.zeros((1, 3)), np.zeros((1, 3)), np.eye(3)[None].copy(), np.zeros((1, 3))
+    gyro, tilt, att = [], [], []
+    for k in range(ticks):
+        _, _, wo = add_telemetry_errors(noise, k, p, v, rot, w, 0.01)
+        if k >= 3000:
+            gyro.append(wo[0].copy())
+            tilt.append(noise.state[0, :3].copy())
+            att.append(noise.state[0, 3:6].copy())
+    # THEN the stationary sizes are the personality's: gyro 0.14 / 0.07 / 0.03 per 4 ms sample
+    # through 40 Hz, tilt integrated over 6 s, pitch 0.016 and heading 0.058 rad (second order)
+    assert np.std(gyro, axis=0) == pytest.approx(
+        [0.14 * np.sqrt(2 * 1.11 * 40 * 0.004), 0.07 * np.sqrt(2 * 1.11 * 40 * 0.004),
+         0.03 * np.sqrt(2 * 1.11 * 40 * 0.004)], rel=0.05)
+    assert np.std(tilt, axis=0)[:2] == pytest.approx(
+        [0.14 * np.sqrt(0.004 * 3.0), 0.07 * np.sqrt(0.004 * 3.0)], rel=0.25)
+    assert np.std(att, axis=0)[1:] == pytest.approx([0.016, 0.058], rel=0.25)
+
+
+def test_gcs_flys_velocity_consistency_is_what_keeps_px4s_velocity_error_out_of_the_law():
+    # docs/gcs.md: on the px4 personality, the reported velocity (T = 0) flies about twice the
+    # error of v + low-passed (p' - v) (T = 0.2 s); the sim's px4 errors show the same
+    gains = {"alpha_p": 2.0, "c_p": 2.0, "k_eps": 1.5, "k_eps_yaw": 1.0}
+    errors = []
+    for t_s in (0.0, 0.2):
+        data = team_to_dict(team_with(autopilot="px4", gains=gains, link_seed=5, duration_s=40.0))
+        data["fly"]["velocity_from_position_s"] = t_s
+        result = simulate(team_from_dict(data), SimOptions(log_rate_hz=20))
+        e = formation_error(result.log.position_enu_m, result.log.offsets_enu_m)
+        errors.append(e[result.log.t_s >= 20].mean())
+    assert errors[0] > 2.0 * errors[1] > 0.02
+
+
+def test_a_noisy_batch_flies_each_team_as_alone():
+    gains = {"alpha_p": 2.0, "c_p": 2.0, "k_eps": 1.5, "k_eps_yaw": 1.0}
+    teams = [team_with(autopilot="px4", gains=gains, link_seed=s, duration_s=5.0) for s in (1, 2)]
+    together = simulate_batch(teams, SimOptions(log_rate_hz=50))
+    for team, result in zip(teams, together, strict=True):
+        alone = simulate(team, SimOptions(log_rate_hz=50))
+        assert np.array_equal(result.log.position_enu_m, alone.log.position_enu_m)
+    assert not np.array_equal(together[0].log.position_enu_m, together[1].log.position_enu_m)

@@ -1,0 +1,202 @@
+"""The telemetry errors of an autopilot's estimator, as `gcs sim` puts them on what the law reads.
+
+With `sim.autopilot` set and `sim.telemetry_noise` true, the law's inputs at each tick carry the
+errors the bundled emulator's personality of that autopilot reports (vehicle_emulator/config/
+personality.py's Sensors, fitted on the SITL recordings; the equations of its estimate_errors):
+
+* velocity: the sum of two first-order Gauss-Markov processes per axis (north, east, up), a fast
+  one and a slow drift; the position carries none (PX4 SIH's reported position does not
+  integrate its velocity error, ArduCopter's errors are millimetres);
+* attitude: per body axis a first-order process of the gyro noise integrated and forgotten
+  (the complementary filter's tilt: 1 sigma = sigma_sample sqrt(T_sample tau / 2)), plus the
+  estimator's own slow error, first or second order (two equal poles);
+* body rates: white noise of the rates the autopilot streams, its raw gyro samples through its
+  second-order low pass (1 sigma = sigma_sample sqrt(2 B T_sample), B = 1.11 f_c, the filter's
+  noise bandwidth).
+
+The law then reads the velocity as gcs fly's does (gcs/fly/consistent.py): the reported velocity
+plus the low-passed difference between the reported position's rate and it
+(fly.velocity_from_position_s).
+
+Not modelled here: the position-hold wander (the law does not fly the autopilot's hold), the
+emulator's angular disturbances and IMU details. The random numbers come from the run's seed.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+#: Processes per vehicle and tick: 3 gyro, 3 integrated-gyro tilt, 3 slow attitude, 3 fast
+#: velocity, 3 velocity drift.
+DRAWS = 15
+
+
+class NoiseModel(NamedTuple):
+    """Sizes (1 sigma) and time constants [s] of one autopilot's telemetry errors."""
+
+    gyro_std_radps: tuple[float, float, float]  # body FLU, per tick
+    tilt_std_rad: tuple[float, float, float]  # integrated gyro noise, roll / pitch / yaw
+    tilt_tau_s: float
+    attitude_std_rad: tuple[float, float, float]  # the estimator's slow error, roll/pitch/yaw
+    attitude_tau_s: tuple[float, float, float]
+    attitude_order: tuple[int, int, int]
+    velocity_std_mps: tuple[float, float, float]  # north, east, up
+    velocity_tau_s: float
+    drift_std_mps: tuple[float, float, float]
+    drift_tau_s: float
+
+
+def _filtered(sample_std: float, sample_s: float, cutoff_hz: float) -> float:
+    """1 sigma of white samples through a second-order Butterworth low pass at cutoff_hz."""
+    return sample_std * math.sqrt(2.0 * 1.11 * cutoff_hz * sample_s)
+
+
+def _integrated(sample_std: float, sample_s: float, tau_s: float) -> float:
+    """1 sigma of white samples integrated and forgotten over tau_s (a leaky integrator)."""
+    return sample_std * math.sqrt(sample_s * tau_s / 2.0)
+
+
+#: PX4 v1.16 SIH (the px4 personality's PX4_SENSORS): gyro 0.14 / 0.07 / 0.03 rad/s per 4 ms
+#: sample through IMU_GYRO_CUTOFF 40 Hz; tilt integrated over 6 s on roll and pitch; EKF2's slow
+#: pitch (0.016 rad) and heading (0.058 rad, second order) errors over 4 s; velocity 0.126 /
+#: 0.126 / 0.10 m/s over 1.5 s plus a 0.10 m/s drift over 10 s.
+PX4_NOISE = NoiseModel(
+    gyro_std_radps=tuple(_filtered(s, 0.004, 40.0) for s in (0.14, 0.07, 0.03)),
+    tilt_std_rad=(_integrated(0.14, 0.004, 6.0), _integrated(0.07, 0.004, 6.0), 0.0),
+    tilt_tau_s=6.0,
+    attitude_std_rad=(0.0, 0.016, 0.058), attitude_tau_s=(4.0, 4.0, 4.0),
+    attitude_order=(1, 1, 2),
+    velocity_std_mps=(0.126, 0.126, 0.10), velocity_tau_s=1.5,
+    drift_std_mps=(0.10, 0.10, 0.10), drift_tau_s=10.0,
+)
+#: ArduCopter 4.7.0-dev SITL (ARDUPILOT_SENSORS): no IMU noise; EKF3's velocity 3-5 mm/s over
+#: 5 s; attitude errors of tens of microradians.
+ARDUPILOT_NOISE = NoiseModel(
+    gyro_std_radps=(0.0, 0.0, 0.0), tilt_std_rad=(0.0, 0.0, 0.0), tilt_tau_s=1.0,
+    attitude_std_rad=(3.0e-5, 3.2e-5, 4.5e-5), attitude_tau_s=(0.15, 0.15, 3.0),
+    attitude_order=(1, 1, 1),
+    velocity_std_mps=(0.0032, 0.0052, 0.002), velocity_tau_s=5.0,
+    drift_std_mps=(0.0, 0.0, 0.0), drift_tau_s=1.0,
+)
+NOISE_MODELS = {"px4": PX4_NOISE, "ardupilot": ARDUPILOT_NOISE}
+
+
+class SimNoise(NamedTuple):
+    """The kernel's view: sizes, factors per tick, the draws and the processes' states."""
+
+    active: bool
+    gyro_std: np.ndarray  # (3,)
+    tilt_std: np.ndarray  # (3,)
+    tilt_phi: float
+    att_std: np.ndarray  # (3,)
+    att_phi: np.ndarray  # (3,)
+    att_second: np.ndarray  # (3,) bool: two equal poles
+    vel_std: np.ndarray  # (3,) ENU
+    vel_phi: float
+    drift_std: np.ndarray  # (3,) ENU
+    drift_phi: float
+    draws: np.ndarray  # (ticks, n, DRAWS) standard normals
+    state: np.ndarray  # (n, 15): tilt 0-2, attitude 3-5, its first stage 6-8, vel 9-11, drift 12-14
+    # gcs fly's velocity consistency (gcs/fly/consistent.py): v_law = v + c, c the low-passed
+    # p' - v; consistency_s 0: the reported velocity as it is
+    consistency_s: float
+    consistency: np.ndarray  # (n, 3) c
+    last: np.ndarray  # (n, 6): the previous tick's reported p and v (NaN before the first)
+
+
+def make_noise(model: NoiseModel | None, ticks: int, n: int, tick_s: float,
+               draws: np.ndarray | None = None, consistency_s: float = 0.0) -> SimNoise:
+    """The noise of n vehicles over `ticks` ticks (`draws` (ticks, n, DRAWS): the run's normals;
+    None with model None: inactive); `consistency_s`: fly.velocity_from_position_s."""
+    extra = (consistency_s, np.zeros((n, 3)), np.full((n, 6), np.nan))
+    if model is None:
+        zero = np.zeros(3)
+        return SimNoise(False, zero, zero, 0.0, zero, zero, np.zeros(3, dtype=np.bool_), zero,
+                        0.0, zero, 0.0, np.zeros((1, n, DRAWS)), np.zeros((n, 15)), *extra)
+    neu_to_enu = [1, 0, 2]
+    return SimNoise(
+        True, np.array(model.gyro_std_radps), np.array(model.tilt_std_rad),
+        math.exp(-tick_s / model.tilt_tau_s), np.array(model.attitude_std_rad),
+        np.exp(-tick_s / np.array(model.attitude_tau_s)),
+        np.array([o == 2 for o in model.attitude_order]),
+        np.array(model.velocity_std_mps)[neu_to_enu], math.exp(-tick_s / model.velocity_tau_s),
+        np.array(model.drift_std_mps)[neu_to_enu], math.exp(-tick_s / model.drift_tau_s),
+        np.ascontiguousarray(draws), np.zeros((n, 15)), *extra)
+
+
+def noise_draws(seed: int, ticks: int, n: int) -> np.ndarray:
+    """The run's standard normals (a stream of its own beside the link's losses)."""
+    return np.random.default_rng([seed, 1]).standard_normal((ticks, n, DRAWS))
+
+
+#: gcs fly's bounds on the consistency correction (gcs/fly/consistent.py): |c| per axis, and
+#: the largest p' - v an update takes (an estimator reset is skipped)
+CONSISTENCY_MAX_MPS = 0.5
+CONSISTENCY_JUMP_MPS = 5.0
+
+
+@njit(cache=True)
+def _consistent(noise, i, p, v_reported, tick_s, out):
+    """gcs fly's law velocity for vehicle i: v + c, c the reported position's rate minus the
+    reported velocity (trapezoid between ticks) low-passed over consistency_s."""
+    last = noise.last[i]
+    c = noise.consistency[i]
+    if noise.consistency_s > 0.0 and not math.isnan(last[0]):
+        alpha = 1.0 - math.exp(-tick_s / noise.consistency_s)
+        jump = False
+        diff = np.empty(3)
+        for k in range(3):
+            diff[k] = (p[i, k] - last[k]) / tick_s - 0.5 * (v_reported[k] + last[3 + k])
+            jump = jump or abs(diff[k]) > CONSISTENCY_JUMP_MPS
+        if not jump:
+            for k in range(3):
+                c[k] = min(max(c[k] + alpha * (diff[k] - c[k]), -CONSISTENCY_MAX_MPS),
+                           CONSISTENCY_MAX_MPS)
+    for k in range(3):
+        last[k] = p[i, k]
+        last[3 + k] = v_reported[k]
+        out[i, k] = v_reported[k] + c[k]
+
+
+@njit(cache=True)
+def add_telemetry_errors(noise, tick, p, v, rot, w, tick_s):
+    """Advance the processes by one tick and return copies of v, R, w with the errors on (v as
+    gcs fly's law reads it: with its consistency correction)."""
+    n = v.shape[0]
+    v_out, rot_out, w_out = v.copy(), rot.copy(), w.copy()
+    s = noise.state
+    for i in range(n):
+        d = noise.draws[tick, i]
+        e = np.empty(3)
+        for k in range(3):
+            kt = math.sqrt(1.0 - noise.tilt_phi * noise.tilt_phi)
+            s[i, k] = noise.tilt_phi * s[i, k] + kt * noise.tilt_std[k] * d[3 + k]
+            pa = noise.att_phi[k]
+            ka = math.sqrt(1.0 - pa * pa)
+            if noise.att_second[k]:
+                # two equal poles: a unit stage low-passed once more, scaled to 1 sigma
+                s[i, 6 + k] = pa * s[i, 6 + k] + ka * d[6 + k]
+                gain = noise.att_std[k] * math.sqrt((1.0 - pa * pa) ** 3 / (1.0 + pa * pa))
+                s[i, 3 + k] = pa * s[i, 3 + k] + gain * s[i, 6 + k] / ka
+            else:
+                s[i, 3 + k] = pa * s[i, 3 + k] + ka * noise.att_std[k] * d[6 + k]
+            kv = math.sqrt(1.0 - noise.vel_phi * noise.vel_phi)
+            kd = math.sqrt(1.0 - noise.drift_phi * noise.drift_phi)
+            s[i, 9 + k] = noise.vel_phi * s[i, 9 + k] + kv * noise.vel_std[k] * d[9 + k]
+            s[i, 12 + k] = noise.drift_phi * s[i, 12 + k] + kd * noise.drift_std[k] * d[12 + k]
+            v_out[i, k] += s[i, 9 + k] + s[i, 12 + k]
+            w_out[i, k] += noise.gyro_std[k] * d[k]
+            e[k] = s[i, k] + s[i, 3 + k]
+        # the reported attitude: the true one turned by the body-axis error e (Rodrigues)
+        angle = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+        if angle > 0.0:
+            kx = np.array([[0.0, -e[2], e[1]], [e[2], 0.0, -e[0]], [-e[1], e[0], 0.0]])
+            turn = (np.eye(3) + (math.sin(angle) / angle) * kx
+                    + ((1.0 - math.cos(angle)) / (angle * angle)) * (kx @ kx))
+            rot_out[i] = rot[i] @ turn
+        _consistent(noise, i, p, v_out[i].copy(), tick_s, v_out)
+    return v_out, rot_out, w_out
