@@ -153,7 +153,7 @@ def main() -> int:
               "", "`gcs sim` on PX4's loops and telemetry errors (`sim.autopilot: px4`, "
               "docs/sweep.md) against what the same gains flew over MAVLink, formation error for "
               "t >= 30 s, Scenario I at 100 Hz (the sim starts at the initial positions, the "
-              "flights from the ground):", "", *px4_comparison()]
+              "flights from the ground or from 10 m, as noted):", "", *px4_comparison()]
     publish(ROOT / "docs" / "benchmarks.md", SPEED_HEADING, "\n".join(lines) + "\n",
             not args.no_write)
     publish(ROOT / "docs" / "sweep.md", STUDIES_HEADING,
