@@ -5,10 +5,10 @@ that names the worst runs with the command that replays each.
 ``gcs.sweep.plots`` and report.md (docs/sweep.md, "Reading the results"). Every function above
 the writing section is pure: the table in, numbers out.
 
-Populations: a run whose ``status`` is "error" produced no metrics (the tool failed, not the
-law), so rates count the runs that ran, "ok" and "diverged"; a diverged run counts as a failure.
-Success is ``converged`` and status "ok". Float metrics count every row whose value is finite
-and report how many were not.
+Populations: a run whose ``status`` is "error" produced no metrics (its drawn team is not a
+valid team: nothing flew), so rates count the runs that ran, "ok" and "diverged"; a diverged
+run counts as a failure. Success is ``converged`` and status "ok". Float metrics count every row
+whose value is finite and report how many were not.
 """
 
 from __future__ import annotations
@@ -25,16 +25,18 @@ import pyarrow as pa
 from scipy import stats
 
 from gcs.sweep import plots, report
+from gcs.sweep.measure import BOOLEAN, METRICS
+from gcs.sweep.work import STATUS_DIVERGED, STATUS_ERROR, STATUS_OK
 
 logger = logging.getLogger(__name__)
 
+
 PARAM_PREFIX = "param."
-BOOL_METRICS = ("converged", "conditions_held", "cond.alpha_p", "cond.prop1", "cond.prop2",
-                "cond.uz_positive")
-FLOAT_METRICS = ("converge_time_s", "final_error_m", "max_error_m", "mean_error_m",
-                 "mass_error_pct", "saturation_share", "min_distance_m", "min_force_up_n")
+#: the row's figures (gcs.sweep.measure, which writes them): the true-or-false ones, the numbers
+BOOL_METRICS = BOOLEAN
+FLOAT_METRICS = tuple(m for m in METRICS if m not in BOOLEAN)
 REQUIRED = ("run", "seed", "status", "message", *BOOL_METRICS, *FLOAT_METRICS)
-STATUSES = ("ok", "diverged", "error")
+STATUSES = (STATUS_OK, STATUS_DIVERGED, STATUS_ERROR)
 CONFIDENCE = 0.95
 #: success_vs_<param>: at most this many bins, and about this many runs in each
 MAX_BINS = 10
