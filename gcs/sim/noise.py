@@ -169,23 +169,25 @@ def add_telemetry_errors(noise, tick, p, v, rot, w, tick_s):
     n = v.shape[0]
     v_out, rot_out, w_out = v.copy(), rot.copy(), w.copy()
     s = noise.state
+    # each process's drive per tick: sqrt(1 - phi^2) of its stationary 1 sigma
+    kt = math.sqrt(1.0 - noise.tilt_phi * noise.tilt_phi)
+    kv = math.sqrt(1.0 - noise.vel_phi * noise.vel_phi)
+    kd = math.sqrt(1.0 - noise.drift_phi * noise.drift_phi)
     for i in range(n):
         d = noise.draws[tick, i]
         e = np.empty(3)
         for k in range(3):
-            kt = math.sqrt(1.0 - noise.tilt_phi * noise.tilt_phi)
             s[i, k] = noise.tilt_phi * s[i, k] + kt * noise.tilt_std[k] * d[3 + k]
             pa = noise.att_phi[k]
             ka = math.sqrt(1.0 - pa * pa)
             if noise.att_second[k]:
-                # two equal poles: a unit stage low-passed once more, scaled to 1 sigma
+                # two equal poles: a unit stage low-passed once more with the gain that makes
+                # the output's stationary 1 sigma att_std ((1 - pa^2) / sqrt(1 + pa^2) of it)
                 s[i, 6 + k] = pa * s[i, 6 + k] + ka * d[6 + k]
-                gain = noise.att_std[k] * math.sqrt((1.0 - pa * pa) ** 3 / (1.0 + pa * pa))
-                s[i, 3 + k] = pa * s[i, 3 + k] + gain * s[i, 6 + k] / ka
+                gain = noise.att_std[k] * (1.0 - pa * pa) / math.sqrt(1.0 + pa * pa)
+                s[i, 3 + k] = pa * s[i, 3 + k] + gain * s[i, 6 + k]
             else:
                 s[i, 3 + k] = pa * s[i, 3 + k] + ka * noise.att_std[k] * d[6 + k]
-            kv = math.sqrt(1.0 - noise.vel_phi * noise.vel_phi)
-            kd = math.sqrt(1.0 - noise.drift_phi * noise.drift_phi)
             s[i, 9 + k] = noise.vel_phi * s[i, 9 + k] + kv * noise.vel_std[k] * d[9 + k]
             s[i, 12 + k] = noise.drift_phi * s[i, 12 + k] + kd * noise.drift_std[k] * d[12 + k]
             v_out[i, k] += s[i, 9 + k] + s[i, 12 + k]
