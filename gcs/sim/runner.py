@@ -17,12 +17,12 @@ import numpy as np
 from gcs.config import TORQUE_MODES, ConfigError, ControlMode, TeamConfig
 from gcs.config.modes import as_strings
 from gcs.config.schema import whole_ratio
-from gcs.control.cascade import ARDUPILOT_RESPONSE, NOMINAL_RESPONSE, PX4_RESPONSE
 from gcs.control.formation import EdgeList, edge_list, reference_velocity
 from gcs.control.gains import LawGains
 from gcs.control.geometry import rotation_from_rpy
 from gcs.control.law import DERIVATIVE_METHODS
 from gcs.flightlog import FlightLog, estimates_record
+from gcs.sim.autopilot import attitude_gains, onboard_response
 from gcs.sim.link import lost_masks, make_link
 from gcs.sim.loop import (
     LOG_FIELDS,
@@ -31,7 +31,6 @@ from gcs.sim.loop import (
     MODE_RATES,
     N_LOG,
     LawInputs,
-    OnboardResponse,
     SampledLoop,
     TeamState,
     run_oracle,
@@ -41,18 +40,6 @@ from gcs.sim.noise import DRAWS, NOISE_MODELS, make_noise, noise_draws
 
 _MODES = {ControlMode.ACTUATORS: MODE_ACTUATORS, ControlMode.RATES: MODE_RATES,
           ControlMode.ATTITUDE: MODE_ATTITUDE}
-#: The onboard attitude loop's P gains in attitude mode [1/s]: PX4 v1.16's defaults
-#: (MC_ROLL_P, MC_PITCH_P, MC_YAW_P); with sim.autopilot, roll and pitch take its response's
-#: attitude_p_per_s and yaw YAW_ATTITUDE_GAIN.
-ATTITUDE_GAIN = (6.5, 6.5, 2.8)
-#: sim.autopilot -> the recorded response its loops fly (gcs/control/cascade.py)
-RESPONSES = {"px4": PX4_RESPONSE, "ardupilot": ARDUPILOT_RESPONSE, "nominal": NOMINAL_RESPONSE}
-#: yaw attitude P [1/s]: PX4 MC_YAW_P, ArduCopter ATC_ANG_YAW_P, the nominal personality's
-YAW_ATTITUDE_GAIN = {"px4": 2.8, "ardupilot": 4.5, "nominal": 2.8}
-#: The torque makes the body rates follow the response's reference this many times faster than
-#: the response itself, and at most TRACK_STEP_LIMIT / dt (stable under RK4 at the plant rate).
-TRACK_BANDWIDTHS = 10.0
-TRACK_STEP_LIMIT = 0.5
 _COL = {name: i for i, name in enumerate(LOG_FIELDS)}
 
 
@@ -288,15 +275,12 @@ def _advance(
     levant_state = np.zeros((n, 3, 3))
     u_prev = np.zeros((n, 3))
     rc_hold = np.array([r.copy() for r in team.rot])  # hover: the command is the attitude held
-    attitude_gain = np.array(ATTITUDE_GAIN)
     link = make_link(team.delay_steps, team.lost_down, team.lost_up, loop.predict)
-    onboard = _onboard(loop, n, thrust_hold)
+    onboard = onboard_response(loop.autopilot, loop.plant_hz, n, thrust_hold)
+    attitude_gain = attitude_gains(loop.autopilot)
     noise = make_noise(NOISE_MODELS[loop.autopilot] if loop.noise else None,
                        team.noise_draws.shape[0], n, loop.ctrl_every / loop.plant_hz,
                        team.noise_draws, loop.velocity_from_position_s)
-    if onboard.active:
-        attitude_gain[:2] = RESPONSES[loop.autopilot].attitude_p_per_s
-        attitude_gain[2] = YAW_ATTITUDE_GAIN[loop.autopilot]
     min_uz = math.inf
     ref_c, ref_a, ref_w, ref_ph = loop.reference
     chunk = log_every * max(1, int(loop.plant_hz) // log_every)  # ~1 simulated second per call
@@ -330,23 +314,6 @@ def _advance(
         if progress is not None:
             progress(min(done, loop.n_steps) * dt_s, loop.duration_s)
     return log, min_uz
-
-
-def _onboard(loop: _Loop, n: int, thrust_n: np.ndarray) -> OnboardResponse:
-    """The vehicles' own loops: inactive for `ideal`, else the autopilot's response model."""
-    dt_s = 1.0 / loop.plant_hz
-    if loop.autopilot == "ideal":
-        return OnboardResponse(False, 0.0, 0.0, 1.0, 0, 0, 1.0, 0.0, np.zeros((n, 3)),
-                               np.zeros((n, 3)), np.zeros((1, n, 3)), thrust_n.copy())
-    r = RESPONSES[loop.autopilot]
-    dead, yaw_dead = (int(round(x / dt_s)) for x in (r.rate_dead_time_s, r.yaw_dead_time_s))
-    return OnboardResponse(
-        True, r.rate_damping, r.rate_natural_radps, r.yaw_time_constant_s, dead, yaw_dead,
-        1.0 - math.exp(-dt_s / r.thrust_time_constant_s),
-        min(TRACK_BANDWIDTHS * max(r.rate_natural_radps, 1.0 / r.yaw_time_constant_s),
-            TRACK_STEP_LIMIT / dt_s),
-        np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((max(dead, yaw_dead) + 1, n, 3)),
-        thrust_n.copy())
 
 
 def _flight_log(team_cfg: TeamConfig, loop: _Loop, arrays: _Team, log: np.ndarray) -> FlightLog:

@@ -124,15 +124,10 @@ def test_prediction_changes_what_a_delayed_law_reads():
 def _rate_step(autopilot: str, axis: int, seconds: float = 1.5):
     """Body rate k of a vehicle whose rate command steps to 1 rad/s at t = 0, under the
     autopilot's response model (the rigid body integrated beside it, 1 kHz)."""
+    from gcs.sim.autopilot import onboard_response
     from gcs.sim.loop import _response_loop
-    from gcs.sim.runner import _Loop, _onboard
 
-    loop = _Loop(law="adaptive", mode="rates", derivative="model", oracle=False,
-                 rate_loop_gain_radps=50.0, levant_lipschitz=1.0, levant_substep_s=1e-4,
-                 plant_hz=1000.0, ctrl_hz=100.0, duration_s=1.0, log_every=1, ctrl_every=10,
-                 n_steps=1000, gains=None, reference=(), predict=False, autopilot=autopilot,
-                 noise=False, velocity_from_position_s=0.0)
-    onboard = _onboard(loop, 1, np.array([9.81]))
+    onboard = onboard_response(autopilot, 1000.0, 1, np.array([9.81]))
     inertia = np.array([[0.05, 0.05, 0.09]])
     w, torque = np.zeros((1, 3)), np.zeros((1, 3))
     cmd = np.zeros((1, 3))
