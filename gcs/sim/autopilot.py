@@ -1,9 +1,10 @@
-"""What `sim.autopilot` puts under the law in `gcs sim`: its loops, as each autopilot answers.
+"""What `sim.autopilot` puts under the law in `gcs sim`: its loops and its airframe.
 
 `ideal` is the paper's model with an idealised rate loop. `px4`, `ardupilot` and `nominal` stand
 for the bundled emulator's personality of that name (vehicle_emulator/config/personality.py, the
-source of truth for every size here): its loops as the recorded response models of
-gcs/control/cascade.py and its attitude P gains. Its telemetry errors are gcs/sim/noise.py's.
+source of truth for every size here; tests/unit/test_sim_personality.py checks the drag
+against it): its loops as the recorded response models of gcs/control/cascade.py, its attitude
+P gains, and its airframe's linear drag. Its telemetry errors are gcs/sim/noise.py's.
 """
 
 from __future__ import annotations
@@ -23,10 +24,19 @@ ATTITUDE_GAIN = (6.5, 6.5, 2.8)
 RESPONSES = {"px4": PX4_RESPONSE, "ardupilot": ARDUPILOT_RESPONSE, "nominal": NOMINAL_RESPONSE}
 #: yaw attitude P [1/s]: PX4 MC_YAW_P, ArduCopter ATC_ANG_YAW_P, the nominal personality's
 YAW_ATTITUDE_GAIN = {"px4": 2.8, "ardupilot": 4.5, "nominal": 2.8}
+#: sim.autopilot -> its airframe's linear drag k [1/s], the force -m k v in the world frame:
+#: PX4 SIH's SIH_KDV 1 N/(m/s) on SIH_MASS 1 kg; the ArduCopter and nominal personalities have
+#: none. `ideal` has none.
+LINEAR_DRAG_PER_S = {"px4": 1.0, "ardupilot": 0.0, "nominal": 0.0}
 #: The torque makes the body rates follow the response's reference this many times faster than
 #: the response itself, and at most TRACK_STEP_LIMIT / dt (stable under RK4 at the plant rate).
 TRACK_BANDWIDTHS = 10.0
 TRACK_STEP_LIMIT = 0.5
+
+
+def linear_drag_per_s(autopilot: str) -> float:
+    """The linear drag [1/s] of the airframe `autopilot` flies (0 for `ideal`)."""
+    return LINEAR_DRAG_PER_S.get(autopilot, 0.0)
 
 
 def attitude_gains(autopilot: str) -> np.ndarray:

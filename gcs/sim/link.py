@@ -70,9 +70,10 @@ def make_link(delay_steps: np.ndarray, lost_down: np.ndarray, lost_up: np.ndarra
 
 
 @njit(cache=True)
-def record(link, step, p, v, rot, w, thrust_n, mass_kg, g):
-    """Keep the true state of plant step `step` and its measured acceleration T R e3 / m - g e3
-    (at step 0 it fills the whole history: the vehicles hovered there before t = 0)."""
+def record(link, step, p, v, rot, w, thrust_n, mass_kg, drag_per_s, g):
+    """Keep the true state of plant step `step` and its measured acceleration T R e3 / m - k v
+    - g e3, k the linear drag (at step 0 it fills the whole history: the vehicles hovered there
+    before t = 0)."""
     depth = link.history.shape[0]
     first, last = (0, depth) if step == 0 else (step % depth, step % depth + 1)
     for slot in range(first, last):
@@ -83,6 +84,8 @@ def record(link, step, p, v, rot, w, thrust_n, mass_kg, g):
                 h[i, 3 + k] = v[i, k]
                 h[i, 15 + k] = w[i, k]
                 h[i, 18 + k] = thrust_n[i] * rot[i, k, 2] / mass_kg[i] - (g if k == 2 else 0.0)
+                if drag_per_s[i] > 0.0:
+                    h[i, 18 + k] -= drag_per_s[i] * v[i, k]
                 for c in range(3):
                     h[i, 6 + 3 * k + c] = rot[i, k, c]
 

@@ -3,7 +3,8 @@
 Two kernels share the law (gcs.control.law) and the physics (flightkit.physics):
 
 * `run_sampled`: what a flight computer does. The law runs every `ctrl_every` plant steps on the
-  sampled state, its outputs are held (zero-order hold) while the plant is integrated by RK4, and
+  sampled state, its outputs are held (zero-order hold) while the plant is integrated by RK4
+  (then each airframe's linear drag, `TeamState.drag_per_s`, as an exact decay), and
   its own states (mhat, rhohat) are integrated by forward Euler over the control period; in
   rates mode rhohat is held (the rate loop, not the torque (26), turns the command into torque).
 * `run_oracle`: the verification mode (docs/reproducing-the-paper.md): the law is evaluated
@@ -17,6 +18,7 @@ the law's edge list (gcs.control.formation.EdgeList), so a law step costs O(n + 
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -38,7 +40,8 @@ from gcs.sim.noise import add_telemetry_errors
 
 
 class TeamState(NamedTuple):
-    """The team's true state (advanced in place) and its mass drops (the faults)."""
+    """The team's true state (advanced in place), its mass drops (the faults) and its airframes'
+    linear drag."""
 
     p: np.ndarray
     v: np.ndarray
@@ -48,6 +51,7 @@ class TeamState(NamedTuple):
     inertia: np.ndarray
     drop_step: np.ndarray  # plant step of each vehicle's mass drop, -1 for none
     drop_factor: np.ndarray
+    drag_per_s: np.ndarray  # (n,) linear drag -m k v in the world frame [1/s]; 0: none
 
 
 class LawInputs(NamedTuple):
@@ -159,6 +163,28 @@ def _acceleration(rotation, thrust_n, mass_kg, g):
 
 
 @njit(cache=True)
+def _add_drag(acc, v, drag_per_s):
+    """The drag -k v each vehicle's accelerometer feels, added to its world acceleration acc."""
+    for i in range(acc.shape[0]):
+        if drag_per_s[i] > 0.0:
+            for k in range(3):
+                acc[i, k] -= drag_per_s[i] * v[i, k]
+
+
+@njit(cache=True)
+def plant_step(p, v, rot, w, thrust_n, torque_nm, mass, inertia, drag_per_s, dt_s):
+    """Advance the team's true state by one plant step in place: RK4 of eqs (6)-(9) under the
+    held thrust and torque (flightkit.physics.rk4_step), then each airframe's linear drag -m k v
+    as the exact decay v exp(-k dt) (the emulator's plant splits the step the same way)."""
+    rk4_step(p, v, rot, w, thrust_n, torque_nm, mass, inertia, dt_s)
+    for i in range(v.shape[0]):
+        if drag_per_s[i] > 0.0:
+            decay = math.exp(-drag_per_s[i] * dt_s)
+            for k in range(3):
+                v[i, k] *= decay
+
+
+@njit(cache=True)
 def _norms(a):
     """Row norms (n,) of an (n, 3) array."""
     return np.sqrt((a * a).sum(axis=1))
@@ -250,7 +276,7 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
     `OnboardResponse` (inactive: the idealised rate loop, no thrust lag), gcs.sim.noise.SimNoise
     (inactive: the law reads the state exactly).
     """
-    p, v, rot, w, mass, inertia, drop_step, drop_factor = team
+    p, v, rot, w, mass, inertia, drop_step, drop_factor, drag_per_s = team
     (mhat, rhohat, nominal_mass, graph, offsets, ref_c, ref_a, ref_w, ref_ph, gains,
      adaptive) = law
     (derivative, levant_state, u_prev, levant_l, levant_h, mode, rate_loop_gain, thrust_hold,
@@ -269,7 +295,7 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
         # the thrust acting on the plant: the held command, or its lagged response
         thrust_now = onboard.thrust_applied if onboard.active else thrust_hold
         if link.active:
-            record(link, step, p, v, rot, w, thrust_now, mass, gains.gravity_mps2)
+            record(link, step, p, v, rot, w, thrust_now, mass, drag_per_s, gains.gravity_mps2)
         if step % ctrl_every == 0:
             if link.active:
                 mp, mv, mrot, mw, macc = receive(link, step, step // ctrl_every)
@@ -308,6 +334,7 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
                 # Measured acceleration: the plant's specific force under the held thrust.
                 if not link.active:
                     macc = _acceleration(rot, thrust_now, mass, gains.gravity_mps2)
+                    _add_drag(macc, v, drag_per_s)
                 meas = TeamMeasurement(mp, mv, macc, mrot, mw)
                 du, ddu = force_derivatives(
                     meas, stage, mhat, 1.0 / kappa, graph, ref, gains, adaptive
@@ -356,7 +383,7 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
                 thrust_hold,
                 u,
             )
-        rk4_step(p, v, rot, w, thrust_now, torque_hold, mass, inertia, dt_s)
+        plant_step(p, v, rot, w, thrust_now, torque_hold, mass, inertia, drag_per_s, dt_s)
     for i in range(n):
         diag[i, 0] = tr_err[i]
         diag[i, 1] = we_norm[i]
@@ -400,9 +427,10 @@ def _advanced(x, k, c):
 @njit(cache=True)
 def run_oracle(first_step, n_steps, dt_s, log_every, team, law, log, log_row0):
     """Classic RK4 on the full closed-loop state (p, v, R, omega, mhat, rhohat) with the law
-    evaluated in every stage (exact derivatives, true masses). Returns the minimum u_z.
+    evaluated in every stage (exact derivatives, true masses), on the paper's drag-free model
+    (the team's drag_per_s is not read). Returns the minimum u_z.
     ``team``, ``law``: `TeamState`, `LawInputs`."""
-    p, v, rot, w, mass, _inertia, drop_step, drop_factor = team
+    p, v, rot, w, mass, _inertia, drop_step, drop_factor, _drag = team
     mhat, rhohat = law.mhat, law.rhohat
     x = OracleState(p, v, rot, w, mhat, rhohat)  # the arrays themselves: advanced in place
     min_uz = np.inf

@@ -22,7 +22,7 @@ from gcs.control.gains import LawGains
 from gcs.control.geometry import rotation_from_rpy
 from gcs.control.law import DERIVATIVE_METHODS
 from gcs.flightlog import FlightLog, estimates_record
-from gcs.sim.autopilot import attitude_gains, onboard_response
+from gcs.sim.autopilot import attitude_gains, linear_drag_per_s, onboard_response
 from gcs.sim.link import lost_masks, make_link
 from gcs.sim.loop import (
     LOG_FIELDS,
@@ -140,6 +140,7 @@ class _Team:
     offsets: np.ndarray
     drop_step: np.ndarray
     drop_factor: np.ndarray
+    drag_per_s: np.ndarray  # (n,) the airframes' linear drag [1/s] (gcs.sim.autopilot)
     delay_steps: np.ndarray  # (n,) the link's one-way delay in plant steps
     lost_down: np.ndarray  # (ticks, n) the link's lost samples (gcs.sim.link)
     lost_up: np.ndarray  # (ticks, n) and lost setpoints
@@ -233,6 +234,7 @@ def _team_of(team: TeamConfig, loop: _Loop) -> _Team:
         offsets=np.ascontiguousarray(team.offsets_enu_m(), dtype=float),
         drop_step=drop_step,
         drop_factor=drop_factor,
+        drag_per_s=np.full(n, linear_drag_per_s(loop.autopilot)),
     )
 
 
@@ -289,7 +291,7 @@ def _advance(
         count = min(chunk, loop.n_steps + 1 - done)
         row0 = done // log_every
         state = TeamState(team.p, team.v, team.rot, team.w, team.mass, team.inertia,
-                          team.drop_step, team.drop_factor)
+                          team.drop_step, team.drop_factor, team.drag_per_s)
         law_in = LawInputs(team.mhat, team.rhohat, team.nominal, team.graph, team.offsets,
                            ref_c, ref_a, ref_w, ref_ph, gains, loop.law == "adaptive")
         if loop.oracle:

@@ -98,7 +98,7 @@ def _scenario_state():
 def test_exact_force_derivatives_match_finite_differences_along_the_closed_loop(adaptive):
     # GIVEN the closed loop of Scenario I at a generic (non-equilibrium) state
     p, v, rot, w, mhat, rhohat, m, j, adj, off, ref_c, ref = _scenario_state()
-    team = TeamState(p, v, rot, w, m, j, np.full(4, -1), np.ones(4))
+    team = TeamState(p, v, rot, w, m, j, np.full(4, -1), np.ones(4), np.zeros(4))
     law = LawInputs(mhat, rhohat, m.copy(), adj, off, ref_c, ref[1], ref[2], ref[3], PAPER_GAINS,
                     adaptive)
 

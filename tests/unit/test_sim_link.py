@@ -27,9 +27,9 @@ def team_with(**sim):
 
 
 def state(n: int, x: float):
-    """Vehicle states whose every number is x (p, v, R, w), hovering (thrust m g)."""
+    """Vehicle states whose every number is x (p, v, R, w), hovering (thrust m g), no drag."""
     return (np.full((n, 3), x), np.full((n, 3), x), np.full((n, 3, 3), x), np.full((n, 3), x),
-            np.full(n, 9.81), np.ones(n), 9.81)
+            np.full(n, 9.81), np.ones(n), np.zeros(n), 9.81)
 
 
 def test_the_law_reads_each_vehicle_d_steps_late_and_holds_a_lost_sample():
