@@ -303,9 +303,13 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
                     predict_to_act(mp, mv, mrot, mw, macc, link, step, dt_s)
             else:
                 mp, mv, mrot, mw = p, v, rot, w
+                # the accelerometer's reading in the world: specific force under the held
+                # thrust and the drag, minus g e3
+                macc = _acceleration(rot, thrust_now, mass, gains.gravity_mps2)
+                _add_drag(macc, v, drag_per_s)
             if noise.active:
-                mv, mrot, mw = add_telemetry_errors(noise, step // ctrl_every, mp, mv, mrot, mw,
-                                                    ctrl_dt)
+                mv, mrot, mw, macc = add_telemetry_errors(
+                    noise, step // ctrl_every, mp, mv, mrot, mw, macc, gains.gravity_mps2, ctrl_dt)
             ref = reference_velocity(t, ref_c, ref_a, ref_w, ref_ph)
             stage = position_stage(
                 mp, mv, mrot, mhat, nominal_mass, graph, offsets, ref, gains, adaptive
@@ -331,10 +335,6 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
                 du = levant_state[:, :, 1].copy()
                 ddu = levant_state[:, :, 2].copy()
             else:
-                # Measured acceleration: the plant's specific force under the held thrust.
-                if not link.active:
-                    macc = _acceleration(rot, thrust_now, mass, gains.gravity_mps2)
-                    _add_drag(macc, v, drag_per_s)
                 meas = TeamMeasurement(mp, mv, macc, mrot, mw)
                 du, ddu = force_derivatives(
                     meas, stage, mhat, 1.0 / kappa, graph, ref, gains, adaptive

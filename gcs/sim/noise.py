@@ -12,7 +12,12 @@ personality.py's Sensors, fitted on the SITL recordings; the equations of its es
   estimator's own slow error, first or second order (two equal poles);
 * body rates: white noise of the rates the autopilot streams, its raw gyro samples through its
   second-order low pass (1 sigma = sigma_sample sqrt(2 B T_sample), B = 1.11 f_c, the filter's
-  noise bandwidth).
+  noise bandwidth);
+* acceleration: as gcs fly computes it from HIGHRES_IMU (gcs/fly/telemetry.py), the specific
+  force the accelerometer reports (body FLU, with its white noise: PX4 the mean of two raw
+  samples, ArduCopter its low-passed one) turned to the world by the REPORTED attitude, minus
+  g e3. So an attitude error e of the estimate reads as a horizontal acceleration of about g e
+  that the vehicle does not have, and the law's u' (derivatives.force_derivatives) acts on it.
 
 The law then reads the velocity as gcs fly's does (gcs/fly/consistent.py): the reported velocity
 plus the low-passed difference between the reported position's rate and it
@@ -31,8 +36,8 @@ import numpy as np
 from numba import njit
 
 #: Processes per vehicle and tick: 3 gyro, 3 integrated-gyro tilt, 3 slow attitude, 3 fast
-#: velocity, 3 velocity drift.
-DRAWS = 15
+#: velocity, 3 velocity drift, 3 accelerometer.
+DRAWS = 18
 
 
 class NoiseModel(NamedTuple):
@@ -48,6 +53,7 @@ class NoiseModel(NamedTuple):
     velocity_tau_s: float
     drift_std_mps: tuple[float, float, float]
     drift_tau_s: float
+    accel_std_mps2: tuple[float, float, float]  # body FLU, per tick: HIGHRES_IMU's
 
 
 def _filtered(sample_std: float, sample_s: float, cutoff_hz: float) -> float:
@@ -63,7 +69,8 @@ def _integrated(sample_std: float, sample_s: float, tau_s: float) -> float:
 #: PX4 v1.16 SIH (the px4 personality's PX4_SENSORS): gyro 0.14 / 0.07 / 0.03 rad/s per 4 ms
 #: sample through IMU_GYRO_CUTOFF 40 Hz; tilt integrated over 6 s on roll and pitch; EKF2's slow
 #: pitch (0.016 rad) and heading (0.058 rad, second order) errors over 4 s; velocity 0.126 /
-#: 0.126 / 0.10 m/s over 1.5 s plus a 0.10 m/s drift over 10 s.
+#: 0.126 / 0.10 m/s over 1.5 s plus a 0.10 m/s drift over 10 s; accelerometer 0.5 / 1.7 / 1.4
+#: m/s^2 per 4 ms sample, HIGHRES_IMU the mean of two.
 PX4_NOISE = NoiseModel(
     gyro_std_radps=tuple(_filtered(s, 0.004, 40.0) for s in (0.14, 0.07, 0.03)),
     tilt_std_rad=(_integrated(0.14, 0.004, 6.0), _integrated(0.07, 0.004, 6.0), 0.0),
@@ -72,15 +79,18 @@ PX4_NOISE = NoiseModel(
     attitude_order=(1, 1, 2),
     velocity_std_mps=(0.126, 0.126, 0.10), velocity_tau_s=1.5,
     drift_std_mps=(0.10, 0.10, 0.10), drift_tau_s=10.0,
+    accel_std_mps2=tuple(s / math.sqrt(2.0) for s in (0.5, 1.7, 1.4)),
 )
-#: ArduCopter 4.7.0-dev SITL (ARDUPILOT_SENSORS): no IMU noise; EKF3's velocity 3-5 mm/s over
-#: 5 s; attitude errors of tens of microradians.
+#: ArduCopter 4.7.0-dev SITL (ARDUPILOT_SENSORS): no gyro noise; EKF3's velocity 3-5 mm/s over
+#: 5 s; attitude errors of tens of microradians; the accelerometer's 10 / 12 / 0.7 mm/s^2 per
+#: 2 ms sample (its 400 Hz loop on whole physics steps) through INS_ACCEL_FILTER 20 Hz.
 ARDUPILOT_NOISE = NoiseModel(
     gyro_std_radps=(0.0, 0.0, 0.0), tilt_std_rad=(0.0, 0.0, 0.0), tilt_tau_s=1.0,
     attitude_std_rad=(3.0e-5, 3.2e-5, 4.5e-5), attitude_tau_s=(0.15, 0.15, 3.0),
     attitude_order=(1, 1, 1),
     velocity_std_mps=(0.0032, 0.0052, 0.002), velocity_tau_s=5.0,
     drift_std_mps=(0.0, 0.0, 0.0), drift_tau_s=1.0,
+    accel_std_mps2=tuple(_filtered(s, 0.002, 20.0) for s in (0.0102, 0.0116, 0.0007)),
 )
 NOISE_MODELS = {"px4": PX4_NOISE, "ardupilot": ARDUPILOT_NOISE}
 
@@ -99,6 +109,7 @@ class SimNoise(NamedTuple):
     vel_phi: float
     drift_std: np.ndarray  # (3,) ENU
     drift_phi: float
+    accel_std: np.ndarray  # (3,) body FLU
     draws: np.ndarray  # (ticks, n, DRAWS) standard normals
     state: np.ndarray  # (n, 15): tilt 0-2, attitude 3-5, its first stage 6-8, vel 9-11, drift 12-14
     # gcs fly's velocity consistency (gcs/fly/consistent.py): v_law = v + c, c the low-passed
@@ -116,7 +127,7 @@ def make_noise(model: NoiseModel | None, ticks: int, n: int, tick_s: float,
     if model is None:
         zero = np.zeros(3)
         return SimNoise(False, zero, zero, 0.0, zero, zero, np.zeros(3, dtype=np.bool_), zero,
-                        0.0, zero, 0.0, np.zeros((1, n, DRAWS)), np.zeros((n, 15)), *extra)
+                        0.0, zero, 0.0, zero, np.zeros((1, n, DRAWS)), np.zeros((n, 15)), *extra)
     neu_to_enu = [1, 0, 2]
     return SimNoise(
         True, np.array(model.gyro_std_radps), np.array(model.tilt_std_rad),
@@ -125,7 +136,7 @@ def make_noise(model: NoiseModel | None, ticks: int, n: int, tick_s: float,
         np.array([o == 2 for o in model.attitude_order]),
         np.array(model.velocity_std_mps)[neu_to_enu], math.exp(-tick_s / model.velocity_tau_s),
         np.array(model.drift_std_mps)[neu_to_enu], math.exp(-tick_s / model.drift_tau_s),
-        np.ascontiguousarray(draws), np.zeros((n, 15)), *extra)
+        np.array(model.accel_std_mps2), np.ascontiguousarray(draws), np.zeros((n, 15)), *extra)
 
 
 def noise_draws(seed: int, ticks: int, n: int) -> np.ndarray:
@@ -163,11 +174,13 @@ def _consistent(noise, i, p, v_reported, tick_s, out):
 
 
 @njit(cache=True)
-def add_telemetry_errors(noise, tick, p, v, rot, w, tick_s):
-    """Advance the processes by one tick and return copies of v, R, w with the errors on (v as
-    gcs fly's law reads it: with its consistency correction)."""
+def add_telemetry_errors(noise, tick, p, v, rot, w, acc, g, tick_s):
+    """Advance the processes by one tick and return copies of v, R, w, a with the errors on (v as
+    gcs fly's law reads it: with its consistency correction; a, the world acceleration, as gcs
+    fly computes it: the accelerometer's specific force R^T (a + g e3) plus its noise, turned by
+    the reported R, minus g e3)."""
     n = v.shape[0]
-    v_out, rot_out, w_out = v.copy(), rot.copy(), w.copy()
+    v_out, rot_out, w_out, acc_out = v.copy(), rot.copy(), w.copy(), acc.copy()
     s = noise.state
     # each process's drive per tick: sqrt(1 - phi^2) of its stationary 1 sigma
     kt = math.sqrt(1.0 - noise.tilt_phi * noise.tilt_phi)
@@ -200,5 +213,20 @@ def add_telemetry_errors(noise, tick, p, v, rot, w, tick_s):
             turn = (np.eye(3) + (math.sin(angle) / angle) * kx
                     + ((1.0 - math.cos(angle)) / (angle * angle)) * (kx @ kx))
             rot_out[i] = rot[i] @ turn
+        _reported_acceleration(noise, d, rot[i], rot_out[i], acc[i], g, acc_out[i])
         _consistent(noise, i, p, v_out[i].copy(), tick_s, v_out)
-    return v_out, rot_out, w_out
+    return v_out, rot_out, w_out, acc_out
+
+
+@njit(cache=True)
+def _reported_acceleration(noise, d, rot, rot_reported, acc, g, out):
+    """One vehicle's world acceleration from its accelerometer as the law reads it: the specific
+    force f = R^T (a + g e3) (body FLU) plus the noise of draws d[15:18], turned by the reported
+    attitude: R_reported f - g e3."""
+    f = np.empty(3)
+    for b in range(3):
+        f[b] = (rot[0, b] * acc[0] + rot[1, b] * acc[1] + rot[2, b] * (acc[2] + g)
+                + noise.accel_std[b] * d[15 + b])
+    for k in range(3):
+        out[k] = rot_reported[k, 0] * f[0] + rot_reported[k, 1] * f[1] + rot_reported[k, 2] * f[2]
+    out[2] -= g
