@@ -80,8 +80,9 @@ PX4_RECORDED = {
 
 
 def px4_comparison(seeds: tuple[int, ...] = (1, 2, 3)) -> list[str]:
-    """configs/square4_px4sih.yaml's rates gains in gcs sim on sim.autopilot px4 (its loops and
-    telemetry errors, 4 ms of link), per fly.velocity_from_position_s, beside the recordings."""
+    """configs/square4_px4sih.yaml's rates gains in gcs sim on sim.autopilot px4 (its loops, drag
+    and telemetry errors, 4 ms of link), per fly.velocity_from_position_s, beside the
+    recordings."""
     import copy
 
     from gcs.config import load_team, team_from_dict, team_to_dict
@@ -150,7 +151,9 @@ def main() -> int:
                      f"{status.get('error', 0)} |")
     lines += ["", f"Per run, Scenario I of `{STUDIES[0]}` in this process on one core: "
               f"{alone_ms:.1f} ms alone, {batch_ms:.1f} ms inside a batch of 32 (best of 3).",
-              "", "`gcs sim` on PX4's loops and telemetry errors (`sim.autopilot: px4`, "
+              "", "`gcs sim` on PX4's loops, airframe drag and telemetry errors (the law's "
+              "acceleration from the accelerometer and the reported attitude; `sim.autopilot: "
+              "px4`, "
               "docs/sweep.md) against what the same gains flew over MAVLink, formation error for "
               "t >= 30 s, Scenario I at 100 Hz (the sim starts at the initial positions, the "
               "flights from the ground or from 10 m, as noted):", "", *px4_comparison()]
