@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from gcs.mission.plan import EXIT_ABORTED, EXIT_OK, Cmd, Command, Phase
+from gcs.mission.plan import EXIT_ABORTED, EXIT_OK, GATE_FORMATION, Cmd, Command, Phase
 from gcs.mission.safety import Problem
 from gcs.mission.stopping import begin_stop
 
@@ -23,12 +23,14 @@ __all__ = ["formation", "not_following", "prime"]
 
 
 def prime(m: MissionMachine) -> list[Command]:
-    """The law's setpoints stream for `prime_s` under the in-flight rules; then t = 0."""
+    """The law's setpoints stream for `prime_s` under the in-flight rules, or until the
+    team's agreed start (GATE_FORMATION's time); then t = 0."""
     problems = m._flight_problems()
     if problems:
         begin_stop(m, problems, EXIT_ABORTED)
         return m._drive()
-    if m._elapsed() < m.plan.prime_s:
+    at = m.gate_time_s(GATE_FORMATION)
+    if m._now_s < at if at is not None else m._elapsed() < m.plan.prime_s:
         return []
     m.formation_t0_s = m._now_s
     m._enter(Phase.FORMATION)

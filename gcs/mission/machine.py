@@ -63,6 +63,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+from gcs.config.modes import FlyAction
 from gcs.mission.autopilots import PX4, AutopilotProfile, ModeSpec, profile_for
 from gcs.mission.connect import connect
 from gcs.mission.formation import formation, prime
@@ -132,7 +133,7 @@ class MissionMachine:
     _phase_since_s: float | None = None
     _configured_s: float | None = None  # PREFLIGHT: when the CONFIGURE commands had all ended
     _now_s: float = 0.0
-    _abort: list[tuple[str, int]] = field(default_factory=list)
+    _abort: list[tuple[str, int, FlyAction | None]] = field(default_factory=list)
     _stop_reason: Outcome | None = None
     _stopping_since_s: float = 0.0
     _interrupts: int = 0
@@ -143,6 +144,9 @@ class MissionMachine:
     _error_t0: float | None = None  # formation error at the formation start
     _goto: GoToStart | None = None  # the team's go-to-start progress
     _delays: SustainedDelays = field(default_factory=SustainedDelays)
+    #: the gate (plan.gates) the machine waits at now, None when it waits at none
+    waiting_at: str | None = None
+    _gates_open: dict[str, float | None] = field(default_factory=dict)  # gate -> its time
 
     def __post_init__(self) -> None:
         self._v = {vid: VehicleProgress() for vid in self.vehicle_ids}
@@ -221,12 +225,34 @@ class MissionMachine:
 
     # --- inputs ----------------------------------------------------------------------------------
 
-    def request_abort(self, reason: str, *, operator: bool = True) -> None:
-        """Ctrl-C, the abort key (operator) or an outside failure; acted on at the next tick."""
+    def request_abort(self, reason: str, *, operator: bool = True,
+                      action: FlyAction | None = None) -> None:
+        """Ctrl-C, the abort key (operator) or an outside failure; acted on at the next tick.
+        `action` replaces the plan's abort action (e.g. the link-loss action when the team
+        around this machine, not a vehicle of its own, was lost)."""
         code = EXIT_INTERRUPTED if operator else EXIT_ABORTED
         if self.phase is Phase.STOPPING and operator:
             self._interrupts += 1
-        self._abort.append((reason, code))
+        self._abort.append((reason, code, action))
+
+    def open_gate(self, gate: str, at_s: float | None = None) -> None:
+        """Let the machine pass `gate` (plan.gates); for GATE_FORMATION, `at_s` is the agreed
+        formation start on this machine's clock (PRIME streams until then)."""
+        self._gates_open[gate] = at_s
+
+    def gate_time_s(self, gate: str) -> float | None:
+        return self._gates_open.get(gate)
+
+    def _gate(self, gate: str) -> bool:
+        """True while the machine must wait at `gate`: one of the plan's, not opened yet."""
+        if gate not in self.plan.gates or gate in self._gates_open:
+            if self.waiting_at == gate:
+                self.waiting_at = None
+            return False
+        if self.waiting_at != gate:
+            self.waiting_at = gate
+            self._note(f"waiting for the team at the {gate} gate")
+        return True
 
     def on_result(self, result: CommandResult) -> list[Command]:
         """A command finished (acknowledged, rejected or timed out)."""
@@ -291,8 +317,9 @@ class MissionMachine:
             if v.goto is not None:
                 update_goto_vehicle(self, s.vehicle_id)
         if self._abort:
-            reasons = [r for r, _ in self._abort]
-            code = max(c for _, c in self._abort)
+            reasons = [r for r, _, _ in self._abort]
+            code = max(c for _, c, _ in self._abort)
+            actions = [a for _, _, a in self._abort if a is not None]
             self._abort.clear()
             if self.phase is Phase.STOPPING:
                 if self._interrupts:
@@ -300,7 +327,8 @@ class MissionMachine:
                                                 "autopilots' failsafes take over"))
                     return []
             elif self.phase is not Phase.DONE:
-                begin_stop(self, [Problem(None, r) for r in reasons], code)
+                begin_stop(self, [Problem(None, r) for r in reasons], code,
+                           action=actions[0] if actions else None)
         return self._drive()
 
     # --- the sequence ----------------------------------------------------------------------------

@@ -19,6 +19,9 @@ __all__ = [
     "EXIT_ABORTED",
     "EXIT_INTERRUPTED",
     "EXIT_OK",
+    "GATES",
+    "GATE_FLIGHT",
+    "GATE_FORMATION",
     "Cmd",
     "Command",
     "CommandResult",
@@ -97,6 +100,14 @@ class Outcome:
     reason: str
 
 
+#: Gate before the first command that moves a vehicle (arming, go to start, priming): every
+#: machine of the team has passed its preflight.
+GATE_FLIGHT = "flight"
+#: Gate before PRIME: every machine's vehicles hold at their start; opened with the agreed
+#: formation start time.
+GATE_FORMATION = "formation"
+GATES = (GATE_FLIGHT, GATE_FORMATION)
+
 
 @dataclass(frozen=True, slots=True)
 class MissionPlan:
@@ -134,3 +145,6 @@ class MissionPlan:
     command_attempts: int = 3  # per stop command (each has its own ack retries)
     command_retry_s: float = 1.0  # between two attempts of a refused stop command
     go_to_start: GoToStartPlan | None = None  # None: no go-to-start phase
+    # the team's gates (GATE_FLIGHT, GATE_FORMATION) this machine waits at until another
+    # party opens them (MissionMachine.open_gate): a team whose vehicles several machines fly
+    gates: frozenset[str] = frozenset()

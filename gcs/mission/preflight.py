@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 from gcs.mission.autopilots import profile_for
 from gcs.mission.landed import quiet_mode_cause, with_quiet_causes
-from gcs.mission.plan import EXIT_ABORTED, Cmd, Command, Phase
+from gcs.mission.plan import EXIT_ABORTED, GATE_FLIGHT, Cmd, Command, Phase
 from gcs.mission.progress import ArmProgress
 from gcs.mission.safety import Problem, VehicleStatus, preflight_problems
 from gcs.mission.start import to_goto
@@ -70,6 +70,8 @@ def preflight(m: MissionMachine) -> list[Command]:
     if problems:
         begin_stop(m, problems, EXIT_ABORTED)
         return m._drive()
+    if m._gate(GATE_FLIGHT):
+        return []
     m._note("preflight checks passed")
     if ground:
         m._arming = tuple(ground)

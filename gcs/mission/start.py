@@ -12,7 +12,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from gcs.mission.goto import GoToStart, crossing_pairs, going_line
-from gcs.mission.plan import EXIT_ABORTED, Cmd, Command, NoteLevel, Phase
+from gcs.mission.plan import EXIT_ABORTED, GATE_FORMATION, Cmd, Command, NoteLevel, Phase
 from gcs.mission.progress import GotoProgress
 from gcs.mission.safety import Problem
 from gcs.mission.stopping import begin_stop
@@ -108,7 +108,8 @@ def to_prime(m: MissionMachine) -> list[Command]:
                 or (v.goto is not None and not v.goto.released)):
             held.append(vid)
     if not held:
-        m._enter(Phase.PRIME)
+        if not m._gate(GATE_FORMATION):
+            m._enter(Phase.PRIME)
         return []
     m._held = tuple(held)
     m._enter(Phase.HOLD)
@@ -122,7 +123,8 @@ def hold(m: MissionMachine) -> list[Command]:
                if not (m._v[vid].status is not None
                        and m._v[vid].status.mode == m.profile(vid).hold.name)]
     if not waiting and not m.position_targets:
-        m._enter(Phase.PRIME)
+        if not m._gate(GATE_FORMATION):
+            m._enter(Phase.PRIME)
     elif m._elapsed() > m.plan.hold_timeout_s:
         names = ", ".join(f"{vid} ({m.profile(vid).hold.name})" for vid in waiting)
         begin_stop(m, [Problem(None, f"vehicles {names} did not report their hold mode "

@@ -23,12 +23,16 @@ __all__ = ["begin_stop", "finish", "stopping"]
 
 
 def begin_stop(m: MissionMachine, problems: Sequence[Problem], code: int,
-               end: bool = False) -> None:
+               end: bool = False, action: FlyAction | None = None) -> None:
+    """Stop for `problems`: each vehicle gets the end action (`end`), `action` when given, the
+    link-loss action when a vehicle's link was lost, else the abort action."""
     if m.phase in (Phase.STOPPING, Phase.DONE):
         return
     lost = {p.vehicle_id for p in problems if p.kind == "link" and p.vehicle_id is not None}
     if end:
         action, reason = m.plan.end_action, "formation complete"
+    elif action is not None:
+        reason = "; ".join(p.text for p in problems)
     elif lost and code != EXIT_INTERRUPTED:
         action = m.plan.link_loss_action
         reason = "; ".join(p.text for p in problems)
