@@ -1,4 +1,4 @@
-"""The `gcs` command line: sim, fly, check and plot (print lives here, not in the library).
+"""The `gcs` command line: sim, fly, agent, sweep, check, plot (print lives here, not below).
 
 `main` points numba's cache at the current sources (flightkit.jitcache) before it imports a
 compiled module, so this module imports none at its top."""
@@ -63,6 +63,10 @@ def build_parser() -> argparse.ArgumentParser:
     from gcs.fly.command import add_parser as add_fly_parser
 
     add_fly_parser(sub)
+
+    from gcs.agent.command import add_parser as add_agent_parser
+
+    add_agent_parser(sub)
 
     from gcs.sweep.command import add_parser as add_sweep_parser
 
@@ -134,6 +138,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             from gcs.sweep.command import run_sweep
 
             return run_sweep(args)
+        if args.command == "agent":
+            from gcs.agent.command import run_agent
+
+            return run_agent(args)
+        if args.command == "fly" and (args.agents or args.agents_running):
+            from gcs.agent.command import run_fly_agents
+
+            return run_fly_agents(args)
         if args.command == "fly":
             from gcs.fly.command import run_fly
 

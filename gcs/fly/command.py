@@ -96,6 +96,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "(default: auto)")
     p.add_argument("--emulators", action="store_true",
                    help="start `vehicle-emu --fleet --team FILE` for the flight and stop it after")
+    p.add_argument("--agents", action="store_true",
+                   help="no law here: start one `gcs agent` per vehicle (each holds its own "
+                        "vehicle's link and runs its share of the law over the neighbour bus, "
+                        "the team file's network: section) and supervise them (docs/agents.md)")
+    p.add_argument("--agents-per-process", type=int, default=1, metavar="K",
+                   help="with --agents: K vehicles per agent process (default: 1)")
+    p.add_argument("--agents-running", action="store_true",
+                   help="with --agents: start none, supervise the agents already running")
     p.add_argument("--connect-timeout-s", type=float, default=None,
                    help="wait this long for every vehicle to be heard (default: the file's "
                         "fly.connect_timeout_s, 60 s)")

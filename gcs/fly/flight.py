@@ -31,7 +31,7 @@ import math
 import os
 import signal
 import sys
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 import numpy as np
@@ -51,7 +51,7 @@ from gcs.fly.sched import Scheduling
 from gcs.fly.setpoints import Setpoints
 from gcs.fly.setup import FlightSetup, FlightSetupError, FlyOptions, FlyResult, prepare
 from gcs.fly.stats import AgeStats, TickStats
-from gcs.fly.tick import Tick, TickLoop, build_law, warm_up
+from gcs.fly.tick import LawRows, Tick, TickLoop, build_law, warm_up
 from gcs.geodesy import Geodetic, TeamFrame
 from gcs.link import (
     CommandRejectedError,
@@ -77,7 +77,10 @@ class Flight:
     """One flight of the team (see the module docstring). Use `await Flight(setup, opts).run()`."""
 
     def __init__(self, setup: FlightSetup, options: FlyOptions,
-                 status_factory: Callable[[Flight], Any] | None = None) -> None:
+                 status_factory: Callable[[Flight], Any] | None = None, *,
+                 law_rows: LawRows | None = None, law_setup: FlightSetup | None = None) -> None:
+        """`law_rows` and `law_setup` (an agent's flight, gcs/agent/): the law is built and
+        run over `law_setup`'s team, of which `law_rows.own_rows` are this flight's vehicles."""
         self.setup = setup
         self.options = options
         team = setup.team
@@ -88,8 +91,11 @@ class Flight:
         self.machine = MissionMachine(setup.plan, self.ids)
         # position mode (law "autopilot") runs no law: the one built here is never stepped
         position_mode = setup.mode == ControlMode.POSITION
-        self.law, rhohat, inertia_estimated = build_law(setup)
-        warm_up(self.law, team, self.period_s)
+        law_setup = setup if law_setup is None else law_setup
+        self.law, rhohat, inertia_estimated = build_law(law_setup)
+        warm_up(self.law, law_setup.team, self.period_s)
+        if law_rows is not None:
+            rhohat = rhohat[law_rows.own_rows]
         vehicles = team.vehicles
         fr = team.frame
         self.ties = TeamTies(TeamFrame(Geodetic(*fr.origin)),
@@ -127,7 +133,12 @@ class Flight:
         self.setpoints = Setpoints(team, setup.mode, self.machine, self.ties, self.proxies,
                                    self.figures.limited_ticks)
         self.tick = Tick(setup, self.machine, self.law, self.ties, self.hot, self.proxies,
-                         self.commander, self.setpoints, self.figures)
+                         self.commander, self.setpoints, self.figures, law_rows)
+        #: tasks that run beside the tick for the flight's lifetime, each given the event set
+        #: when the flight is done (an agent's bus: its status, the supervisor's gates)
+        self.companions: list[Callable[[asyncio.Event], Awaitable[None]]] = []
+        #: sections added to the records (an agent's neighbour figures), read at the end
+        self.report_more: Callable[[], dict[str, Any]] | None = None
         self._finished = asyncio.Event()
         self.tick_loop = TickLoop(self.machine, self.period_s, self.figures.ticks, self.tick.step,
                                   self._finished)
@@ -184,6 +195,8 @@ class Flight:
                         tg.create_task(self.tick_loop.run(), name="control tick")
                         if not self.ties.complete:
                             tg.create_task(self._origins_loop(), name="origins")
+                        for k, companion in enumerate(self.companions):
+                            tg.create_task(companion(self._finished), name=f"companion {k}")
                         if self._status_factory is not None:
                             tg.create_task(self._status_factory(self).run(self._finished),
                                            name="status")
@@ -196,7 +209,8 @@ class Flight:
         outcome = self.machine.outcome or Outcome(EXIT_ABORTED, "stopped without an outcome")
         return self.records.write(outcome, scheduling=self.scheduling, tlog=self._tlog,
                                   vehicle_notes=self.vehicle_notes,
-                                  compiled_after_ready=self.compiled_after_ready)
+                                  compiled_after_ready=self.compiled_after_ready,
+                                  more=self.report_more() if self.report_more else None)
 
     def _install_signal_handlers(self, loop: asyncio.AbstractEventLoop) -> None:
         for sig, why in ((signal.SIGINT, "interrupted (Ctrl-C)"), (signal.SIGTERM, "terminated")):

@@ -123,9 +123,11 @@ class Records:
         return f"{name} ({note})" if note else name
 
     def write(self, outcome: Outcome, *, scheduling: Scheduling | None, tlog: TlogWriter | None,
-              vehicle_notes: dict[int, str], compiled_after_ready: list[str]) -> FlyResult:
+              vehicle_notes: dict[int, str], compiled_after_ready: list[str],
+              more: dict[str, Any] | None = None) -> FlyResult:
         """report.json, timeseries.csv and (options.figures) the figures from the formation's
-        samples; none without one."""
+        samples; none without one. `more`: sections added to the records' extra (an agent's
+        neighbour figures)."""
         fig = self.figures
         out = self.options.out_dir
         if len(fig.builder) == 0:
@@ -173,6 +175,7 @@ class Records:
             "statustext": self.statustexts(),
             # numba compiles during the flight (each stalled the tick while it ran)
             "compiled_after_ready": compiled_after_ready,
+            **(more or {}),
         })
         report = build_report(log)
         write_report(out / REPORT_NAME, report)

@@ -14,6 +14,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 
@@ -21,17 +22,13 @@ from gcs.config import TORQUE_MODES, ControlMode, TeamConfig
 from gcs.control.formation import reference_velocity
 from gcs.control.gains import GRAVITY_MPS2
 from gcs.control.law import SingularCommandError, TeamCommand, TeamLaw, TeamMeasurement
-from gcs.control.position import phi
 from gcs.control.predict import PredictionAudit, horizons_s, predict, uplink_delay_s
 from gcs.control.slots import FormationSlots
 from gcs.fly.collector import PacedCollector
 from gcs.fly.commander import Commander
 from gcs.fly.delay import unmeasured_delay_lines
+from gcs.fly.hover import HoverStart
 from gcs.fly.measure import (
-    HOVER_MIN_SAMPLES,
-    HOVER_WINDOW_S,
-    HoverEstimate,
-    HoverThrust,
     TeamSample,
     command_heading_rad,
     drop_stale_neighbours,
@@ -47,7 +44,6 @@ from gcs.fly.stats import TickStats, log_due
 from gcs.fly.telemetry import StatusSlices, team_sample, vehicle_statuses
 from gcs.fly.telemetry import warm_up as sample_warm_up
 from gcs.link import HotTable, VehicleProxy, fastpath
-from gcs.link.samples import AttitudeTarget
 from gcs.metrics import formation_error, formation_error_m
 from gcs.mission.machine import MissionMachine
 from gcs.mission.plan import Phase
@@ -187,14 +183,33 @@ class TickLoop:
                            1e3 * gap_s, t_s, periods)
 
 
+class LawRows(Protocol):
+    """An agent's law team around the flight's own vehicles (gcs/agent/neighbours.py): the
+    tick publishes its own states, and its law runs over the own rows plus neighbours' rows."""
+
+    own_rows: np.ndarray
+
+    def publish(self, sample: TeamSample) -> None: ...
+    def fresh(self, own_fresh: np.ndarray, now_s: float) -> np.ndarray: ...
+    def record_ages(self, now_s: float) -> None: ...
+    def measurement(self, own: TeamMeasurement, act_s: float | None) -> TeamMeasurement: ...
+    def heading(self, own_heading_rad: np.ndarray) -> np.ndarray: ...
+    def own(self, command: TeamCommand) -> TeamCommand: ...
+
+
 class Tick:
     """One tick of the team (`step`), and what it last saw and did (`last_sample`,
-    `last_command`, `formation_error_m`, `formation_t_s`: the live status reads them)."""
+    `last_command`, `formation_error_m`, `formation_t_s`: the live status reads them).
+
+    With `law_rows` (an agent's flight, gcs/agent/), the law runs over the agent's law team:
+    the flight's own vehicles and their neighbours from the bus; only own rows are sent."""
 
     def __init__(self, setup: FlightSetup, machine: MissionMachine, law: TeamLaw,
                  ties: TeamTies, hot: HotTable, proxies: list[VehicleProxy],
-                 commander: Commander, setpoints: Setpoints, figures: Figures) -> None:
+                 commander: Commander, setpoints: Setpoints, figures: Figures,
+                 law_rows: LawRows | None = None) -> None:
         team = setup.team
+        self.law_rows = law_rows
         self.setup = setup
         self.team = team
         self.n = team.n
@@ -213,7 +228,8 @@ class Tick:
         self.setpoints = setpoints
         self.figures = figures
         self.consistency = figures.consistency
-        self.hover = HoverStart(setup, machine, law, hot, proxies, figures.hover_estimates)
+        self.hover = HoverStart(setup, machine, law, hot, proxies, figures.hover_estimates,
+                                None if law_rows is None else law_rows.own_rows)
         self._from_hover = setup.law == "adaptive" and any(v.estimates.from_hover
                                                            for v in team.vehicles)
         self.slots: FormationSlots | None = None  # position mode: fixed at the formation start
@@ -243,6 +259,8 @@ class Tick:
         """Tick k: its deadline and its start `now_s` on the event loop's clock."""
         sample = team_sample(self.proxies, now_s, self.last_sample, self._tie_arrays, self.hot)
         self.last_sample = sample
+        if self.law_rows is not None:
+            self.law_rows.publish(sample)
         self.consistency.update(sample.position_m, sample.velocity_mps, sample.position_taken_s,
                                 sample.finite)
         m = self.machine
@@ -337,7 +355,9 @@ class Tick:
     def _run_law(self, k: int, sample: TeamSample, now_s: float) -> TeamCommand | None:
         if self._k0 is None:
             self._start_formation(k, sample)
-            self.law.heading_rad = command_heading_rad(self.team.fly.heading, sample.rotation)
+            heading = command_heading_rad(self.team.fly.heading, sample.rotation)
+            self.law.heading_rad = (heading if self.law_rows is None
+                                    else self.law_rows.heading(heading))
             self._log_unmeasured_delays()
             if not self.hover.initial_mass(sample, now_s):
                 return self.last_command
@@ -345,9 +365,13 @@ class Tick:
         dt = (k - (self._last_law_k if self._last_law_k is not None else k - 1)) * self.period_s
         self._last_law_k = k
         fresh = fresh_mask(sample, self.team.fly.stale_after_s)
+        rows = self.law_rows
         # the staleness rule, per edge and in place: the law's weights a_ij of this tick
-        stale_neighbours = drop_stale_neighbours(self.law.graph, fresh,
-                                                 self.law.active_graph.weight)
+        stale_neighbours = drop_stale_neighbours(
+            self.law.graph, fresh if rows is None else rows.fresh(fresh, now_s),
+            self.law.active_graph.weight)
+        if rows is not None:
+            stale_neighbours = stale_neighbours[rows.own_rows]
         ref = reference_velocity(t, *self.ref_arrays)
         meas = self._law_input(sample, now_s)
         try:
@@ -362,11 +386,15 @@ class Tick:
             self.machine.request_abort(f"t = {t:.2f} s: the law produced a non-finite command",
                                        operator=False)
             return self.last_command
+        if rows is not None:
+            command = rows.own(command)
         self.last_command = command
         self.formation_t_s = t
         log, self._next_log_k = log_due(k, self._k0, self.setup.log_every, self._next_log_k)
         if self.machine.phase is Phase.FORMATION:
             self.figures.ages.record(sample.delay_s, sample.age_s, fresh, stale_neighbours)
+            if rows is not None:
+                rows.record_ages(now_s)
             self.consistency.update_figures()
             if log:
                 self.log(t, sample, ref[0], command)
@@ -380,7 +408,7 @@ class Tick:
         if self.consistency.on:
             held = held._replace(velocity_mps=self.consistency.velocity(held.velocity_mps))
         if self.figures.audit is None:
-            return held
+            return held if self.law_rows is None else self.law_rows.measurement(held, None)
         # each link's least one-way delay: the table's copy of the clock filters' (a column)
         least = (self.hot.clock_line[:, 3] if self._clocks_in_table
                  else np.array([p.clock.least_delay_s for p in self.proxies]))
@@ -392,7 +420,7 @@ class Tick:
                                        sample.position_taken_s, sample.rotation,
                                        sample.omega_radps, sample.attitude_taken_s)
             self.figures.audit.record(act, predicted, held, h_pos)
-        return predicted
+        return predicted if self.law_rows is None else self.law_rows.measurement(predicted, act)
 
     def log(self, t: float, sample: TeamSample, ref_velocity_enu_mps: np.ndarray,
             c: TeamCommand | None) -> None:
@@ -408,68 +436,3 @@ class Tick:
                                     velocity_enu_mps=sample.velocity_mps,
                                     reference_velocity_enu_mps=ref_velocity_enu_mps,
                                     mass_true_kg=true_mass_kg(self.team, t), **law)
-
-
-class HoverStart:
-    """mhat(0) from the hover (`estimates.mhat: from_hover`): the thrust each such vehicle
-    reports while it holds in PRIME (`record`), turned into its initial mass estimate at the
-    formation start (`initial_mass`)."""
-
-    def __init__(self, setup: FlightSetup, machine: MissionMachine, law: TeamLaw, hot: HotTable,
-                 proxies: list[VehicleProxy], estimates: dict[int, HoverEstimate]) -> None:
-        self.setup = setup
-        self.team = setup.team
-        self.machine = machine
-        self.law = law
-        self.hot = hot
-        self.proxies = proxies  # the team's, in team order once the links are open
-        self.thrust = HoverThrust(setup.team.n)
-        self.estimates = estimates  # vehicle id -> its estimate (the records')
-
-    def record(self) -> None:
-        """PRIME: the vehicles hold on their own; keep the thrust they report (from_hover)."""
-        hot = self.hot
-        for i, (v, p) in enumerate(zip(self.team.vehicles, self.proxies, strict=True)):
-            if not v.estimates.from_hover:
-                continue
-            if p.slot == i and hot.count[i, fastpath.ATTITUDE_TARGET] > 0:  # no decode per tick
-                self.thrust.add(i, float(hot.rx_s[i, fastpath.ATTITUDE_TARGET]),
-                                float(hot.misc[i, fastpath.TARGET_THRUST]))
-            elif (at := p.sample(AttitudeTarget)) is not None:
-                self.thrust.add(i, at.rx_time_s, at.thrust)
-
-    def initial_mass(self, sample: TeamSample, now_s: float) -> bool:
-        """At the formation start: mhat_i(0) from the hover of each `mhat: from_hover` vehicle,
-        checked against Proposition 2; False (and the flight stops) when one cannot be taken
-        or fails the check."""
-        if self.setup.law != "adaptive":
-            return True
-        g = self.setup.gains
-        phi0_all = phi(np.ascontiguousarray(sample.velocity_mps), g.sigma_a)  # the law's (23)
-        for i, v in enumerate(self.team.vehicles):
-            if not v.estimates.from_hover:
-                continue
-            name = f"vehicle {v.id} (sysid {v.sysid})"
-            phi0 = float(phi0_all[i])
-            est = self.thrust.estimate(i, now_s, v.airframe.max_thrust_n, g.alpha_m, phi0,
-                                       v.mass_bound_kg)
-            if est is None:
-                self.machine.request_abort(
-                    f"{name}: no hover thrust to take mhat(0) from (fewer than "
-                    f"{HOVER_MIN_SAMPLES} ATTITUDE_TARGET in the {HOVER_WINDOW_S:g} s before the "
-                    "formation start)", operator=False)
-                return False
-            self.estimates[v.id] = est
-            bound = ("no mass_bound_kg" if est.least_mhat0 is None else
-                     f"Proposition 2: mhat(0) >= (phi(0) - 1) mbar / alpha_m = "
-                     f"{est.least_mhat0:.4g} {'holds' if est.proposition2_holds else 'FAILS'}")
-            logger.info("%s: hover thrust %.4f (%d samples) -> %.4g kg, mhat(0) %.4g; %s", name,
-                        est.thrust_norm, est.samples, est.mass_kg, est.mhat0, bound)
-            if not est.proposition2_holds:
-                self.machine.request_abort(
-                    f"{name}: mhat(0) {est.mhat0:.4g} from the hover ({est.mass_kg:.4g} kg) is "
-                    f"below Proposition 2's {est.least_mhat0:.4g} (mass_bound_kg "
-                    f"{v.mass_bound_kg:g})", operator=False)
-                return False
-            self.law.mhat[i] = est.mhat0
-        return True

@@ -197,6 +197,11 @@ class MissionMachine:
         return dict(self._goto.results) if self._goto is not None else {}
 
     @property
+    def stop_reason(self) -> Outcome | None:
+        """Why the machine is stopping (from STOPPING on; the outcome once DONE)."""
+        return self.outcome or self._stop_reason
+
+    @property
     def lost(self) -> frozenset[int]:
         return frozenset(vid for vid, v in self._v.items() if v.lost)
 
@@ -242,6 +247,9 @@ class MissionMachine:
 
     def gate_time_s(self, gate: str) -> float | None:
         return self._gates_open.get(gate)
+
+    def gate_open(self, gate: str) -> bool:
+        return gate in self._gates_open
 
     def _gate(self, gate: str) -> bool:
         """True while the machine must wait at `gate`: one of the plan's, not opened yet."""

@@ -254,7 +254,7 @@ def test_each_emulator_room_imports_only_the_rooms_below_it():
 GCS_LAYERS = (
     ("cli",),
     ("precompile",),
-    ("sweep",),
+    ("sweep", "agent"),
     ("fly", "sim"),
     ("mission", "plots", "report", "flightlog_builder", "flightlog_csv"),
     ("flightlog", "link"),

@@ -1,0 +1,113 @@
+"""One report of a team flown by agents: each agent's records (report.json, timeseries.csv in
+its own directory) merged into the records `gcs fly` writes for a whole team (pure but for the
+files it reads and writes).
+
+Every agent logs on the same grid of formation times: t = 0 at the agreed formation start,
+samples every 1 / fly.log_rate_hz. The merged log keeps the instants every agent logged, the
+vehicles in team-file order; the team's figures (formation error, velocity error) are computed
+over all of them as for a `gcs fly` flight. The link of each vehicle is its agent's; the tick
+figures are the worst agent's (its late ticks), each agent's under `extra.agents`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gcs.flightlog import SERIES_SHAPES, FlightLog
+from gcs.flightlog_csv import load_timeseries, save_timeseries
+from gcs.fly.records import REPORT_NAME, TIMESERIES_NAME
+from gcs.report import build_report, write_report
+
+__all__ = ["MergeError", "merge_logs", "merge_records"]
+
+#: series of FlightLog that are per team, not per vehicle
+_TEAM_SERIES = ("t_s", "reference_velocity_enu_mps")
+
+
+class MergeError(ValueError):
+    """The agents' records cannot be merged; one line."""
+
+
+def merge_logs(logs: Sequence[FlightLog], order: Sequence[int], name: str,
+               agents: dict[str, Any]) -> FlightLog:
+    """The team's log from its agents' logs: the instants all logged (on the log grid), the
+    vehicles in `order` (team ids)."""
+    if not logs:
+        raise MergeError("no agent wrote a formation log")
+    period = min(log.period_s for log in logs if log.n_samples > 1) if any(
+        log.n_samples > 1 for log in logs) else 1.0
+    keys = [np.round(log.t_s / period).astype(np.int64) for log in logs]
+    common = keys[0]
+    for k in keys[1:]:
+        common = np.intersect1d(common, k)
+    if common.size == 0:
+        raise MergeError("the agents' logs share no sample instant (did the formation start "
+                         "at the same time for all?)")
+    picks = [np.searchsorted(k, common) for k in keys]
+    where: dict[int, tuple[int, int]] = {}
+    for a, log in enumerate(logs):
+        for j, vid in enumerate(log.vehicle_ids.tolist()):
+            if vid in where:
+                raise MergeError(f"vehicle {vid} is in the logs of two agents")
+            where[vid] = (a, j)
+    missing = [vid for vid in order if vid not in where]
+    if missing:
+        raise MergeError(f"no agent's log has vehicles {missing}")
+
+    def per_vehicle(field: str) -> np.ndarray:
+        cols = [getattr(logs[where[v][0]], field)[picks[where[v][0]], where[v][1]]
+                for v in order]
+        return np.stack(cols, axis=1)
+
+    first = logs[0]
+    series = {f: per_vehicle(f) for f in SERIES_SHAPES if f not in _TEAM_SERIES}
+    extra: dict[str, Any] = {"agents": agents}
+    link: dict[str, Any] = {}
+    for log in logs:
+        link.update(log.extra.get("link") or {})
+    extra["link"] = link
+    ticks = [log.extra["tick"] for log in logs if "tick" in log.extra]
+    if ticks:
+        extra["tick"] = max(ticks, key=lambda t: float(t.get("late_pct") or 0.0))
+    for key in ("mode", "estimates"):
+        if key in first.extra:
+            extra[key] = first.extra[key]
+    extra["vehicle_kinds"] = [k for log in logs for k in log.extra.get("vehicle_kinds", [])]
+    return FlightLog(
+        t_s=common * period,
+        reference_velocity_enu_mps=first.reference_velocity_enu_mps[picks[0]],
+        vehicle_ids=np.array(order),
+        sysids=np.array([logs[where[v][0]].sysids[where[v][1]] for v in order]),
+        offsets_enu_m=np.array([logs[where[v][0]].offsets_enu_m[where[v][1]] for v in order]),
+        source=first.source, controller=first.controller, team=first.team, name=name,
+        extra=extra, **series)
+
+
+def merge_records(agent_dirs: Sequence[Path], order: Sequence[int], out: Path, name: str,
+                  agents: dict[str, Any], figures: bool,
+                  pairs: Sequence[tuple[int, int]]) -> tuple[FlightLog, dict[str, Any]]:
+    """Read each agent's timeseries.csv, write the team's report.json, timeseries.csv and
+    (figures) its figures to `out`; returns the merged log and report."""
+    logs = []
+    for d in agent_dirs:
+        path = d / TIMESERIES_NAME
+        if not path.is_file():
+            raise MergeError(f"{path}: missing (the agent wrote no formation log)")
+        try:
+            logs.append(load_timeseries(path))
+        except (OSError, ValueError) as exc:
+            raise MergeError(f"{path}: {exc}") from exc
+    log = merge_logs(logs, order, name, agents)
+    report = build_report(log)
+    out.mkdir(parents=True, exist_ok=True)
+    write_report(out / REPORT_NAME, report)
+    save_timeseries(log, out / TIMESERIES_NAME)
+    if figures:
+        from gcs.plots import write_figures
+
+        write_figures(log, out, pairs=list(pairs))
+    return log, report

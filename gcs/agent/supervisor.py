@@ -1,0 +1,228 @@
+"""`gcs fly --agents`: the supervisor of a team whose law runs in one agent per vehicle.
+
+The supervisor never runs the law and holds no MAVLink link. Over the bus (docs/agents.md) it
+* hears every agent's status and every vehicle's state sample;
+* opens GATE_FLIGHT once every agent waits there (every vehicle passed its preflight), and
+  GATE_FORMATION once every agent's vehicles hold at their start, with the formation start
+  agreed as an instant on its own clock, `start_lead_s` ahead (each agent turns it into its
+  own clock by the message's send time);
+* relays an abort to every agent when one agent stops (its reason, naming its vehicles),
+  when an agent falls silent for network.stale_after_s, or at Ctrl-C;
+* sends a heartbeat at STATUS_RATE_HZ, by which the agents know it is there;
+* ends when every agent reported its outcome and records (or its process exited), then merges
+  the records (gcs/agent/merge.py).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, TextIO
+
+import numpy as np
+
+from gcs.agent.runtime import STATUS_RATE_HZ
+from gcs.config import TeamConfig
+from gcs.metrics import formation_error_m
+from gcs.mission.plan import EXIT_ABORTED, EXIT_INTERRUPTED, EXIT_OK, GATE_FLIGHT, GATE_FORMATION
+
+__all__ = ["AgentState", "Supervisor", "SupervisorOutcome"]
+
+#: how often the supervisor wakes
+PERIOD_S = 0.02
+
+
+@dataclass
+class AgentState:
+    """What the supervisor knows of one agent (the vehicles it flies)."""
+
+    vehicles: tuple[int, ...]
+    status: dict[str, Any] | None = None
+    heard_s: float | None = None
+    exited: int | None = None  # the process's exit status, when the supervisor started it
+    outcome: dict[str, Any] | None = None
+
+    @property
+    def name(self) -> str:
+        ids = ", ".join(str(v) for v in self.vehicles)
+        return f"agent of vehicle{'s' if len(self.vehicles) > 1 else ''} {ids}"
+
+    @property
+    def finished(self) -> bool:
+        return self.exited is not None or (
+            self.status is not None and bool(self.status.get("done"))
+            and "outcome" in self.status)
+
+
+@dataclass
+class SupervisorOutcome:
+    exit_code: int
+    reason: str
+    agents: list[AgentState]
+    events: list[dict[str, Any]] = field(default_factory=list)
+    max_error_after_m: float = math.nan
+
+
+class Supervisor:
+    """See the module docstring. `bus` is a SupervisorBus (gcs/agent/bus.py); `exits` gives,
+    per agent, its process's exit status or None (agents the supervisor did not start: None)."""
+
+    def __init__(self, team: TeamConfig, bus: Any, groups: list[tuple[int, ...]],
+                 exits: Callable[[int], int | None], *, prime_s: float, connect_timeout_s: float,
+                 stream: TextIO | None = None, clock: Callable[[], float] = time.monotonic,
+                 start_lead_s: float = 1.0) -> None:
+        self.team = team
+        self.bus = bus
+        self.agents = [AgentState(tuple(g)) for g in groups]
+        self._of_vehicle = {v: a for a in self.agents for v in a.vehicles}
+        self.exits = exits
+        self.prime_s = prime_s
+        self.connect_timeout_s = connect_timeout_s
+        self.stream = stream
+        self.clock = clock
+        self.start_lead_s = start_lead_s
+        self.events: list[dict[str, Any]] = []
+        self.aborted: str | None = None
+        self.interrupted = False
+        self.formation_at_s: float | None = None
+        self._flight_gate_sent = False
+        self._started_s = clock()
+        self._last_beat_s = -1e9
+        self._last_line_s = -1e9
+        self._stop = asyncio.Event()
+
+    def _event(self, text: str) -> None:
+        self.events.append({"t_s": round(self.clock() - self._started_s, 3), "event": text})
+        if self.stream is not None:
+            print(f"gcs fly --agents: {text}", file=self.stream, flush=True)
+
+    def interrupt(self) -> None:
+        """Ctrl-C: every agent gets the abort (its vehicles the abort action)."""
+        self.interrupted = True
+        self.abort("operator abort (Ctrl-C)")
+
+    def abort(self, reason: str) -> None:
+        if self.aborted is None:
+            self.aborted = reason
+            self._event(f"abort to every agent: {reason}")
+        self.bus.publish_control({"kind": "abort", "reason": reason, "sent_s": self.clock()})
+
+    # --- one wake-up -----------------------------------------------------------------------------
+
+    def _hear(self) -> None:
+        for msg, rx_s in self.bus.take_statuses():
+            vids = msg.get("vehicles") or []
+            a = self._of_vehicle.get(int(vids[0])) if vids else None
+            if a is None:
+                continue
+            a.status, a.heard_s = msg, rx_s
+            if msg.get("done") and "outcome" in msg:
+                a.outcome = msg["outcome"]
+        for k, a in enumerate(self.agents):
+            if a.exited is None:
+                a.exited = self.exits(k)
+
+    def _gates(self, now: float) -> None:
+        live = [a for a in self.agents if a.status is not None]
+        if len(live) < len(self.agents):
+            return
+        waits = [a.status.get("waiting_at") for a in live]
+        if all(w == GATE_FLIGHT for w in waits) or (
+                self._flight_gate_sent and any(w == GATE_FLIGHT for w in waits)):
+            if not self._flight_gate_sent:
+                self._event("every agent passed its preflight: flight gate opened")
+            self._flight_gate_sent = True
+            self.bus.publish_control({"kind": "gate", "gate": GATE_FLIGHT, "sent_s": now})
+        if all(w == GATE_FORMATION for w in waits) or (
+                self.formation_at_s is not None and any(w == GATE_FORMATION for w in waits)):
+            if self.formation_at_s is None:
+                self.formation_at_s = now + self.prime_s + self.start_lead_s
+                self._event(f"every vehicle holds at its start: formation starts in "
+                            f"{self.prime_s + self.start_lead_s:.1f} s")
+            self.bus.publish_control({"kind": "gate", "gate": GATE_FORMATION,
+                                      "at_s": self.formation_at_s, "sent_s": now})
+
+    def _watch(self, now: float) -> None:
+        if self.aborted is not None:
+            return
+        for a in self.agents:
+            s = a.status
+            stop = s.get("stopping") if s is not None else None
+            out = a.outcome
+            if out is not None and out.get("exit_code"):
+                self.abort(f"{a.name} stopped: {out.get('reason')}")
+                return
+            if stop is not None and stop.get("exit_code"):
+                self.abort(f"{a.name} stopping: {stop.get('reason')}")
+                return
+            if a.exited is not None and out is None:
+                self.abort(f"{a.name} exited with status {a.exited} without an outcome")
+                return
+            if a.heard_s is None:
+                if now - self._started_s > self.connect_timeout_s:
+                    self.abort(f"{a.name} not heard within {self.connect_timeout_s:g} s")
+                    return
+            elif not a.finished and now - a.heard_s > self.team.network.stale_after_s:
+                self.abort(f"{a.name} silent for {now - a.heard_s:.2f} s > "
+                           f"{self.team.network.stale_after_s:g} s (network.stale_after_s)")
+                return
+
+    def _line(self, now: float) -> None:
+        if self.stream is None or now - self._last_line_s < 1.0:
+            return
+        self._last_line_s = now
+        ids = self.team.ids()
+        rows = self.bus.rows(ids, now)
+        phases = " ".join(f"{v}:{(a.status or {}).get('phase', '-')}"
+                          for a in self.agents for v in a.vehicles[:1])
+        err = (formation_error_m(np.ascontiguousarray(rows.position_m),
+                                 self.team.offsets_enu_m())
+               if bool(np.all(rows.finite)) else math.nan)
+        t = None if self.formation_at_s is None else now - self.formation_at_s
+        when = "" if t is None else f" t={t:6.1f}s"
+        print(f"gcs fly --agents:{when} formation error {err:.3f} m; {phases}",
+              file=self.stream, flush=True)
+
+    def step(self) -> bool:
+        """One wake-up; True when every agent has finished."""
+        now = self.clock()
+        self._hear()
+        if now - self._last_beat_s >= 1.0 / STATUS_RATE_HZ:
+            self._last_beat_s = now
+            self.bus.publish_control({"kind": "heartbeat", "sent_s": now})
+            if self.aborted is not None:
+                self.abort(self.aborted)  # again, for an agent that missed it
+        if self.aborted is None:
+            self._gates(now)
+        self._watch(now)
+        self._line(now)
+        return all(a.finished for a in self.agents)
+
+    async def run(self) -> SupervisorOutcome:
+        while not self.step():
+            await asyncio.sleep(PERIOD_S)
+        return self.outcome()
+
+    def outcome(self) -> SupervisorOutcome:
+        codes = []
+        reasons = []
+        for a in self.agents:
+            out = a.outcome
+            if out is None:
+                codes.append(EXIT_ABORTED)
+                reasons.append(f"{a.name}: no outcome (exit status {a.exited})")
+            else:
+                codes.append(int(out.get("exit_code", EXIT_ABORTED)))
+                if out.get("exit_code"):
+                    reasons.append(f"{a.name}: {out.get('reason')}")
+        code = max(codes) if codes else EXIT_ABORTED
+        if self.interrupted:
+            code = EXIT_INTERRUPTED
+        if code == EXIT_OK:
+            reason = "formation complete (every agent)"
+        else:
+            reason = "; ".join(([self.aborted] if self.aborted else []) + reasons)
+        return SupervisorOutcome(code, reason, self.agents, self.events)
