@@ -4,7 +4,8 @@ Every problem raises ConfigError with one line "<file>: <key path>: <problem>" (
 when the value came from a YAML file). The schema is documented in docs/configuration.md; the
 paper's Scenario I is configs/square4.yaml. Modules: declare (each key declared once, on its
 dataclass field, and the section reader built on those declarations), modes (the named choices:
-control modes, stop actions), schema, fly_schema and fault_schema (the dataclasses), yamlnode
+control modes, stop actions), schema, fly_schema, fault_schema and network_schema (the dataclasses;
+network_schema also reads its section), errors (ConfigError), yamlnode
 (YAML with line numbers -> a node that checks values), fly_section and fault_section (the rules
 between the `fly:` keys; one fault), reader (what depends on other sections, and the entry
 points), describe (what `gcs check` prints).
@@ -36,7 +37,9 @@ from gcs.config.modes import (
     TORQUE_MODES,
     ControlMode,
     FlyAction,
+    NetworkMode,
 )
+from gcs.config.network_schema import AgentNetwork, NetworkConfig, SupervisorNetwork
 from gcs.config.reader import (
     load_team,
     team_from_dict,
@@ -93,6 +96,7 @@ __all__ = [
     "POSITION_MODE",
     "THRUST_MARGIN",
     "TORQUE_MODES",
+    "AgentNetwork",
     "Airframe",
     "AxisReference",
     "ConfigError",
@@ -118,11 +122,14 @@ __all__ = [
     "LinkLossFault",
     "MissionConfig",
     "MotorEfficiencyFault",
+    "NetworkConfig",
+    "NetworkMode",
     "PacketLossFault",
     "PlantParams",
     "PositionModeConfig",
     "ReferenceVelocity",
     "SimConfig",
+    "SupervisorNetwork",
     "TeamConfig",
     "VehicleConfig",
     "check_go_to_start",

@@ -51,14 +51,16 @@ def key(
     check: Check | None = None,
     optional: bool = False,
     internal: bool = False,
+    write: Callable[[Any], Any] | None = None,
 ) -> Any:
     """A dataclass field that is a team-file key. `name`: its YAML key (default: the field's
     name); `optional`: the key may be left out although the field has no default (the section's
     reader supplies the value, as `given` to read_section); `internal`: no team-file key at all
-    (a value the reader adds, such as the file's path)."""
+    (a value the reader adds, such as the file's path); `write`: the value's plain form, for a
+    value its own reader reads from a shape `to_plain` does not write (a mapping keyed by id)."""
     bounds = {k: v for k, v in (("gt", gt), ("ge", ge), ("lt", lt), ("le", le)) if v is not None}
     meta = {"bounds": bounds, "choices": tuple(choices), "name": name, "read": read,
-            "check": check, "optional": optional, "internal": internal}
+            "check": check, "optional": optional, "internal": internal, "write": write}
     return dataclasses.field(default=default, metadata=meta)
 
 
@@ -168,6 +170,7 @@ def to_plain(x: Any, special: Callable[[Any], Any] | None = None) -> Any:
     if isinstance(x, enum.Enum):
         return x.value
     if dataclasses.is_dataclass(x):
-        return {yaml_name(f): to_plain(getattr(x, f.name), special)
+        return {yaml_name(f): (f.metadata["write"](getattr(x, f.name)) if f.metadata.get("write")
+                               else to_plain(getattr(x, f.name), special))
                 for f in _keys(type(x)) if getattr(x, f.name) is not None}
     return [to_plain(v, special) for v in x] if isinstance(x, tuple) else x

@@ -127,6 +127,7 @@ def describe(team: TeamConfig) -> str:
         f"     scheduling {fly.scheduling} (fly.scheduling: the operating system's priority for "
         "the tick)",
         _go_to_start_line(team),
+        _network_line(team),
     ]
     out.append("faults:" + ("" if team.faults else " none"))
     for f in team.faults:
@@ -228,3 +229,23 @@ def _go_to_start_line(team: TeamConfig) -> str:
     except ConfigError as exc:
         text += f"\n     gcs fly refuses this team file: {exc.problem}"
     return text
+
+
+def _network_line(team: TeamConfig) -> str:
+    """The `network:` section: who listens where, how the processes meet, the clocks."""
+    net = team.network
+    explicit = {a.vehicle_id: a.listen for a in net.agents}
+    defaults = [v.id for v in team.vehicles if v.id not in explicit]
+    where = [f"{vid} on {', '.join(listen)}" for vid, listen in explicit.items()]
+    if defaults:
+        where.append(f"{'the others' if explicit else 'every one'} on "
+                     f"tcp/127.0.0.1:<{net.base_port} + id>")
+    meet = (f"through router {net.router}" if net.mode == "client" else
+            "each connecting to every other's endpoints" + (
+                f" and router {net.router}" if net.router else ""))
+    return (f"network: {net.mode} mode, keys {net.key_root(team.name)}/..., supervisor on "
+            f"{', '.join(net.supervisor_listen())}, agents: {'; '.join(where)}; {meet}, "
+            f"multicast scouting {'on' if net.multicast_scouting else 'off'}, clock offsets "
+            f"{'measured' if net.clock_sync else 'taken as 0 (one host)'}; the supervisor "
+            f"takes a state as stale after {net.stale_after_s:g} s, an agent the supervisor as "
+            f"lost after {net.supervisor_lost_after_s:g} s")

@@ -14,7 +14,8 @@ from collections.abc import Iterable
 
 from gcs.control.modes import ControlMode
 
-__all__ = ["ControlMode", "FlyAction"]  # ControlMode is re-exported: the team file's choice
+# ControlMode is re-exported: the team file's choice
+__all__ = ["ControlMode", "FlyAction", "NetworkMode"]
 
 
 class FlyAction(enum.StrEnum):
@@ -22,6 +23,13 @@ class FlyAction(enum.StrEnum):
 
     LAND = "land"
     HOLD = "hold"  # the autopilot's hold mode (PX4 AUTO_LOITER, ArduPilot BRAKE)
+
+
+class NetworkMode(enum.StrEnum):
+    """network.mode: how an agent's Zenoh session joins the others (gcs/agent/bus.py)."""
+
+    PEER = "peer"  # listens on its own endpoints and connects to every other process's
+    CLIENT = "client"  # connects to network.router only, which routes every message
 
 
 LAWS = ("adaptive", "baseline")

@@ -14,6 +14,7 @@ import yaml
 from gcs.config.declare import read_field, read_section, read_value, to_plain
 from gcs.config.fault_section import read_fault
 from gcs.config.fly_section import read_fly
+from gcs.config.network_schema import read_network
 from gcs.config.schema import (
     GAIN_NAMES,
     GRAVITY_MPS2,
@@ -213,6 +214,8 @@ def _team(root: Node, proposition2: bool = True) -> TeamConfig:
         "graph": lambda read: _graph(root.child("graph"), [v.id for v in read["vehicles"]]),
         "faults": faults,
         "fly": lambda _: read_fly(root.child("fly")),
+        "network": lambda read: read_network(root.child("network"),
+                                             [v.id for v in read["vehicles"]]),
     })
     _check_rates(root, team)
     return team

@@ -2,8 +2,8 @@
 
 Every problem raises ConfigError with one line "<file>: <key path>: <problem>" (plus "(line N)"
 when the value came from a YAML file). The schema is documented in docs/configuration.md. The
-named choices (modes, actions) are in modes, the `fly:` section's dataclasses in fly_schema;
-both are re-exported here.
+named choices (modes, actions) are in modes, the `fly:` section's dataclasses in fly_schema, the
+`network:` section's in network_schema, ConfigError in errors; all are re-exported here.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gcs.config.declare import key
+from gcs.config.errors import ConfigError
 from gcs.config.fault_schema import (  # noqa: F401  (re-exported: this module's before the split)
     Fault,
     FaultConfig,
@@ -56,6 +57,7 @@ from gcs.config.modes import (  # noqa: F401  (re-exported: this module's before
     ControlMode,
     as_strings,
 )
+from gcs.config.network_schema import NetworkConfig
 from gcs.control.gains import LawGains
 
 if TYPE_CHECKING:
@@ -69,27 +71,6 @@ ZERO3: Vec3 = (0.0, 0.0, 0.0)
 
 def _choices(options: Sequence[str]) -> str:
     return ", ".join(repr(o) for o in as_strings(options))
-
-
-class ConfigError(ValueError):
-    """A bad team config. str(e) is one line: "<file>: <key path>: <problem>[ (line N)]".
-
-    ConfigError(message) with a single argument is accepted too; then only str(e) is meaningful.
-    """
-
-    def __init__(
-        self,
-        source: str,
-        path: str | None = None,
-        problem: str | None = None,
-        line: int | None = None,
-    ) -> None:
-        if path is None or problem is None:
-            message = source
-        else:
-            message = f"{source}: {path}: {problem}" + (f" (line {line})" if line else "")
-        super().__init__(" ".join(message.splitlines()))
-        self.source, self.path, self.problem, self.line = source, path, problem, line
 
 
 # --------------------------------------------------------------------------------------------
@@ -370,6 +351,7 @@ class TeamConfig:
     faults: tuple[Fault, ...] = key(())
     fly: FlyConfig = key(FlyConfig())
     frame: FrameConfig = key(FrameConfig())
+    network: NetworkConfig = key(NetworkConfig())  # gcs agent's Zenoh bus (network_schema.py)
     source_path: str = key("<dict>", internal=True)
 
     @property

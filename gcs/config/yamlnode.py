@@ -209,6 +209,11 @@ class Node:
     def item(self, k: int) -> Node:
         return self._sub(k, f"{self.path}[{k}]")
 
+    def entry(self, key: Any) -> Node:
+        """The value under mapping key `key` taken as it is (an integer key such as a vehicle id,
+        which `child` would look up as a string), at path `<path>.<key>`."""
+        return self._sub(key, f"{self.path}.{key}" if self.path else str(key))
+
     def keys(self, required: str, optional: str = "") -> Node:
         """Check a mapping: all of `required` present, nothing outside required + optional."""
         req, allowed = required.split(), required.split() + optional.split()

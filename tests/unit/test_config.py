@@ -294,7 +294,7 @@ ERRORS = [
         "x",
         r"^<dict>: nmae: unknown key; did you mean 'name'\? allowed keys: name, "
         r"mission, controller, reference_velocity, graph, vehicles, sim, faults, fly, frame, "
-        r"emulator$",
+        r"network, emulator$",
     ),
     (
         "vehicles.2.plant.mas_kg",
