@@ -1,0 +1,121 @@
+"""The supervisor's sequence over its agents' statuses (its bus recorded, its clock driven)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gcs.agent.neighbours import NeighbourState
+from gcs.agent.supervisor import Supervisor
+from gcs.config import load_team
+from gcs.mission.plan import EXIT_ABORTED, EXIT_INTERRUPTED, EXIT_OK
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+class Bus:
+    def __init__(self) -> None:
+        self.inbox: list[tuple[dict, float]] = []
+        self.sent: list[dict] = []
+
+    def take_statuses(self):
+        out, self.inbox = self.inbox, []
+        return out
+
+    def publish_control(self, msg: dict) -> None:
+        self.sent.append(msg)
+
+    def rows(self, ids, now_s):
+        k = len(ids)
+        return NeighbourState(np.zeros((k, 3)), np.zeros((k, 3)), np.zeros((k, 3)),
+                              np.zeros(k), np.zeros(k), np.zeros(k, dtype=bool))
+
+
+class World:
+    def __init__(self, groups) -> None:
+        self.team = load_team(ROOT / "configs" / "square4.yaml")
+        self.t = 0.0
+        self.bus = Bus()
+        self.exit: dict[int, int | None] = {}
+        self.sup = Supervisor(self.team, self.bus, groups, lambda k: self.exit.get(k),
+                              prime_s=1.5, connect_timeout_s=10.0, clock=lambda: self.t)
+
+    def say(self, vehicles, **status) -> None:
+        msg = {"kind": "status", "vehicles": list(vehicles), "phase": "preflight",
+               "waiting_at": None, "stopping": None, "done": False} | status
+        self.bus.inbox.append((msg, self.t))
+
+    def step(self, dt: float = 0.05) -> bool:
+        self.t += dt
+        return self.sup.step()
+
+    def gates(self, gate: str) -> list[dict]:
+        return [m for m in self.bus.sent if m["kind"] == "gate" and m["gate"] == gate]
+
+
+def test_gates_open_only_when_every_agent_waits_and_the_start_is_agreed_ahead():
+    w = World([(1,), (2,), (3, 4)])
+    w.say((1,), waiting_at="flight")
+    w.say((2,), waiting_at="flight")
+    w.step()
+    assert not w.gates("flight")  # agent 3-4 not heard yet
+    w.say((3, 4), waiting_at="flight")
+    w.step()
+    assert w.gates("flight")
+    for v in ((1,), (2,), (3, 4)):
+        w.say(v, phase="hold", waiting_at="formation")
+    w.step()
+    (first, *_) = w.gates("formation")
+    # the start: prime_s + the lead ahead, on the supervisor's clock, with its send time
+    assert first["at_s"] == pytest.approx(first["sent_s"] + 2.5)
+    assert any(m["kind"] == "heartbeat" for m in w.bus.sent)
+
+
+def test_one_agent_stopping_aborts_every_agent_and_the_outcome_names_it():
+    w = World([(1,), (2,)])
+    w.say((1,), phase="formation")
+    w.say((2,), phase="stopping", stopping={"exit_code": 1, "reason": "tilt 1.2 rad"})
+    w.step()
+    aborts = [m for m in w.bus.sent if m["kind"] == "abort"]
+    assert aborts and "agent of vehicle 2 stopping: tilt 1.2 rad" in aborts[0]["reason"]
+    w.say((1,), done=True, outcome={"exit_code": 1, "reason": "supervisor: ..."})
+    w.say((2,), done=True, outcome={"exit_code": 1, "reason": "tilt 1.2 rad"})
+    assert w.step()
+    out = w.sup.outcome()
+    assert out.exit_code == EXIT_ABORTED and "tilt 1.2 rad" in out.reason
+
+
+def test_a_silent_agent_or_one_that_exits_without_an_outcome_aborts_the_others():
+    w = World([(1,), (2,)])
+    w.say((1,), phase="formation")
+    w.say((2,), phase="formation")
+    w.step()
+    for _ in range(30):  # agent 2 silent for 1.5 s (network.stale_after_s 1 s)
+        w.say((1,), phase="formation")
+        w.step()
+    aborts = [m for m in w.bus.sent if m["kind"] == "abort"]
+    assert aborts and "agent of vehicle 2 silent for" in aborts[0]["reason"]
+    w2 = World([(1,), (2,)])
+    w2.say((1,), phase="formation")
+    w2.say((2,), phase="formation")
+    w2.exit[1] = -9
+    w2.step()
+    assert "exited with status -9 without an outcome" in w2.sup.aborted
+
+
+def test_a_clean_team_ends_with_exit_0_and_ctrl_c_with_130():
+    w = World([(1,), (2,)])
+    for v in ((1,), (2,)):
+        w.say(v, phase="done", done=True, outcome={"exit_code": 0, "reason": "ok"})
+    assert w.step()
+    assert w.sup.outcome().exit_code == EXIT_OK
+    w2 = World([(1,)])
+    w2.say((1,), phase="formation")
+    w2.step()
+    w2.sup.interrupt()
+    assert [m for m in w2.bus.sent if m["kind"] == "abort"]
+    w2.say((1,), phase="done", done=True, outcome={"exit_code": 130, "reason": "abort"})
+    assert w2.step()
+    assert w2.sup.outcome().exit_code == EXIT_INTERRUPTED
