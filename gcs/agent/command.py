@@ -170,7 +170,6 @@ def run_fly_agents(args: argparse.Namespace) -> int:
 def run_supervised(args: argparse.Namespace, team: TeamConfig, out: Path) -> int:
     """`gcs fly --agents`: start the agents (unless --agents-running), supervise, merge."""
     from gcs.agent.bus import SupervisorBus
-
     from gcs.fly.warmup import compile_law
 
     options = FlyOptions(out_dir=out, mode=args.mode, duration_s=args.duration_s)

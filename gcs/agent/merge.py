@@ -2,15 +2,18 @@
 its own directory) merged into the records `gcs fly` writes for a whole team (pure but for the
 files it reads and writes).
 
-Every agent logs on the same grid of formation times: t = 0 at the agreed formation start,
-samples every 1 / fly.log_rate_hz. The merged log keeps the instants every agent logged, the
-vehicles in team-file order; the team's figures (formation error, velocity error) are computed
+Every agent logs its formation time t from the agreed formation start (its own clock's image
+of the supervisor's instant), every 1 / fly.log_rate_hz from its first law tick; the agents'
+ticks are not in phase. The merged log interpolates each agent's series linearly to the log
+grid (multiples of the log period) over the span every agent logged, the vehicles in team-file
+order; the team's figures (formation error, velocity error) are computed
 over all of them as for a `gcs fly` flight. The link of each vehicle is its agent's; the tick
 figures are the worst agent's (its late ticks), each agent's under `extra.agents`.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -32,22 +35,32 @@ class MergeError(ValueError):
     """The agents' records cannot be merged; one line."""
 
 
+def _at(t_s: np.ndarray, series: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """`series` (k, ...) sampled at `t_s`, linearly interpolated at `grid`."""
+    flat = series.reshape(series.shape[0], -1)
+    out = np.empty((grid.size, flat.shape[1]))
+    for c in range(flat.shape[1]):
+        out[:, c] = np.interp(grid, t_s, flat[:, c])
+    return out.reshape(grid.size, *series.shape[1:])
+
+
 def merge_logs(logs: Sequence[FlightLog], order: Sequence[int], name: str,
                agents: dict[str, Any]) -> FlightLog:
-    """The team's log from its agents' logs: the instants all logged (on the log grid), the
-    vehicles in `order` (team ids)."""
+    """The team's log from its agents' logs: every series interpolated to the log grid over
+    the span all agents logged, the vehicles in `order` (team ids)."""
     if not logs:
         raise MergeError("no agent wrote a formation log")
-    period = min(log.period_s for log in logs if log.n_samples > 1) if any(
-        log.n_samples > 1 for log in logs) else 1.0
-    keys = [np.round(log.t_s / period).astype(np.int64) for log in logs]
-    common = keys[0]
-    for k in keys[1:]:
-        common = np.intersect1d(common, k)
-    if common.size == 0:
-        raise MergeError("the agents' logs share no sample instant (did the formation start "
-                         "at the same time for all?)")
-    picks = [np.searchsorted(k, common) for k in keys]
+    spaced = [log.period_s for log in logs if log.n_samples > 1]
+    if not spaced:
+        raise MergeError("the agents' logs hold one sample each: nothing to merge")
+    period = min(spaced)
+    first = max(float(log.t_s[0]) for log in logs)
+    last = min(float(log.t_s[-1]) for log in logs)
+    grid = np.arange(math.ceil(first / period - 1e-9), math.floor(last / period + 1e-9) + 1
+                     ) * period
+    if grid.size == 0:
+        raise MergeError(f"the agents' logs share no time span (latest start {first:.3f} s, "
+                         f"earliest end {last:.3f} s): did they agree on the formation start?")
     where: dict[int, tuple[int, int]] = {}
     for a, log in enumerate(logs):
         for j, vid in enumerate(log.vehicle_ids.tolist()):
@@ -57,13 +70,18 @@ def merge_logs(logs: Sequence[FlightLog], order: Sequence[int], name: str,
     missing = [vid for vid in order if vid not in where]
     if missing:
         raise MergeError(f"no agent's log has vehicles {missing}")
+    cache: dict[tuple[int, str], np.ndarray] = {}
 
     def per_vehicle(field: str) -> np.ndarray:
-        cols = [getattr(logs[where[v][0]], field)[picks[where[v][0]], where[v][1]]
-                for v in order]
+        cols = []
+        for v in order:
+            a, j = where[v]
+            if (a, field) not in cache:
+                cache[(a, field)] = _at(logs[a].t_s, getattr(logs[a], field), grid)
+            cols.append(cache[(a, field)][:, j])
         return np.stack(cols, axis=1)
 
-    first = logs[0]
+    lead = logs[0]
     series = {f: per_vehicle(f) for f in SERIES_SHAPES if f not in _TEAM_SERIES}
     extra: dict[str, Any] = {"agents": agents}
     link: dict[str, Any] = {}
@@ -74,16 +92,16 @@ def merge_logs(logs: Sequence[FlightLog], order: Sequence[int], name: str,
     if ticks:
         extra["tick"] = max(ticks, key=lambda t: float(t.get("late_pct") or 0.0))
     for key in ("mode", "estimates"):
-        if key in first.extra:
-            extra[key] = first.extra[key]
+        if key in lead.extra:
+            extra[key] = lead.extra[key]
     extra["vehicle_kinds"] = [k for log in logs for k in log.extra.get("vehicle_kinds", [])]
     return FlightLog(
-        t_s=common * period,
-        reference_velocity_enu_mps=first.reference_velocity_enu_mps[picks[0]],
+        t_s=grid,
+        reference_velocity_enu_mps=_at(lead.t_s, lead.reference_velocity_enu_mps, grid),
         vehicle_ids=np.array(order),
         sysids=np.array([logs[where[v][0]].sysids[where[v][1]] for v in order]),
         offsets_enu_m=np.array([logs[where[v][0]].offsets_enu_m[where[v][1]] for v in order]),
-        source=first.source, controller=first.controller, team=first.team, name=name,
+        source=lead.source, controller=lead.controller, team=lead.team, name=name,
         extra=extra, **series)
 
 

@@ -28,9 +28,9 @@ import numpy as np
 
 from gcs.agent.neighbours import NeighbourRows, NeighbourSource
 from gcs.agent.team import AgentTeam
-from gcs.config import TeamConfig
+from gcs.config import ControlMode, TeamConfig
 from gcs.fly.flight import Flight
-from gcs.fly.setup import FlightSetup, FlyOptions, FlyResult, prepare
+from gcs.fly.setup import FlightSetup, FlightSetupError, FlyOptions, FlyResult, prepare
 from gcs.mission.plan import GATES, Phase
 
 logger = logging.getLogger("gcs.agent")
@@ -48,6 +48,9 @@ def agent_setups(team: TeamConfig, own: tuple[int, ...], options: FlyOptions
     own vehicles (links, machine with the team's gates, setpoints, records) and to the law
     team (own vehicles and their neighbours). FlightSetupError as `gcs fly`'s."""
     whole = prepare(team, options)
+    if whole.mode == ControlMode.POSITION:
+        raise FlightSetupError("position mode runs no law, so there is nothing to share among "
+                               "agents: fly it with gcs fly (no --agents)")
     agent = AgentTeam(whole.team, own)
     flight = dataclasses.replace(whole, team=agent.own_team,
                                  plan=dataclasses.replace(whole.plan, gates=frozenset(GATES)))

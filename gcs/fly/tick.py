@@ -46,7 +46,7 @@ from gcs.fly.telemetry import warm_up as sample_warm_up
 from gcs.link import HotTable, VehicleProxy, fastpath
 from gcs.metrics import formation_error, formation_error_m
 from gcs.mission.machine import MissionMachine
-from gcs.mission.plan import Phase
+from gcs.mission.plan import GATE_FORMATION, Phase
 
 logger = logging.getLogger("gcs.fly")
 
@@ -282,7 +282,7 @@ class Tick:
         if m.law_active and (streaming or m.phase is Phase.FORMATION) and self.position_mode:
             self._fly_slots(k, sample, streaming)
         elif m.law_active and (streaming or m.phase is Phase.FORMATION):
-            command = self._run_law(k, sample, now_s)
+            command = self._run_law(k, sample, now_s, deadline_s)
             if command is not None:
                 self.setpoints.send(command, streaming)
         elif m.phase is Phase.PRIME and self.position_mode:
@@ -352,7 +352,8 @@ class Tick:
             self.figures.start_error_m[vid] = float(np.linalg.norm(
                 sample.position_m[i] - np.asarray(r.target_enu_m)))
 
-    def _run_law(self, k: int, sample: TeamSample, now_s: float) -> TeamCommand | None:
+    def _run_law(self, k: int, sample: TeamSample, now_s: float,
+                 deadline_s: float) -> TeamCommand | None:
         if self._k0 is None:
             self._start_formation(k, sample)
             heading = command_heading_rad(self.team.fly.heading, sample.rotation)
@@ -361,7 +362,10 @@ class Tick:
             self._log_unmeasured_delays()
             if not self.hover.initial_mass(sample, now_s):
                 return self.last_command
-        t = (k - self._k0) * self.period_s
+        # t from the first law tick; a team's agreed start (an agent's GATE_FORMATION time)
+        # instead where there is one, so that every agent's v_r(t) is the same function of time
+        agreed = self.machine.gate_time_s(GATE_FORMATION)
+        t = (k - self._k0) * self.period_s if agreed is None else max(0.0, deadline_s - agreed)
         dt = (k - (self._last_law_k if self._last_law_k is not None else k - 1)) * self.period_s
         self._last_law_k = k
         fresh = fresh_mask(sample, self.team.fly.stale_after_s)
