@@ -123,15 +123,16 @@ def free_udp_port() -> int:
         return int(s.getsockname()[1])
 
 
-def free_udp_port_block(n: int, attempts: int = 200) -> int:
-    """A base port such that base .. base+n-1 on 127.0.0.1 were all free a moment ago."""
+def free_udp_port_block(n: int, attempts: int = 200, kind: int = socket.SOCK_DGRAM) -> int:
+    """A base port such that base .. base+n-1 on 127.0.0.1 were all free a moment ago (UDP;
+    `kind` socket.SOCK_STREAM: TCP)."""
     rng = random.Random()
     for _ in range(attempts):
         base = rng.randrange(20000, 60000 - n)
         socks: list[socket.socket] = []
         try:
             for k in range(n):
-                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                s = socket.socket(socket.AF_INET, kind)
                 socks.append(s)
                 s.bind(("127.0.0.1", base + k))
             return base
@@ -140,7 +141,7 @@ def free_udp_port_block(n: int, attempts: int = 200) -> int:
         finally:
             for s in socks:
                 s.close()
-    raise OSError(f"no block of {n} free UDP ports found in {attempts} attempts")
+    raise OSError(f"no block of {n} free ports found in {attempts} attempts")
 
 
 @dataclass
@@ -484,4 +485,4 @@ def clients_on_port_block(n: int, attempts: int = 50) -> list[MavClient]:
         except OSError:
             for c in clients:
                 c.close()
-    raise OSError(f"no block of {n} free UDP ports found in {attempts} attempts")
+    raise OSError(f"no block of {n} free ports found in {attempts} attempts")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import json
 import logging
 import signal
 import subprocess
@@ -20,6 +21,7 @@ from gcs.agent.team import AgentTeam
 from gcs.config import TeamConfig, load_team
 from gcs.config.modes import FLY_MODES, as_strings
 from gcs.fly.command import EmulatorFleetError, emulator_fleet
+from gcs.fly.records import TIMESERIES_NAME
 from gcs.fly.setup import FlightSetupError, FlyOptions, prepare
 from gcs.mission.plan import EXIT_ABORTED, EXIT_INTERRUPTED
 from gcs.report import summary_table
@@ -27,6 +29,8 @@ from gcs.report import summary_table
 __all__ = ["add_parser", "run_agent", "run_fly_agents", "run_supervised"]
 
 EXIT_SETUP = 2
+#: the supervisor's own account: every agent's outcome and the events it saw and sent
+SUPERVISOR_NAME = "supervisor.json"
 
 AGENT_DESCRIPTION = """\
 Fly one vehicle's share of the team's formation law (or a few vehicles'), as one agent of a
@@ -206,17 +210,34 @@ def run_supervised(args: argparse.Namespace, team: TeamConfig, out: Path) -> int
     # the agents' records: where the supervisor put them, or where each one says it wrote them
     dirs = (procs.dirs if procs is not None
             else [Path(str((a.status or {}).get("records") or "")) for a in outcome.agents])
-    agents = {a.name: {"vehicles": list(a.vehicles), "outcome": a.outcome,
-                       "exit_status": a.exited} for a in outcome.agents}
-    agents["supervisor"] = {"events": outcome.events}
+    agents: dict[str, Any] = {}
+    present: list[Path] = []
+    for a, d in zip(outcome.agents, dirs, strict=True):
+        has = (d / TIMESERIES_NAME).is_file()
+        agents[a.name] = {"vehicles": list(a.vehicles), "outcome": a.outcome,
+                          "exit_status": a.exited, "records": str(d) if has else None}
+        if has:
+            present.append(d)
+    summary = {"outcome": {"exit_code": outcome.exit_code, "reason": outcome.reason},
+               "agents": agents, "events": outcome.events}
+    out.mkdir(parents=True, exist_ok=True)
+    (out / SUPERVISOR_NAME).write_text(json.dumps(summary, indent=1, default=str))
+    flown = [v for a, d in zip(outcome.agents, dirs, strict=True)
+             if (d / TIMESERIES_NAME).is_file() for v in a.vehicles]
+    order = [v for v in team.ids() if v in flown]
     try:
-        log, _ = merge_records(dirs, team.ids(), out, team.name, agents,
+        log, _ = merge_records(present, order, out, team.name,
+                               {**agents, "supervisor": {"events": outcome.events}},
                                figures=not args.no_figures,
-                               pairs=[(e.i, e.j) for e in team.graph.edges])
+                               pairs=[(e.i, e.j) for e in team.graph.edges
+                                      if e.i in order and e.j in order])
         print(summary_table(log))
-        print(f"  records of each agent in {out / 'agents'}/, the team's in {out}/")
+        lacking = [v for v in team.ids() if v not in flown]
+        print(f"  records of each agent in {out / 'agents'}/, the team's in {out}/"
+              + (f" (no records of vehicles {lacking})" if lacking else ""))
     except MergeError as exc:
-        print(f"gcs fly: no merged records: {exc}", file=sys.stderr)
+        print(f"gcs fly: no merged records: {exc}; the supervisor's account is in "
+              f"{out / SUPERVISOR_NAME}", file=sys.stderr)
         if outcome.exit_code == 0:
             return EXIT_ABORTED
     code = outcome.exit_code

@@ -69,6 +69,8 @@ class NeighbourRows:
         self._slot_from_first = offsets[self.neighbour_rows] - offsets[self.own_rows[0]]
         #: per neighbour, at each formation tick: its age at use, since received, stale
         self.ages = AgeStats(len(self.neighbour_ids))
+        #: per neighbour, the oldest sample the law used (fresh) [s]: at most stale_after_s
+        self.age_used_max_s = np.full(len(agent.neighbours), -np.inf)
         self._state: NeighbourState | None = None
         self._fresh = np.zeros(len(self.neighbour_ids), dtype=bool)
         self._ok = np.zeros(len(self.neighbour_ids), dtype=bool)  # a finite sample to use
@@ -107,8 +109,11 @@ class NeighbourRows:
         s = self._state
         if s is None or not len(self.neighbour_ids):
             return
-        self.ages.record(now_s - s.taken_s, now_s - s.received_s, self._fresh,
+        age = now_s - s.taken_s
+        self.ages.record(age, now_s - s.received_s, self._fresh,
                          np.zeros(len(self.neighbour_ids), dtype=np.int64))
+        used = np.where(self._fresh, age, -np.inf)
+        np.maximum(self.age_used_max_s, used, out=self.age_used_max_s)
 
     def measurement(self, own: TeamMeasurement, act_s: float | None) -> TeamMeasurement:
         """The law team's measurement: `own` (as the tick held or predicted it) in the own

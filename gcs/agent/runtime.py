@@ -180,6 +180,9 @@ class TeamWatch:
             edges[str(vid)] = {"age_p50_ms": float(p50[k]), "age_p99_ms": float(p99[k]),
                                "age_max_ms": float(top[k]),
                                "stale_ticks": int(ages.stale_own[k]),
+                               "age_used_max_ms": (1e3 * float(self.rows.age_used_max_s[k])
+                                                   if np.isfinite(self.rows.age_used_max_s[k])
+                                                   else None),
                                **stats.get(vid, {})}
         return {"agent": {"vehicles": list(self.rows.own_ids),
                           "neighbours": list(self.rows.neighbour_ids), "edges": edges,

@@ -44,6 +44,7 @@ class AgentState:
     heard_s: float | None = None
     exited: int | None = None  # the process's exit status, when the supervisor started it
     outcome: dict[str, Any] | None = None
+    gone: bool = False  # silent past network.stale_after_s before its outcome
 
     @property
     def name(self) -> str:
@@ -52,7 +53,7 @@ class AgentState:
 
     @property
     def finished(self) -> bool:
-        return self.exited is not None or (
+        return self.gone or self.exited is not None or (
             self.status is not None and bool(self.status.get("done"))
             and "outcome" in self.status)
 
@@ -146,6 +147,13 @@ class Supervisor:
                                       "at_s": self.formation_at_s, "sent_s": now})
 
     def _watch(self, now: float) -> None:
+        stale = self.team.network.stale_after_s
+        for a in self.agents:
+            if (a.heard_s is not None and not a.finished and not a.gone
+                    and now - a.heard_s > stale):
+                a.gone = True
+                self._event(f"{a.name} silent for {now - a.heard_s:.2f} s > {stale:g} s "
+                            "(network.stale_after_s): taken as gone")
         if self.aborted is not None:
             return
         for a in self.agents:
@@ -165,9 +173,9 @@ class Supervisor:
                 if now - self._started_s > self.connect_timeout_s:
                     self.abort(f"{a.name} not heard within {self.connect_timeout_s:g} s")
                     return
-            elif not a.finished and now - a.heard_s > self.team.network.stale_after_s:
-                self.abort(f"{a.name} silent for {now - a.heard_s:.2f} s > "
-                           f"{self.team.network.stale_after_s:g} s (network.stale_after_s)")
+            elif a.gone:
+                self.abort(f"{a.name} silent for {now - a.heard_s:.2f} s > {stale:g} s "
+                           "(network.stale_after_s)")
                 return
 
     def _line(self, now: float) -> None:
@@ -213,7 +221,8 @@ class Supervisor:
             out = a.outcome
             if out is None:
                 codes.append(EXIT_ABORTED)
-                reasons.append(f"{a.name}: no outcome (exit status {a.exited})")
+                why = "silent" if a.gone else f"exit status {a.exited}"
+                reasons.append(f"{a.name}: no outcome ({why})")
             else:
                 codes.append(int(out.get("exit_code", EXIT_ABORTED)))
                 if out.get("exit_code"):
