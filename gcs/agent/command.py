@@ -16,7 +16,7 @@ from typing import Any
 
 from gcs.agent.merge import MergeError, merge_records
 from gcs.agent.runtime import fly_agent
-from gcs.agent.supervisor import Supervisor, SupervisorOutcome
+from gcs.agent.supervise import Supervisor, SupervisorOutcome
 from gcs.agent.team import AgentTeam
 from gcs.config import TeamConfig, load_team
 from gcs.config.modes import FLY_MODES, as_strings

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from gcs.agent.neighbours import NeighbourState
-from gcs.agent.supervisor import Supervisor
+from gcs.agent.supervise import Supervisor
 from gcs.config import load_team
 from gcs.mission.plan import EXIT_ABORTED, EXIT_INTERRUPTED, EXIT_OK
 
