@@ -564,8 +564,9 @@ class Testbed:
     def describe(self) -> str:
         """One line: mode, hosts, impairer and impairments, and the notes."""
         kinds = sorted({i.describe() for i in self._impairments if i is not None})
-        text = (f"{self.mode} testbed, {len(self._impairments)} hosts, impairment "
-                f"{' / '.join(kinds) or 'none'} via {self.impairer}")
+        asked = " / ".join(kinds) or "none"
+        how = f"via {self.impairer}" if self.impaired or not kinds else "NOT applied"
+        text = f"{self.mode} testbed, {len(self._impairments)} hosts, impairment {asked} {how}"
         return text + ("" if not self.notes else " (" + "; ".join(self.notes) + ")")
 
     # -- lifetime
