@@ -31,6 +31,8 @@ PURE = {
     "gcs/link/enums.py": "MAVLink enumerations and mode encodings",
     "gcs/link/liveness.py": "link and HEARTBEAT staleness, every time an argument",
     "gcs/link/samples.py": "typed samples of the messages read above the link",
+    "gcs/agent/wire.py": "the agents' state sample as bytes",
+    "gcs/agent/control.py": "the agents' and supervisor's control messages as JSON",
     "flightkit/physics.py": "the rigid-body model both programs simulate",
     "flightkit/fleet_protocol.py": "the emulator fleet's ready line",
     "vehicle_emulator/physics/plant.py": "the fleet's physics step: inner loops, mixer, motors, RK4",
@@ -248,9 +250,9 @@ def test_each_emulator_room_imports_only_the_rooms_below_it():
 
 #: gcs's layers, top first: a module imports only layers below its own (a package's modules may
 #: import each other). cli composes the commands; precompile compiles through fly and sim; the
-#: sweep, which flies sim's runs in batches; the two programs' packages; what they share (the
-#: flight sequence, records, figures); the link and the log; the team file and the metrics; the
-#: law; the frames.
+#: sweep, which flies sim's runs in batches, and the agents, which fly `gcs fly`'s flight over
+#: their bus; the two programs' packages; what they share (the flight sequence, records,
+#: figures); the link and the log; the team file and the metrics; the law; the frames.
 GCS_LAYERS = (
     ("cli",),
     ("precompile",),
