@@ -33,6 +33,8 @@ PURE = {
     "gcs/link/samples.py": "typed samples of the messages read above the link",
     "gcs/agent/wire.py": "the agents' state sample as bytes",
     "gcs/agent/control.py": "the agents' and supervisor's control messages as JSON",
+    "gcs/agent/clocks.py": "a peer's clock offset from four timestamps",
+    "gcs/agent/table.py": "the latest sample per sender, per-edge figures, every time an argument",
     "flightkit/physics.py": "the rigid-body model both programs simulate",
     "flightkit/fleet_protocol.py": "the emulator fleet's ready line",
     "vehicle_emulator/physics/plant.py": "the fleet's physics step: inner loops, mixer, motors, RK4",

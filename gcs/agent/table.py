@@ -1,0 +1,178 @@
+"""The latest state sample of each vehicle a process hears, and what it received from each
+(pure: every time is an argument, on this process's monotonic clock): the latest sample wins by
+seq, gaps in seq count as lost, older or repeated ones as duplicates, undecodable ones as
+corrupt with their reason; each sender's clock offset from the echoes it carries."""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Iterable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gcs.agent.clocks import OffsetEstimator
+from gcs.agent.control import MAX_TEXT, EdgeFigures
+from gcs.agent.wire import Echo, StateSample, WireError, decode
+
+
+@dataclass(frozen=True, slots=True)
+class Rows:
+    """The latest state of vehicles `ids`, one row each in that order (world ENU, body FLU).
+    `taken_local_s`: when the vehicle took the sample, on this process's clock (the sender's
+    taken_s less its clock offset; -inf before the first sample, and before the first offset
+    when clocks are synchronised); `received_s`: when it arrived here (-inf before);
+    `age_s = now - taken_local_s` (inf before); `finite`: the row holds a sample with a known
+    time (the other arrays hold NaN where it does not)."""
+
+    ids: tuple[int, ...]
+    position_enu_m: np.ndarray  # (k, 3)
+    velocity_enu_mps: np.ndarray  # (k, 3)
+    acceleration_enu_mps2: np.ndarray  # (k, 3)
+    attitude_wxyz: np.ndarray  # (k, 4) FLU -> ENU
+    omega_flu_radps: np.ndarray  # (k, 3)
+    taken_local_s: np.ndarray  # (k,)
+    received_s: np.ndarray  # (k,)
+    age_s: np.ndarray  # (k,)
+    finite: np.ndarray  # (k,) bool
+
+    def fresh(self, max_age_s: float) -> np.ndarray:
+        """(k,) bool: the rows with a sample at most `max_age_s` old."""
+        return self.finite & (self.age_s <= max_age_s)
+
+
+@dataclass(slots=True)
+class _Edge:
+    """What this process knows of one sender."""
+
+    sample: StateSample | None = None
+    received_s: float = -np.inf  # when `sample` arrived
+    last_sent_s: float | None = None  # the sender's sent_s of its latest message (to echo)
+    last_received_s: float = -np.inf  # ... and when that message arrived
+    received: int = 0
+    lost: int = 0
+    duplicates: int = 0
+    corrupt: int = 0
+    restarts: int = 0
+    corrupt_reason: str | None = None
+    clock: OffsetEstimator = field(default_factory=OffsetEstimator)
+
+
+class SampleTable:
+    """The senders `senders` as this process hears them. `local_ids`: the ids whose messages
+    this process sends (its own vehicles, or the supervisor's id): an echo naming one of them
+    is an exchange with its sender. `team_ids`: the ids a sample's vehicle and echoes may
+    name. `clock_sync` False: every sender's clock is taken as this one's (one host)."""
+
+    def __init__(self, senders: Iterable[int], *, local_ids: Collection[int],
+                 team_ids: Collection[int] | None = None, clock_sync: bool = True) -> None:
+        self._edges = {vid: _Edge() for vid in senders}
+        self.local_ids = frozenset(local_ids)
+        self.team_ids = None if team_ids is None else frozenset(team_ids)
+        self.clock_sync = clock_sync
+
+    @property
+    def senders(self) -> tuple[int, ...]:
+        return tuple(self._edges)
+
+    def _edge(self, vid: int) -> _Edge:
+        try:
+            return self._edges[vid]
+        except KeyError:
+            raise KeyError(f"vehicle {vid} is not heard here (senders: "
+                           f"{', '.join(map(str, self._edges))})") from None
+
+    def corrupt(self, vid: int, reason: str) -> None:
+        """Count a message from `vid` that could not be used, with its reason."""
+        edge = self._edge(vid)
+        edge.corrupt += 1
+        edge.corrupt_reason = reason[:MAX_TEXT]
+
+    def receive(self, vid: int, data: bytes, received_s: float) -> StateSample | None:
+        """Take bytes that arrived at `received_s` on vehicle `vid`'s key: the sample if it is
+        the newest of `vid`, else None (counted as corrupt or duplicate; never raises for the
+        bytes)."""
+        edge = self._edge(vid)
+        try:
+            sample = decode(data, self.team_ids)
+        except WireError as exc:
+            self.corrupt(vid, exc.reason)
+            return None
+        if sample.vehicle_id != vid:
+            self.corrupt(vid, f"vehicle id {sample.vehicle_id} on the key of vehicle {vid}")
+            return None
+        last = edge.sample
+        if last is not None and sample.epoch != last.epoch:
+            edge.restarts += 1  # a new process: its seq starts again, its clock may differ
+            edge.clock.reset()
+        elif last is not None and sample.seq <= last.seq:
+            edge.duplicates += 1
+            return None
+        elif last is not None:
+            edge.lost += sample.seq - last.seq - 1
+        edge.received += 1
+        edge.sample, edge.received_s = sample, received_s
+        self.heard(vid, sample.sent_s, received_s, sample.echoes)
+        return sample
+
+    def heard(self, vid: int, sent_s: float, received_s: float,
+              echoes: Sequence[Echo] = ()) -> None:
+        """A message from `vid` sent at `sent_s` (its clock) arrived at `received_s` (ours),
+        carrying `echoes`: each that names one of `local_ids` is a clock exchange."""
+        edge = self._edge(vid)
+        edge.last_sent_s, edge.last_received_s = sent_s, received_s
+        for e in echoes:
+            if e.peer_id in self.local_ids:
+                edge.clock.add(e.sent_s, sent_s - e.held_s, sent_s, received_s)
+
+    def echoes(self, now_s: float) -> tuple[Echo, ...]:
+        """An echo of every sender's latest message, held until `now_s`."""
+        return tuple(Echo(vid, e.last_sent_s, max(0.0, now_s - e.last_received_s))
+                     for vid, e in self._edges.items() if e.last_sent_s is not None)
+
+    def latest(self, vid: int) -> StateSample | None:
+        return self._edge(vid).sample
+
+    def last_heard_s(self, vid: int) -> float:
+        """When the latest message of `vid` arrived (our clock); -inf before the first."""
+        return self._edge(vid).last_received_s
+
+    def offset(self, vid: int) -> float | None:
+        """The offset used to convert `vid`'s times (its clock - ours): the measured one, None
+        before the first exchange; 0 without clock synchronisation."""
+        return self._edge(vid).clock.offset_s if self.clock_sync else 0.0
+
+    def to_local(self, vid: int, peer_s: float) -> float:
+        """Time `peer_s` of `vid`'s clock on ours; -inf before its offset is known."""
+        offset = self.offset(vid)
+        return -np.inf if offset is None else peer_s - offset
+
+    def figures(self, vid: int) -> EdgeFigures:
+        e = self._edge(vid)
+        return EdgeFigures(vid, e.received, e.lost, e.duplicates, e.corrupt, e.restarts,
+                           e.corrupt_reason, e.clock.offset_s, e.clock.uncertainty_s)
+
+    def stats(self) -> dict[int, EdgeFigures]:
+        """Per sender, what arrived from it and its measured clock offset."""
+        return {vid: self.figures(vid) for vid in self._edges}
+
+    def rows(self, ids: Sequence[int], now_s: float) -> Rows:
+        """The latest state of vehicles `ids` at `now_s` (our clock); KeyError naming an id
+        that is not a sender."""
+        k = len(ids)
+        state = np.full((k, 16), np.nan)
+        taken = np.full(k, -np.inf)
+        received = np.full(k, -np.inf)
+        for row, vid in enumerate(ids):
+            edge = self._edge(vid)
+            s = edge.sample
+            if s is None:
+                continue
+            received[row] = edge.received_s
+            taken[row] = self.to_local(vid, s.taken_s)
+            state[row] = (*s.position_enu_m, *s.velocity_enu_mps, *s.acceleration_enu_mps2,
+                          *s.attitude_wxyz, *s.omega_flu_radps)
+        finite = np.isfinite(taken)
+        state[~finite] = np.nan
+        age = np.where(finite, now_s - taken, np.inf)
+        return Rows(tuple(ids), state[:, 0:3], state[:, 3:6], state[:, 6:9], state[:, 9:13],
+                    state[:, 13:16], taken, received, age, finite)

@@ -1,0 +1,128 @@
+"""The latest sample per sender and what each edge received (gcs/agent/table.py), with every
+time an argument: latest wins, loss from gaps, duplicates, corrupt bytes, restarts, clock
+offsets from echoes and the rows the law reads."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gcs.agent.control import MAX_TEXT
+from gcs.agent.table import SampleTable
+from gcs.agent.wire import SUPERVISOR_ID, Echo, StateSample, encode
+
+
+def sample(vid: int, seq: int, *, epoch: int = 1, taken_s: float = 0.0, sent_s: float = 0.0,
+           x: float = 0.0, echoes: tuple[Echo, ...] = ()) -> bytes:
+    return encode(StateSample(vid, epoch, seq, taken_s, sent_s, (x, 2.0, 3.0), (0.1, 0.2, 0.3),
+                              (0.0, 0.0, 0.5), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.1), echoes))
+
+
+def test_the_latest_sample_wins_and_older_or_repeated_ones_are_counted():
+    # GIVEN vehicle 1's table of its neighbours 2 and 3
+    table = SampleTable((2, 3), local_ids=(1,), team_ids=(1, 2, 3), clock_sync=False)
+    # WHEN vehicle 2 sends seq 5, then 5 again, then 4, then 6
+    assert table.receive(2, sample(2, 5, x=5.0), 10.0) is not None
+    assert table.receive(2, sample(2, 5, x=55.0), 10.1) is None
+    assert table.receive(2, sample(2, 4, x=4.0), 10.2) is None
+    assert table.receive(2, sample(2, 6, x=6.0), 10.3).seq == 6
+    # THEN seq 6 is the one held, two were duplicates, none lost, nothing from 3
+    assert table.latest(2).position_enu_m[0] == 6.0
+    f = table.figures(2)
+    assert (f.received, f.duplicates, f.lost, f.corrupt, f.restarts) == (2, 2, 0, 0, 0)
+    assert table.latest(3) is None and table.figures(3).received == 0
+
+
+def test_gaps_in_seq_are_lost_samples():
+    table = SampleTable((2,), local_ids=(1,))
+    for seq in (0, 1, 4, 5, 9):
+        table.receive(2, sample(2, seq), 0.0)
+    f = table.figures(2)
+    assert (f.received, f.lost) == (5, 5) and f.loss_fraction == 0.5
+
+
+def test_a_new_epoch_is_a_restart_not_a_duplicate():
+    # GIVEN vehicle 2 at seq 100, then its process restarted (epoch 2) from seq 0
+    table = SampleTable((2,), local_ids=(1,))
+    table.receive(2, sample(2, 100, epoch=1), 0.0)
+    assert table.receive(2, sample(2, 0, epoch=2, x=9.0), 1.0) is not None
+    table.receive(2, sample(2, 1, epoch=2), 1.1)
+    f = table.figures(2)
+    assert (f.received, f.duplicates, f.lost, f.restarts) == (3, 0, 0, 1)
+
+
+def test_corrupt_bytes_are_counted_with_the_last_reason_never_raised():
+    table = SampleTable((2, 3), local_ids=(1,), team_ids=(1, 2, 3))
+    assert table.receive(2, b"garbage", 0.0) is None
+    assert table.receive(2, b"XMST" + sample(2, 0)[4:], 0.0) is None
+    # a sample of vehicle 3 on vehicle 2's key, one from a stranger, a too long reason
+    assert table.receive(2, sample(3, 0), 0.0) is None
+    assert table.receive(3, sample(9, 0), 0.0) is None
+    f2, f3 = table.figures(2), table.figures(3)
+    assert (f2.corrupt, f2.received) == (3, 0)
+    assert f2.corrupt_reason == "vehicle id 3 on the key of vehicle 2"
+    assert (f3.corrupt, f3.corrupt_reason) == (1, "vehicle id 9 is no vehicle of the team")
+    table.corrupt(3, "x" * 1000)
+    assert len(table.figures(3).corrupt_reason) == MAX_TEXT
+
+
+def test_rows_before_and_after_the_first_sample():
+    # GIVEN one process's clock as the others' (one host) and a sample of 2 only
+    table = SampleTable((2, 3), local_ids=(1,), clock_sync=False)
+    table.receive(2, sample(2, 0, taken_s=99.5, sent_s=99.6, x=7.0), 99.7)
+    rows = table.rows([3, 2], now_s=100.0)
+    # THEN vehicle 3's row is NaN with -inf times and infinite age; vehicle 2's is its sample
+    assert rows.ids == (3, 2) and rows.finite.tolist() == [False, True]
+    assert np.isnan(rows.position_enu_m[0]).all() and rows.taken_local_s[0] == -np.inf
+    assert rows.received_s[0] == -np.inf and rows.age_s[0] == np.inf
+    np.testing.assert_array_equal(rows.position_enu_m[1], [7.0, 2.0, 3.0])
+    np.testing.assert_array_equal(rows.velocity_enu_mps[1], [0.1, 0.2, 0.3])
+    np.testing.assert_array_equal(rows.acceleration_enu_mps2[1], [0.0, 0.0, 0.5])
+    np.testing.assert_array_equal(rows.attitude_wxyz[1], [1.0, 0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(rows.omega_flu_radps[1], [0.0, 0.0, 0.1])
+    assert (rows.taken_local_s[1], rows.received_s[1]) == (99.5, 99.7)
+    assert rows.age_s[1] == pytest.approx(0.5)
+    assert rows.fresh(0.6).tolist() == [False, True] and not rows.fresh(0.4).any()
+    assert rows.position_enu_m.shape == (2, 3) and rows.attitude_wxyz.shape == (2, 4)
+    with pytest.raises(KeyError, match=r"vehicle 4 is not heard here \(senders: 2, 3\)"):
+        table.rows([4], 0.0)
+
+
+def test_echoes_give_each_sender_its_offset_and_convert_its_times():
+    # GIVEN vehicle 1 here and vehicle 2 whose clock reads ours + 50 s, 1 ms each way
+    here = SampleTable((2,), local_ids=(1,), team_ids=(1, 2))
+    there = SampleTable((1,), local_ids=(2,), team_ids=(1, 2))
+    offset, leg = 50.0, 0.001
+    # WHEN 1 sends at t = 10 (ours), 2 receives it, holds 20 ms and sends a sample echoing it
+    there.receive(1, sample(1, 0, taken_s=9.99, sent_s=10.0), 10.0 + leg + offset)
+    sent2 = 10.0 + leg + offset + 0.020
+    echoes = there.echoes(sent2)
+    assert echoes == (Echo(1, 10.0, pytest.approx(0.020)),)
+    # AND before the echo arrives here the sample has no known time
+    here.receive(2, sample(2, 0, taken_s=sent2 - 0.005, sent_s=sent2), sent2 - offset + leg)
+    assert here.offset(2) is None and not here.rows([2], 10.1).finite[0]
+    here.receive(2, sample(2, 1, taken_s=sent2 - 0.005, sent_s=sent2, echoes=echoes),
+                 sent2 - offset + leg)
+    # THEN here knows 2's offset, and its sample's time on our clock
+    assert here.offset(2) == pytest.approx(offset, abs=1e-9)
+    assert here.figures(2).uncertainty_s == pytest.approx(leg, abs=1e-9)
+    rows = here.rows([2], now_s=10.1)
+    assert rows.finite[0] and rows.taken_local_s[0] == pytest.approx(10.016, abs=1e-9)
+    assert rows.age_s[0] == pytest.approx(0.084, abs=1e-9)
+
+
+def test_echoes_of_other_ids_and_the_supervisor_are_kept_apart():
+    # GIVEN the supervisor's table (its own id 0) and vehicle 2 echoing vehicle 3 and the
+    # supervisor's heartbeat sent at 5.0, held 0.1 s
+    sup = SampleTable((2, 3), local_ids=(SUPERVISOR_ID,), team_ids=(2, 3))
+    data = sample(2, 0, sent_s=8.0, echoes=(Echo(3, 1.0, 0.0), Echo(SUPERVISOR_ID, 5.0, 0.1)))
+    sup.receive(2, data, 5.2)
+    # THEN only the supervisor's echo is an exchange: rtt (5.2 - 5) - 0.1 = 0.1, offset
+    # ((7.9 - 5) + (8 - 5.2)) / 2 = 2.85
+    assert sup.figures(2).offset_s == pytest.approx(2.85)
+    assert sup.figures(2).uncertainty_s == pytest.approx(0.05)
+    assert sup.figures(3).offset_s is None
+    # AND a heartbeat-like message records what to echo, held until now
+    sup.heard(3, 4.0, 5.5)
+    assert sup.echoes(6.0) == (Echo(2, 8.0, pytest.approx(0.8)), Echo(3, 4.0, 0.5))
+    assert sup.last_heard_s(3) == 5.5
