@@ -129,6 +129,10 @@ class SampleTable:
         return tuple(Echo(vid, e.last_sent_s, max(0.0, now_s - e.last_received_s))
                      for vid, e in self._edges.items() if e.last_sent_s is not None)
 
+    def clock(self, vid: int) -> OffsetEstimator:
+        """`vid`'s clock filter (read it; the table feeds it)."""
+        return self._edge(vid).clock
+
     def latest(self, vid: int) -> StateSample | None:
         return self._edge(vid).sample
 
