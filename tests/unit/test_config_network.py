@@ -4,6 +4,7 @@ shipped team's meaning, endpoints, vehicle ids and the rules between the keys.""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -17,9 +18,21 @@ from gcs.config.network_schema import (
     key_chunk,
 )
 from gcs.config.reader import team_to_dict, team_to_yaml
-from tests.unit.test_config import base, raises_at
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+
+
+def base() -> dict[str, Any]:
+    """Scenario I (vehicles 1..4) as plain data, without a network section."""
+    data = team_to_dict(load_team(CONFIGS / "square4.yaml"))
+    del data["network"]
+    return data
+
+
+def raises_at(data: dict[str, Any], match: str) -> None:
+    with pytest.raises(ConfigError, match=match) as info:
+        team_from_dict(data)
+    assert "\n" not in str(info.value) and str(info.value).startswith("<dict>: ")
 
 
 TEAMS = sorted(p for p in CONFIGS.glob("*.yaml") if not p.name.startswith("study_"))
@@ -46,7 +59,7 @@ def test_a_full_network_section_reads_and_round_trips():
     data["network"] = {
         "key_prefix": "lab/flights", "mode": "client", "router": "tcp/127.0.0.1:7447",
         "multicast_scouting": True, "base_port": 9000,
-        "agents": {2: {"listen": ["tcp/10.0.0.2:7000", "udp/[::1]:7001"]},
+        "agents": {2: {"listen": ["tcp/192.0.2.2:7000", "udp/[::1]:7001"]},
                    4: {"listen": ["quic/uav4.local:7002"]}},
         "supervisor": {"listen": ["tcp/0.0.0.0:7010"]},
         "stale_after_s": 0.5, "supervisor_lost_after_s": 2.0, "clock_sync": False,
@@ -56,7 +69,7 @@ def test_a_full_network_section_reads_and_round_trips():
     assert net == NetworkConfig(
         key_prefix="lab/flights", mode=NetworkMode.CLIENT, router="tcp/127.0.0.1:7447",
         multicast_scouting=True, base_port=9000,
-        agents=(AgentNetwork(2, ("tcp/10.0.0.2:7000", "udp/[::1]:7001")),
+        agents=(AgentNetwork(2, ("tcp/192.0.2.2:7000", "udp/[::1]:7001")),
                 AgentNetwork(4, ("quic/uav4.local:7002",))),
         supervisor=SupervisorNetwork(("tcp/0.0.0.0:7010",)),
         stale_after_s=0.5, supervisor_lost_after_s=2.0, clock_sync=False)
