@@ -16,7 +16,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Collection, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -135,12 +135,13 @@ class NeighbourBus(BusSession):
         return sample
 
     def publish_status(self, vehicle_id: int, phase: str, waiting_gate: str | None = None,
-                       outcome: str | None = None) -> Status:
-        """Publish own vehicle `vehicle_id`'s status with this process's edge figures;
-        WireError for a text the message cannot carry (empty, over 300 characters)."""
+                       outcome: str | None = None, **more: Any) -> Status:
+        """Publish own vehicle `vehicle_id`'s status with this process's edge figures (`more`:
+        Status's other fields, e.g. exit_code, done, records); WireError for a text the
+        message cannot carry (empty, over 300 characters)."""
         self._own(vehicle_id)
         status = Status(vehicle_id, self._status_seq[vehicle_id], self.clock(), phase,
-                        waiting_gate, outcome, tuple(self.stats().values()))
+                        waiting_gate, outcome, tuple(self.stats().values()), **more)
         self._status_pubs[vehicle_id].put(encode_control(status))
         self._status_seq[vehicle_id] += 1
         return status

@@ -16,9 +16,9 @@ from typing import Any
 
 from gcs.agent.merge import MergeError, merge_records
 from gcs.agent.runtime import fly_agent
+from gcs.agent.session import BusError
 from gcs.agent.supervise import Supervisor, SupervisorOutcome
-from gcs.agent.team import AgentTeam
-from gcs.config import TeamConfig, load_team
+from gcs.config import ConfigError, TeamConfig, load_team
 from gcs.config.modes import FLY_MODES, as_strings
 from gcs.fly.command import EmulatorFleetError, emulator_fleet
 from gcs.fly.records import TIMESERIES_NAME
@@ -70,16 +70,11 @@ def run_agent(args: argparse.Namespace) -> int:
     """Entry of `gcs agent`; exit statuses as gcs fly's."""
     logging.basicConfig(level=getattr(logging, str(args.log_level).upper(), logging.WARNING),
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    from gcs.agent.bus import NeighbourBus
-
     team = load_team(args.team)
     own = tuple(args.ids)
     label = "-".join(str(v) for v in own)
     out = args.out if args.out is not None else Path("runs") / f"{team.name}-agent-{label}"
     options = _options(team, args, out)
-
-    def open_bus(agent: AgentTeam) -> Any:
-        return NeighbourBus(team, agent.own, agent.neighbours)
 
     status = None
     if args.status != "off":
@@ -88,8 +83,8 @@ def run_agent(args: argparse.Namespace) -> int:
         def status(flight: Any) -> Any:
             return StatusView(flight, args.status)
     try:
-        result = asyncio.run(fly_agent(team, own, options, open_bus, status))
-    except FlightSetupError as exc:
+        result = asyncio.run(fly_agent(team, own, options, status))
+    except (FlightSetupError, BusError, ConfigError) as exc:
         print(f"gcs agent: {exc}", file=sys.stderr)
         return EXIT_SETUP
     except KeyboardInterrupt:
@@ -129,7 +124,7 @@ class AgentProcesses:
                 argv += ["--duration-s", str(args.duration_s)]
             if args.no_figures:
                 argv.append("--no-figures")
-            log = open(d.with_suffix(".log"), "wb")  # noqa: SIM115 (closed in stop)
+            log = open(d.with_suffix(".log"), "wb")  # noqa: SIM115 (the child keeps its own)
             self.procs.append(subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=log,
                                                stderr=subprocess.STDOUT,
                                                start_new_session=True))
@@ -173,7 +168,7 @@ def run_fly_agents(args: argparse.Namespace) -> int:
 
 def run_supervised(args: argparse.Namespace, team: TeamConfig, out: Path) -> int:
     """`gcs fly --agents`: start the agents (unless --agents-running), supervise, merge."""
-    from gcs.agent.bus import SupervisorBus
+    from gcs.agent.supervisor import SupervisorBus
     from gcs.fly.warmup import compile_law
 
     options = FlyOptions(out_dir=out, mode=args.mode, duration_s=args.duration_s)
@@ -190,7 +185,7 @@ def run_supervised(args: argparse.Namespace, team: TeamConfig, out: Path) -> int
         return None if procs is None else procs.exit_status(k)
 
     async def supervise() -> SupervisorOutcome:
-        async with SupervisorBus(team) as bus:
+        async with SupervisorBus.for_team(team) as bus:
             sup = Supervisor(team, bus, groups, exits, prime_s=setup.plan.prime_s,
                              connect_timeout_s=setup.plan.connect_timeout_s + 30.0,
                              stream=sys.stderr)
@@ -204,12 +199,17 @@ def run_supervised(args: argparse.Namespace, team: TeamConfig, out: Path) -> int
           f"({'found' if procs is None else 'started'}), the law runs in them", file=sys.stderr)
     try:
         outcome = asyncio.run(supervise())
+    except BusError as exc:
+        print(f"gcs fly: {exc}", file=sys.stderr)
+        if procs is not None:
+            procs.stop(timeout_s=0.0)
+        return EXIT_SETUP
     finally:
         if procs is not None:
             procs.stop()
     # the agents' records: where the supervisor put them, or where each one says it wrote them
     dirs = (procs.dirs if procs is not None
-            else [Path(str((a.status or {}).get("records") or "")) for a in outcome.agents])
+            else [Path(a.records or "") for a in outcome.agents])
     agents: dict[str, Any] = {}
     present: list[Path] = []
     for a, d in zip(outcome.agents, dirs, strict=True):

@@ -24,6 +24,7 @@ from gcs.config.modes import FlyAction
 
 MAX_CONTROL_BYTES = 256 * 1024
 MAX_TEXT = 300  # characters of a phase, gate name, outcome or reason
+MAX_PATH = 4096  # characters of a records directory
 MAX_COUNT = 2**53  # counters: exact in a JSON number
 
 
@@ -103,7 +104,9 @@ class EdgeFigures:
 @dataclass(frozen=True, slots=True)
 class Status:
     """Agent -> supervisor: vehicle `vehicle_id`'s phase, the gate it waits at (None: none),
-    its outcome once it has one, and its edges' figures."""
+    why it stops (`outcome`, with `exit_code`) from its stop on, `done` once its flight has
+    ended (then `outcome` is its outcome), `records` where it wrote them, its formation time,
+    and its edges' figures."""
 
     vehicle_id: int
     seq: int
@@ -112,6 +115,10 @@ class Status:
     waiting_gate: str | None = None
     outcome: str | None = None
     edges: tuple[EdgeFigures, ...] = ()
+    exit_code: int | None = None
+    done: bool = False
+    records: str | None = None
+    formation_t_s: float | None = None
 
 
 ControlMessage = Heartbeat | Gate | Abort | Status
@@ -156,6 +163,19 @@ def _number(value: Any, where: str, ids: Collection[int] | None) -> float:
 def _text(value: Any, where: str, ids: Collection[int] | None) -> str:
     if not isinstance(value, str) or not 1 <= len(value) <= MAX_TEXT:
         raise WireError(f"{where}: expected a string of 1..{MAX_TEXT} characters, got "
+                        f"{_show(value)}")
+    return value
+
+
+def _flag(value: Any, where: str, ids: Collection[int] | None) -> bool:
+    if not isinstance(value, bool):
+        raise WireError(f"{where}: expected true or false, got {_show(value)}")
+    return value
+
+
+def _path(value: Any, where: str, ids: Collection[int] | None) -> str:
+    if not isinstance(value, str) or not 1 <= len(value) <= MAX_PATH or "\x00" in value:
+        raise WireError(f"{where}: expected a path of 1..{MAX_PATH} characters, got "
                         f"{_show(value)}")
     return value
 
@@ -246,7 +266,9 @@ def _unique_edges(edges: tuple[EdgeFigures, ...], where: str) -> None:
 
 _SPECS[Status] = {"vehicle_id": _vehicle, "seq": _COUNT, "sent_s": _number, "phase": _text,
                   "waiting_gate": _optional(_text), "outcome": _optional(_text),
-                  "edges": _tuple_of(_object(EdgeFigures), MAX_ECHOES)}
+                  "edges": _tuple_of(_object(EdgeFigures), MAX_ECHOES),
+                  "exit_code": _optional(_integer(0, 255)), "done": _flag,
+                  "records": _optional(_path), "formation_t_s": _OPT_NUMBER}
 _READERS = {kind: _object(cls) for cls, kind in _KINDS.items()}
 _CLASSES = {kind: cls for cls, kind in _KINDS.items()}
 

@@ -14,11 +14,12 @@ own row, so the placeholder only keeps the unused row finite.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
 from typing import Protocol
 
 import numpy as np
 
+from gcs.agent.table import Rows
 from gcs.agent.team import AgentTeam
 from gcs.control.law import TeamCommand, TeamMeasurement
 from gcs.control.predict import horizons_s, predict
@@ -26,21 +27,7 @@ from gcs.fly.measure import TeamSample
 from gcs.fly.stats import AgeStats
 from gcs.frames import quat_wxyz_from_rotation
 
-__all__ = ["NeighbourRows", "NeighbourSource", "NeighbourState"]
-
-
-@dataclass(frozen=True, slots=True)
-class NeighbourState:
-    """The latest samples of k neighbours: position_m, velocity_mps, acceleration_mps2 (k, 3)
-    world ENU; taken_s (k,) when each vehicle took its sample, on this process's clock (-inf
-    before the first); received_s (k,) when it arrived (-inf before the first); finite (k,)."""
-
-    position_m: np.ndarray
-    velocity_mps: np.ndarray
-    acceleration_mps2: np.ndarray
-    taken_s: np.ndarray
-    received_s: np.ndarray
-    finite: np.ndarray
+__all__ = ["NeighbourRows", "NeighbourSource"]
 
 
 class NeighbourSource(Protocol):
@@ -50,7 +37,7 @@ class NeighbourSource(Protocol):
                 velocity: np.ndarray, acceleration: np.ndarray, quaternion_wxyz: np.ndarray,
                 omega: np.ndarray) -> None: ...
 
-    def rows(self, ids: tuple[int, ...], now_s: float) -> NeighbourState: ...
+    def rows(self, ids: tuple[int, ...], now_s: float) -> Rows: ...
 
 
 class NeighbourRows:
@@ -71,7 +58,8 @@ class NeighbourRows:
         self.ages = AgeStats(len(self.neighbour_ids))
         #: per neighbour, the oldest sample the law used (fresh) [s]: at most stale_after_s
         self.age_used_max_s = np.full(len(agent.neighbours), -np.inf)
-        self._state: NeighbourState | None = None
+        self._state: Rows | None = None
+        self.unpublished = 0  # ticks an own vehicle's sample was not complete and finite
         self._fresh = np.zeros(len(self.neighbour_ids), dtype=bool)
         self._ok = np.zeros(len(self.neighbour_ids), dtype=bool)  # a finite sample to use
 
@@ -79,13 +67,18 @@ class NeighbourRows:
 
     def publish(self, sample: TeamSample) -> None:
         """Each own vehicle's latest state on the bus (skipped while it is not finite)."""
-        quats = quat_wxyz_from_rotation(sample.rotation) if sample.finite.any() else None
+        if not sample.finite.any():
+            return
+        quats = quat_wxyz_from_rotation(sample.rotation)
         for i, vid in enumerate(self.own_ids):
-            if not sample.finite[i] or quats is None:
+            values = (sample.position_m[i], sample.velocity_mps[i],
+                      sample.acceleration_mps2[i], quats[i], sample.omega_radps[i])
+            taken = float(sample.position_taken_s[i])
+            if not (sample.finite[i] and math.isfinite(taken)
+                    and all(np.isfinite(v).all() for v in values)):
+                self.unpublished += 1
                 continue
-            self.source.publish(vid, float(sample.position_taken_s[i]), sample.position_m[i],
-                                sample.velocity_mps[i], sample.acceleration_mps2[i], quats[i],
-                                sample.omega_radps[i])
+            self.source.publish(vid, taken, *values)
 
     # --- the law's rows --------------------------------------------------------------------------
 
@@ -94,10 +87,10 @@ class NeighbourRows:
         (this tick's neighbour state, used by `measurement`)."""
         state = self.source.rows(self.neighbour_ids, now_s)
         self._state = state
-        age = now_s - state.taken_s
-        self._ok = (state.finite & np.isfinite(state.position_m).all(axis=1)
-                    & np.isfinite(state.velocity_mps).all(axis=1)
-                    & np.isfinite(state.acceleration_mps2).all(axis=1))
+        age = now_s - state.taken_local_s
+        self._ok = (state.finite & np.isfinite(state.position_enu_m).all(axis=1)
+                    & np.isfinite(state.velocity_enu_mps).all(axis=1)
+                    & np.isfinite(state.acceleration_enu_mps2).all(axis=1))
         self._fresh = self._ok & np.isfinite(age) & (age <= self.stale_after_s)
         out = np.zeros(self.n_law, dtype=bool)
         out[self.own_rows] = own_fresh
@@ -109,7 +102,7 @@ class NeighbourRows:
         s = self._state
         if s is None or not len(self.neighbour_ids):
             return
-        age = now_s - s.taken_s
+        age = now_s - s.taken_local_s
         self.ages.record(age, now_s - s.received_s, self._fresh,
                          np.zeros(len(self.neighbour_ids), dtype=np.int64))
         used = np.where(self._fresh, age, -np.inf)
@@ -134,9 +127,9 @@ class NeighbourRows:
         if k:
             if s is None:
                 raise RuntimeError("NeighbourRows.measurement before fresh() this tick")
-            n_pos, n_vel, n_acc = s.position_m, s.velocity_mps, s.acceleration_mps2
+            n_pos, n_vel, n_acc = s.position_enu_m, s.velocity_enu_mps, s.acceleration_enu_mps2
             if act_s is not None:
-                h = horizons_s(act_s, s.taken_s)
+                h = horizons_s(act_s, s.taken_local_s)
                 held = TeamMeasurement(n_pos, n_vel, n_acc, np.tile(np.eye(3), (k, 1, 1)),
                                        np.zeros((k, 3)))
                 p = predict(held, h, np.zeros(k))

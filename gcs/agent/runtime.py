@@ -20,18 +20,20 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import logging
+import math
 import time
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
-
-from gcs.agent.neighbours import NeighbourRows, NeighbourSource
+from gcs.agent.bus import NeighbourBus
+from gcs.agent.control import MAX_TEXT, Abort, Gate
+from gcs.agent.neighbours import NeighbourRows
 from gcs.agent.team import AgentTeam
+from gcs.agent.wire import SUPERVISOR_ID
 from gcs.config import ControlMode, TeamConfig
 from gcs.fly.flight import Flight
 from gcs.fly.setup import FlightSetup, FlightSetupError, FlyOptions, FlyResult, prepare
-from gcs.mission.plan import GATES, Phase
+from gcs.mission.plan import GATE_FORMATION, GATES, Phase
 
 logger = logging.getLogger("gcs.agent")
 
@@ -59,10 +61,10 @@ def agent_setups(team: TeamConfig, own: tuple[int, ...], options: FlyOptions
 
 
 class TeamWatch:
-    """The agent's side of the team (module docstring)."""
+    """The agent's side of the team (module docstring). `bus` is its NeighbourBus."""
 
-    def __init__(self, flight: Flight, bus: Any, rows: NeighbourRows, team: TeamConfig,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, flight: Flight, bus: NeighbourBus, rows: NeighbourRows,
+                 team: TeamConfig, clock: Callable[[], float] = time.monotonic) -> None:
         self.flight = flight
         self.machine = flight.machine
         self.bus = bus
@@ -70,47 +72,51 @@ class TeamWatch:
         self.team = team
         self.clock = clock
         self.started_s = clock()
-        self.supervisor_heard_s: float | None = None
         self.events: list[dict[str, Any]] = []  # what the watch did, for the records
         self._stopped_by_watch = False
         self._last_status_s = -1e9
         self.records: str | None = None
+        self.final_outcome: tuple[int, str] | None = None
 
     # --- status ----------------------------------------------------------------------------------
 
-    def status(self) -> dict[str, Any]:
+    def publish_status(self) -> None:
+        """Each own vehicle's status: the machine's phase and gate, why it stops, its end."""
         m = self.machine
-        why = m.stop_reason
-        return {
-            "kind": "status", "vehicles": list(self.rows.own_ids), "phase": m.phase.value,
-            "waiting_at": m.waiting_at, "formation_t_s": self.flight.tick.formation_t_s,
-            "stopping": None if why is None else {"exit_code": why.exit_code,
-                                                   "reason": why.reason},
-            "done": m.done, "records": self.records, "sent_s": self.clock(),
-        }
+        why = m.stop_reason if self.final_outcome is None else None
+        code, text = ((why.exit_code, why.reason) if why is not None
+                      else self.final_outcome or (None, None))
+        for vid in self.rows.own_ids:
+            self.bus.publish_status(
+                vid, m.phase.value, m.waiting_at,
+                None if text is None else " ".join(text.split())[:MAX_TEXT],
+                exit_code=code, done=self.final_outcome is not None, records=self.records,
+                formation_t_s=self.flight.tick.formation_t_s)
 
     def _note(self, what: str, **kw: Any) -> None:
-        t = self.flight.tick.formation_t_s
         self.events.append({"t_since_start_s": round(self.clock() - self.started_s, 3),
-                            "formation_t_s": t, "event": what, **kw})
+                            "formation_t_s": self.flight.tick.formation_t_s, "event": what,
+                            **kw})
         logger.warning("%s", what)
 
-    # --- the supervisor's messages -----------------------------------------------------------
+    # --- the supervisor's orders -------------------------------------------------------------
 
-    def on_message(self, msg: dict[str, Any], rx_s: float) -> None:
-        kind = msg.get("kind")
-        self.supervisor_heard_s = rx_s
+    def on_order(self, order: Gate | Abort, now_s: float) -> None:
         m = self.machine
-        if kind == "gate":
-            gate = msg["gate"]
-            if gate in GATES and not m.gate_open(gate):
-                at = msg.get("at_s")
-                local = None if at is None else rx_s + (float(at) - float(msg["sent_s"]))
-                m.open_gate(gate, local)
-                self._note(f"gate {gate} opened by the supervisor", at_local_s=local)
-        elif kind == "abort" and m.phase not in (Phase.STOPPING, Phase.DONE):
-            self._note(f"supervisor abort: {msg.get('reason', '')}")
-            m.request_abort(f"supervisor: {msg.get('reason', 'abort')}", operator=False)
+        if isinstance(order, Gate):
+            if order.name not in GATES or m.gate_open(order.name):
+                return
+            at = None
+            if order.name == GATE_FORMATION:
+                at = self.bus.to_local(SUPERVISOR_ID, order.opened_s)
+                if not math.isfinite(at):  # no clock offset yet: the order's own send time
+                    at = now_s + (order.opened_s - order.sent_s)
+            m.open_gate(order.name, at)
+            self._note(f"gate {order.name} opened by the supervisor",
+                       **({} if at is None else {"starts_in_s": round(at - now_s, 3)}))
+        elif m.phase not in (Phase.STOPPING, Phase.DONE):
+            self._note(f"supervisor abort ({order.action}): {order.reason}")
+            m.request_abort(f"supervisor: {order.reason}", operator=False, action=order.action)
 
     # --- the loss rules --------------------------------------------------------------------------
 
@@ -127,77 +133,78 @@ class TeamWatch:
         if m.phase in (Phase.STOPPING, Phase.DONE):
             return
         net = self.team.network
-        heard = self.supervisor_heard_s
-        if heard is None:
-            wait = self.flight.setup.plan.connect_timeout_s
+        age = self.bus.supervisor_age_s(now_s)
+        wait = self.flight.setup.plan.connect_timeout_s
+        if not math.isfinite(age):
             if now_s - self.started_s > wait:
                 self._stop(f"no supervisor heard within {wait:g} s (fly.connect_timeout_s)")
-        elif now_s - heard > net.supervisor_lost_after_s:
-            self._stop(f"lost the supervisor: silent for {now_s - heard:.2f} s > "
+        elif age > net.supervisor_lost_after_s:
+            self._stop(f"lost the supervisor: silent for {age:.2f} s > "
                        f"{net.supervisor_lost_after_s:g} s (network.supervisor_lost_after_s)")
         if m.phase in (Phase.PRIME, Phase.FORMATION) and self.rows.neighbour_ids:
             state = self.bus.rows(self.rows.neighbour_ids, now_s)
-            age = now_s - state.taken_s
+            ages = now_s - state.taken_local_s
             bound = self.team.fly.link_lost_after_s
-            late = [(vid, float(a)) for vid, a in zip(self.rows.neighbour_ids, age, strict=True)
+            late = [(vid, float(a)) for vid, a in zip(self.rows.neighbour_ids, ages, strict=True)
                     if not a <= bound]
             if late:
                 words = ", ".join(
-                    f"vehicle {vid} ({f'{a:.2f} s' if np.isfinite(a) else 'never heard'})"
+                    f"vehicle {vid} ({f'{a:.2f} s' if math.isfinite(a) else 'never heard'})"
                     for vid, a in late)
                 self._stop(f"neighbour lost: {words} older than {bound:g} s "
                            "(fly.link_lost_after_s)")
 
     async def run(self, finished: asyncio.Event) -> None:
-        """Until the flight is done: the supervisor's messages, the loss rules, the status."""
+        """Until the flight is done: the supervisor's orders, the loss rules, the status."""
         period = 1.0 / STATUS_RATE_HZ
         while not finished.is_set():
-            for msg, rx_s in self.bus.take_control():
-                self.on_message(msg, rx_s)
             now = self.clock()
+            while not self.bus.control.empty():
+                self.on_order(self.bus.control.get_nowait(), now)
             self.check(now)
             if now - self._last_status_s >= period:
                 self._last_status_s = now
-                self.bus.publish_status(self.status())
+                self.publish_status()
             await asyncio.sleep(WATCH_PERIOD_S)
 
     async def final(self, result: FlyResult, repeat: int = 5) -> None:
         """After the records are written: the final status, a few times (a late subscriber)."""
-        self.records = str(result.out_dir) if result.log is not None else None
+        self.records = str(result.out_dir.resolve()) if result.log is not None else None
+        self.final_outcome = (result.outcome.exit_code, result.outcome.reason)
         for _ in range(repeat):
-            self.bus.publish_status({**self.status(), "done": True, "outcome": {
-                "exit_code": result.outcome.exit_code, "reason": result.outcome.reason}})
+            self.publish_status()
             await asyncio.sleep(1.0 / STATUS_RATE_HZ)
 
     def report(self) -> dict[str, Any]:
-        """The records' `agent` section: own and neighbour vehicles, the neighbours' ages at
-        use and the bus's per-edge figures, the watch's events."""
+        """The records' `agent` section: own and neighbour vehicles, per neighbour its ages at
+        use, the oldest sample the law used and the bus's figures; the watch's events."""
         ages = self.rows.ages
         p50, p99, top = (ages.percentiles_ms(q) for q in (50, 99, 100))
         stats = self.bus.stats()
+        used = self.rows.age_used_max_s
         edges = {}
         for k, vid in enumerate(self.rows.neighbour_ids):
-            edges[str(vid)] = {"age_p50_ms": float(p50[k]), "age_p99_ms": float(p99[k]),
-                               "age_max_ms": float(top[k]),
-                               "stale_ticks": int(ages.stale_own[k]),
-                               "age_used_max_ms": (1e3 * float(self.rows.age_used_max_s[k])
-                                                   if np.isfinite(self.rows.age_used_max_s[k])
-                                                   else None),
-                               **stats.get(vid, {})}
+            fig = stats.get(vid)
+            edges[str(vid)] = {
+                "age_p50_ms": float(p50[k]), "age_p99_ms": float(p99[k]),
+                "age_max_ms": float(top[k]), "stale_ticks": int(ages.stale_own[k]),
+                "age_used_max_ms": 1e3 * float(used[k]) if math.isfinite(used[k]) else None,
+                **({} if fig is None else {**dataclasses.asdict(fig),
+                                           "loss_fraction": fig.loss_fraction})}
         return {"agent": {"vehicles": list(self.rows.own_ids),
                           "neighbours": list(self.rows.neighbour_ids), "edges": edges,
+                          "unpublished_samples": self.rows.unpublished,
+                          "supervisor_offset_s": self.bus.offset(SUPERVISOR_ID),
+                          "control_corrupt": self.bus.control_corrupt,
                           "events": self.events}}
 
 
 async def fly_agent(team: TeamConfig, own: tuple[int, ...], options: FlyOptions,
-                    open_bus: Callable[[AgentTeam], Any],
                     status_factory: Callable[[Flight], Any] | None = None) -> FlyResult:
-    """Fly the agent's vehicles with the team: the bus opened by `open_bus(agent)` (an async
-    context manager giving a NeighbourSource with the control channel)."""
+    """Fly the agent's vehicles with the team over its neighbour bus."""
     agent, setup, law_setup = agent_setups(team, own, options)
-    async with open_bus(agent) as bus:
-        source: NeighbourSource = bus
-        rows = NeighbourRows(agent, source, team.fly.stale_after_s)
+    async with NeighbourBus.for_team(team, agent.own) as bus:
+        rows = NeighbourRows(agent, bus, team.fly.stale_after_s)
         flight = Flight(setup, options, status_factory, law_rows=rows, law_setup=law_setup)
         watch = TeamWatch(flight, bus, rows, team)
         flight.companions.append(watch.run)

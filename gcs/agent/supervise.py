@@ -8,7 +8,8 @@ The supervisor never runs the law and holds no MAVLink link. Over the bus (docs/
   own clock by the message's send time);
 * relays an abort to every agent when one agent stops (its reason, naming its vehicles),
   when an agent falls silent for network.stale_after_s, or at Ctrl-C;
-* sends a heartbeat at STATUS_RATE_HZ, by which the agents know it is there;
+* sends a heartbeat every HEARTBEAT_PERIOD_S (it repeats the open gates and the abort), by
+  which the agents know it is there and measure their clock offsets to it;
 * ends when every agent reported its outcome and records (or its process exited), then merges
   the records (gcs/agent/merge.py).
 """
@@ -24,7 +25,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from gcs.agent.runtime import STATUS_RATE_HZ
+from gcs.agent.control import MAX_TEXT, Status
 from gcs.config import TeamConfig
 from gcs.metrics import formation_error_m
 from gcs.mission.plan import EXIT_ABORTED, EXIT_INTERRUPTED, EXIT_OK, GATE_FLIGHT, GATE_FORMATION
@@ -33,17 +34,19 @@ __all__ = ["AgentState", "Supervisor", "SupervisorOutcome"]
 
 #: how often the supervisor wakes
 PERIOD_S = 0.02
+#: between two heartbeats (network.supervisor_lost_after_s should be several of these)
+HEARTBEAT_PERIOD_S = 0.1
 
 
 @dataclass
 class AgentState:
-    """What the supervisor knows of one agent (the vehicles it flies)."""
+    """What the supervisor knows of one agent (the vehicles it flies): its first vehicle's
+    latest status (an agent's vehicles share its phase)."""
 
     vehicles: tuple[int, ...]
-    status: dict[str, Any] | None = None
+    status: Status | None = None
     heard_s: float | None = None
     exited: int | None = None  # the process's exit status, when the supervisor started it
-    outcome: dict[str, Any] | None = None
     gone: bool = False  # silent past network.stale_after_s before its outcome
 
     @property
@@ -52,10 +55,21 @@ class AgentState:
         return f"agent of vehicle{'s' if len(self.vehicles) > 1 else ''} {ids}"
 
     @property
+    def outcome(self) -> dict[str, Any] | None:
+        """{exit_code, reason} once the agent's flight has ended."""
+        s = self.status
+        if s is None or not s.done:
+            return None
+        return {"exit_code": s.exit_code if s.exit_code is not None else EXIT_ABORTED,
+                "reason": s.outcome or ""}
+
+    @property
+    def records(self) -> str | None:
+        return self.status.records if self.status is not None else None
+
+    @property
     def finished(self) -> bool:
-        return self.gone or self.exited is not None or (
-            self.status is not None and bool(self.status.get("done"))
-            and "outcome" in self.status)
+        return self.gone or self.exited is not None or self.outcome is not None
 
 
 @dataclass
@@ -68,7 +82,7 @@ class SupervisorOutcome:
 
 
 class Supervisor:
-    """See the module docstring. `bus` is a SupervisorBus (gcs/agent/bus.py); `exits` gives,
+    """See the module docstring. `bus` is a SupervisorBus (gcs/agent/supervisor.py); `exits` gives,
     per agent, its process's exit status or None (agents the supervisor did not start: None)."""
 
     def __init__(self, team: TeamConfig, bus: Any, groups: list[tuple[int, ...]],
@@ -106,23 +120,22 @@ class Supervisor:
         self.abort("operator abort (Ctrl-C)")
 
     def abort(self, reason: str) -> None:
+        """Every agent stops with the team file's abort action (repeated by the heartbeats)."""
         if self.aborted is None:
             self.aborted = reason
             self._event(f"abort to every agent: {reason}")
-        self.bus.publish_control({"kind": "abort", "reason": reason, "sent_s": self.clock()})
+            self.bus.abort(reason[:MAX_TEXT], action=self.team.fly.abort_action)
 
     # --- one wake-up -----------------------------------------------------------------------------
 
     def _hear(self) -> None:
-        for msg, rx_s in self.bus.take_statuses():
-            vids = msg.get("vehicles") or []
-            a = self._of_vehicle.get(int(vids[0])) if vids else None
-            if a is None:
-                continue
-            a.status, a.heard_s = msg, rx_s
-            if msg.get("done") and "outcome" in msg:
-                a.outcome = msg["outcome"]
+        while not self.bus.status_updates.empty():  # each vehicle's latest is in `statuses`
+            self.bus.status_updates.get_nowait()
         for k, a in enumerate(self.agents):
+            first = a.vehicles[0]
+            status = self.bus.statuses.get(first)
+            if status is not None:
+                a.status, a.heard_s = status, self.bus.status_received_s[first]
             if a.exited is None:
                 a.exited = self.exits(k)
 
@@ -130,21 +143,16 @@ class Supervisor:
         live = [a for a in self.agents if a.status is not None]
         if len(live) < len(self.agents):
             return
-        waits = [a.status.get("waiting_at") for a in live]
-        if all(w == GATE_FLIGHT for w in waits) or (
-                self._flight_gate_sent and any(w == GATE_FLIGHT for w in waits)):
-            if not self._flight_gate_sent:
-                self._event("every agent passed its preflight: flight gate opened")
+        waits = [a.status.waiting_gate for a in live]
+        if not self._flight_gate_sent and all(w == GATE_FLIGHT for w in waits):
             self._flight_gate_sent = True
-            self.bus.publish_control({"kind": "gate", "gate": GATE_FLIGHT, "sent_s": now})
-        if all(w == GATE_FORMATION for w in waits) or (
-                self.formation_at_s is not None and any(w == GATE_FORMATION for w in waits)):
-            if self.formation_at_s is None:
-                self.formation_at_s = now + self.prime_s + self.start_lead_s
-                self._event(f"every vehicle holds at its start: formation starts in "
-                            f"{self.prime_s + self.start_lead_s:.1f} s")
-            self.bus.publish_control({"kind": "gate", "gate": GATE_FORMATION,
-                                      "at_s": self.formation_at_s, "sent_s": now})
+            self._event("every agent passed its preflight: flight gate opened")
+            self.bus.open_gate(GATE_FLIGHT)
+        if self.formation_at_s is None and all(w == GATE_FORMATION for w in waits):
+            self.formation_at_s = now + self.prime_s + self.start_lead_s
+            self._event(f"every vehicle holds at its start: the formation starts in "
+                        f"{self.prime_s + self.start_lead_s:.1f} s")
+            self.bus.open_gate(GATE_FORMATION, at_s=self.formation_at_s)
 
     def _watch(self, now: float) -> None:
         stale = self.team.network.stale_after_s
@@ -158,13 +166,12 @@ class Supervisor:
             return
         for a in self.agents:
             s = a.status
-            stop = s.get("stopping") if s is not None else None
             out = a.outcome
-            if out is not None and out.get("exit_code"):
-                self.abort(f"{a.name} stopped: {out.get('reason')}")
+            if out is not None and out["exit_code"]:
+                self.abort(f"{a.name} stopped: {out['reason']}")
                 return
-            if stop is not None and stop.get("exit_code"):
-                self.abort(f"{a.name} stopping: {stop.get('reason')}")
+            if s is not None and not s.done and s.exit_code:
+                self.abort(f"{a.name} stopping: {s.outcome}")
                 return
             if a.exited is not None and out is None:
                 self.abort(f"{a.name} exited with status {a.exited} without an outcome")
@@ -184,9 +191,9 @@ class Supervisor:
         self._last_line_s = now
         ids = self.team.ids()
         rows = self.bus.rows(ids, now)
-        phases = " ".join(f"{v}:{(a.status or {}).get('phase', '-')}"
-                          for a in self.agents for v in a.vehicles[:1])
-        err = (formation_error_m(np.ascontiguousarray(rows.position_m),
+        phases = " ".join(f"{a.vehicles[0]}:{a.status.phase if a.status else '-'}"
+                          for a in self.agents)
+        err = (formation_error_m(np.ascontiguousarray(rows.position_enu_m),
                                  self.team.offsets_enu_m())
                if bool(np.all(rows.finite)) else math.nan)
         t = None if self.formation_at_s is None else now - self.formation_at_s
@@ -198,11 +205,9 @@ class Supervisor:
         """One wake-up; True when every agent has finished."""
         now = self.clock()
         self._hear()
-        if now - self._last_beat_s >= 1.0 / STATUS_RATE_HZ:
+        if now - self._last_beat_s >= HEARTBEAT_PERIOD_S:
             self._last_beat_s = now
-            self.bus.publish_control({"kind": "heartbeat", "sent_s": now})
-            if self.aborted is not None:
-                self.abort(self.aborted)  # again, for an agent that missed it
+            self.bus.heartbeat()  # repeats the open gates and the abort
         if self.aborted is None:
             self._gates(now)
         self._watch(now)

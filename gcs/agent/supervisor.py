@@ -124,12 +124,13 @@ class SupervisorBus(BusSession):
         self._pub.put(encode_control(message))
         self._seq += 1
 
-    def open_gate(self, name: str) -> Gate:
-        """Open gate `name` now (the supervisor's clock) and tell the agents; every later
-        heartbeat repeats it. Opening an open gate sends it again with its first time."""
+    def open_gate(self, name: str, at_s: float | None = None) -> Gate:
+        """Open gate `name` now, or at `at_s` (both the supervisor's clock: a formation start
+        agreed ahead), and tell the agents; every later heartbeat repeats it. Opening an open
+        gate sends it again with its first time."""
         opened = {g.name: g.opened_s for g in self.gates}
         if name not in opened:
-            opened[name] = self.clock()
+            opened[name] = self.clock() if at_s is None else at_s
             self.gates = (*self.gates, OpenGate(name, opened[name]))
         gate = Gate(self._seq, self.clock(), name, opened[name])
         self._send(gate)

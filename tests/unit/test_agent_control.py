@@ -50,7 +50,7 @@ def test_a_gate_and_a_status_as_literal_json():
     assert json.loads(encode_control(Status(2, 1, 5, "connect", edges=(EdgeFigures(1),)))) == {
         "kind": "status", "vehicle_id": 2, "seq": 1, "sent_s": 5, "phase": "connect",
         "edges": [{"neighbour_id": 1, "received": 0, "lost": 0, "duplicates": 0, "corrupt": 0,
-                   "restarts": 0}]}
+                   "restarts": 0}], "done": False}
     # AND an echo is [peer, sent_s, held_s], a gate [name, opened_s]
     beat = json.loads(encode_control(MESSAGES[1]))
     assert beat["echoes"][0] == [1, 3.0, 0.01] and beat["gates"][1] == ["formation", 10.9]

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gcs.agent.neighbours import NeighbourRows, NeighbourState
+from gcs.agent.neighbours import NeighbourRows
+from gcs.agent.table import Rows
 from gcs.agent.team import AgentTeam
 from gcs.config import ConfigError, load_team
 from gcs.control.formation import reference_velocity
@@ -54,12 +55,14 @@ class Exact:
     def publish(self, vehicle_id, *_args) -> None:
         self.published.append(vehicle_id)
 
-    def rows(self, ids, now_s) -> NeighbourState:
+    def rows(self, ids, now_s) -> Rows:
         r = [self.index[v] for v in ids]
         k = len(r)
-        return NeighbourState(self.meas.position_m[r], self.meas.velocity_mps[r],
-                              self.meas.acceleration_mps2[r], np.full(k, self.taken_s),
-                              np.full(k, self.taken_s), np.ones(k, dtype=bool))
+        taken = np.full(k, self.taken_s)
+        return Rows(tuple(ids), self.meas.position_m[r], self.meas.velocity_mps[r],
+                    self.meas.acceleration_mps2[r], np.tile([1.0, 0, 0, 0], (k, 1)),
+                    np.zeros((k, 3)), taken, taken.copy(), now_s - taken,
+                    np.ones(k, dtype=bool))
 
 
 def measurement(team, rng) -> TeamMeasurement:
@@ -118,10 +121,10 @@ def test_a_stale_or_unheard_neighbour_is_out_of_the_law_and_its_row_stays_finite
     rows = NeighbourRows(agent, src, stale_after_s=0.1)
     # neighbour 5 is 0.2 s old, neighbour 7 never heard (NaN, -inf)
     state = src.rows(agent.neighbours, 0.2)
-    state.taken_s[:] = 0.15
-    state.taken_s[1] = 0.0
-    state.position_m[2] = np.nan
-    state.taken_s[2] = -np.inf
+    state.taken_local_s[:] = 0.15
+    state.taken_local_s[1] = 0.0
+    state.position_enu_m[2] = np.nan
+    state.taken_local_s[2] = -np.inf
     state.finite[2] = False
     src.rows = lambda ids, now_s: state
     fresh = rows.fresh(np.ones(1, dtype=bool), now_s=0.2)

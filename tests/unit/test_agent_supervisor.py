@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import asyncio
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from gcs.agent.neighbours import NeighbourState
+from gcs.agent.control import Status
 from gcs.agent.supervise import Supervisor
+from gcs.agent.table import Rows
 from gcs.config import load_team
 from gcs.mission.plan import EXIT_ABORTED, EXIT_INTERRUPTED, EXIT_OK
 
@@ -16,21 +18,28 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 class Bus:
+    """The SupervisorBus calls the supervisor makes, recorded; statuses put in by the test."""
+
     def __init__(self) -> None:
-        self.inbox: list[tuple[dict, float]] = []
+        self.statuses: dict[int, Status] = {}
+        self.status_received_s: dict[int, float] = {}
+        self.status_updates: asyncio.Queue = asyncio.Queue()
         self.sent: list[dict] = []
 
-    def take_statuses(self):
-        out, self.inbox = self.inbox, []
-        return out
+    def open_gate(self, name, at_s=None) -> None:
+        self.sent.append({"kind": "gate", "gate": name, "at_s": at_s})
 
-    def publish_control(self, msg: dict) -> None:
-        self.sent.append(msg)
+    def abort(self, reason, action) -> None:
+        self.sent.append({"kind": "abort", "reason": reason, "action": action})
 
-    def rows(self, ids, now_s):
+    def heartbeat(self) -> None:
+        self.sent.append({"kind": "heartbeat"})
+
+    def rows(self, ids, now_s) -> Rows:
         k = len(ids)
-        return NeighbourState(np.zeros((k, 3)), np.zeros((k, 3)), np.zeros((k, 3)),
-                              np.zeros(k), np.zeros(k), np.zeros(k, dtype=bool))
+        return Rows(tuple(ids), np.zeros((k, 3)), np.zeros((k, 3)), np.zeros((k, 3)),
+                    np.zeros((k, 4)), np.zeros((k, 3)), np.zeros(k), np.zeros(k), np.zeros(k),
+                    np.zeros(k, dtype=bool))
 
 
 class World:
@@ -43,9 +52,10 @@ class World:
                               prime_s=1.5, connect_timeout_s=10.0, clock=lambda: self.t)
 
     def say(self, vehicles, **status) -> None:
-        msg = {"kind": "status", "vehicles": list(vehicles), "phase": "preflight",
-               "waiting_at": None, "stopping": None, "done": False} | status
-        self.bus.inbox.append((msg, self.t))
+        fields = {"phase": "preflight"} | status
+        for v in vehicles:
+            self.bus.statuses[v] = Status(v, 0, self.t, **fields)
+            self.bus.status_received_s[v] = self.t
 
     def step(self, dt: float = 0.05) -> bool:
         self.t += dt
@@ -57,31 +67,31 @@ class World:
 
 def test_gates_open_only_when_every_agent_waits_and_the_start_is_agreed_ahead():
     w = World([(1,), (2,), (3, 4)])
-    w.say((1,), waiting_at="flight")
-    w.say((2,), waiting_at="flight")
+    w.say((1,), waiting_gate="flight")
+    w.say((2,), waiting_gate="flight")
     w.step()
     assert not w.gates("flight")  # agent 3-4 not heard yet
-    w.say((3, 4), waiting_at="flight")
+    w.say((3, 4), waiting_gate="flight")
     w.step()
     assert w.gates("flight")
     for v in ((1,), (2,), (3, 4)):
-        w.say(v, phase="hold", waiting_at="formation")
+        w.say(v, phase="hold", waiting_gate="formation")
     w.step()
-    (first, *_) = w.gates("formation")
-    # the start: prime_s + the lead ahead, on the supervisor's clock, with its send time
-    assert first["at_s"] == pytest.approx(first["sent_s"] + 2.5)
+    (first,) = w.gates("formation")
+    # the start: prime_s + the lead ahead, on the supervisor's clock
+    assert first["at_s"] == pytest.approx(w.t + 2.5)
     assert any(m["kind"] == "heartbeat" for m in w.bus.sent)
 
 
 def test_one_agent_stopping_aborts_every_agent_and_the_outcome_names_it():
     w = World([(1,), (2,)])
     w.say((1,), phase="formation")
-    w.say((2,), phase="stopping", stopping={"exit_code": 1, "reason": "tilt 1.2 rad"})
+    w.say((2,), phase="stopping", exit_code=1, outcome="tilt 1.2 rad")
     w.step()
     aborts = [m for m in w.bus.sent if m["kind"] == "abort"]
     assert aborts and "agent of vehicle 2 stopping: tilt 1.2 rad" in aborts[0]["reason"]
-    w.say((1,), done=True, outcome={"exit_code": 1, "reason": "supervisor: ..."})
-    w.say((2,), done=True, outcome={"exit_code": 1, "reason": "tilt 1.2 rad"})
+    w.say((1,), done=True, exit_code=1, outcome="supervisor: ...")
+    w.say((2,), done=True, exit_code=1, outcome="tilt 1.2 rad")
     assert w.step()
     out = w.sup.outcome()
     assert out.exit_code == EXIT_ABORTED and "tilt 1.2 rad" in out.reason
@@ -108,7 +118,7 @@ def test_a_silent_agent_or_one_that_exits_without_an_outcome_aborts_the_others()
 def test_a_clean_team_ends_with_exit_0_and_ctrl_c_with_130():
     w = World([(1,), (2,)])
     for v in ((1,), (2,)):
-        w.say(v, phase="done", done=True, outcome={"exit_code": 0, "reason": "ok"})
+        w.say(v, phase="done", done=True, exit_code=0, outcome="formation complete")
     assert w.step()
     assert w.sup.outcome().exit_code == EXIT_OK
     w2 = World([(1,)])
@@ -116,6 +126,6 @@ def test_a_clean_team_ends_with_exit_0_and_ctrl_c_with_130():
     w2.step()
     w2.sup.interrupt()
     assert [m for m in w2.bus.sent if m["kind"] == "abort"]
-    w2.say((1,), phase="done", done=True, outcome={"exit_code": 130, "reason": "abort"})
+    w2.say((1,), phase="done", done=True, exit_code=130, outcome="abort")
     assert w2.step()
     assert w2.sup.outcome().exit_code == EXIT_INTERRUPTED
