@@ -24,6 +24,7 @@ then log in again); raised alone: an RLIMIT_NICE that allows it (``<user> - nice
 from __future__ import annotations
 
 import os
+import threading
 from dataclasses import dataclass
 
 POLICIES = ("auto", "realtime", "raised", "normal")
@@ -124,3 +125,30 @@ def apply_scheduling(policy: str, request: Request) -> Scheduling:
     refused.append(why)
     return Scheduling("normal", f"normal scheduling: {'; '.join(refused)}; a busy machine can "
                                 f"make {request.timing} late: {request.grant}")
+
+
+def share_with_threads() -> int:
+    """Give every other thread of this process the calling thread's scheduling (policy and
+    priority, nice value): threads a library started before or beside `apply_scheduling` (a
+    network stack's receive threads) otherwise run at normal priority and wait behind every
+    real-time process of a busy machine. Returns how many threads took it; 0 where the
+    operating system lists no threads (/proc/self/task) or refuses."""
+    try:
+        tids = [int(t) for t in os.listdir("/proc/self/task")]
+        policy = os.sched_getscheduler(0)
+        param = os.sched_getparam(0)
+        nice = os.getpriority(os.PRIO_PROCESS, 0)
+    except (OSError, AttributeError):
+        return 0
+    me = threading.get_native_id()
+    done = 0
+    for tid in tids:
+        if tid == me:
+            continue
+        try:
+            os.sched_setscheduler(tid, policy, param)
+            os.setpriority(os.PRIO_PROCESS, tid, nice)
+        except OSError:  # the thread ended meanwhile, or the OS refuses
+            continue
+        done += 1
+    return done

@@ -131,6 +131,7 @@ class NeighbourBus(BusSession):
             _floats(omega_flu_radps, 3), self.table.echoes(now))
         data = encode(sample)
         self._state_pubs[vehicle_id].put(data)
+        self._count_sent(len(data))
         self._seq[vehicle_id] += 1
         return sample
 
@@ -142,7 +143,9 @@ class NeighbourBus(BusSession):
         self._own(vehicle_id)
         status = Status(vehicle_id, self._status_seq[vehicle_id], self.clock(), phase,
                         waiting_gate, outcome, tuple(self.stats().values()), **more)
-        self._status_pubs[vehicle_id].put(encode_control(status))
+        data = encode_control(status)
+        self._status_pubs[vehicle_id].put(data)
+        self._count_sent(len(data))
         self._status_seq[vehicle_id] += 1
         return status
 

@@ -22,11 +22,15 @@ from gcs.config import ConfigError, TeamConfig, load_team
 from gcs.config.modes import FLY_MODES, as_strings
 from gcs.fly.command import EmulatorFleetError, emulator_fleet
 from gcs.fly.records import TIMESERIES_NAME
+from gcs.fly.sched import SchedulingError, apply_scheduling, share_with_threads
 from gcs.fly.setup import FlightSetupError, FlyOptions, prepare
+from gcs.fly.warmup import compile_law
 from gcs.mission.plan import EXIT_ABORTED, EXIT_INTERRUPTED
 from gcs.report import summary_table
 
 __all__ = ["add_parser", "run_agent", "run_fly_agents", "run_supervised"]
+
+logger = logging.getLogger("gcs.agent")
 
 EXIT_SETUP = 2
 #: the supervisor's own account: every agent's outcome and the events it saw and sent
@@ -83,8 +87,12 @@ def run_agent(args: argparse.Namespace) -> int:
         def status(flight: Any) -> Any:
             return StatusView(flight, args.status)
     try:
-        result = asyncio.run(fly_agent(team, own, options, status))
-    except (FlightSetupError, BusError, ConfigError) as exc:
+        # the law compiles (first run only) before the process asks for real-time scheduling
+        compile_law(force=False)
+        scheduling = apply_scheduling(team.fly.scheduling)
+        logging.getLogger("gcs.agent").info("%s", scheduling.detail)
+        result = asyncio.run(fly_agent(team, own, options, status, scheduling))
+    except (FlightSetupError, BusError, ConfigError, SchedulingError) as exc:
         print(f"gcs agent: {exc}", file=sys.stderr)
         return EXIT_SETUP
     except KeyboardInterrupt:
@@ -169,7 +177,6 @@ def run_fly_agents(args: argparse.Namespace) -> int:
 def run_supervised(args: argparse.Namespace, team: TeamConfig, out: Path) -> int:
     """`gcs fly --agents`: start the agents (unless --agents-running), supervise, merge."""
     from gcs.agent.supervisor import SupervisorBus
-    from gcs.fly.warmup import compile_law
 
     options = FlyOptions(out_dir=out, mode=args.mode, duration_s=args.duration_s)
     try:
@@ -186,6 +193,7 @@ def run_supervised(args: argparse.Namespace, team: TeamConfig, out: Path) -> int
 
     async def supervise() -> SupervisorOutcome:
         async with SupervisorBus.for_team(team) as bus:
+            share_with_threads()  # its bus's receive threads: the process's priority
             sup = Supervisor(team, bus, groups, exits, prime_s=setup.plan.prime_s,
                              connect_timeout_s=setup.plan.connect_timeout_s + 30.0,
                              stream=sys.stderr)
@@ -195,6 +203,16 @@ def run_supervised(args: argparse.Namespace, team: TeamConfig, out: Path) -> int
                 loop.add_signal_handler(signal.SIGTERM, sup.interrupt)
             return await sup.run()
 
+    # the supervisor's heartbeats and its hearing of the agents are the team's liveness: the
+    # ground station's priority (fly.scheduling), as the agents have
+    try:
+        scheduling = apply_scheduling(team.fly.scheduling)
+    except SchedulingError as exc:
+        print(f"gcs fly: {exc}", file=sys.stderr)
+        if procs is not None:
+            procs.stop(timeout_s=0.0)
+        return EXIT_SETUP
+    logger.info("%s", scheduling.detail)
     print(f"gcs fly: {setup.mode_choice}; {len(groups)} agents "
           f"({'found' if procs is None else 'started'}), the law runs in them", file=sys.stderr)
     try:

@@ -21,6 +21,7 @@ import asyncio
 import dataclasses
 import logging
 import math
+import resource
 import time
 from collections.abc import Callable
 from typing import Any
@@ -32,6 +33,7 @@ from gcs.agent.team import AgentTeam
 from gcs.agent.wire import SUPERVISOR_ID
 from gcs.config import ControlMode, TeamConfig
 from gcs.fly.flight import Flight
+from gcs.fly.sched import Scheduling, share_with_threads
 from gcs.fly.setup import FlightSetup, FlightSetupError, FlyOptions, FlyResult, prepare
 from gcs.mission.plan import GATE_FORMATION, GATES, Phase
 
@@ -41,6 +43,12 @@ logger = logging.getLogger("gcs.agent")
 STATUS_RATE_HZ = 5.0
 #: how often the watch wakes: gates, aborts and the loss rules act within this
 WATCH_PERIOD_S = 0.02
+
+
+def _cpu_s() -> float:
+    """This process's processor time so far (user + system) [s]."""
+    use = resource.getrusage(resource.RUSAGE_SELF)
+    return round(use.ru_utime + use.ru_stime, 3)
 
 
 def agent_setups(team: TeamConfig, own: tuple[int, ...], options: FlyOptions
@@ -86,12 +94,30 @@ class TeamWatch:
         why = m.stop_reason if self.final_outcome is None else None
         code, text = ((why.exit_code, why.reason) if why is not None
                       else self.final_outcome or (None, None))
+        waiting = m.waiting_at
+        if waiting is not None and text is None:
+            missing = self.unheard(self.clock())
+            if missing:  # not ready for the team until its neighbours' states arrive
+                waiting = None
+                text = f"waiting for neighbours {', '.join(map(str, missing))} on the bus"
         for vid in self.rows.own_ids:
             self.bus.publish_status(
-                vid, m.phase.value, m.waiting_at,
+                vid, m.phase.value, waiting,
                 None if text is None else " ".join(text.split())[:MAX_TEXT],
                 exit_code=code, done=self.final_outcome is not None, records=self.records,
                 formation_t_s=self.flight.tick.formation_t_s)
+
+    def unheard(self, now_s: float) -> list[int]:
+        """The neighbours whose latest state is older than fly.link_lost_after_s (or never
+        arrived with a known clock offset): the agent does not report itself ready at a
+        gate while there are any."""
+        if not self.rows.neighbour_ids:
+            return []
+        state = self.bus.rows(self.rows.neighbour_ids, now_s)
+        ages = now_s - state.taken_local_s
+        bound = self.team.fly.link_lost_after_s
+        return [vid for vid, a in zip(self.rows.neighbour_ids, ages, strict=True)
+                if not a <= bound]
 
     def _note(self, what: str, **kw: Any) -> None:
         self.events.append({"t_since_start_s": round(self.clock() - self.started_s, 3),
@@ -112,6 +138,7 @@ class TeamWatch:
                 if not math.isfinite(at):  # no clock offset yet: the order's own send time
                     at = now_s + (order.opened_s - order.sent_s)
             m.open_gate(order.name, at)
+            share_with_threads()  # threads the bus started for new connections since
             self._note(f"gate {order.name} opened by the supervisor",
                        **({} if at is None else {"starts_in_s": round(at - now_s, 3)}))
         elif m.phase not in (Phase.STOPPING, Phase.DONE):
@@ -194,18 +221,24 @@ class TeamWatch:
         return {"agent": {"vehicles": list(self.rows.own_ids),
                           "neighbours": list(self.rows.neighbour_ids), "edges": edges,
                           "unpublished_samples": self.rows.unpublished,
+                          "bus_traffic": dict(self.bus.traffic),
+                          "cpu_s": _cpu_s(), "wall_s": round(self.clock() - self.started_s, 3),
                           "supervisor_offset_s": self.bus.offset(SUPERVISOR_ID),
                           "control_corrupt": self.bus.control_corrupt,
                           "events": self.events}}
 
 
 async def fly_agent(team: TeamConfig, own: tuple[int, ...], options: FlyOptions,
-                    status_factory: Callable[[Flight], Any] | None = None) -> FlyResult:
-    """Fly the agent's vehicles with the team over its neighbour bus."""
+                    status_factory: Callable[[Flight], Any] | None = None,
+                    scheduling: Scheduling | None = None) -> FlyResult:
+    """Fly the agent's vehicles with the team over its neighbour bus (`scheduling`: what the
+    OS gave the process, for the records)."""
     agent, setup, law_setup = agent_setups(team, own, options)
     async with NeighbourBus.for_team(team, agent.own) as bus:
+        share_with_threads()  # the bus's receive threads: the tick's priority (gcs/fly/sched.py)
         rows = NeighbourRows(agent, bus, team.fly.stale_after_s)
         flight = Flight(setup, options, status_factory, law_rows=rows, law_setup=law_setup)
+        flight.scheduling = scheduling
         watch = TeamWatch(flight, bus, rows, team)
         flight.companions.append(watch.run)
         flight.report_more = watch.report

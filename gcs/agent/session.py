@@ -73,25 +73,30 @@ def _unique(items: Iterable[str], leave_out: Collection[str] = ()) -> tuple[str,
 def agent_endpoints(network: NetworkConfig, team_ids: Sequence[int],
                     own_ids: Collection[int]) -> Endpoints:
     """An agent process serving vehicles `own_ids`: peer mode listens on their endpoints and
-    connects to every other vehicle's, the supervisor's and the router; client mode connects
-    to the router only."""
+    connects to the agents of the vehicles before its first (team order), the supervisor's
+    and the router; client mode connects to the router only."""
     router = () if network.router is None else (network.router,)
     if network.mode == NetworkMode.CLIENT:
         return Endpoints(network.mode, (), router, network.multicast_scouting)
     listen = _unique(e for vid in own_ids for e in network.agent_listen(vid))
-    others = [e for vid in team_ids if vid not in own_ids for e in network.agent_listen(vid)]
+    # one link per pair of processes: each connects to the agents of the vehicles before its
+    # first own one (team order) and is connected to by those after (two peers opening a link
+    # to each other at once over a lossy network could each drop the other's handshake)
+    first = min(team_ids.index(v) for v in own_ids)
+    others = [e for vid in team_ids[:first] if vid not in own_ids
+              for e in network.agent_listen(vid)]
     connect = _unique([*others, *network.supervisor_listen(), *router], leave_out=listen)
     return Endpoints(network.mode, listen, connect, network.multicast_scouting)
 
 
 def supervisor_endpoints(network: NetworkConfig, team_ids: Sequence[int]) -> Endpoints:
-    """The supervisor: listens on its endpoints, connects to every agent's (and the router)."""
+    """The supervisor: listens on its endpoints (every agent connects to it) and connects to
+    the router."""
     router = () if network.router is None else (network.router,)
     if network.mode == NetworkMode.CLIENT:
         return Endpoints(network.mode, (), router, network.multicast_scouting)
     listen = network.supervisor_listen()
-    agents = [e for vid in team_ids for e in network.agent_listen(vid)]
-    return Endpoints(network.mode, listen, _unique([*agents, *router], leave_out=listen),
+    return Endpoints(network.mode, listen, _unique(router, leave_out=listen),
                      network.multicast_scouting)
 
 
@@ -123,6 +128,8 @@ class BusSession(abc.ABC):
         self.clock = clock
         self.epoch = new_epoch() if epoch is None else epoch
         self.late = 0  # samples that arrived after the event loop closed (the bus closing)
+        #: traffic of this process: messages and payload bytes put and received (any key)
+        self.traffic = {"sent": 0, "sent_bytes": 0, "received": 0, "received_bytes": 0}
         self._session: zenoh.Session | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._entities: list[Any] = []
@@ -183,11 +190,18 @@ class BusSession(abc.ABC):
         loop, clock = self._loop, self.clock
         assert loop is not None
 
+        traffic = self.traffic
+
+        def counted(key: str, data: bytes, received_s: float) -> None:  # on the loop
+            traffic["received"] += 1
+            traffic["received_bytes"] += len(data)
+            deliver(key, data, received_s)
+
         def on_sample(sample: zenoh.Sample) -> None:  # on a Zenoh thread
             received_s = clock()
             data = sample.payload.to_bytes()
             try:
-                loop.call_soon_threadsafe(deliver, str(sample.key_expr), data, received_s)
+                loop.call_soon_threadsafe(counted, str(sample.key_expr), data, received_s)
             except RuntimeError:  # the loop has closed: the bus is being torn down
                 self.late += 1
 
@@ -196,6 +210,10 @@ class BusSession(abc.ABC):
     def _on_state(self, vehicle_id: int, data: bytes, received_s: float) -> None:
         if self.table.receive(vehicle_id, data, received_s) is not None:
             self._heard.set()
+
+    def _count_sent(self, size: int) -> None:
+        self.traffic["sent"] += 1
+        self.traffic["sent_bytes"] += size
 
     def peers(self) -> int:
         """How many Zenoh peers and routers this session is connected to now."""

@@ -108,6 +108,10 @@ class Supervisor:
         self._last_beat_s = -1e9
         self._last_line_s = -1e9
         self._stop = asyncio.Event()
+        # compiled (or loaded from the cache) here, not in the first status line: a second's
+        # load there would silence the heartbeats past network.supervisor_lost_after_s
+        formation_error_m(np.ascontiguousarray(team.initial_positions_enu_m()),
+                          np.ascontiguousarray(team.offsets_enu_m()))
 
     def _event(self, text: str) -> None:
         self.events.append({"t_s": round(self.clock() - self._started_s, 3), "event": text})
@@ -185,6 +189,21 @@ class Supervisor:
                            "(network.stale_after_s)")
                 return
 
+    def _ready_in_time(self, now: float) -> None:
+        """Every agent at the flight gate within connect_timeout_s of the start, else abort
+        naming those that are not and why (their status says, e.g. a neighbour unheard)."""
+        if self._flight_gate_sent or self.aborted is not None:
+            return
+        if now - self._started_s <= self.connect_timeout_s:
+            return
+        late = [f"{a.name} ({a.status.phase}"
+                + (f": {a.status.outcome}" if a.status.outcome else "") + ")"
+                for a in self.agents
+                if a.status is not None and a.status.waiting_gate != GATE_FLIGHT]
+        if late:
+            self.abort(f"not every agent ready within {self.connect_timeout_s:g} s: "
+                       + "; ".join(late))
+
     def _line(self, now: float) -> None:
         if self.stream is None or now - self._last_line_s < 1.0:
             return
@@ -211,6 +230,7 @@ class Supervisor:
         if self.aborted is None:
             self._gates(now)
         self._watch(now)
+        self._ready_in_time(now)
         self._line(now)
         return all(a.finished for a in self.agents)
 

@@ -121,7 +121,9 @@ class SupervisorBus(BusSession):
     def _send(self, message: Heartbeat | Gate | Abort) -> None:
         if self._pub is None:
             raise RuntimeError("the bus is not open: use `async with` around it")
-        self._pub.put(encode_control(message))
+        data = encode_control(message)
+        self._pub.put(data)
+        self._count_sent(len(data))
         self._seq += 1
 
     def open_gate(self, name: str, at_s: float | None = None) -> Gate:

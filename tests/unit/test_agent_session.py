@@ -27,20 +27,21 @@ SQUARE4 = Path(__file__).resolve().parents[2] / "configs" / "square4.yaml"
 
 def test_the_default_endpoints_of_an_agent_and_the_supervisor():
     net, ids = NetworkConfig(), (1, 2, 3, 4)
-    # GIVEN vehicle 2's agent THEN it listens on 7452 and connects to the others and the
-    # supervisor
+    # GIVEN vehicle 2's agent THEN it listens on 7452 and connects to the agent of the
+    # vehicle before it and to the supervisor: one link per pair of processes
     assert agent_endpoints(net, ids, [2]) == Endpoints(
         NetworkMode.PEER, ("tcp/127.0.0.1:7452",),
-        ("tcp/127.0.0.1:7451", "tcp/127.0.0.1:7453", "tcp/127.0.0.1:7454",
-         "tcp/127.0.0.1:7450"), False)
-    # AND one process serving 1 and 3 listens on both, connects to neither
+        ("tcp/127.0.0.1:7451", "tcp/127.0.0.1:7450"), False)
+    assert agent_endpoints(net, ids, [4]).connect == (
+        "tcp/127.0.0.1:7451", "tcp/127.0.0.1:7452", "tcp/127.0.0.1:7453", "tcp/127.0.0.1:7450")
+    # AND one process serving 1 and 3 listens on both and connects to the supervisor only
+    # (vehicles 2 and 4 connect to it)
     ep = agent_endpoints(net, ids, [1, 3])
     assert ep.listen == ("tcp/127.0.0.1:7451", "tcp/127.0.0.1:7453")
-    assert ep.connect == ("tcp/127.0.0.1:7452", "tcp/127.0.0.1:7454", "tcp/127.0.0.1:7450")
-    # AND the supervisor listens on the base port and connects to every agent
+    assert ep.connect == ("tcp/127.0.0.1:7450",)
+    # AND the supervisor listens on the base port; every agent connects to it
     assert supervisor_endpoints(net, ids) == Endpoints(
-        NetworkMode.PEER, ("tcp/127.0.0.1:7450",),
-        tuple(f"tcp/127.0.0.1:{7450 + i}" for i in ids), False)
+        NetworkMode.PEER, ("tcp/127.0.0.1:7450",), (), False)
 
 
 def test_shared_endpoints_a_router_and_client_mode():
@@ -50,9 +51,10 @@ def test_shared_endpoints_a_router_and_client_mode():
                        "agents": {3: {"listen": ["tcp/192.0.2.3:7000"]},
                                   4: {"listen": ["udp/192.0.2.4:7000"]}}}
     net, ids = team_from_dict(data).network, (1, 2, 3, 4)
-    # THEN an agent connects to each endpoint once, the router last; scouting as asked
-    ep = agent_endpoints(net, ids, [1])
-    assert ep.connect == ("tcp/127.0.0.1:7452", "tcp/192.0.2.3:7000", "udp/192.0.2.4:7000",
+    # THEN an agent connects to each endpoint before its own once, the router last;
+    # scouting as asked
+    ep = agent_endpoints(net, ids, [4])
+    assert ep.connect == ("tcp/127.0.0.1:7451", "tcp/127.0.0.1:7452", "tcp/192.0.2.3:7000",
                           "tcp/127.0.0.1:7450", "tcp/192.0.2.1:7447")
     assert ep.multicast_scouting
     # AND in client mode every process only connects to the router
