@@ -194,8 +194,11 @@ def run_supervised(args: argparse.Namespace, team: TeamConfig, out: Path) -> int
     async def supervise() -> SupervisorOutcome:
         async with SupervisorBus.for_team(team) as bus:
             share_with_threads()  # its bus's receive threads: the process's priority
-            sup = Supervisor(team, bus, groups, exits, prime_s=setup.plan.prime_s,
-                             connect_timeout_s=setup.plan.connect_timeout_s + 30.0,
+            plan = setup.plan
+            sup = Supervisor(team, bus, groups, exits, prime_s=plan.prime_s,
+                             connect_timeout_s=plan.connect_timeout_s + 30.0,
+                             follow=(plan.formation_check_s, plan.formation_max_error_m,
+                                     plan.formation_max_fraction),
                              stream=sys.stderr)
             loop = asyncio.get_running_loop()
             with contextlib.suppress(NotImplementedError):

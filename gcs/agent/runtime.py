@@ -62,8 +62,9 @@ def agent_setups(team: TeamConfig, own: tuple[int, ...], options: FlyOptions
         raise FlightSetupError("position mode runs no law, so there is nothing to share among "
                                "agents: fly it with gcs fly (no --agents)")
     agent = AgentTeam(whole.team, own)
-    flight = dataclasses.replace(whole, team=agent.own_team,
-                                 plan=dataclasses.replace(whole.plan, gates=frozenset(GATES)))
+    # the formation check is the supervisor's: an agent sees only its own share of the team
+    flight = dataclasses.replace(whole, team=agent.own_team, plan=dataclasses.replace(
+        whole.plan, gates=frozenset(GATES), formation_max_error_m=math.inf))
     law = dataclasses.replace(whole, team=agent.law_team)
     return agent, flight, law
 
@@ -194,6 +195,19 @@ class TeamWatch:
                 self.publish_status()
             await asyncio.sleep(WATCH_PERIOD_S)
 
+    async def wait_for_supervisor(self) -> None:
+        """Before the flight opens its links: announce the agent (loaded, its bus open) until
+        the supervisor's heartbeat is heard, which it sends once every agent of the team is
+        announced; so no vehicle's link is judged while another agent is still starting on
+        the same machine. Returns after fly.connect_timeout_s regardless (the flight then
+        stops on the missing supervisor)."""
+        wait = self.flight.setup.plan.connect_timeout_s
+        period = 1.0 / STATUS_RATE_HZ
+        while (not math.isfinite(self.bus.supervisor_age_s(self.clock()))
+               and self.clock() - self.started_s < wait):
+            self.publish_status()
+            await asyncio.sleep(period)
+
     async def final(self, result: FlyResult, repeat: int = 5) -> None:
         """After the records are written: the final status, a few times (a late subscriber)."""
         self.records = str(result.out_dir.resolve()) if result.log is not None else None
@@ -242,6 +256,7 @@ async def fly_agent(team: TeamConfig, own: tuple[int, ...], options: FlyOptions,
         watch = TeamWatch(flight, bus, rows, team)
         flight.companions.append(watch.run)
         flight.report_more = watch.report
+        await watch.wait_for_supervisor()
         result = await flight.run()
         await watch.final(result)
     return result

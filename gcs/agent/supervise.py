@@ -8,8 +8,10 @@ The supervisor never runs the law and holds no MAVLink link. Over the bus (docs/
   own clock by the message's send time);
 * relays an abort to every agent when one agent stops (its reason, naming its vehicles),
   when an agent falls silent for network.stale_after_s, or at Ctrl-C;
-* sends a heartbeat every HEARTBEAT_PERIOD_S (it repeats the open gates and the abort), by
-  which the agents know it is there and measure their clock offsets to it;
+* sends a heartbeat every HEARTBEAT_PERIOD_S once every agent has announced itself (each agent
+  opens its vehicles' links only then: no link is judged while another agent of the machine is
+  still starting); it repeats the open gates and the abort, and by it the agents know the
+  supervisor is there and measure their clock offsets to it;
 * ends when every agent reported its outcome and records (or its process exited), then merges
   the records (gcs/agent/merge.py).
 """
@@ -87,6 +89,7 @@ class Supervisor:
 
     def __init__(self, team: TeamConfig, bus: Any, groups: list[tuple[int, ...]],
                  exits: Callable[[int], int | None], *, prime_s: float, connect_timeout_s: float,
+                 follow: tuple[float, float, float] = (10.0, 1.0, 0.5),
                  stream: TextIO | None = None, clock: Callable[[], float] = time.monotonic,
                  start_lead_s: float = 1.0) -> None:
         self.team = team
@@ -96,6 +99,10 @@ class Supervisor:
         self.exits = exits
         self.prime_s = prime_s
         self.connect_timeout_s = connect_timeout_s
+        #: the team's formation_check (plan: check from t [s], max error [m], max fraction of
+        #: the error at t = 0): an agent sees only its own vehicles' share of the formation
+        self.follow = follow
+        self._error_t0: float | None = None
         self.stream = stream
         self.clock = clock
         self.start_lead_s = start_lead_s
@@ -189,10 +196,30 @@ class Supervisor:
                            "(network.stale_after_s)")
                 return
 
+    def _following(self, now: float) -> None:
+        """The team's formation error, from every vehicle's state on the bus, must fall as the
+        law predicts (gcs fly's fly.formation_check, here over the whole team)."""
+        if self.formation_at_s is None or self.aborted is not None or now < self.formation_at_s:
+            return
+        rows = self.bus.rows(self.team.ids(), now)
+        if not bool(np.all(rows.finite)):
+            return
+        err = formation_error_m(np.ascontiguousarray(rows.position_enu_m),
+                                np.ascontiguousarray(self.team.offsets_enu_m()))
+        if self._error_t0 is None:
+            self._error_t0 = err
+        check_s, most_m, fraction = self.follow
+        t = now - self.formation_at_s
+        bound = max(most_m, fraction * self._error_t0)
+        if t >= check_s and err > bound and all(a.outcome is None for a in self.agents):
+            self.abort(f"the vehicles do not follow the formation: error {err:.2f} m at t = "
+                       f"{t:.1f} s > {bound:.2f} m = max({most_m:g} m, {fraction:g} x "
+                       f"{self._error_t0:.2f} m at t = 0) (fly.formation_check)")
+
     def _ready_in_time(self, now: float) -> None:
         """Every agent at the flight gate within connect_timeout_s of the start, else abort
         naming those that are not and why (their status says, e.g. a neighbour unheard)."""
-        if self._flight_gate_sent or self.aborted is not None:
+        if self._flight_gate_sent or self.formation_at_s is not None or self.aborted is not None:
             return
         if now - self._started_s <= self.connect_timeout_s:
             return
@@ -224,13 +251,17 @@ class Supervisor:
         """One wake-up; True when every agent has finished."""
         now = self.clock()
         self._hear()
-        if now - self._last_beat_s >= HEARTBEAT_PERIOD_S:
+        # heartbeats once every agent is announced (each waits for the first before opening
+        # its vehicles' links), or to carry an abort
+        everyone = all(a.status is not None for a in self.agents)
+        if (everyone or self.aborted is not None) and now - self._last_beat_s >= HEARTBEAT_PERIOD_S:
             self._last_beat_s = now
             self.bus.heartbeat()  # repeats the open gates and the abort
         if self.aborted is None:
             self._gates(now)
         self._watch(now)
         self._ready_in_time(now)
+        self._following(now)
         self._line(now)
         return all(a.finished for a in self.agents)
 

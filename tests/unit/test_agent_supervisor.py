@@ -129,3 +129,34 @@ def test_a_clean_team_ends_with_exit_0_and_ctrl_c_with_130():
     w2.say((1,), phase="done", done=True, exit_code=130, outcome="abort")
     assert w2.step()
     assert w2.sup.outcome().exit_code == EXIT_INTERRUPTED
+
+
+def test_the_team_formation_check_is_the_supervisors():
+    # GIVEN a formation started whose error (from the states on the bus) stays at 5 m
+    w = World([(1,), (2,), (3,), (4,)])
+    for v in (1, 2, 3, 4):
+        w.say((v,), phase="hold", waiting_gate="formation")
+    w.step()
+    offsets = w.team.offsets_enu_m()
+
+    def rows(ids, now_s):
+        k = len(ids)
+        pos = offsets.copy()
+        pos[0] += [5.0, 0.0, 0.0]
+        return Rows(tuple(ids), pos, np.zeros((k, 3)), np.zeros((k, 3)), np.zeros((k, 4)),
+                    np.zeros((k, 3)), np.zeros(k), np.zeros(k), np.zeros(k),
+                    np.ones(k, dtype=bool))
+
+    w.bus.rows = rows
+    for _ in range(int(9.0 / 0.05)):  # until t = 10 s nothing happens
+        for v in (1, 2, 3, 4):
+            w.say((v,), phase="formation")
+        w.step()
+    assert w.sup.aborted is None
+    for _ in range(int(4.0 / 0.05)):
+        for v in (1, 2, 3, 4):
+            w.say((v,), phase="formation")
+        w.step()
+    # THEN after fly.formation_check_s the supervisor stops the team, naming the rule
+    assert "do not follow the formation" in w.sup.aborted
+    assert "(fly.formation_check)" in w.sup.aborted
