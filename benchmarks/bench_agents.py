@@ -34,10 +34,11 @@ from tests.harness import free_udp_port_block
 ROOT = Path(__file__).resolve().parents[1]
 HEADING = "## Agents (`gcs fly --agents`)"
 #: grid16's four agent processes and its sixteen emulated vehicles share two cores here; each
-#: agent stands for a companion computer of its own. Real-time agents would starve the fleet
-#: (the vehicles' stand-in, nice -5) whenever they are busy together, as at the start of the
-#: sequence: the agents take a raised priority instead, the fleet's share stays its own.
-SIZING_SCHEDULING = "raised"
+#: agent stands for a companion computer of its own and each vehicle for an autopilot with a
+#: processor of its own. Agents above the fleet (the vehicles' stand-in, nice -5) would starve
+#: it whenever they are busy together (its TIMESYNC answers then come 0.3 s late and the flight
+#: stops, as it should): here the agents run normally scheduled, below the vehicles.
+SIZING_SCHEDULING = "normal"
 #: the fleet's sixteen vehicles as the paper's model: the px4 personality's sixteen estimators
 #: and inner loops beside four agent processes saturate the two cores (its TIMESYNC answers
 #: then come 0.3 s late and the flight stops, as it should)
@@ -111,7 +112,7 @@ def sizing(tmp: Path) -> str:
     msgs = [tr["sent"] / w / k for _, _, w, k, tr in rows]
     lines = [
         "grid16 (16 vehicles, rates at 100 Hz) as 16 agents in 4 processes "
-        "(`gcs fly --agents --agents-per-process 4`, fly.scheduling raised) against one "
+        "(`gcs fly --agents --agents-per-process 4`, fly.scheduling normal) against one "
         "`vehicle-emu --fleet` (nominal personality), 30 s "
         "of formation, 127.0.0.1, 2-core machine; each agent process's own records "
         "(processor time over its whole life: start, connect, preflight, formation, stop):",
