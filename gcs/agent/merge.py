@@ -8,7 +8,9 @@ ticks are not in phase. The merged log interpolates each agent's series linearly
 grid (multiples of the log period) over the span every agent logged, the vehicles in team-file
 order; the team's figures (formation error, velocity error) are computed
 over all of them as for a `gcs fly` flight. The link of each vehicle is its agent's; the tick
-figures are the worst agent's (its late ticks), each agent's under `extra.agents`.
+figures are the worst agent's (its late ticks), each agent's under `extra.agents`; every edge's
+neighbour figures (age at use, loss, clock offset) under `extra.edges` as "i<-j" (an agent of
+vehicles i and k: "i+k<-j").
 """
 
 from __future__ import annotations
@@ -95,6 +97,16 @@ def merge_logs(logs: Sequence[FlightLog], order: Sequence[int], name: str,
         if key in lead.extra:
             extra[key] = lead.extra[key]
     extra["vehicle_kinds"] = [k for log in logs for k in log.extra.get("vehicle_kinds", [])]
+    # per edge ("i<-j", "i+k<-j" for an agent of several vehicles: what that agent measured
+    # of neighbour j's samples): ages at use, loss, clock offset
+    edges: dict[str, Any] = {}
+    for log in logs:
+        agent = log.extra.get("agent") or {}
+        own = "+".join(str(v) for v in agent.get("vehicles", []))
+        for nb, fig in (agent.get("edges") or {}).items():
+            edges[f"{own}<-{nb}"] = fig
+    if edges:
+        extra["edges"] = edges
     return FlightLog(
         t_s=grid,
         reference_velocity_enu_mps=_at(lead.t_s, lead.reference_velocity_enu_mps, grid),

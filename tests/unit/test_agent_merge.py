@@ -28,7 +28,9 @@ def agent_log(ids, t0_k: int, k: int, rng, offsets) -> FlightLog:
         mass_estimate_kg=rng.uniform(1, 2, (k, n)), inertia_estimate_kgm2=np.ones((k, n, 3)),
         thrust_n=np.ones((k, n)), force_enu_n=np.ones((k, n, 3)), vehicle_ids=np.array(ids),
         offsets_enu_m=offsets, source="sim", controller="adaptive", team="t.yaml", name="t",
-        extra={"tick": tick, "link": link, "vehicle_kinds": [f"PX4 {v}" for v in ids]})
+        extra={"tick": tick, "link": link, "vehicle_kinds": [f"PX4 {v}" for v in ids],
+               "agent": {"vehicles": list(ids),
+                         "edges": {str(ids[0] % 4 + 1): {"age_p50_ms": 12.0, "lost": 3}}}})
 
 
 def test_the_team_log_has_every_vehicle_at_the_instants_all_agents_logged(tmp_path):
@@ -66,6 +68,10 @@ def test_the_team_log_has_every_vehicle_at_the_instants_all_agents_logged(tmp_pa
     assert set(written["link"]) == {"1", "2", "3", "4"}
     assert written["tick"]["late_pct"] == max(log.extra["tick"]["late_pct"] for log in logs)
     assert (out / "timeseries.csv").is_file()
+    # AND each agent's per-edge neighbour figures, named receiver <- neighbour
+    edges = written["extra"]["edges"]
+    assert edges["3<-4"] == {"age_p50_ms": 12.0, "lost": 3} and "2<-3" in edges
+    assert "1+4<-2" in edges  # the agent of vehicles 1 and 4
 
 
 def test_a_missing_vehicle_or_a_missing_log_is_a_clear_error(tmp_path):
