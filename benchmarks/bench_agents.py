@@ -63,8 +63,10 @@ def on_free_ports(src: Path, dst: Path, duration_s: float, autopilot: str | None
     if scheduling is not None:
         data["fly"]["scheduling"] = scheduling
         # four agent processes, the supervisor and sixteen vehicles normally scheduled on two
-        # cores: a process may wait a second for its turn, which the liveness bounds allow
+        # cores: a process may wait a second for its turn, which the liveness bounds allow;
+        # and the agents tick at 50 Hz (at 100 Hz the four need ~1.8 cores beside the fleet)
         data["network"].update(stale_after_s=3.0, supervisor_lost_after_s=3.0)
+        data["fly"]["rates"]["tick_rate_hz"] = 50
     dst.write_text(yaml.safe_dump(data, sort_keys=False))
     return dst
 
@@ -114,7 +116,7 @@ def sizing(tmp: Path) -> str:
     got = [tr["received_bytes"] / w / k for _, _, w, k, tr in rows]
     msgs = [tr["sent"] / w / k for _, _, w, k, tr in rows]
     lines = [
-        "grid16 (16 vehicles, rates at 100 Hz) as 16 agents in 4 processes "
+        "grid16 (16 vehicles, rates at 50 Hz) as 16 agents in 4 processes "
         "(`gcs fly --agents --agents-per-process 4`, fly.scheduling normal, the network's liveness bounds 3 s) against one "
         "`vehicle-emu --fleet` (nominal personality), 30 s "
         "of formation, 127.0.0.1, 2-core machine; each agent process's own records "
