@@ -6,8 +6,9 @@ team (gcs/agent/neighbours.py), and `TeamWatch` beside it for the team around it
   at the end, where its records are) at STATUS_RATE_HZ;
 * it opens the mission machine's gates when the supervisor says so: GATE_FLIGHT at once,
   GATE_FORMATION at the agreed start, which the supervisor gives on its own clock and the agent
-  turns into its own by the message's send time (the difference is the bus's one-way delay);
-* it relays the supervisor's abort to the machine (the plan's abort action);
+  turns into its own by the offset it measured from the heartbeats' echoes (before any, by the
+  order's send time: off by the bus's one-way delay);
+* it relays the supervisor's abort to the machine (with the action the supervisor names);
 * it stops the flight with the team file's link-loss action (fly.link_loss_action) when the
   supervisor falls silent for network.supervisor_lost_after_s once heard, when no supervisor
   is heard within fly.connect_timeout_s, or, from PRIME on, when a neighbour's latest sample
@@ -39,7 +40,7 @@ from gcs.mission.plan import GATE_FORMATION, GATES, Phase
 
 logger = logging.getLogger("gcs.agent")
 
-#: agent status messages per second (and the supervisor's heartbeats)
+#: agent status messages per second
 STATUS_RATE_HZ = 5.0
 #: how often the watch wakes: gates, aborts and the loss rules act within this
 WATCH_PERIOD_S = 0.02
