@@ -104,7 +104,8 @@ class NeighbourBus(BusSession):
 
     def _declare(self) -> None:
         for vid in self.own_ids:
-            self._state_pubs[vid] = self.publisher(self.keys.state(vid))
+            # latest sample wins: a lost state is replaced by the next, never resent
+            self._state_pubs[vid] = self.publisher(self.keys.state(vid), reliable=False)
             self._status_pubs[vid] = self.publisher(self.keys.status(vid), express=False)
         for vid in self.neighbour_ids:
             self.subscribe(self.keys.state(vid),

@@ -20,15 +20,26 @@ from gcs.config.modes import NetworkMode
 if TYPE_CHECKING:
     from gcs.config.yamlnode import Node
 
-#: A Zenoh locator this project accepts: protocol/host:port, host a name, IPv4 or [IPv6].
+#: A Zenoh endpoint this project accepts: protocol/host:port (host a name, IPv4 or [IPv6]),
+#: then optionally Zenoh's link metadata `?key=value;...` and configuration `#key=value;...`
+#: (e.g. `udp/10.0.0.2:7447?rel=1;mixed_rel=1`, docs/agents.md "The mesh").
 ENDPOINT = re.compile(r"^(tcp|udp|quic)/"
                       r"(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?)"
-                      r":([0-9]{1,5})$")
-ENDPOINT_FORMS = "tcp/HOST:PORT, udp/HOST:PORT or quic/HOST:PORT"
+                      r":([0-9]{1,5})"
+                      r"(\?[A-Za-z0-9_]+=[A-Za-z0-9_.-]+(?:;[A-Za-z0-9_]+=[A-Za-z0-9_.-]+)*)?"
+                      r"(#[A-Za-z0-9_]+=[A-Za-z0-9_.-]+(?:;[A-Za-z0-9_]+=[A-Za-z0-9_.-]+)*)?$")
+ENDPOINT_FORMS = ("tcp/HOST:PORT, udp/HOST:PORT or quic/HOST:PORT, optionally followed by "
+                  "?key=value;... metadata")
 #: A key-expression chunk as the bus writes it: no '/', no Zenoh wildcard or reserved character.
 _CHUNK = re.compile(r"^[A-Za-z0-9_.-]+$")
 _NOT_CHUNK = re.compile(r"[^A-Za-z0-9_.-]")
 DEFAULT_HOST = "127.0.0.1"
+
+
+def endpoint_socket(text: str) -> str:
+    """The socket an endpoint names (protocol/host:port), without Zenoh's metadata and
+    configuration: two endpoints with the same one cannot both be listened on."""
+    return text.split("?", 1)[0].split("#", 1)[0]
 
 
 def endpoint_problem(text: Any) -> str | None:
@@ -177,10 +188,11 @@ def read_network(node: Node, ids: Sequence[int]) -> NetworkConfig:
 
     def claim(endpoints: tuple[str, ...], who: str, nodes: list[Node]) -> None:
         for text, where in zip(endpoints, nodes, strict=True):
-            if text in owners:
-                where.fail(f"{text} is {who}'s listen endpoint and also {owners[text]}'s; each "
-                           "process needs its own")
-            owners[text] = who
+            socket = endpoint_socket(text)
+            if socket in owners:
+                where.fail(f"{socket} is {who}'s listen endpoint and also {owners[socket]}'s; "
+                           "each process needs its own")
+            owners[socket] = who
 
     base = node.child("base_port")
     sup = node.child("supervisor.listen")

@@ -1,4 +1,4 @@
-"""The agents' bus on real Zenoh sessions over TCP on 127.0.0.1, on free ports picked per test:
+"""The agents' bus on real Zenoh sessions over TCP (and UDP) on 127.0.0.1, on free ports picked per test:
 samples cross with their values and times, the latest wins, losses and corrupt bytes are
 counted, a non-neighbour's key is never subscribed, sessions meet only by their endpoints,
 clock offsets, the supervisor's side, and an agent in another process.
@@ -43,10 +43,11 @@ STATE = {"position_enu_m": (1.0, 2.0, 3.0), "velocity_enu_mps": (0.1, 0.2, 0.3),
          "omega_flu_radps": (0.01, 0.02, 0.03)}
 
 
-def free_tcp_ports(n: int) -> list[int]:
-    """n distinct ports free on 127.0.0.1 now (held open together while picked)."""
+def free_ports(n: int, kind: socket.SocketKind = socket.SOCK_STREAM) -> list[int]:
+    """n distinct TCP (`kind` SOCK_DGRAM: UDP) ports free on 127.0.0.1 now (held open
+    together while picked)."""
     with contextlib.ExitStack() as stack:
-        socks = [stack.enter_context(socket.socket()) for _ in range(n)]
+        socks = [stack.enter_context(socket.socket(socket.AF_INET, kind)) for _ in range(n)]
         for s in socks:
             s.bind(("127.0.0.1", 0))
         return [s.getsockname()[1] for s in socks]
@@ -56,12 +57,20 @@ def tcp(port: int) -> str:
     return f"tcp/127.0.0.1:{port}"
 
 
-def ring_network(**changes: object) -> NetworkConfig:
-    """The ring's network on free ports, under a key prefix of its own."""
-    ports = free_tcp_ports(len(IDS) + 1)
+def mixed_udp(port: int) -> str:
+    """A UDP endpoint carrying reliable messages on QUIC streams and best-effort ones as
+    datagrams (Zenoh's `rel=1;mixed_rel=1` link metadata)."""
+    return f"udp/127.0.0.1:{port}?rel=1;mixed_rel=1"
+
+
+def ring_network(endpoint: Callable[[int], str] = tcp, **changes: object) -> NetworkConfig:
+    """The ring's network on free ports (`endpoint` of a port), under a key prefix of its
+    own."""
+    ports = free_ports(len(IDS) + 1, socket.SOCK_STREAM if endpoint is tcp
+                       else socket.SOCK_DGRAM)
     fields = {"key_prefix": f"test/{uuid.uuid4().hex[:12]}",
-              "agents": tuple(AgentNetwork(vid, (tcp(ports[vid]),)) for vid in IDS),
-              "supervisor": SupervisorNetwork((tcp(ports[0]),))}
+              "agents": tuple(AgentNetwork(vid, (endpoint(ports[vid]),)) for vid in IDS),
+              "supervisor": SupervisorNetwork((endpoint(ports[0]),))}
     return NetworkConfig(**(fields | changes))
 
 
@@ -193,7 +202,7 @@ def test_a_non_neighbours_key_is_never_subscribed():
 
 def test_without_endpoints_or_multicast_two_sessions_never_meet():
     async def scenario() -> None:
-        p1, p2 = (tcp(p) for p in free_tcp_ports(2))
+        p1, p2 = (tcp(p) for p in free_ports(2))
         key = f"test/{uuid.uuid4().hex[:12]}/state/1"
         heard: dict[str, set[bytes]] = {"a": set(), "b": set(), "c": set()}
 
@@ -330,6 +339,38 @@ def test_the_supervisor_hears_every_vehicle_and_steers_the_agents():
     run_bounded(scenario(), TEST_S)
 
 
+def test_over_a_mixed_udp_link_states_go_best_effort_and_control_reliable():
+    async def scenario() -> None:
+        # GIVEN the ring over UDP endpoints with mixed reliability
+        network = ring_network(mixed_udp)
+        sup = SupervisorBus(network, TEAM, IDS)
+        async with sup, agent(network, 1) as one, agent(network, 2) as two, \
+                asyncio.TaskGroup() as tg:
+            beat = tg.create_task(sup.beat(0.05))
+            # THEN each own state is published best effort (a lost one is never resent ahead
+            # of the next), every status and heartbeat reliably
+            assert one.reliabilities() == {one.keys.state(1): zenoh.Reliability.BEST_EFFORT,
+                                           one.keys.status(1): zenoh.Reliability.RELIABLE}
+            assert sup.reliabilities() == {sup.keys.supervisor: zenoh.Reliability.RELIABLE}
+
+            def send() -> None:
+                one.publish(1, time.monotonic(), **STATE)
+                two.publish(2, time.monotonic(), **STATE)
+
+            # AND samples, statuses and gates cross the link
+            async with publishing(send):
+                await wait_until(lambda: one.rows([2], time.monotonic()).finite[0]
+                                 and sup.rows([1, 2], time.monotonic()).finite.all(), WAIT_S)
+                one.publish_status(1, "hold", waiting_gate="formation")
+                await wait_until(lambda: 1 in sup.statuses, WAIT_S)
+                gate = sup.open_gate("formation")
+                assert await asyncio.wait_for(one.control.get(), WAIT_S) == gate
+            assert one.stats()[2].corrupt == 0 and sup.statuses[1].phase == "hold"
+            beat.cancel()
+
+    run_bounded(scenario(), TEST_S)
+
+
 def test_an_agent_in_another_process_exchanges_samples_and_clocks():
     async def scenario() -> None:
         network = ring_network()
@@ -361,7 +402,7 @@ def test_an_agent_in_another_process_exchanges_samples_and_clocks():
             proc.stdin.close()
             out, _ = await asyncio.wait_for(proc.communicate(), WAIT_S)
             lines = out.decode().splitlines()
-            assert lines[0] == "agent_peer: ready" and json.loads(lines[-1])["1"] >= 1
+            assert lines[0] == "agent_peer: ready" and json.loads(lines[-1])["1"]["received"] >= 1
             assert await proc.wait() == 0
         finally:
             if proc.returncode is None:

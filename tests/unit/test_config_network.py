@@ -98,6 +98,10 @@ def test_the_team_name_becomes_one_key_chunk():
     ("tcp/127.0.0.1:0", "port 0 of 'tcp/127.0.0.1:0' is outside 1..65535"),
     ("tcp/127.0.0.1:70000", "port 70000"),
     ("tcp/a b:1", "expected an endpoint"),
+    ("udp/10.0.0.2:7447?rel=1;mixed_rel=1", None),
+    ("tcp/10.0.0.2:7447#so_sndbuf=65000", None),
+    ("udp/10.0.0.2:7447?rel", "expected an endpoint"),
+    ("udp/10.0.0.2:7447?rel=1;", "expected an endpoint"),
     (7447, "got int 7447"),
 ])
 def test_endpoint_forms(text, problem):
@@ -134,6 +138,10 @@ NETWORK_ERRORS = [
     ({"agents": {1: {"listen": ["tcp/127.0.0.1:7452"]}}},
      r"network\.base_port: tcp/127\.0\.0\.1:7452 is vehicle 2 \(default: base_port \+ 2\)'s "
      r"listen endpoint and also vehicle 1's"),
+    ({"agents": {1: {"listen": ["udp/10.0.0.1:7000?rel=1;mixed_rel=1"]},
+                 2: {"listen": ["udp/10.0.0.1:7000"]}}},
+     r"network\.agents\.2\.listen\[0\]: udp/10\.0\.0\.1:7000 is vehicle 2's listen endpoint "
+     r"and also vehicle 1's"),
     ({"supervisor": {"listen": ["tcp/127.0.0.1:7453"]}},
      r"network\.base_port: tcp/127\.0\.0\.1:7453 is vehicle 3 .* also the supervisor's"),
     ({"supervisor": {"listen": "tcp/127.0.0.1:1"}}, r"network\.supervisor\.listen: expected a list"),
