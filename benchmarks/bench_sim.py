@@ -16,6 +16,7 @@ import sys
 import time
 from pathlib import Path
 
+from benchmarks.docsection import write_section
 from flightkit import jitcache
 
 jitcache.configure()  # numba's cache, before the compiled modules below are imported
@@ -38,24 +39,6 @@ def timed(team, options, repeat):
         result = simulate(team, options)
         runs.append(time.perf_counter() - started)
     return first, statistics.median(runs), min(runs), result
-
-
-def update_section(path: Path, heading: str, body: str) -> None:
-    """Replace (or append) the section that starts at `heading`, leaving the others as they are."""
-    text = path.read_text() if path.exists() else "# Benchmarks\n"
-    lines = text.splitlines()
-    start = next((i for i, line in enumerate(lines) if line.strip() == heading), None)
-    if start is None:
-        new = text.rstrip("\n") + "\n\n" + heading + "\n" + body.rstrip("\n") + "\n"
-    else:
-        end = next(
-            (i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines)
-        )
-        new = "\n".join(
-            lines[:start] + [heading] + body.rstrip("\n").splitlines() + [""] + lines[end:]
-        )
-        new = new.rstrip("\n") + "\n"
-    path.write_text(new)
 
 
 def main() -> int:
@@ -109,7 +92,7 @@ def main() -> int:
         "rate the vehicle would (100-250 Hz in rates mode), which is already 8x cheaper.",
     ]
     if args.write:
-        update_section(args.write, HEADING, "\n".join(body))
+        write_section(args.write, HEADING, HEADING + "\n" + "\n".join(body))
         print(f"updated {args.write}")
     return 0
 
