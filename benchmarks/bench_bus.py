@@ -1,8 +1,8 @@
 """The agents' bus across an impaired network: how old a neighbour's state is when an agent's
-law reads it, over Zenoh on TCP and on UDP with mixed reliability (docs/benchmarks.md, "The
-agents' bus across a lossy network").
+law reads it, over Zenoh on TCP and on UDP with mixed reliability, and what it does to the
+formation (docs/benchmarks.md, "The agents' bus across a lossy network").
 
-    sudo python -m benchmarks.bench_bus [--seconds S] [--no-write]
+    sudo python -m benchmarks.bench_bus [--seconds S] [--flights K] [--no-write]
 
 Two stand-in agents (tests/integration/agent_peer.py: the product's NeighbourBus, no vehicle),
 each in a network namespace of its own on one bridge (tests/netns.py), publish their state at
@@ -10,8 +10,10 @@ each in a network namespace of its own on one bridge (tests/netns.py), publish t
 is delayed 20 ms +- 5 ms (normal) and dropped with probability 0.1 (the agents' test's
 impairment), or not impaired at all. Per transport and network: the age at use (median, p99,
 max), the share of ticks at which the sample is older than fly.stale_after_s (0.1 s, where the
-law drops the edge) and the samples lost. Needs root (namespaces); elsewhere it says so and
-stops.
+law drops the edge) and the samples lost. Then K pairs of flights, one through the plain network
+and one through the impaired one in turn (tests/agents_across.py, as
+tests/integration/test_agents_netns.py flies them): formation error for t >= 30 s and each
+edge's figures. Needs root (namespaces); elsewhere it says so and stops.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.docsection import publish
+from tests.agents_across import ENDPOINTS, HOSTS, FlightFailed, error_after, fly_across
 from tests.netns import BETWEEN_AGENTS, Mode, Testbed
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -35,10 +38,7 @@ HEADING = "## The agents' bus across a lossy network"
 PEER = ROOT / "tests" / "integration" / "agent_peer.py"
 RATE_HZ = 100
 STALE_S = 0.1  # fly.stale_after_s's default
-TRANSPORTS = {
-    "TCP": lambda host, port: f"tcp/{host}:{port}",
-    "UDP, mixed reliability": lambda host, port: f"udp/{host}:{port}?rel=1;mixed_rel=1",
-}
+TRANSPORTS = {"TCP": "tcp", "UDP, mixed reliability": "udp-mixed"}
 
 
 def exchange(endpoint, impaired: bool, seconds: float) -> dict:
@@ -80,17 +80,81 @@ def row(name: str, network: str, figures: dict) -> str:
             f"{100 * lost / max(received + lost, 1):.1f} % |")
 
 
+def flights(pairs: int, tmp: Path) -> str:
+    """Per transport, `pairs` plain and impaired flights in turn; their table and the ratios of
+    the medians."""
+    rows, verdicts, failed = [], [], []
+    for label, transport in TRANSPORTS.items():
+        runs: dict[str, list[dict]] = {"plain": [], "impaired": []}
+        for k in range(pairs):
+            for name in runs:
+                impairment = ([BETWEEN_AGENTS] * len(HOSTS) + [None] if name == "impaired"
+                              else None)
+                try:
+                    with Testbed(len(HOSTS) + 1, impairment, mode=Mode.NAMESPACES) as bed:
+                        report = fly_across(bed, tmp, f"{transport}-{name}-{k}", transport)
+                except FlightFailed as exc:  # a result too: what the network did to it
+                    failed.append(f"{label}, {name} flight {k + 1}: {exc.reason}")
+                    print(failed[-1], flush=True)
+                    rows.append(f"| {label} | {name} | {k + 1} | stopped (below) | | | | |")
+                    continue
+                e = error_after(report)
+                edges = report["extra"]["edges"].values()
+                runs[name].append({
+                    "mean": float(np.nanmean(e)), "max": float(np.nanmax(e)),
+                    "p50": np.median([x["age_p50_ms"] for x in edges]),
+                    "p99": max(x["age_p99_ms"] for x in edges),
+                    "loss": [x["loss_fraction"] for x in edges],
+                    "stale": sum(x["stale_ticks"] for x in edges),
+                    "used": max(x["age_used_max_ms"] for x in edges)})
+                r = runs[name][-1]
+                print(f"{transport} {name} {k}: {r['mean']:.4f} / {r['max']:.4f} m", flush=True)
+                rows.append(f"| {label} | {name} | {k + 1} | {r['mean']:.4f} / {r['max']:.4f} | "
+                            f"{r['p50']:.0f} / {r['p99']:.0f} | "
+                            f"{100 * min(r['loss']):.0f}-{100 * max(r['loss']):.0f} % | "
+                            f"{r['stale']} | {r['used']:.0f} |")
+        if not (runs["plain"] and runs["impaired"]):
+            verdicts.append(f"* {label}: no ratio (no completed flight of one network)")
+            continue
+        med = {name: (np.median([r["mean"] for r in rs]), np.median([r["max"] for r in rs]))
+               for name, rs in runs.items()}
+        verdicts.append(f"* {label}: impaired against plain, medians over the flights: mean "
+                        f"{med['impaired'][0] / med['plain'][0]:.2f}x, max "
+                        f"{med['impaired'][1] / med['plain'][1]:.2f}x")
+    return ("| transport | network | flight | formation error t >= 30 s, mean / max [m] | age "
+            "at use p50 / p99 [ms] | samples lost (per edge) | stale ticks (all edges) | "
+            "oldest used [ms] |\n|---|---|---|---|---|---|---|---|\n" + "\n".join(rows)
+            + "\n\n" + "\n".join(verdicts) + "\n"
+            + "".join(f"\nStopped: {f}" for f in failed) + ("\n" if failed else ""))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=30.0)
+    ap.add_argument("--flights", type=int, default=3, help="pairs of flights (0: none)")
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args()
     rows = []
     for name, endpoint in TRANSPORTS.items():
         for impaired in (False, True):
             network = "20 +- 5 ms, 10 % loss" if impaired else "plain"
-            rows.append(row(name, network, exchange(endpoint, impaired, args.seconds)))
+            rows.append(row(name, network, exchange(ENDPOINTS[endpoint], impaired,
+                                                    args.seconds)))
             print(rows[-1], flush=True)
+    flown = ""
+    if args.flights > 0:
+        with tempfile.TemporaryDirectory(prefix="bench-bus-") as d:
+            flown = (f"\n### Flights through it\n\nScenario I (square4, nominal vehicles, "
+                     f"rates at 50 Hz, 45 s, hold at the end) flown by two agent processes "
+                     f"(vehicles 1 and 3 in one host, 2 and 4 in another, each beside its "
+                     f"vehicles' `vehicle-emu --fleet`; every edge of the ring crosses the "
+                     f"network), supervised from a third host; per transport "
+                     f"{args.flights} flights through the plain network and "
+                     f"{args.flights} through the impaired one (each agent host's frames), "
+                     f"in turn. All on this machine's two cores: every flight's error is "
+                     f"millimetres, and its spread from flight to flight is as large as "
+                     f"the network's effect.\n\n"
+                     + flights(args.flights, Path(d)))
     text = (f"{HEADING}\n\n`python -m benchmarks.bench_bus` ({time.strftime('%Y-%m-%d')}, this "
             f"2-core machine, as root). Two stand-in agents (the product's bus, no vehicle) in "
             f"network namespaces of their own publish their state at {RATE_HZ} Hz for "
@@ -106,7 +170,7 @@ def main() -> None:
             "until its retransmission, so ages pile up behind it. With mixed reliability "
             "(`udp/HOST:PORT?rel=1;mixed_rel=1`) the states, published best effort, travel as "
             "datagrams: a lost one is gone and the next replaces it, while statuses, gates and "
-            "aborts keep their reliable QUIC streams.\n")
+            "aborts keep their reliable QUIC streams.\n" + flown)
     publish(ROOT / "docs" / "benchmarks.md", HEADING, text, write=not args.no_write)
 
 

@@ -237,14 +237,15 @@ def run_supervised(args: argparse.Namespace, team: TeamConfig, out: Path) -> int
         has = (d / TIMESERIES_NAME).is_file()
         agents[a.name] = {"vehicles": list(a.vehicles), "outcome": a.outcome,
                           "exit_status": a.exited, "records": str(d) if has else None}
-        if has:
+        # found agents name their records per vehicle: a process of several, one directory
+        if has and d not in present:
             present.append(d)
     summary = {"outcome": {"exit_code": outcome.exit_code, "reason": outcome.reason},
                "agents": agents, "events": outcome.events}
     out.mkdir(parents=True, exist_ok=True)
     (out / SUPERVISOR_NAME).write_text(json.dumps(summary, indent=1, default=str))
-    flown = [v for a, d in zip(outcome.agents, dirs, strict=True)
-             if (d / TIMESERIES_NAME).is_file() for v in a.vehicles]
+    flown = {v for a, d in zip(outcome.agents, dirs, strict=True)
+             if (d / TIMESERIES_NAME).is_file() for v in a.vehicles}
     order = [v for v in team.ids() if v in flown]
     try:
         log, _ = merge_records(present, order, out, team.name,
