@@ -36,7 +36,7 @@ from gcs.control.law import (
     position_stage,
 )
 from gcs.sim.link import deliver, predict_to_act, receive, record, send
-from gcs.sim.noise import add_telemetry_errors
+from gcs.sim.noise import add_telemetry_errors, recorded_position
 
 
 class TeamState(NamedTuple):
@@ -308,7 +308,7 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
                 macc = _acceleration(rot, thrust_now, mass, gains.gravity_mps2)
                 _add_drag(macc, v, drag_per_s)
             if noise.active:
-                mv, mrot, mw, macc = add_telemetry_errors(
+                mp, mv, mrot, mw, macc = add_telemetry_errors(
                     noise, step // ctrl_every, mp, mv, mrot, mw, macc, gains.gravity_mps2, ctrl_dt)
             ref = reference_velocity(t, ref_c, ref_a, ref_w, ref_ph)
             stage = position_stage(
@@ -373,7 +373,8 @@ def run_sampled(first_step, n_steps, dt_s, ctrl_every, log_every, team, law, loo
             _write_log(
                 log,
                 log_row0 + (step - first_step) // log_every,
-                p,
+                # with telemetry errors, the positions as gcs fly records them
+                recorded_position(noise, step // ctrl_every, p, v) if noise.active else p,
                 v,
                 tr_err,
                 we_norm,

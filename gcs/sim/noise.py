@@ -5,8 +5,11 @@ errors the bundled emulator's personality of that autopilot reports (vehicle_emu
 personality.py's Sensors, fitted on the SITL recordings; the equations of its estimate_errors):
 
 * velocity: the sum of two first-order Gauss-Markov processes per axis (north, east, up), a fast
-  one and a slow drift; the position carries none (PX4 SIH's reported position does not
-  integrate its velocity error, ArduCopter's errors are millimetres);
+  one and a slow drift;
+* position: the share of that velocity error the estimator integrates, forgotten over its own
+  time constant (PX4 SIH's reported position integrates none of it; ArduCopter's EKF3 all, over
+  3 s: its position and velocity estimates agree, so gcs fly's correction toward the position's
+  rate cannot remove the error, and the law flies the reported position);
 * attitude: per body axis a first-order process of the gyro noise integrated and forgotten
   (the complementary filter's tilt: 1 sigma = sigma_sample sqrt(T_sample tau / 2)), plus the
   estimator's own slow error, first or second order (two equal poles);
@@ -23,6 +26,12 @@ The law then reads the velocity as gcs fly's does (gcs/fly/consistent.py): the r
 plus the low-passed difference between the reported position's rate and it
 (fly.velocity_from_position_s).
 
+The log records the positions as gcs fly records them: each vehicle's latest LOCAL_POSITION_NED,
+the reported one, which at some ticks is still the previous stream period's (`held_share` of the
+vehicles and ticks, from a draw of its own): the team's samples do not all arrive before every
+tick, so a pair's error carries the distance one vehicle flew in a stream period. The law does
+not see it: with fly.predict gcs fly carries each sample to when its setpoint acts.
+
 Not modelled here: the position-hold wander (the law does not fly the autopilot's hold), the
 emulator's angular disturbances and IMU details. The random numbers come from the run's seed.
 """
@@ -30,6 +39,7 @@ emulator's angular disturbances and IMU details. The random numbers come from th
 from __future__ import annotations
 
 import math
+from statistics import NormalDist
 from typing import NamedTuple
 
 import numpy as np
@@ -38,6 +48,10 @@ from numba import njit
 #: Processes per vehicle and tick: 3 gyro, 3 integrated-gyro tilt, 3 slow attitude, 3 fast
 #: velocity, 3 velocity drift, 3 accelerometer.
 DRAWS = 18
+#: Process states per vehicle (SimNoise.state)
+STATES = 18
+#: gcs fly asks LOCAL_POSITION_NED at min(tick rate, this) (docs/gcs.md, PREFLIGHT)
+POSITION_STREAM_MAX_HZ = 100.0
 
 
 class NoiseModel(NamedTuple):
@@ -54,6 +68,12 @@ class NoiseModel(NamedTuple):
     drift_std_mps: tuple[float, float, float]
     drift_tau_s: float
     accel_std_mps2: tuple[float, float, float]  # body FLU, per tick: HIGHRES_IMU's
+    # the share of the velocity error the reported position integrates, and its decay [s]
+    position_share: float = 0.0
+    position_tau_s: float = 1.0
+    # the share of (vehicle, tick) pairs whose recorded position is still the previous stream
+    # period's (0: none; with it each vehicle takes one more draw per tick)
+    held_share: float = 0.0
 
 
 def _filtered(sample_std: float, sample_s: float, cutoff_hz: float) -> float:
@@ -82,8 +102,12 @@ PX4_NOISE = NoiseModel(
     accel_std_mps2=tuple(s / math.sqrt(2.0) for s in (0.5, 1.7, 1.4)),
 )
 #: ArduCopter 4.7.0-dev SITL (ARDUPILOT_SENSORS): no gyro noise; EKF3's velocity 3-5 mm/s over
-#: 5 s; attitude errors of tens of microradians; the accelerometer's 10 / 12 / 0.7 mm/s^2 per
-#: 2 ms sample (its 400 Hz loop on whole physics steps) through INS_ACCEL_FILTER 20 Hz.
+#: 5 s, which its position integrates and forgets over 3 s (5-12 mm); attitude errors of tens of
+#: microradians; the accelerometer's 10 / 12 / 0.7 mm/s^2 per 2 ms sample (its 400 Hz loop on
+#: whole physics steps) through INS_ACCEL_FILTER 20 Hz. Held samples: 8 % of the records, the
+#: mean over the four vehicles of the share of gcs fly's ticks at which a vehicle's latest
+#: LOCAL_POSITION_NED was a period older than the newest of the team's (0, 6, 11, 16 %, the
+#: personality's fleet sending the four in team order; tlog of its flight, seed 1).
 ARDUPILOT_NOISE = NoiseModel(
     gyro_std_radps=(0.0, 0.0, 0.0), tilt_std_rad=(0.0, 0.0, 0.0), tilt_tau_s=1.0,
     attitude_std_rad=(3.0e-5, 3.2e-5, 4.5e-5), attitude_tau_s=(0.15, 0.15, 3.0),
@@ -91,6 +115,8 @@ ARDUPILOT_NOISE = NoiseModel(
     velocity_std_mps=(0.0032, 0.0052, 0.002), velocity_tau_s=5.0,
     drift_std_mps=(0.0, 0.0, 0.0), drift_tau_s=1.0,
     accel_std_mps2=tuple(_filtered(s, 0.002, 20.0) for s in (0.0102, 0.0116, 0.0007)),
+    position_share=1.0, position_tau_s=3.0,
+    held_share=0.08,
 )
 NOISE_MODELS = {"px4": PX4_NOISE, "ardupilot": ARDUPILOT_NOISE}
 
@@ -110,8 +136,13 @@ class SimNoise(NamedTuple):
     drift_std: np.ndarray  # (3,) ENU
     drift_phi: float
     accel_std: np.ndarray  # (3,) body FLU
-    draws: np.ndarray  # (ticks, n, DRAWS) standard normals
-    state: np.ndarray  # (n, 15): tilt 0-2, attitude 3-5, its first stage 6-8, vel 9-11, drift 12-14
+    pos_share: float  # the share of the velocity error the position integrates
+    pos_phi: float
+    held_threshold: float  # a recorded position is held when draw DRAWS is below (-inf: never)
+    held_period_s: float  # the position stream's period
+    draws: np.ndarray  # (ticks, n, DRAWS or DRAWS + 1) standard normals
+    # (n, 18): tilt 0-2, attitude 3-5, its first stage 6-8, vel 9-11, drift 12-14, position 15-17
+    state: np.ndarray
     # gcs fly's velocity consistency (gcs/fly/consistent.py): v_law = v + c, c the low-passed
     # p' - v; consistency_s 0: the reported velocity as it is
     consistency_s: float
@@ -127,7 +158,8 @@ def make_noise(model: NoiseModel | None, ticks: int, n: int, tick_s: float,
     if model is None:
         zero = np.zeros(3)
         return SimNoise(False, zero, zero, 0.0, zero, zero, np.zeros(3, dtype=np.bool_), zero,
-                        0.0, zero, 0.0, zero, np.zeros((1, n, DRAWS)), np.zeros((n, 15)), *extra)
+                        0.0, zero, 0.0, zero, 0.0, 0.0, -math.inf, 0.0, np.zeros((1, n, DRAWS)),
+                        np.zeros((n, STATES)), *extra)
     neu_to_enu = [1, 0, 2]
     return SimNoise(
         True, np.array(model.gyro_std_radps), np.array(model.tilt_std_rad),
@@ -136,12 +168,18 @@ def make_noise(model: NoiseModel | None, ticks: int, n: int, tick_s: float,
         np.array([o == 2 for o in model.attitude_order]),
         np.array(model.velocity_std_mps)[neu_to_enu], math.exp(-tick_s / model.velocity_tau_s),
         np.array(model.drift_std_mps)[neu_to_enu], math.exp(-tick_s / model.drift_tau_s),
-        np.array(model.accel_std_mps2), np.ascontiguousarray(draws), np.zeros((n, 15)), *extra)
+        np.array(model.accel_std_mps2), model.position_share,
+        math.exp(-tick_s / model.position_tau_s),
+        NormalDist().inv_cdf(model.held_share) if model.held_share > 0.0 else -math.inf,
+        max(tick_s, 1.0 / POSITION_STREAM_MAX_HZ), np.ascontiguousarray(draws),
+        np.zeros((n, STATES)), *extra)
 
 
-def noise_draws(seed: int, ticks: int, n: int) -> np.ndarray:
-    """The run's standard normals (a stream of its own beside the link's losses)."""
-    return np.random.default_rng([seed, 1]).standard_normal((ticks, n, DRAWS))
+def noise_draws(seed: int, ticks: int, n: int, model: NoiseModel | None = None) -> np.ndarray:
+    """The run's standard normals (a stream of its own beside the link's losses): DRAWS per
+    vehicle and tick, one more when `model` holds recorded positions."""
+    count = DRAWS + (1 if model is not None and model.held_share > 0.0 else 0)
+    return np.random.default_rng([seed, 1]).standard_normal((ticks, n, count))
 
 
 #: gcs fly's bounds on the consistency correction (gcs/fly/consistent.py): |c| per axis, and
@@ -175,12 +213,12 @@ def _consistent(noise, i, p, v_reported, tick_s, out):
 
 @njit(cache=True)
 def add_telemetry_errors(noise, tick, p, v, rot, w, acc, g, tick_s):
-    """Advance the processes by one tick and return copies of v, R, w, a with the errors on (v as
+    """Advance the processes by one tick and return copies of p, v, R, w, a with the errors on (v as
     gcs fly's law reads it: with its consistency correction; a, the world acceleration, as gcs
     fly computes it: the accelerometer's specific force R^T (a + g e3) plus its noise, turned by
     the reported R, minus g e3)."""
     n = v.shape[0]
-    v_out, rot_out, w_out, acc_out = v.copy(), rot.copy(), w.copy(), acc.copy()
+    p_out, v_out, rot_out, w_out, acc_out = p.copy(), v.copy(), rot.copy(), w.copy(), acc.copy()
     s = noise.state
     # each process's drive per tick: sqrt(1 - phi^2) of its stationary 1 sigma
     kt = math.sqrt(1.0 - noise.tilt_phi * noise.tilt_phi)
@@ -203,6 +241,9 @@ def add_telemetry_errors(noise, tick, p, v, rot, w, acc, g, tick_s):
                 s[i, 3 + k] = pa * s[i, 3 + k] + ka * noise.att_std[k] * d[6 + k]
             s[i, 9 + k] = noise.vel_phi * s[i, 9 + k] + kv * noise.vel_std[k] * d[9 + k]
             s[i, 12 + k] = noise.drift_phi * s[i, 12 + k] + kd * noise.drift_std[k] * d[12 + k]
+            s[i, 15 + k] = (noise.pos_phi * s[i, 15 + k]
+                            + noise.pos_share * (s[i, 9 + k] + s[i, 12 + k]) * tick_s)
+            p_out[i, k] += s[i, 15 + k]
             v_out[i, k] += s[i, 9 + k] + s[i, 12 + k]
             w_out[i, k] += noise.gyro_std[k] * d[k]
             e[k] = s[i, k] + s[i, 3 + k]
@@ -214,8 +255,8 @@ def add_telemetry_errors(noise, tick, p, v, rot, w, acc, g, tick_s):
                     + ((1.0 - math.cos(angle)) / (angle * angle)) * (kx @ kx))
             rot_out[i] = rot[i] @ turn
         _reported_acceleration(noise, d, rot[i], rot_out[i], acc[i], g, acc_out[i])
-        _consistent(noise, i, p, v_out[i].copy(), tick_s, v_out)
-    return v_out, rot_out, w_out, acc_out
+        _consistent(noise, i, p_out, v_out[i].copy(), tick_s, v_out)
+    return p_out, v_out, rot_out, w_out, acc_out
 
 
 @njit(cache=True)
@@ -230,3 +271,17 @@ def _reported_acceleration(noise, d, rot, rot_reported, acc, g, out):
     for k in range(3):
         out[k] = rot_reported[k, 0] * f[0] + rot_reported[k, 1] * f[1] + rot_reported[k, 2] * f[2]
     out[2] -= g
+
+
+@njit(cache=True)
+def recorded_position(noise, tick, p, v):
+    """The positions (n, 3) gcs fly records at this tick: each vehicle's latest reported one,
+    the truth plus its estimate's error, or, where its draw DRAWS is below held_threshold, the
+    previous stream period's (p - v T)."""
+    out = p + noise.state[:, 15:18]
+    if noise.held_threshold > -math.inf:
+        for i in range(p.shape[0]):
+            if noise.draws[tick, i, DRAWS] < noise.held_threshold:
+                for k in range(3):
+                    out[i, k] -= v[i, k] * noise.held_period_s
+    return out

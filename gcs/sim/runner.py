@@ -144,7 +144,7 @@ class _Team:
     delay_steps: np.ndarray  # (n,) the link's one-way delay in plant steps
     lost_down: np.ndarray  # (ticks, n) the link's lost samples (gcs.sim.link)
     lost_up: np.ndarray  # (ticks, n) and lost setpoints
-    noise_draws: np.ndarray  # (ticks, n, DRAWS) the telemetry errors' normals, or (1, n, DRAWS)
+    noise_draws: np.ndarray  # (ticks, n, DRAWS[+1]) the telemetry errors' normals, or (1, n, DRAWS)
 
     @property
     def n(self) -> int:
@@ -213,7 +213,7 @@ def _team_of(team: TeamConfig, loop: _Loop) -> _Team:
             drop_factor[i] = 1.0 - fault.fraction
     ticks = loop.n_steps // loop.ctrl_every + 1
     lost_down, lost_up = lost_masks(ticks, n, team.sim.link_loss, team.sim.link_seed)
-    draws = (noise_draws(team.sim.link_seed, ticks, n) if loop.noise
+    draws = (noise_draws(team.sim.link_seed, ticks, n, NOISE_MODELS[loop.autopilot]) if loop.noise
              else np.zeros((1, n, DRAWS)))
     return _Team(
         noise_draws=draws,

@@ -170,7 +170,7 @@ def test_the_px4_telemetry_errors_have_their_fitted_sizes():
     p, v, rot, w = np.zeros((1, 3)), np.zeros((1, 3)), np.eye(3)[None].copy(), np.zeros((1, 3))
     gyro, tilt, att = [], [], []
     for k in range(ticks):
-        _, _, wo, _ = add_telemetry_errors(noise, k, p, v, rot, w, np.zeros((1, 3)), 9.81, 0.01)
+        _, _, _, wo, _ = add_telemetry_errors(noise, k, p, v, rot, w, np.zeros((1, 3)), 9.81, 0.01)
         if k >= 3000:
             gyro.append(wo[0].copy())
             tilt.append(noise.state[0, :3].copy())

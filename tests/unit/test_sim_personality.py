@@ -71,7 +71,7 @@ def _hover_errors(model, ticks: int, seed: int = 3):
     rot = np.eye(3)[None].copy()
     rots, accs = np.empty((ticks, 3, 3)), np.empty((ticks, 3))
     for k in range(ticks):
-        _, rot_out, _, acc_out = add_telemetry_errors(noise, k, p, v, rot, w, acc,
+        _, _, rot_out, _, acc_out = add_telemetry_errors(noise, k, p, v, rot, w, acc,
                                                       GRAVITY_MPS2, 0.01)
         rots[k], accs[k] = rot_out[0], acc_out[0]
     return rots, accs
