@@ -79,19 +79,40 @@ PX4_RECORDED = {
 }
 
 
-def px4_comparison(seeds: tuple[int, ...] = (1, 2, 3)) -> list[str]:
-    """configs/square4_px4sih.yaml's rates gains in gcs sim on sim.autopilot px4 (its loops, drag
-    and telemetry errors, 4 ms of link), per fly.velocity_from_position_s, beside the
-    recordings."""
-    import copy
+#: The ArduCopter SITL team file (tests/data/sitl/team_arducopter_sitl.yaml) with the rates gains
+#: the 2026-12-04 SITL flight flew (its report.json: alpha_p 1, c_p 2, k_eps 1.5, k_eps_yaw 1)
+ARDUPILOT_TEAM = "tests/data/sitl/team_arducopter_sitl.yaml"
+ARDUPILOT_FLOWN_GAINS = {"alpha_p": 1.0, "c_p": 2.0, "k_eps": 1.5, "k_eps_yaw": 1.0}
+#: What that file flew over MAVLink (fly.velocity_from_position_s 0.2, the default): the
+#: ardupilot personality (`vehicle-emu --fleet --team FILE --autopilot ardupilot --param
+#: GUID_OPTIONS=8`, then `gcs fly --team FILE`, one fleet per flight) and real ArduCopter SITL
+#: (flights/2026-12-04/ardupilot_rates_1st): formation error for t >= 30 s, mean / max [m].
+ARDUPILOT_RECORDED = ("personality 0.0028 / 0.0080, 0.0039 / 0.0094; real ArduCopter SITL "
+                      "0.0040 / 0.0217")
 
-    from gcs.config import load_team, team_from_dict, team_to_dict
+
+def _late_error(data: dict) -> str:
+    """gcs sim on the team `data`; its formation error for t >= 30 s, mean / max [m]."""
+    from gcs.config import team_from_dict
     from gcs.metrics import formation_error
     from gcs.sim.runner import SimOptions
 
+    log = simulate(team_from_dict(data), SimOptions(log_rate_hz=50)).log
+    e = formation_error(log.position_enu_m, log.offsets_enu_m)[log.t_s >= 30]
+    return f"{e.mean():.{3 if e.mean() >= 0.01 else 4}f} / {e.max():.{3 if e.max() >= 0.01 else 4}f}"
+
+
+def autopilot_comparison(seeds: tuple[int, ...] = (1, 2, 3)) -> list[str]:
+    """gcs sim on sim.autopilot px4 (configs/square4_px4sih.yaml's rates gains; its loops, drag
+    and telemetry errors, 4 ms of link), per fly.velocity_from_position_s, and on ardupilot (the
+    ArduCopter SITL team file as flown), beside the recordings."""
+    import copy
+
+    from gcs.config import load_team, team_to_dict
+
+    rows = ["| sim.autopilot | fly.velocity_from_position_s | gcs sim, seeds "
+            f"{', '.join(map(str, seeds))}: mean / max [m] | flown |", "|---|---|---|---|"]
     base = team_to_dict(load_team(ROOT / "configs" / "square4_px4sih.yaml"))
-    rows = ["| fly.velocity_from_position_s | gcs sim, sim.autopilot px4, seeds "
-            f"{', '.join(map(str, seeds))}: mean / max [m] | flown |", "|---|---|---|"]
     for t_s in (0.2, 0.0):
         figures = []
         for seed in seeds:
@@ -103,10 +124,19 @@ def px4_comparison(seeds: tuple[int, ...] = (1, 2, 3)) -> list[str]:
             data["fly"]["velocity_from_position_s"] = t_s
             data["sim"].update(controller_rate_hz=100, autopilot="px4", link_seed=seed,
                                link_delay_s=0.004)
-            log = simulate(team_from_dict(data), SimOptions(log_rate_hz=50)).log
-            e = formation_error(log.position_enu_m, log.offsets_enu_m)[log.t_s >= 30]
-            figures.append(f"{e.mean():.3f} / {e.max():.3f}")
-        rows.append(f"| {t_s:g} s | {', '.join(figures)} | {PX4_RECORDED[t_s]} |")
+            figures.append(_late_error(data))
+        rows.append(f"| px4 | {t_s:g} s | {', '.join(figures)} | {PX4_RECORDED[t_s]} |")
+    base = team_to_dict(load_team(ROOT / ARDUPILOT_TEAM))
+    figures = []
+    for seed in seeds:
+        data = copy.deepcopy(base)
+        data["controller"]["mode"] = "rates"
+        data["controller"]["gains"].update(ARDUPILOT_FLOWN_GAINS)
+        data["sim"].update(plant_rate_hz=1000, controller_rate_hz=100, autopilot="ardupilot",
+                           link_seed=seed, link_delay_s=0.004)
+        figures.append(_late_error(data))
+    velocity_s = base["fly"].get("velocity_from_position_s", 0.2)
+    rows.append(f"| ardupilot | {velocity_s:g} s | {', '.join(figures)} | {ARDUPILOT_RECORDED} |")
     return rows
 
 
@@ -151,12 +181,13 @@ def main() -> int:
                      f"{status.get('error', 0)} |")
     lines += ["", f"Per run, Scenario I of `{STUDIES[0]}` in this process on one core: "
               f"{alone_ms:.1f} ms alone, {batch_ms:.1f} ms inside a batch of 32 (best of 3).",
-              "", "`gcs sim` on PX4's loops, airframe drag and telemetry errors (the law's "
-              "acceleration from the accelerometer and the reported attitude; `sim.autopilot: "
-              "px4`, "
-              "docs/sweep.md) against what the same gains flew over MAVLink, formation error for "
-              "t >= 30 s, Scenario I at 100 Hz (the sim starts at the initial positions, the "
-              "flights from the ground or from 10 m, as noted):", "", *px4_comparison()]
+              "", "`gcs sim` on PX4's and ArduPilot's loops, airframes and telemetry errors "
+              "(`sim.autopilot`, docs/sweep.md: px4's drag and the law's acceleration from the "
+              "accelerometer and the reported attitude; ardupilot's position estimate error and "
+              "the records gcs fly holds a stream period) against what the same gains flew over "
+              "MAVLink, formation error for t >= 30 s, Scenario I at 100 Hz (the sim starts at "
+              "the initial positions, the flights from the ground or from 10 m, as noted):", "",
+              *autopilot_comparison()]
     publish(ROOT / "docs" / "benchmarks.md", SPEED_HEADING, "\n".join(lines) + "\n",
             not args.no_write)
     publish(ROOT / "docs" / "sweep.md", STUDIES_HEADING,
