@@ -104,10 +104,8 @@ class NeighbourBus(BusSession):
 
     def _declare(self) -> None:
         for vid in self.own_ids:
-            # latest sample wins: a lost state is replaced by the next, never resent; not
-            # express, so that Zenoh may send the own vehicles' samples of a tick together
-            self._state_pubs[vid] = self.publisher(self.keys.state(vid), express=False,
-                                                   reliable=False)
+            # latest sample wins: a lost state is replaced by the next, never resent
+            self._state_pubs[vid] = self.publisher(self.keys.state(vid), reliable=False)
             self._status_pubs[vid] = self.publisher(self.keys.status(vid), express=False)
         for vid in self.neighbour_ids:
             self.subscribe(self.keys.state(vid),
