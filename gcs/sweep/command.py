@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -97,21 +99,24 @@ def run_sweep(args: argparse.Namespace) -> int:
     update, stop = _progress(total, args.quiet)
     started = time.perf_counter()
     flown = 0
+    signalled: list[int] = []
     try:
-        work = batches(todo, study.batch_runs)
-        stream = (run_ray(study, work, args.address) if args.executor == "ray"
-                  else run_local(study, work, args.workers))
-        count = total - len(todo)
-        for rows in stream:
-            store.add(rows)
-            flown += len(rows)
-            count += len(rows)
-            update(count)
+        with _stopped_by_signals(signalled):
+            work = batches(todo, study.batch_runs)
+            stream = (run_ray(study, work, args.address) if args.executor == "ray"
+                      else run_local(study, work, args.workers))
+            count = total - len(todo)
+            for rows in stream:
+                store.add(rows)
+                flown += len(rows)
+                count += len(rows)
+                update(count)
     except KeyboardInterrupt:
         stop()
-        print(f"gcs sweep: interrupted after {flown} runs; the same command resumes",
+        how = signal.Signals(signalled[0]).name if signalled else "SIGINT"
+        print(f"gcs sweep: interrupted ({how}) after {flown} runs; the same command resumes",
               file=sys.stderr)
-        return 130
+        return 128 + (signalled[0] if signalled else signal.SIGINT)
     except Exception as exc:  # a worker or the cluster failed: what is written stays
         stop()
         print(f"gcs sweep: stopped after {flown} runs: {type(exc).__name__}: {exc}; the "
@@ -130,6 +135,24 @@ def run_sweep(args: argparse.Namespace) -> int:
     for path in written:
         print(path)
     return 0
+
+
+@contextlib.contextmanager
+def _stopped_by_signals(received: list[int]) -> Iterator[None]:
+    """While the runs fly, SIGINT and SIGTERM stop the sweep as Ctrl-C does (the batches written
+    stay, the same command resumes), whatever disposition the process started with: a script's
+    background job starts with SIGINT ignored, and Python then installs no handler of its own.
+    ``received`` collects the signal numbers."""
+    def interrupt(signum: int, _frame: object) -> None:
+        received.append(signum)
+        raise KeyboardInterrupt
+
+    previous = {sig: signal.signal(sig, interrupt) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 def _run_seconds(study: Study) -> float:

@@ -105,18 +105,21 @@ def test_an_interrupted_sweep_resumes_where_it_stopped(tmp_path):
     study = small_study(tmp_path, runs=40, batch_runs=2)
     whole = sweep(study, tmp_path / "whole", "--workers", "2")
     assert whole.returncode == 0, whole.stderr
-    # GIVEN a sweep on one worker, interrupted once its first batches are written
+    # GIVEN a sweep on one worker, started as a script's background job is (SIGINT ignored, so
+    # Python installs no Ctrl-C handler of its own), interrupted once its first batches are
+    # written
     out = tmp_path / "cut"
     proc = subprocess.Popen([*GCS, "sweep", "--study", str(study), "--out", str(out),
                              "--workers", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+                            text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and len(list((out / "parts").glob("*.parquet"))) < 2:
         time.sleep(0.05)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
-    assert "the same command resumes" in err
+    assert "interrupted (SIGINT)" in err and "the same command resumes" in err
     kept = len(list((out / "parts").glob("*.parquet")))
     assert 2 <= kept < 20
     # WHEN the same command runs again
