@@ -23,6 +23,7 @@ then log in again); raised alone: an RLIMIT_NICE that allows it (``<user> - nice
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 from dataclasses import dataclass
@@ -152,3 +153,21 @@ def share_with_threads() -> int:
             continue
         done += 1
     return done
+
+
+def leave_realtime() -> bool:
+    """Put every thread of this process back under normal scheduling (SCHED_OTHER; the nice value
+    stays) if the process is real-time: for the work after the timed part (records, figures),
+    which at SCHED_FIFO would take a core from every normally scheduled process for as long as it
+    computes. Returns whether it was real-time. Leaving real-time needs no permission."""
+    try:
+        policy = os.sched_getscheduler(0) & ~getattr(os, "SCHED_RESET_ON_FORK", 0)
+        if policy not in (os.SCHED_FIFO, os.SCHED_RR):
+            return False
+        tids = [int(t) for t in os.listdir("/proc/self/task")]
+    except (OSError, AttributeError):
+        return False
+    for tid in tids:
+        with contextlib.suppress(OSError):  # the thread ended meanwhile
+            os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+    return True

@@ -22,7 +22,7 @@ from gcs.config import ConfigError, TeamConfig, load_team
 from gcs.config.modes import FLY_MODES, as_strings
 from gcs.fly.command import EmulatorFleetError, emulator_fleet
 from gcs.fly.records import TIMESERIES_NAME
-from gcs.fly.sched import SchedulingError, apply_scheduling, share_with_threads
+from gcs.fly.sched import SchedulingError, apply_scheduling, leave_realtime, share_with_threads
 from gcs.fly.setup import FlightSetupError, FlyOptions, prepare
 from gcs.fly.warmup import compile_law
 from gcs.mission.plan import EXIT_ABORTED, EXIT_INTERRUPTED
@@ -220,6 +220,7 @@ def run_supervised(args: argparse.Namespace, team: TeamConfig, out: Path) -> int
           f"({'found' if procs is None else 'started'}), the law runs in them", file=sys.stderr)
     try:
         outcome = asyncio.run(supervise())
+        leave_realtime()  # merging the records is no timed work (gcs/fly/flight.py, the same)
     except BusError as exc:
         print(f"gcs fly: {exc}", file=sys.stderr)
         if procs is not None:

@@ -47,7 +47,7 @@ from gcs.fly.origins import (
     origin_from_home_position,
 )
 from gcs.fly.records import TLOG_NAME, Figures, Records, flight_log_builder
-from gcs.fly.sched import Scheduling
+from gcs.fly.sched import Scheduling, leave_realtime
 from gcs.fly.setpoints import Setpoints
 from gcs.fly.setup import FlightSetup, FlightSetupError, FlyOptions, FlyResult, prepare
 from gcs.fly.stats import AgeStats, TickStats
@@ -207,6 +207,10 @@ class Flight:
                     await self._emergency_stop()
                     raise
         outcome = self.machine.outcome or Outcome(EXIT_ABORTED, "stopped without an outcome")
+        # the links are closed: the records and figures are no timed work, and at SCHED_FIFO
+        # they would take a core from the vehicles' simulators for seconds
+        if leave_realtime():
+            logger.info("flight over: normal scheduling for the records")
         return self.records.write(outcome, scheduling=self.scheduling, tlog=self._tlog,
                                   vehicle_notes=self.vehicle_notes,
                                   compiled_after_ready=self.compiled_after_ready,

@@ -12,11 +12,18 @@ scheduled (SCHED_RESET_ON_FORK) and ask for their own.
 
 from __future__ import annotations
 
-from flightkit.sched import POLICIES, Request, Scheduling, SchedulingError, share_with_threads
+from flightkit.sched import (
+    POLICIES,
+    Request,
+    Scheduling,
+    SchedulingError,
+    leave_realtime,
+    share_with_threads,
+)
 from flightkit.sched import apply_scheduling as _apply
 
 __all__ = ["GRANT", "POLICIES", "RAISED_NICE", "RT_PRIORITY", "Scheduling", "SchedulingError",
-           "apply_scheduling", "share_with_threads"]
+           "apply_scheduling", "leave_realtime", "share_with_threads"]
 
 #: SCHED_FIFO priority of `realtime` (1-99; low: above every normal process, below the kernel's
 #: own real-time threads, which run at 50 and up).

@@ -113,3 +113,36 @@ def test_the_emulators_refusals_name_its_option_and_how_to_grant_it():
     assert out["error"].startswith("--scheduling realtime: SCHED_FIFO refused (Operation not "
                                    "permitted); grant it with root")
     assert "a nice limit of -5 (an rtprio limit of 9 for realtime; docs/emulator.md" in out["error"]
+
+
+LEAVE = """
+import json, os, threading
+from gcs.fly.sched import apply_scheduling, leave_realtime
+first = apply_scheduling("auto").policy
+stop = threading.Event()
+worker = threading.Thread(target=stop.wait)
+worker.start()
+from flightkit.sched import share_with_threads
+share_with_threads()
+def fifo(tid):
+    return os.sched_getscheduler(tid) & ~getattr(os, "SCHED_RESET_ON_FORK", 0) == os.SCHED_FIFO
+before = [fifo(t) for t in (0, worker.native_id)]
+left = leave_realtime()
+after = [fifo(t) for t in (0, worker.native_id)]
+stop.set()
+worker.join()
+print(json.dumps({"first": first, "before": before, "left": left, "after": after,
+                  "again": leave_realtime()}))
+"""
+
+
+def test_leaving_realtime_puts_every_thread_back_under_normal_scheduling():
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    done = subprocess.run([sys.executable, "-c", LEAVE], capture_output=True, text=True,
+                          timeout=60, env=env, check=True)
+    out = json.loads(done.stdout)
+    # a process that was real-time (both its threads) is normal after, and says so once
+    assert out["after"] == [False, False] and out["again"] is False, out
+    assert out["left"] == (out["first"] == "realtime") == all(out["before"]), out
+    if ROOT:
+        assert out["first"] == "realtime" and out["left"], out
