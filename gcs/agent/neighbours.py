@@ -108,9 +108,17 @@ class NeighbourRows:
         used = np.where(self._fresh, age, -np.inf)
         np.maximum(self.age_used_max_s, used, out=self.age_used_max_s)
 
-    def measurement(self, own: TeamMeasurement, act_s: float | None) -> TeamMeasurement:
+    def measurement(self, own: TeamMeasurement, act_s: float | None,
+                    own_taken_s: np.ndarray | None = None) -> TeamMeasurement:
         """The law team's measurement: `own` (as the tick held or predicted it) in the own
-        rows, each neighbour's latest sample (predicted to `act_s` when given) in its row."""
+        rows, each neighbour's latest sample in its row, predicted to `act_s` when given (with
+        `fly.predict`), else to the instant of the agent's newest own sample `own_taken_s`.
+
+        The latter is what `gcs fly` sees without prediction: every vehicle's latest sample,
+        each taken within one telemetry period. A neighbour's sample crossed the bus after its
+        agent's tick and is a tick older than that; carried forward by its own velocity and
+        acceleration to the own sample's instant (never backward), it stands where `gcs fly`
+        would have measured it."""
         n = self.n_law
         s = self._state
         k = len(self.neighbour_ids)
@@ -128,8 +136,11 @@ class NeighbourRows:
             if s is None:
                 raise RuntimeError("NeighbourRows.measurement before fresh() this tick")
             n_pos, n_vel, n_acc = s.position_enu_m, s.velocity_enu_mps, s.acceleration_enu_mps2
-            if act_s is not None:
-                h = horizons_s(act_s, s.taken_local_s)
+            to_s = act_s
+            if to_s is None and own_taken_s is not None and np.isfinite(own_taken_s).any():
+                to_s = float(np.nanmax(own_taken_s))
+            if to_s is not None:
+                h = horizons_s(to_s, s.taken_local_s)
                 held = TeamMeasurement(n_pos, n_vel, n_acc, np.tile(np.eye(3), (k, 1, 1)),
                                        np.zeros((k, 3)))
                 p = predict(held, h, np.zeros(k))

@@ -401,7 +401,7 @@ class Tick:
                 rows.record_ages(now_s)
             self.consistency.update_figures()
             if log:
-                self.log(t, sample, ref[0], command)
+                self.log(t, sample, ref[0], command, now_s)
         return command
 
     def _law_input(self, sample: TeamSample, now_s: float) -> TeamMeasurement:
@@ -412,7 +412,8 @@ class Tick:
         if self.consistency.on:
             held = held._replace(velocity_mps=self.consistency.velocity(held.velocity_mps))
         if self.figures.audit is None:
-            return held if self.law_rows is None else self.law_rows.measurement(held, None)
+            return held if self.law_rows is None else self.law_rows.measurement(
+                held, None, own_taken_s=sample.position_taken_s)
         # each link's least one-way delay: the table's copy of the clock filters' (a column)
         least = (self.hot.clock_line[:, 3] if self._clocks_in_table
                  else np.array([p.clock.least_delay_s for p in self.proxies]))
@@ -427,9 +428,12 @@ class Tick:
         return predicted if self.law_rows is None else self.law_rows.measurement(predicted, act)
 
     def log(self, t: float, sample: TeamSample, ref_velocity_enu_mps: np.ndarray,
-            c: TeamCommand | None) -> None:
+            c: TeamCommand | None, now_s: float | None = None) -> None:
         """One record sample; `c` None (position mode: no law) records its figures as NaN."""
         p = sample.position_m
+        if now_s is not None:
+            h = horizons_s(now_s, sample.position_taken_s)
+            p = p + sample.velocity_mps * h[:, None]
         self.formation_error_m = formation_error_m(p, self.offsets_m)  # no (n, n, 3) array
         law = {} if c is None else {
             "attitude_error": c.attitude_error, "omega_error_radps": c.omega_error_radps,

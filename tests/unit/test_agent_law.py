@@ -139,6 +139,38 @@ def test_a_stale_or_unheard_neighbour_is_out_of_the_law_and_its_row_stays_finite
                                + 0.1 * v2 + 0.005 * a2)
 
 
+def test_without_prediction_neighbours_are_carried_to_the_own_samples_instant(grid16):
+    # GIVEN an agent whose own sample was taken at 0.22 s and neighbours' samples of 0.20 s
+    # (a tick older: they crossed the bus after their agents' ticks) and one of 0.25 s
+    team = grid16
+    agent = AgentTeam(team, (6,))
+    meas = measurement(team, np.random.default_rng(5))
+    src = Exact(team.ids(), meas, taken_s=0.20)
+    state = src.rows(agent.neighbours, 0.23)
+    state.taken_local_s[3] = 0.25
+    src.rows = lambda ids, now_s: state
+    rows = NeighbourRows(agent, src, stale_after_s=0.1)
+    rows.fresh(np.ones(1, dtype=bool), now_s=0.23)
+    idx = [team.index_of(6)]
+    own = TeamMeasurement(*(a[idx] for a in meas))
+    m = rows.measurement(own, None, own_taken_s=np.array([0.22]))
+    # THEN each older neighbour stands where its velocity and acceleration carry it in 0.02 s,
+    # the newer one where it was (never carried backward), and the own row is untouched
+    for row, vid in zip(rows.neighbour_rows, agent.neighbours, strict=True):
+        j = team.index_of(vid)
+        h = 0.0 if vid == agent.neighbours[3] else 0.02
+        np.testing.assert_allclose(m.position_m[row], meas.position_m[j]
+                                   + h * meas.velocity_mps[j]
+                                   + 0.5 * h * h * meas.acceleration_mps2[j], rtol=1e-12)
+        np.testing.assert_allclose(m.velocity_mps[row], meas.velocity_mps[j]
+                                   + h * meas.acceleration_mps2[j], rtol=1e-12)
+    np.testing.assert_array_equal(m.position_m[rows.own_rows], own.position_m)
+    # AND without an own instant (nothing taken yet) they are used as received
+    m0 = rows.measurement(own, None)
+    np.testing.assert_array_equal(m0.position_m[rows.neighbour_rows],
+                                  state.position_enu_m)
+
+
 def test_the_tick_publishes_each_own_vehicle_with_a_finite_sample(grid16):
     agent = AgentTeam(grid16, (6, 7))
     src = Exact(grid16.ids(), measurement(grid16, np.random.default_rng(1)), 0.0)
