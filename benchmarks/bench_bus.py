@@ -151,9 +151,9 @@ def main() -> None:
                      f"network), supervised from a third host; per transport "
                      f"{args.flights} flights through the plain network and "
                      f"{args.flights} through the impaired one (each agent host's frames), "
-                     f"in turn. All on this machine's two cores: every flight's error is "
-                     f"millimetres, and its spread from flight to flight is as large as "
-                     f"the network's effect.\n\n"
+                     f"in turn, all on this machine's two cores. Each record's positions "
+                     f"are carried to its tick's instant, so the merged formation error is "
+                     f"the flight's, not the agents' phase (docs/gcs.md, \"Records\").\n\n"
                      + flights(args.flights, Path(d)))
     text = (f"{HEADING}\n\n`python -m benchmarks.bench_bus` ({time.strftime('%Y-%m-%d')}, this "
             f"2-core machine, as root). Two stand-in agents (the product's bus, no vehicle) in "
