@@ -19,6 +19,7 @@ import time
 
 from gcs.fly.warmup import compile_law
 from gcs.sim.warmup import compile_sim
+from gcs.sweep.measure import compile_measure
 
 
 def _font_cache() -> None:
@@ -40,6 +41,7 @@ def compile_all(emulator: bool = True) -> None:
     try:
         compile_law()
         compile_sim()
+        compile_measure()  # gcs sweep's measure of each run
         _font_cache()
     finally:
         code = proc.wait() if proc is not None else 0

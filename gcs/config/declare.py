@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import functools
 import types
 import typing
 from collections.abc import Callable, Sequence
@@ -93,7 +94,7 @@ def read_section(node: Node, cls: type, default: Any = None, *,
         return default
     required, optional = section_keys(cls, default)
     node.keys(" ".join(required), " ".join([*optional, *extra_keys]))
-    hints = typing.get_type_hints(cls)
+    hints = _hints(cls)
     given = given or {}
     values = {}
     for f in dataclasses.fields(cls):
@@ -115,7 +116,13 @@ def read_field(node: Node, cls: type, name: str, **bounds: float) -> Any:
     to the declared ones (bounds known only when the file is read, such as the mission's end)."""
     f = cls.__dataclass_fields__[name]
     meta = {**f.metadata, "bounds": {**f.metadata.get("bounds", {}), **bounds}}
-    return read_value(node.child(yaml_name(f)), typing.get_type_hints(cls)[name], meta, f.default)
+    return read_value(node.child(yaml_name(f)), _hints(cls)[name], meta, f.default)
+
+
+@functools.cache
+def _hints(cls: type) -> dict[str, Any]:
+    """The resolved annotations of section `cls` (a class's annotations do not change)."""
+    return typing.get_type_hints(cls)
 
 
 def read_value(node: Node, hint: Any, meta: typing.Mapping[str, Any], fallback: Any) -> Any:

@@ -108,3 +108,15 @@ def reference_velocity(
             out[2, k] -= a * w * w * c
             out[3, k] += a * w * w * w * s
     return out
+
+
+@njit(cache=True)
+def reference_velocity_series(
+    t_s: np.ndarray, constant: np.ndarray, amplitude: np.ndarray, omega: np.ndarray,
+    phase: np.ndarray
+) -> np.ndarray:
+    """v_r at each instant of `t_s`, (T, 3): row k is reference_velocity(t_s[k], ...)[0]."""
+    out = np.empty((t_s.size, 3))
+    for k in range(t_s.size):
+        out[k] = reference_velocity(t_s[k], constant, amplitude, omega, phase)[0]
+    return out

@@ -17,7 +17,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from gcs.control.formation import EdgeList
+from gcs.control.formation import EdgeList, reference_velocity
 from gcs.control.gains import LawGains
 
 
@@ -97,6 +97,33 @@ def sliding_variable(
             ve[i, k] = velocity_mps[i, k] - reference_mps[0, k]
             s[i, k] = c_p * coupling + ve[i, k]
     return s, ve
+
+
+@njit(cache=True)
+def saturated_samples(
+    t_s: np.ndarray,
+    position_m: np.ndarray,
+    velocity_mps: np.ndarray,
+    graph: EdgeList,
+    offsets_m: np.ndarray,
+    gains: tuple[float, float],
+    reference: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+) -> int:
+    """How many (sample, vehicle) pairs of a log (T, n, 3) have a saturated term of the force
+    (23) past its knee: |s_ik| or |v^e_ik| >= sigma_a for some axis k, with s and v^e of (21)
+    at each sample's time. gains = (c_p, sigma_a); reference as formation.reference_velocity."""
+    c_p, sigma_a = gains
+    constant, amplitude, omega, phase = reference
+    hits = 0
+    for m in range(t_s.size):
+        ref = reference_velocity(t_s[m], constant, amplitude, omega, phase)
+        s, ve = sliding_variable(position_m[m], velocity_mps[m], graph, offsets_m, c_p, ref)
+        for i in range(s.shape[0]):
+            for k in range(3):
+                if abs(s[i, k]) >= sigma_a or abs(ve[i, k]) >= sigma_a:
+                    hits += 1
+                    break
+    return hits
 
 
 @njit(cache=True)

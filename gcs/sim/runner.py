@@ -17,7 +17,7 @@ import numpy as np
 from gcs.config import TORQUE_MODES, ConfigError, ControlMode, TeamConfig
 from gcs.config.modes import as_strings
 from gcs.config.schema import whole_ratio
-from gcs.control.formation import EdgeList, edge_list, reference_velocity
+from gcs.control.formation import EdgeList, edge_list, reference_velocity_series
 from gcs.control.gains import LawGains
 from gcs.control.geometry import rotation_from_rpy
 from gcs.control.law import DERIVATIVE_METHODS
@@ -321,7 +321,7 @@ def _advance(
 def _flight_log(team_cfg: TeamConfig, loop: _Loop, arrays: _Team, log: np.ndarray) -> FlightLog:
     dt_s = 1.0 / loop.plant_hz
     t_s = np.arange(log.shape[0]) * loop.log_every * dt_s
-    ref = np.array([reference_velocity(t, *loop.reference)[0] for t in t_s])
+    ref = reference_velocity_series(t_s, *loop.reference)
     c = _COL
     n = team_cfg.n
     adaptive = loop.law == "adaptive"

@@ -94,8 +94,10 @@ def run_sweep(args: argparse.Namespace) -> int:
         print(f"gcs sweep: all {total} runs already in {out}; writing the table and analysis",
               file=sys.stderr)
     from gcs.sim.warmup import compile_sim
+    from gcs.sweep.measure import compile_measure
 
     compile_sim(force=False)  # once here, so the workers load the kernels from the cache
+    compile_measure()
     update, stop = _progress(total, args.quiet)
     started = time.perf_counter()
     flown = 0

@@ -11,8 +11,8 @@ import numpy as np
 from gcs import metrics
 from gcs.config import TeamConfig
 from gcs.config.conditions import conditions
-from gcs.control.formation import edge_list, reference_velocity
-from gcs.control.position import sliding_variable
+from gcs.control.formation import edge_list
+from gcs.control.position import saturated_samples
 from gcs.flightlog import FlightLog
 from gcs.sweep.study import StudyMetrics
 
@@ -40,19 +40,33 @@ def saturation_share(log: FlightLog, team: TeamConfig) -> float:
     """Share of (sample, vehicle) pairs at which a saturated term of the force (23) is past its
     knee: |s_ik| or |v^e_ik| >= sigma_a for some axis k (tanh there is >= 0.76 of its limit)."""
     gains = team.controller.gains
-    graph = edge_list(team.adjacency())
-    offsets = np.ascontiguousarray(log.offsets_enu_m, dtype=float)
-    ref_arrays = tuple(np.ascontiguousarray(x, dtype=float)
-                       for x in team.reference_velocity.as_arrays())
-    hits = 0
-    for k, t in enumerate(log.t_s):
-        s, ve = sliding_variable(
-            np.ascontiguousarray(log.position_enu_m[k]), np.ascontiguousarray(
-                log.velocity_enu_mps[k]), graph, offsets, gains.c_p,
-            reference_velocity(t, *ref_arrays))
-        past = (np.abs(s) >= gains.sigma_a) | (np.abs(ve) >= gains.sigma_a)
-        hits += int(past.any(axis=1).sum())
+    hits = _saturated(log.t_s, log.position_enu_m, log.velocity_enu_mps, team.adjacency(),
+                      log.offsets_enu_m, (gains.c_p, gains.sigma_a),
+                      team.reference_velocity.as_arrays())
     return hits / (log.t_s.size * team.n)
+
+
+def _saturated(t_s: np.ndarray, position_m: np.ndarray, velocity_mps: np.ndarray,
+               adjacency: np.ndarray, offsets_m: np.ndarray, gains: tuple[float, float],
+               reference: tuple[np.ndarray, ...]) -> int:
+    """saturated_samples with every argument in the one type its compiled code takes."""
+    def c(x: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(x, dtype=float)
+
+    return saturated_samples(c(t_s), c(position_m), c(velocity_mps), edge_list(adjacency),
+                             c(offsets_m), (float(gains[0]), float(gains[1])),
+                             tuple(c(x) for x in reference))
+
+
+def compile_measure() -> None:
+    """Compile the measure's kernel (or load it from numba's cache) before the workers start,
+    so they only load it: one vehicle, one sample, its arrays read-only as a log's are."""
+    log = [np.zeros(1), np.zeros((1, 1, 3)), np.zeros((1, 1, 3)), np.zeros((1, 3))]
+    for x in log:
+        x.flags.writeable = False
+    t_s, position_m, velocity_mps, offsets_m = log
+    _saturated(t_s, position_m, velocity_mps, np.zeros((1, 1)), offsets_m, (1.0, 1.0),
+               (np.zeros(3), np.zeros((3, 1)), np.zeros((3, 1)), np.zeros((3, 1))))
 
 
 def min_distance_m(position_m: np.ndarray) -> float:
