@@ -129,7 +129,7 @@ class NeighbourBus(BusSession):
             vehicle_id, self.epoch, self._seq[vehicle_id], float(taken_s), now,
             _floats(position_enu_m, 3), _floats(velocity_enu_mps, 3),
             _floats(acceleration_enu_mps2, 3), _floats(attitude_wxyz, 4),
-            _floats(omega_flu_radps, 3), self.table.echoes(now))
+            _floats(omega_flu_radps, 3), self.table.echoes(now, vehicle_id))
         data = encode(sample)
         self._state_pubs[vehicle_id].put(data)
         self._count_sent(len(data))

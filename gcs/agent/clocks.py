@@ -1,6 +1,6 @@
-"""A peer's clock offset from NTP-style exchanges (pure): each exchange gives four timestamps,
-the estimate is the exchange with the least round trip in a sliding window (NTP's clock
-filter, RFC 5905 section 10), and its uncertainty is half that round trip.
+"""A peer's clock offset from NTP-style exchanges (pure): each exchange gives four timestamps;
+the estimate is the median offset of the window's faster half (the exchanges whose round trip is
+at most the window's median), kept inside the interval every exchange of the window allows.
 
     local  t1 ----------------------------------------> t4       (this process's clock)
                  \\                                     /
@@ -9,42 +9,45 @@ filter, RFC 5905 section 10), and its uncertainty is half that round trip.
     offset = ((t2 - t1) + (t3 - t4)) / 2      the peer's clock minus ours
     rtt    = (t4 - t1) - (t3 - t2)            the time on the wire, both ways
 
-The offset's error is at most rtt / 2 whatever the asymmetry of the two legs, so the least
-round trip bounds it tightest. In the agents' exchange, t1 is a sample's `sent_s` that the peer
-echoes back with `held_s = t3 - t2` in its own sample sent at t3, received here at t4.
+One exchange's offset errs by half the difference of its two legs, at most rtt / 2 whatever
+the asymmetry, so the true offset lies in [offset - rtt / 2, offset + rtt / 2] of every exchange
+and in their intersection. Why the median and not NTP's single least round trip: when the two
+legs jitter independently and alike (a radio mesh, netem's normal jitter), the difference of
+the legs is independent of their sum, so the fastest exchange errs as much as any other (by the
+jitter's standard deviation / sqrt 2), while the median of many converges on the true offset.
+The faster half keeps the median clear of one direction's queueing, where the least round trip
+is the better estimate; the intersection bounds what either may do.
+
+In the agents' exchange, t1 is a sample's `sent_s` that the peer echoes back with
+`held_s = t3 - t2` in its own sample sent at t3, received here at t4. The peer echoes every
+message it received, once (gcs/agent/table.py): echoing only its latest would favour the
+messages that arrived early, and bias the offset by a fraction of the jitter.
 """
 
 from __future__ import annotations
 
 import math
-from collections import deque
-from dataclasses import dataclass
+
+import numpy as np
 
 #: A round trip this far below zero is rounding (timestamps of ~1e6 s differ in the 1e-10 s);
 #: it is taken as 0. Further below, the four timestamps cannot be one exchange.
 RTT_ROUNDING_S = 1e-6
 
 
-@dataclass(frozen=True, slots=True)
-class Exchange:
-    """One exchange: the peer's offset (its clock - ours) and the round trip it was measured
-    over, received at `at_s` (our clock)."""
-
-    offset_s: float
-    rtt_s: float
-    at_s: float
-
-
 class OffsetEstimator:
-    """One peer's clock offset: `add` each exchange; the estimate is the least-round-trip one
-    of the last `window` exchanges no older than `max_age_s` (by our clock, at the newest)."""
+    """One peer's clock offset: `add` each exchange; the estimate is over the last `window`
+    exchanges no older than `max_age_s` (by our clock, at the newest)."""
 
-    def __init__(self, window: int = 64, max_age_s: float = 30.0) -> None:
+    def __init__(self, window: int = 512, max_age_s: float = 30.0) -> None:
         if window < 1 or not max_age_s > 0.0:
             raise ValueError(f"window {window} must be >= 1 and max_age_s {max_age_s} > 0")
         self.window, self.max_age_s = window, max_age_s
-        self._exchanges: deque[Exchange] = deque(maxlen=window)
-        self._best: Exchange | None = None
+        # a ring of the last `window` exchanges: offset, round trip, our time of arrival
+        self._ring = np.full((3, window), np.nan)
+        self._next = 0
+        self._estimate: tuple[float, float, float] | None = None  # offset, bound, least rtt
+        self._stale = False
         self.total = 0  # exchanges accepted since the start or the last reset
         self.refused = 0  # exchanges refused: not finite, or a negative round trip
 
@@ -59,49 +62,72 @@ class OffsetEstimator:
         if rtt < -RTT_ROUNDING_S:
             self.refused += 1
             return False
-        self._exchanges.append(Exchange(((t2_s - t1_s) + (t3_s - t4_s)) / 2.0, max(rtt, 0.0),
-                                        t4_s))
+        slot = self._next % self.window
+        self._ring[:, slot] = (((t2_s - t1_s) + (t3_s - t4_s)) / 2.0, max(rtt, 0.0), t4_s)
+        self._next += 1
         self.total += 1
-        newest = max(e.at_s for e in self._exchanges)
-        while self._exchanges[0].at_s < newest - self.max_age_s:
-            self._exchanges.popleft()
-        self._best = min(self._exchanges, key=lambda e: e.rtt_s)
+        self._stale = True
         return True
 
     def reset(self) -> None:
         """Forget every exchange (the peer restarted: its clock may be another)."""
-        self._exchanges.clear()
-        self._best = None
+        self._ring[:] = np.nan
+        self._next = 0
+        self._estimate = None
+        self._stale = False
         self.total = 0
+
+    def _window(self) -> np.ndarray:
+        """The exchanges in the window, (3, k): offset, rtt, arrival."""
+        ring = self._ring[:, :min(self._next, self.window)]
+        if ring.shape[1] == 0:
+            return ring
+        return ring[:, ring[2] >= np.max(ring[2]) - self.max_age_s]
+
+    def _current(self) -> tuple[float, float, float] | None:
+        if self._stale:
+            self._stale = False
+            offset, rtt, _ = self._window()
+            faster = offset[rtt <= np.median(rtt)]
+            estimate = float(np.median(faster))
+            low, high = float(np.max(offset - rtt / 2.0)), float(np.min(offset + rtt / 2.0))
+            if low <= high:  # clamped into what every exchange allows
+                estimate = min(max(estimate, low), high)
+                bound = max(estimate - low, high - estimate)
+            else:  # exchanges that contradict each other (a clock stepped): the fastest one
+                best = int(np.argmin(rtt))
+                estimate, bound = float(offset[best]), float(rtt[best]) / 2.0
+            self._estimate = (estimate, bound, float(np.min(rtt)))
+        return self._estimate
 
     @property
     def samples(self) -> int:
         """Exchanges in the window."""
-        return len(self._exchanges)
-
-    @property
-    def best(self) -> Exchange | None:
-        """The exchange the estimate is, None before the first."""
-        return self._best
+        return self._window().shape[1]
 
     @property
     def offset_s(self) -> float | None:
         """The peer's clock minus ours [s], None before the first exchange."""
-        return None if self._best is None else self._best.offset_s
+        current = self._current()
+        return None if current is None else current[0]
 
     @property
     def rtt_s(self) -> float | None:
         """The least round trip in the window [s], None before the first exchange."""
-        return None if self._best is None else self._best.rtt_s
+        current = self._current()
+        return None if current is None else current[2]
 
     @property
     def uncertainty_s(self) -> float | None:
-        """Half the least round trip: a bound on the offset's error [s]; None before the
-        first exchange."""
-        return None if self._best is None else self._best.rtt_s / 2.0
+        """A bound on the offset's error [s]: the estimate's distance to the far end of the
+        interval every exchange in the window allows (at most the least round trip); None
+        before the first exchange."""
+        current = self._current()
+        return None if current is None else current[1]
 
     def to_local(self, peer_s: float) -> float:
         """Time `peer_s` of the peer's clock on ours; LookupError before the first exchange."""
-        if self._best is None:
+        current = self._current()
+        if current is None:
             raise LookupError("no clock offset measured yet: no exchange with the peer")
-        return peer_s - self._best.offset_s
+        return peer_s - current[0]

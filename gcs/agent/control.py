@@ -2,7 +2,7 @@
 dataclass per `kind`, `encode_control` / `decode_control`; every problem is a WireError.
 
 Supervisor -> agents, on `<root>/supervisor`: `heartbeat` (periodic: the gates open so far, the
-abort order if any, and an echo of each vehicle's latest state sample for the agents' clock
+abort order if any, and an echo of each vehicle's newest state sample for the agents' clock
 offsets), `gate` (a gate opens now) and `abort`. Agent -> supervisor, on
 `<root>/agent/<id>/status`: `status` (phase, the gate it waits at, its outcome, its edges'
 figures). A gate or an abort sent once is repeated in every later heartbeat, so a lost message
@@ -45,8 +45,9 @@ class OpenGate:
 
 @dataclass(frozen=True, slots=True)
 class Heartbeat:
-    """Supervisor -> agents, periodic. `echoes`: each vehicle's latest state sample (peer id
-    the vehicle, its sent_s, held since); `abort_reason` and `abort_action` both or neither."""
+    """Supervisor -> agents, periodic. `echoes`: each vehicle's newest state sample since the
+    last heartbeat (peer id the vehicle, its sent_s, held since); `abort_reason` and
+    `abort_action` both or neither."""
 
     seq: int
     sent_s: float
@@ -81,8 +82,8 @@ class Abort:
 class EdgeFigures:
     """What one process received from one neighbour: samples accepted, lost (gaps in seq),
     duplicates or out of order (dropped), corrupt (WireError; the last reason), restarts (a
-    new epoch), and the neighbour's clock offset (its clock - ours) with its uncertainty
-    (half the least round trip), None before the first echo."""
+    new epoch), and the neighbour's clock offset (its clock - ours) with a bound on its error
+    (gcs/agent/clocks.py), None before the first echo."""
 
     neighbour_id: int
     received: int = 0

@@ -150,11 +150,13 @@ class SupervisorBus(BusSession):
 
     def heartbeat(self) -> Heartbeat:
         """Send one heartbeat: the open gates, the abort order, an echo of every vehicle's
-        latest state sample (the agents' clock offsets to the supervisor)."""
+        newest state sample since the last heartbeat (the agents' clock offsets to the
+        supervisor, which place the formation start: a millisecond's bias there is nothing, and
+        a heartbeat stays one echo per vehicle)."""
         now = self.clock()
         order = self.abort_order
         beat = Heartbeat(self._seq, now, self.gates, order and order.reason,
-                         order and order.action, self.table.echoes(now))
+                         order and order.action, self.table.echoes(now, SUPERVISOR_ID, 1))
         self._send(beat)
         return beat
 

@@ -5,6 +5,7 @@ corrupt with their reason; each sender's clock offset from the echoes it carries
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field
 
@@ -13,6 +14,11 @@ import numpy as np
 from gcs.agent.clocks import OffsetEstimator
 from gcs.agent.control import MAX_TEXT, EdgeFigures
 from gcs.agent.wire import Echo, StateSample, WireError, decode
+
+#: Messages of one sender kept to echo. A process echoes each message once per own publisher
+#: (gcs/agent/clocks.py says why every one); one that publishes less often than the sender
+#: echoes only the newest this many.
+ECHO_BACKLOG = 16
 
 
 @dataclass(frozen=True, slots=True)
@@ -46,8 +52,11 @@ class _Edge:
 
     sample: StateSample | None = None
     received_s: float = -np.inf  # when `sample` arrived
-    last_sent_s: float | None = None  # the sender's sent_s of its latest message (to echo)
-    last_received_s: float = -np.inf  # ... and when that message arrived
+    last_received_s: float = -np.inf  # when the sender's latest message arrived
+    # the sender's latest messages to echo, oldest first: (their number here, sent_s, arrival)
+    backlog: deque[tuple[int, float, float]] = field(
+        default_factory=lambda: deque(maxlen=ECHO_BACKLOG))
+    heard_count: int = 0  # messages heard from the sender (the backlog's numbering)
     received: int = 0
     lost: int = 0
     duplicates: int = 0
@@ -66,6 +75,7 @@ class SampleTable:
     def __init__(self, senders: Iterable[int], *, local_ids: Collection[int],
                  team_ids: Collection[int] | None = None, clock_sync: bool = True) -> None:
         self._edges = {vid: _Edge() for vid in senders}
+        self._echoed: dict[int, dict[int, int]] = {}  # publisher -> sender -> last echoed
         self.local_ids = frozenset(local_ids)
         self.team_ids = None if team_ids is None else frozenset(team_ids)
         self.clock_sync = clock_sync
@@ -104,6 +114,7 @@ class SampleTable:
         if last is not None and sample.epoch != last.epoch:
             edge.restarts += 1  # a new process: its seq starts again, its clock may differ
             edge.clock.reset()
+            edge.backlog.clear()
         elif last is not None and sample.seq <= last.seq:
             edge.duplicates += 1
             return None
@@ -119,15 +130,27 @@ class SampleTable:
         """A message from `vid` sent at `sent_s` (its clock) arrived at `received_s` (ours),
         carrying `echoes`: each that names one of `local_ids` is a clock exchange."""
         edge = self._edge(vid)
-        edge.last_sent_s, edge.last_received_s = sent_s, received_s
+        edge.last_received_s = received_s
+        edge.heard_count += 1
+        edge.backlog.append((edge.heard_count, sent_s, received_s))
         for e in echoes:
             if e.peer_id in self.local_ids:
                 edge.clock.add(e.sent_s, sent_s - e.held_s, sent_s, received_s)
 
-    def echoes(self, now_s: float) -> tuple[Echo, ...]:
-        """An echo of every sender's latest message, held until `now_s`."""
-        return tuple(Echo(vid, e.last_sent_s, max(0.0, now_s - e.last_received_s))
-                     for vid, e in self._edges.items() if e.last_sent_s is not None)
+    def echoes(self, now_s: float, publisher: int,
+               per_sender: int = ECHO_BACKLOG) -> tuple[Echo, ...]:
+        """The echoes for `publisher`'s (one of `local_ids`) message sent at `now_s`: every
+        message heard since its last echoes (the newest `per_sender` of each sender, at most
+        ECHO_BACKLOG), each held until `now_s`."""
+        echoed = self._echoed.setdefault(publisher, {})
+        out = []
+        for vid, e in self._edges.items():
+            last = echoed.get(vid, 0)
+            new = [Echo(vid, sent_s, max(0.0, now_s - received_s))
+                   for n, sent_s, received_s in e.backlog if n > last]
+            out += new[max(0, len(new) - per_sender):]
+            echoed[vid] = e.heard_count
+        return tuple(out)
 
     def clock(self, vid: int) -> OffsetEstimator:
         """`vid`'s clock filter (read it; the table feeds it)."""

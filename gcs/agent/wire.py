@@ -17,11 +17,13 @@ A sample says what one vehicle's state was when its vehicle took it, in the worl
 | acceleration_enu_mps2 | 3 f64         | world ENU [m/s^2]                                      |
 | attitude_wxyz         | 4 f64         | quaternion FLU -> ENU, w first                         |
 | omega_flu_radps       | 3 f64         | body rates, FLU [rad/s]                                |
-| echoes[n]             | u32, f64, f64 | peer id, that peer's sent_s last received, held_s      |
+| echoes[n]             | u32, f64, f64 | peer id, a sent_s of that peer received, held_s        |
 
 An echo hands a peer back its own send time with how long the sender held it: with the peer's
-receive time the four timestamps of an NTP exchange (gcs/agent/clocks.py). Peer id 0 is the
-supervisor (its heartbeats carry sent_s; gcs/agent/control.py).
+receive time the four timestamps of an NTP exchange (gcs/agent/clocks.py). A sample echoes
+each message heard since its vehicle's last sample, so a peer may appear more than once, or not
+at all (gcs/agent/table.py). Peer id 0 is the supervisor (its heartbeats carry sent_s;
+gcs/agent/control.py).
 """
 
 from __future__ import annotations

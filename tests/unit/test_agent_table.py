@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from gcs.agent.control import MAX_TEXT
-from gcs.agent.table import SampleTable
+from gcs.agent.table import ECHO_BACKLOG, SampleTable
 from gcs.agent.wire import SUPERVISOR_ID, Echo, StateSample, encode
 
 
@@ -96,7 +96,7 @@ def test_echoes_give_each_sender_its_offset_and_convert_its_times():
     # WHEN 1 sends at t = 10 (ours), 2 receives it, holds 20 ms and sends a sample echoing it
     there.receive(1, sample(1, 0, taken_s=9.99, sent_s=10.0), 10.0 + leg + offset)
     sent2 = 10.0 + leg + offset + 0.020
-    echoes = there.echoes(sent2)
+    echoes = there.echoes(sent2, 2)
     assert echoes == (Echo(1, 10.0, pytest.approx(0.020)),)
     # AND before the echo arrives here the sample has no known time
     here.receive(2, sample(2, 0, taken_s=sent2 - 0.005, sent_s=sent2), sent2 - offset + leg)
@@ -124,5 +124,36 @@ def test_echoes_of_other_ids_and_the_supervisor_are_kept_apart():
     assert sup.figures(3).offset_s is None
     # AND a heartbeat-like message records what to echo, held until now
     sup.heard(3, 4.0, 5.5)
-    assert sup.echoes(6.0) == (Echo(2, 8.0, pytest.approx(0.8)), Echo(3, 4.0, 0.5))
+    assert sup.echoes(6.0, SUPERVISOR_ID) == (Echo(2, 8.0, pytest.approx(0.8)),
+                                              Echo(3, 4.0, 0.5))
     assert sup.last_heard_s(3) == 5.5
+    # AND a heartbeat (one echo per vehicle) echoes the newest of those heard since
+    sup.heard(3, 6.0, 6.5)
+    sup.heard(3, 7.0, 7.5)
+    assert sup.echoes(8.0, SUPERVISOR_ID, 1) == (Echo(3, 7.0, 0.5),)
+    assert sup.last_heard_s(3) == 7.5
+
+
+def test_each_message_is_echoed_once_by_each_publisher():
+    # GIVEN an agent process publishing vehicles 1 and 3, hearing vehicle 2
+    table = SampleTable((2,), local_ids=(1, 3), team_ids=(1, 2, 3))
+    table.receive(2, sample(2, 0, sent_s=1.00), 1.02)
+    table.receive(2, sample(2, 1, sent_s=1.02), 1.05)
+    # WHEN vehicle 1 publishes THEN it echoes both messages heard since, each held till now
+    assert table.echoes(1.06, 1) == (Echo(2, 1.00, pytest.approx(0.04)),
+                                     Echo(2, 1.02, pytest.approx(0.01)))
+    # AND vehicle 3, publishing after it, echoes the same two (each publisher's sender needs
+    # its own exchanges), and neither echoes them again: a repeated echo would weigh the
+    # message that was followed by a slow one twice
+    assert [e.sent_s for e in table.echoes(1.07, 3)] == [1.00, 1.02]
+    assert table.echoes(1.08, 1) == () and table.echoes(1.08, 3) == ()
+    table.receive(2, sample(2, 2, sent_s=1.04), 1.09)
+    assert table.echoes(1.10, 1) == (Echo(2, 1.04, pytest.approx(0.01)),)
+    # AND a publisher that fell behind echoes the newest ECHO_BACKLOG only
+    for k in range(3, 3 + ECHO_BACKLOG + 5):
+        table.receive(2, sample(2, k, sent_s=1.0 + 0.02 * k), 1.03 + 0.02 * k)
+    echoed = table.echoes(2.0, 1)
+    assert len(echoed) == ECHO_BACKLOG and echoed[-1].sent_s == pytest.approx(1.0 + 0.02 * 23)
+    # AND a sender that restarted is echoed from its new process's messages on
+    table.receive(2, sample(2, 0, sent_s=5.0, epoch=9), 5.01)
+    assert [e.sent_s for e in table.echoes(5.02, 3)] == [5.0]
