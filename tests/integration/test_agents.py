@@ -184,26 +184,31 @@ def test_an_agent_killed_mid_formation_stops_the_team_on_fresh_data_only(tmp_pat
     rep1 = json.loads((out / "agent-1" / "report.json").read_text())
     assert rep1["extra"]["outcome"]["exit_code"] == 1
     # AND vehicle 3, its agent gone, left OFFBOARD by its own failsafe (PX4: COM_OF_LOSS_T,
-    # then COM_OBL_RC_ACT) within seconds
-    assert modes and modes[-1] != "OFFBOARD", modes
+    # then COM_OBL_RC_ACT) within seconds, and never flew OFFBOARD again; once landed and
+    # disarmed, PX4 puts it back in its intended mode, OFFBOARD, disarmed
+    flying_offboard = ("OFFBOARD", True)
+    left = next((i for i, state in enumerate(modes) if state != flying_offboard), None)
+    assert left is not None, modes
+    assert flying_offboard not in modes[left:], modes
 
 
-def vehicle_modes(team: Path, vid: int, seconds: float) -> list[str]:
-    """The flight modes vehicle `vid` reports in HEARTBEAT for `seconds`, as received on its
-    ground-station port (the team file's link.local_port), each change once."""
+def vehicle_modes(team: Path, vid: int, seconds: float) -> list[tuple[str, bool]]:
+    """The (flight mode, armed) pairs vehicle `vid` reports in HEARTBEAT for `seconds`, as
+    received on its ground-station port (the team file's link.local_port), each change once."""
     data = yaml.safe_load(team.read_text())
     port = next(v["link"]["local_port"] for v in data["vehicles"] if v["id"] == vid)
     conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255)
-    modes: list[str] = []
+    modes: list[tuple[str, bool]] = []
     end = time.monotonic() + seconds
     try:
         while time.monotonic() < end:
             msg = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5)
             if msg is None or msg.get_srcSystem() != vid:
                 continue
-            mode = mavutil.mode_string_v10(msg)
-            if not modes or modes[-1] != mode:
-                modes.append(mode)
+            state = (mavutil.mode_string_v10(msg),
+                     bool(msg.base_mode & mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED))
+            if not modes or modes[-1] != state:
+                modes.append(state)
     finally:
         conn.close()
     return modes

@@ -195,9 +195,13 @@ def test_stale_namespaces_of_a_killed_run_are_swept_and_live_ones_kept(testbed):
     # GIVEN a run killed (SIGKILL) while its testbed, with a process in a host, was up
     child = subprocess.Popen([PY, "-c", textwrap.dedent("""
         import sys, time
-        from tests.netns import Testbed
+        from tests.netns import Testbed, _pids_in
         bed = Testbed(2).__enter__()
         bed.host(1).popen(["sleep", "300"])
+        # `ip netns exec` joins the namespace after the fork: wait until it has
+        deadline = time.monotonic() + 30.0
+        while not _pids_in(bed.host(1).netns) and time.monotonic() < deadline:
+            time.sleep(0.01)
         print(" ".join(bed.namespaces), flush=True)
         time.sleep(300)
         """)], cwd=ROOT, stdout=subprocess.PIPE, text=True)
