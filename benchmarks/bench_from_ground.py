@@ -249,8 +249,20 @@ def _cell(x: float, fmt: str) -> str:
     return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, fmt)
 
 
-def real_intro(rows: list[dict]) -> str:
-    labels = sorted({r["team"] for r in rows} - {"px4-sih"})
+def kept_real_lines(doc: Path = DOC) -> list[str]:
+    """The real vehicles' rows of the section as the doc has them (flights of real SITL are
+    not rerun by this script: without --records their rows stay as measured)."""
+    text = doc.read_text() if doc.exists() else ""
+    if REAL_HEADING not in text:
+        return []
+    body = text.split(REAL_HEADING, 1)[1].split("\n## ", 1)[0]
+    return [line for line in body.splitlines()
+            if line.startswith("| ") and not line.startswith(("| team ", "| px4-sih "))]
+
+
+def real_intro(rows: list[dict], kept: list[str] = ()) -> str:
+    labels = sorted({r["team"] for r in rows} - {"px4-sih"}
+                    | {line.split("|")[1].strip() for line in kept})
     records = " ".join(f'--records "{label}"=DIR' for label in labels)
     return (
         f"`python -m benchmarks.bench_from_ground --team px4-sih {records}` on "
@@ -268,12 +280,17 @@ def real_intro(rows: list[dict]) -> str:
         "before the formation (hold: PX4 holding the start position) and in the formation from "
         "10 s on: the heading's drift in 1 s beyond its yaw rate's integral (D(1 s) of "
         "`benchmarks.calibration.fit_heading_estimate`: the estimate's own motion) and the "
-        "roll/pitch rate RMS.")
+        "roll/pitch rate RMS." + (
+            " The real vehicles' rows were measured by an earlier run with --records and are "
+            "kept as they were (`--team px4-sih` alone flies the personality only)."
+            if kept else ""))
 
 
-def section(rows: list[dict], duration_s: float, heading: str = HEADING) -> str:
+def section(rows: list[dict], duration_s: float, heading: str = HEADING,
+            kept: list[str] = ()) -> str:
     if heading == REAL_HEADING:
-        lines = [heading, "", real_intro(rows), ""] + table(rows, phases=True)
+        head, rule, *body = table(rows, phases=True)
+        lines = [heading, "", real_intro(rows, kept), "", head, rule, *kept, *body]
         return "\n".join(lines) + "\n"
     where = f"on {platform.machine()}, Python {platform.python_version()}"
     if heading == SIH_HEADING:
@@ -366,7 +383,8 @@ def main() -> None:
                           (REAL_HEADING, [r for r in rows if r["team"] in real])):
         if not part:
             continue
-        text = section(part, args.duration_s, heading)
+        kept = kept_real_lines() if heading == REAL_HEADING and not args.records else []
+        text = section(part, args.duration_s, heading, kept)
         print(text)
         if not args.no_write:
             write_section(DOC, heading, text)

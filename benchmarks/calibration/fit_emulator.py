@@ -270,6 +270,7 @@ def fit_noise(autopilot: str, n: int, iterations: int = 3, verbose: bool = True)
             ob.velocity_error_std[:] = vel
             ob.position_error_phi[:] = np.exp(-ob.control_div * emu.plant.dt_s / tau_p)
             ob.attitude_error_std[:] = att
+            ob.heading_std_rad[:] = att[2]  # the size a heading schedule scales
             if scale_imu:
                 ob.disturbance_std[:] = dist
                 ob.gyro_bias_std[:] = bias

@@ -88,7 +88,8 @@ def _integrated(sample_std: float, sample_s: float, tau_s: float) -> float:
 
 #: PX4 v1.16 SIH (the px4 personality's PX4_SENSORS): gyro 0.14 / 0.07 / 0.03 rad/s per 4 ms
 #: sample through IMU_GYRO_CUTOFF 40 Hz; tilt integrated over 6 s on roll and pitch; EKF2's slow
-#: pitch (0.016 rad) and heading (0.058 rad, second order) errors over 4 s; velocity 0.126 /
+#: pitch (0.016 rad) and heading (0.058 rad, second order; stationary: the personality sizes its
+#: heading error by the time since takeoff, docs/sweep.md) errors over 4 s; velocity 0.126 /
 #: 0.126 / 0.10 m/s over 1.5 s plus a 0.10 m/s drift over 10 s; accelerometer 0.5 / 1.7 / 1.4
 #: m/s^2 per 4 ms sample, HIGHRES_IMU the mean of two.
 PX4_NOISE = NoiseModel(

@@ -464,3 +464,37 @@ def test_velocity_error_is_a_fast_error_plus_a_slow_drift_kept_out_of_the_positi
     assert np.corrcoef(slow[:-lag], slow[lag:])[0, 1] == pytest.approx(math.exp(-1.0), abs=0.1)
     assert vel_err[0, 1] == pytest.approx(vel_parts[0, 0, 1] + vel_parts[0, 1, 1])
     assert not pos_err.any() and vel_err[0, 0] == 0.0 and vel_err[0, 2] == 0.0
+
+
+def test_px4_heading_error_size_follows_the_time_since_each_takeoff():
+    # GIVEN a px4 and an ardupilot vehicle on the ground (the px4 personality schedules its
+    # heading error's size; ardupilot's is stationary)
+    specs = sitl_airframe("px4", 1, 0.0) + [
+        replace(sitl_airframe("ardupilot", 1, 0.0)[0], vehicle_id=2, sysid=2)]
+    plant = FleetPlant(specs, dt_s=1e-3)
+    ob = plant.onboard
+    s = PERSONALITIES["px4"].sensors
+    base, floor = s.attitude_error_std_rad[2], s.heading_floor_rad
+    ardupilot = PERSONALITIES["ardupilot"].sensors.attitude_error_std_rad[2]
+    ground, air = np.array([True, True]), np.array([False, False])
+    # WHEN the time since takeoff passes through its phases
+    ob.schedule_heading(5.0, ground)
+    on_ground = ob.attitude_error_std[:, 2].copy()
+    ob.schedule_heading(10.0, air)  # takeoff at 10 s
+    ob.schedule_heading(10.0 + 0.5 * s.heading_takeoff_s, air)
+    early = ob.attitude_error_std[:, 2].copy()
+    ob.schedule_heading(10.0 + s.heading_takeoff_s + s.heading_settle_s, air)
+    settling = ob.attitude_error_std[:, 2].copy()
+    ob.schedule_heading(200.0, ground)  # landed
+    ob.schedule_heading(300.0, air)  # the second takeoff
+    ob.schedule_heading(301.0, air)
+    again = ob.attitude_error_std[:, 2].copy()
+    # THEN px4's 1 sigma is the floor on the ground, factor x base in the first phase, one time
+    # constant into the settling floor + (base - floor) / e, and a takeoff starts it again;
+    # ardupilot's never moves
+    assert on_ground[0] == pytest.approx(floor)
+    assert early[0] == pytest.approx(s.heading_takeoff_factor * base)
+    assert settling[0] == pytest.approx(floor + (base - floor) * math.exp(-1.0))
+    assert again[0] == pytest.approx(s.heading_takeoff_factor * base)
+    for size in (on_ground, early, settling, again):
+        assert size[1] == ardupilot

@@ -88,6 +88,7 @@ class Recording:
     phase: np.ndarray  # (k,) str labels
     law: dict[str, float]
     mode_switch_s: float  # DO_SET_MODE into the setpoint mode
+    takeoff_s: float | None  # the autopilot's "Takeoff detected" (None: not recorded)
     hover_window_s: tuple[float, float]
     doublets: tuple[Doublet, ...]
     thrust_edges_s: tuple[tuple[float, ...], ...]  # per thrust doublet, its four edges
@@ -123,6 +124,8 @@ def load_recording(autopilot: str, directory: Path | None = None) -> Recording:
     ]
     if not switch:
         raise ValueError(f"{root}/hover_noise.json: no DO_SET_MODE into the setpoint mode")
+    detected = [c["t"] + st["dt_ms"] * 1e-3 for c in hover["commands"]
+                for st in c.get("statustexts", []) if st["text"].startswith("Takeoff detected")]
     doublets = tuple(
         Doublet("rpy".index(d["axis"]), int(d["rep"]), float(d["amp_radps"]), tuple(d["t_edges_s"]))
         for d in summaries["rate_steps"]["doublets"]
@@ -139,6 +142,7 @@ def load_recording(autopilot: str, directory: Path | None = None) -> Recording:
         phase=np.array([r["phase"] for r in rows]),
         law={k: float(v) for k, v in hover["law"].items() if isinstance(v, int | float)},
         mode_switch_s=float(switch[0]),
+        takeoff_s=float(detected[0]) if detected else None,
         hover_window_s=(float(hover["window_s"][0]), float(hover["window_s"][1])),
         doublets=doublets,
         thrust_edges_s=tuple(tuple(float(e) for e in s["edges_s"]) for s in steps),
@@ -260,9 +264,11 @@ def replay(
     law_h_ref = rec.law["h_ref"]
     specs = specs if specs is not None else sitl_airframe(rec.autopilot, n, law_h_ref)
     emu = Emulator(specs, seed=seed, tick_s=TICK_S)
+    offset = rec.start_s - LEAD_S  # recording time = emulator time + offset
+    if rec.takeoff_s is not None:  # in the air since the recorded takeoff (heading schedule)
+        emu.plant.onboard.airborne_since_s[:] = rec.takeoff_s - offset
     if emulator_hook is not None:
         emulator_hook(emu)
-    offset = rec.start_s - LEAD_S  # recording time = emulator time + offset
     gcs = mavlink.MAVLink(None, srcSystem=GCS_SYSID, srcComponent=GCS_COMPID)
     collectors = []
     for node in emu.nodes:

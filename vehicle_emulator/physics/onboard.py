@@ -12,6 +12,7 @@ Pure: no clock, no I/O.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -45,6 +46,8 @@ from vehicle_emulator.physics.inner import (
 __all__ = ["REF_DELAY_MAX", "Onboard", "named_params", "named_states", "onboard_step"]
 
 REF_DELAY_MAX = 32  # control periods of dead time the reference model can hold
+# the heading error's scheduled size is updated at most this often (it changes over seconds)
+HEADING_UPDATE_S = 0.05
 
 
 class Onboard:
@@ -126,6 +129,16 @@ class Onboard:
         self.attitude_error_phi = np.exp(
             -1.0 / (rates[:, None] * np.array([se.attitude_error_tau_s for se in sen], dtype=f))
         )
+        # the heading error's size after each takeoff (Sensors.heading_*): schedule_heading sets
+        # attitude_error_std[:, 2] from heading_std_rad, the size it scales
+        self.heading_std_rad = self.attitude_error_std[:, 2].copy()
+        self.heading_schedule = np.array(
+            [(se.heading_takeoff_factor, se.heading_takeoff_s, se.heading_settle_s,
+              se.heading_floor_rad) for se in sen], dtype=f).reshape(n, 4)
+        self.heading_scheduled = self.sensor_model & (self.heading_schedule[:, 1] > 0.0)
+        self.airborne_since_s = np.full(n, np.nan)  # NaN: on the ground
+        self._heading_any = bool(self.heading_scheduled.any())
+        self._heading_next_s = -math.inf
         order = np.array([se.attitude_error_order for se in sen], dtype=np.int64).reshape(n, 3)
         if not np.isin(order, (1, 2)).all():
             raise ValueError(f"attitude_error_order must be 1 or 2 per axis, got {order.tolist()}")
@@ -209,6 +222,25 @@ class Onboard:
         self.attitude_sample_step = np.zeros(n, dtype=np.int64)
         self.position_sample_step = np.zeros(n, dtype=np.int64)
         self._position_prev_step = np.zeros(n, dtype=np.int64)
+
+    def schedule_heading(self, now_s: float, on_ground: np.ndarray) -> None:
+        """The heading error's size now (Sensors.heading_*), for the vehicles that schedule it:
+        the time since each left the ground picks it (kept here, restarted by each takeoff)."""
+        if not self._heading_any or now_s < self._heading_next_s:
+            return
+        self._heading_next_s = now_s + HEADING_UPDATE_S
+        since = self.airborne_since_s
+        since[on_ground] = np.nan
+        since[~on_ground & np.isnan(since)] = now_s
+        airborne_s = now_s - since
+        factor, takeoff_s, settle_s, floor = self.heading_schedule.T
+        with np.errstate(invalid="ignore"):
+            settling = floor + (self.heading_std_rad - floor) * np.exp(
+                -np.maximum(airborne_s - takeoff_s, 0.0) / settle_s)
+            std = np.where(airborne_s < takeoff_s, factor * self.heading_std_rad, settling)
+        std = np.where(np.isnan(airborne_s), floor, std)
+        self.attitude_error_std[:, 2] = np.where(self.heading_scheduled, std,
+                                                 self.attitude_error_std[:, 2])
 
     def set_noise(self, i: int, on: bool) -> bool:
         """EMU_NOISE for vehicle i: the sensor model's noise (calibrated personalities); returns

@@ -322,6 +322,7 @@ class FleetPlant:
         """Advance every vehicle by ``steps`` physics steps (setpoints held constant)."""
         if steps <= 0:
             return
+        self.onboard.schedule_heading(self.time_s, self.on_ground)
         _step_kernel(
             int(steps), self.steps_done, self.dt_s,
             Commands(self.mode, self.thrust_cmd_norm, self.rate_cmd_flu_radps, self.attitude_cmd,
