@@ -44,8 +44,9 @@ TRANSPORTS = {"TCP": "tcp", "UDP, mixed reliability": "udp-mixed"}
 def exchange(endpoint, impaired: bool, seconds: float) -> dict:
     """Vehicles 1 and 2's stand-in agents in hosts 1 and 2, each the other's neighbour; returns
     each one's figures of the other (agent_peer's JSON)."""
-    with Testbed(3, [BETWEEN_AGENTS if impaired else None] * 2 + [None],
-                 mode=Mode.NAMESPACES) as bed:
+    with tempfile.TemporaryDirectory(prefix="bench-bus-") as logs, Testbed(
+            3, [BETWEEN_AGENTS if impaired else None] * 2 + [None], mode=Mode.NAMESPACES,
+            log_dir=logs) as bed:
         agents = {v: [endpoint(bed.address(v), bed.host(v).free_port("udp"))] for v in (1, 2)}
         network = {"key_prefix": "bench", "agents": agents,
                    "supervisor": [endpoint(bed.address(3), bed.host(3).free_port("udp"))]}
@@ -91,7 +92,8 @@ def flights(pairs: int, tmp: Path) -> str:
                 impairment = ([BETWEEN_AGENTS] * len(HOSTS) + [None] if name == "impaired"
                               else None)
                 try:
-                    with Testbed(len(HOSTS) + 1, impairment, mode=Mode.NAMESPACES) as bed:
+                    with Testbed(len(HOSTS) + 1, impairment, mode=Mode.NAMESPACES,
+                                 log_dir=tmp) as bed:
                         report = fly_across(bed, tmp, f"{transport}-{name}-{k}", transport)
                 except FlightFailed as exc:  # a result too: what the network did to it
                     failed.append(f"{label}, {name} flight {k + 1}: {exc.reason}")

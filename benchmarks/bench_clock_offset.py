@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import select
+import shutil
 import socket
 import struct
 import sys
@@ -113,7 +114,7 @@ def main() -> int:
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench-clock-"))
     try:
-        with Testbed(2, BETWEEN_AGENTS, mode=Mode.NAMESPACES) as bed:
+        with Testbed(2, BETWEEN_AGENTS, mode=Mode.NAMESPACES, log_dir=tmp) as bed:
             a, b = bed.address(1), bed.address(2)
             argv = [sys.executable, "-m", "benchmarks.bench_clock_offset", "--pinger"]
             procs = [bed.host(1).popen([*argv, a, b, str(args.seconds), str(tmp / "1.json")],
@@ -123,10 +124,12 @@ def main() -> int:
             for p in procs:
                 p.wait(args.seconds + 60)
             described = bed.describe()
+        here, there = (json.loads((tmp / f"{k}.json").read_text()) for k in (1, 2))
     except TestbedError as exc:
         print(f"bench_clock_offset: needs network namespaces (root): {exc}", file=sys.stderr)
         return 1
-    here, there = (json.loads((tmp / f"{k}.json").read_text()) for k in (1, 2))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
     lines = [
         HEADING, "",
         f"`python -m benchmarks.bench_clock_offset` ({time.strftime('%Y-%m-%d')}, "

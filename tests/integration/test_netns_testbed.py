@@ -170,11 +170,11 @@ def _alive(pid: int) -> bool:
 
 
 def test_teardown_removes_namespaces_and_processes_even_on_keyboard_interrupt(
-        testbed, record_property):
+        testbed, record_property, tmp_path):
     # GIVEN a three-host impaired testbed with processes (and a stray one) in each host
     probe = testbed(1)  # through the fixture: states a fallback the same way
     record_property("testbed_mode", str(probe.mode))
-    with pytest.raises(KeyboardInterrupt), Testbed(3, BETWEEN_AGENTS) as bed:
+    with pytest.raises(KeyboardInterrupt), Testbed(3, BETWEEN_AGENTS, log_dir=tmp_path) as bed:
         _sleepers(bed)
         names, pids = bed.namespaces, _pids_of(bed)
         assert pids
