@@ -431,9 +431,9 @@ class Tick:
             c: TeamCommand | None, now_s: float | None = None) -> None:
         """One record sample; `c` None (position mode: no law) records its figures as NaN."""
         p = sample.position_m
-        if now_s is not None:  # to the tick's instant; a stale sample stays where it was
+        if now_s is not None:  # to the tick's instant; a lost link's sample stays where it was
             h = horizons_s(now_s, sample.position_taken_s)
-            h[h > self.team.fly.stale_after_s] = 0.0
+            h[h > self.team.fly.link_lost_after_s] = 0.0
             carry = sample.velocity_mps * h[:, None]
             p = p + np.where(np.isfinite(carry), carry, 0.0)
         self.formation_error_m = formation_error_m(p, self.offsets_m)  # no (n, n, 3) array
