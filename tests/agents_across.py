@@ -26,6 +26,8 @@ PY = sys.executable
 #: host -> its agent process's vehicles: on the ring 1-2-3-4-1 every edge crosses the network
 HOSTS = {1: (1, 3), 2: (2, 4)}
 SUPERVISOR_HOST = 3
+#: the agents' tick rate (fly_across says why not 100 Hz)
+AGENT_TICK_RATE_HZ = 50
 #: Zenoh endpoints of a host's address and port: over TCP, or over UDP with mixed reliability
 #: (states as datagrams, control on QUIC streams; docs/agents.md, "The mesh")
 ENDPOINTS = {"tcp": lambda host, port: f"tcp/{host}:{port}",
@@ -70,7 +72,7 @@ def fly_across(bed: Testbed, tmp: Path, name: str, transport: str = "udp-mixed")
     # takes both cores from them for up to the kernel's real-time limit (0.95 s of every
     # second), which their stream rates and TIMESYNC answers then show.
     data["fly"]["rates"].update(k_eps=1.0, k_eps_yaw=2.0, alpha_p=1.5, c_p=2.25,
-                                tick_rate_hz=50)
+                                tick_rate_hz=AGENT_TICK_RATE_HZ)
     data["fly"]["scheduling"] = "normal"
     # each host's vehicles in one `vehicle-emu --fleet` (cheaper than a process each)
     data["sim"] = {**data.get("sim", {}), "plant_rate_hz": 500, "controller_rate_hz": 500}

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.agents_across import HOSTS, error_after, fly_across
+from tests.agents_across import AGENT_TICK_RATE_HZ, HOSTS, error_after, fly_across
 from tests.netns import BETWEEN_AGENTS, Impairer
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(600)]
@@ -43,11 +43,16 @@ def test_agents_converge_through_a_delayed_lossy_network_and_measure_it(testbed,
     # the ratio is that benchmark's
     assert np.nanmean(e_imp) <= max(1.5 * np.nanmean(e_plain), 0.004), figures
     assert np.nanmax(e_imp) <= max(1.5 * np.nanmax(e_plain), 0.008), figures
-    # AND each edge's measured ages and losses show the impairment (its tail the link's 20 ms,
-    # its jitter and the lost samples' gaps later; its median no more than that later, though
-    # on these two shared cores the plain flight's own median moves by as much; one sample in
-    # ten lost, more where two own vehicles' samples leave together) and the plain network
-    # none of it; nothing older than fly.stale_after_s was flown on
+    # AND each edge's measured ages and losses show the impairment and the plain network none
+    # of it; nothing older than fly.stale_after_s was flown on. The tail is the link's delay
+    # later, its jitter and the lost samples' gaps on top. The median is the delay later, give
+    # or take where the two flights' ticks fall: a sample waits up to a tick in its publisher
+    # and up to a tick in its user, and those phases are each flight's own (the plain flight's
+    # medians span 8-32 ms across its edges at 50 Hz). Loss is one sample in ten, more where
+    # two of a host's samples leave together and the jitter swaps them (Zenoh drops a
+    # best-effort frame older than the last it took).
+    tick_ms = 1e3 / AGENT_TICK_RATE_HZ
+    delay_ms, jitter_ms = 1e3 * BETWEEN_AGENTS.delay_s, 1e3 * BETWEEN_AGENTS.jitter_s
     edges, plain_edges = impaired["extra"]["edges"], plain["extra"]["edges"]
     assert sorted(edges) == sorted(plain_edges) == ["1+3<-2", "1+3<-4", "2+4<-1", "2+4<-3"]
     for edge, e in edges.items():
@@ -57,8 +62,9 @@ def test_agents_converge_through_a_delayed_lossy_network_and_measure_it(testbed,
               f"{p['loss_fraction']:.3f} / {e['loss_fraction']:.3f}; stale ticks "
               f"{p['stale_ticks']} / {e['stale_ticks']}")
         if applied:  # else loopback: the testbed's warning says so
-            assert e["age_p99_ms"] >= p["age_p99_ms"] + 20.0, (edge, e, p)
-            assert e["age_p50_ms"] - p["age_p50_ms"] <= 45.0, (edge, e, p)
+            assert e["age_p99_ms"] >= p["age_p99_ms"] + delay_ms, (edge, e, p)
+            assert (e["age_p50_ms"] - p["age_p50_ms"]
+                    <= delay_ms + jitter_ms + 2 * tick_ms), (edge, e, p)
             assert 0.05 <= e["loss_fraction"] <= 0.45, (edge, e)
         assert e["age_used_max_ms"] <= 100.0, (edge, e)
         assert p["age_p50_ms"] < 45.0 and p["age_used_max_ms"] <= 100.0, (edge, p)

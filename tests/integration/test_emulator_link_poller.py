@@ -6,7 +6,6 @@ from __future__ import annotations
 import asyncio
 import math
 import socket
-import threading
 import time
 
 import numpy as np
@@ -230,32 +229,34 @@ def test_a_wake_up_delivers_what_it_read_within_its_budget_while_the_input_keeps
         poller = LinkPoller()
         poller.attach(link)
         poller.read_budget_s = budget_s
-        poller.between = lambda: time.sleep(0.002)  # a fleet tick that takes 2 ms
         where = ("127.0.0.1", link.local_address[1])
         timesync = _frame(mavlink.MAVLink_timesync_message(0, 12345))
         setpoints = [_frame(mavlink.MAVLink_set_attitude_target_message(
             0, 1, 1, 128, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, 0.5)) for _ in range(300)]
+        gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        pending = iter(setpoints)
 
-        def ground_station() -> None:  # the request, then a setpoint every millisecond
-            gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            try:
-                gcs.sendto(timesync, where)
-                for data in setpoints:
+        def tick() -> None:
+            # a fleet tick that takes 2 ms, during which the ground station sends two more
+            # setpoints (one a millisecond): sent here, in step with the rounds, the input
+            # outpaces the reads however busy the machine is (a loopback datagram is in the
+            # socket when sendto returns)
+            for data in (next(pending, None), next(pending, None)):
+                if data is not None:
                     gcs.sendto(data, where)
-                    time.sleep(0.001)
-            finally:
-                gcs.close()
+            time.sleep(0.002)
 
-        sender = threading.Thread(target=ground_station)
+        poller.between = tick
         try:
-            sender.start()
-            # (waiting here, not in the loop: its own wake-ups would read first)
+            # GIVEN the request, then the first two setpoints, waiting
+            gcs.sendto(timesync, where)
+            tick()
             assert poller._epoll.poll(5.0), "nothing arrived"
             # WHEN the poller wakes up once while the stream goes on
             poller._ready()
             return poller.datagrams, poller.budget_stops, list(got)
         finally:
-            sender.join()
+            gcs.close()
             poller.close()
             link.close()
 
