@@ -66,7 +66,9 @@ class NeighbourRows:
     # --- publishing ------------------------------------------------------------------------------
 
     def publish(self, sample: TeamSample) -> None:
-        """Each own vehicle's latest state on the bus (skipped while it is not finite)."""
+        """Each own vehicle's latest state on the bus, its velocity and acceleration as the law
+        reads them (the tick passes them through its consistency filters); skipped while it is
+        not finite."""
         if not sample.finite.any():
             return
         quats = quat_wxyz_from_rotation(sample.rotation)

@@ -124,6 +124,11 @@ def describe(team: TeamConfig) -> str:
             "reported velocity above (fly.velocity_from_position_s)"
             if fly.velocity_from_position_s > 0 else
             "the reported velocity as it is (fly.velocity_from_position_s 0)"),
+        "     the law's acceleration: " + (
+            f"that velocity's rate below 1/{fly.acceleration_from_velocity_s:g} s, the "
+            "accelerometer's above (fly.acceleration_from_velocity_s)"
+            if fly.acceleration_from_velocity_s > 0 else
+            "the accelerometer's alone (fly.acceleration_from_velocity_s 0)"),
         f"     scheduling {fly.scheduling} (fly.scheduling: the operating system's priority for "
         "the tick)",
         _go_to_start_line(team),

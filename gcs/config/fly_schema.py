@@ -182,6 +182,10 @@ class FlyConfig:
     # the law's velocity takes the reported position's rate below 1 / this [s]; 0: the reported
     # velocity as it is (gcs/fly/consistent.py)
     velocity_from_position_s: float = key(0.2, ge=0.0, le=60.0)
+    # the law's acceleration takes that velocity's rate below 1 / this [s], the accelerometer's
+    # (turned by the reported attitude) above; 0: the accelerometer's alone
+    # (gcs/fly/consistent.py)
+    acceleration_from_velocity_s: float = key(0.5, ge=0.0, le=60.0)
     # the operating system's priority for the ground station (gcs/fly/sched.py)
     scheduling: str = key("auto", choices=FLY_SCHEDULING)
     # any valid message from the vehicle keeps its link ALIVE; none for this long -> LOST (a

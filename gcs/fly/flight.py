@@ -40,7 +40,7 @@ from flightkit.latecompile import watch_late_compiles
 from gcs.config import ControlMode, FlyAction, TeamConfig
 from gcs.control.predict import PredictionAudit
 from gcs.fly.commander import Commander
-from gcs.fly.consistent import VelocityConsistency
+from gcs.fly.consistent import AccelerationConsistency, VelocityConsistency
 from gcs.fly.origins import (
     TeamTies,
     origin_from_gps_global_origin,
@@ -127,7 +127,9 @@ class Flight:
             # delay compensation (gcs/control/predict.py) and its measured error
             PredictionAudit(self.n) if team.fly.predict and not position_mode else None,
             VelocityConsistency(self.n, 0.0 if position_mode
-                                else team.fly.velocity_from_position_s))
+                                else team.fly.velocity_from_position_s),
+            AccelerationConsistency(self.n, 0.0 if position_mode
+                                    else team.fly.acceleration_from_velocity_s))
         self.commander = Commander(self.machine, setup.requested_rates_hz,
                                    setup.plan.mode_timeout_s, self._proxy_by_id)
         self.setpoints = Setpoints(team, setup.mode, self.machine, self.ties, self.proxies,

@@ -16,7 +16,7 @@ from gcs.control.predict import PredictionAudit
 from gcs.flightlog import estimates_record
 from gcs.flightlog_builder import FlightLogBuilder
 from gcs.flightlog_csv import save_timeseries
-from gcs.fly.consistent import VelocityConsistency
+from gcs.fly.consistent import AccelerationConsistency, VelocityConsistency
 from gcs.fly.measure import HoverEstimate
 from gcs.fly.sched import Scheduling
 from gcs.fly.setup import FlightSetup, FlyOptions, FlyResult
@@ -90,6 +90,8 @@ class Figures:
     # the law's velocity filter (gcs/fly/consistent.py): the tick feeds and reads it, the report
     # states what it did
     consistency: VelocityConsistency
+    # the law's acceleration filter (the same module), fed and read alike
+    accel_consistency: AccelerationConsistency
     hover_estimates: dict[int, HoverEstimate] = field(default_factory=dict)
     start_error_m: dict[int, float] = field(default_factory=dict)  # |p(0) - start| at t = 0
 
@@ -153,7 +155,8 @@ class Records:
                     "clock": clock_report(self.proxies[i].clock.estimate()),
                     "prediction": prediction_report(
                         fig.audit.figures(i) if fig.audit is not None else None),
-                    "velocity_from_position": fig.consistency.report(i)}
+                    "velocity_from_position": fig.consistency.report(i),
+                    "acceleration_from_velocity": fig.accel_consistency.report(i)}
                    for i, s in enumerate(stats)],
         )
         tick = fig.ticks.report()

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import copy
+import dataclasses
 import logging
 import math
 import time
@@ -228,6 +229,7 @@ class Tick:
         self.setpoints = setpoints
         self.figures = figures
         self.consistency = figures.consistency
+        self.accel_consistency = figures.accel_consistency
         self.hover = HoverStart(setup, machine, law, hot, proxies, figures.hover_estimates,
                                 None if law_rows is None else law_rows.own_rows)
         self._from_hover = setup.law == "adaptive" and any(v.estimates.from_hover
@@ -259,10 +261,15 @@ class Tick:
         """Tick k: its deadline and its start `now_s` on the event loop's clock."""
         sample = team_sample(self.proxies, now_s, self.last_sample, self._tie_arrays, self.hot)
         self.last_sample = sample
-        if self.law_rows is not None:
-            self.law_rows.publish(sample)
         self.consistency.update(sample.position_m, sample.velocity_mps, sample.position_taken_s,
                                 sample.finite)
+        law_velocity = self.consistency.velocity(sample.velocity_mps)
+        self.accel_consistency.update(law_velocity, sample.acceleration_mps2,
+                                      sample.position_taken_s, sample.finite)
+        if self.law_rows is not None:  # the own vehicles' states as this law reads them
+            self.law_rows.publish(dataclasses.replace(
+                sample, velocity_mps=law_velocity,
+                acceleration_mps2=self.accel_consistency.corrected(sample.acceleration_mps2)))
         m = self.machine
         rows = self._status_slices.rows(k)
         if rows is None or rows:
@@ -400,6 +407,7 @@ class Tick:
             if rows is not None:
                 rows.record_ages(now_s)
             self.consistency.update_figures()
+            self.accel_consistency.update_figures()
             if log:
                 self.log(t, sample, ref[0], command, now_s)
         return command
@@ -411,6 +419,9 @@ class Tick:
         held = sample.measurement()
         if self.consistency.on:
             held = held._replace(velocity_mps=self.consistency.velocity(held.velocity_mps))
+        if self.accel_consistency.on:
+            held = held._replace(
+                acceleration_mps2=self.accel_consistency.corrected(held.acceleration_mps2))
         if self.figures.audit is None:
             return held if self.law_rows is None else self.law_rows.measurement(
                 held, None, own_taken_s=sample.position_taken_s)

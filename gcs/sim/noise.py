@@ -149,13 +149,21 @@ class SimNoise(NamedTuple):
     consistency_s: float
     consistency: np.ndarray  # (n, 3) c
     last: np.ndarray  # (n, 6): the previous tick's reported p and v (NaN before the first)
+    # and its acceleration's (fly.acceleration_from_velocity_s): a_law = a + c_a, c_a the
+    # low-passed v_law' - a; 0: the acceleration as the accelerometer gives it
+    accel_consistency_s: float
+    accel_consistency: np.ndarray  # (n, 3) c_a
+    accel_last: np.ndarray  # (n, 6): the previous tick's v_law and a (NaN before the first)
 
 
 def make_noise(model: NoiseModel | None, ticks: int, n: int, tick_s: float,
-               draws: np.ndarray | None = None, consistency_s: float = 0.0) -> SimNoise:
+               draws: np.ndarray | None = None, consistency_s: float = 0.0,
+               accel_consistency_s: float = 0.0) -> SimNoise:
     """The noise of n vehicles over `ticks` ticks (`draws` (ticks, n, DRAWS): the run's normals;
-    None with model None: inactive); `consistency_s`: fly.velocity_from_position_s."""
-    extra = (consistency_s, np.zeros((n, 3)), np.full((n, 6), np.nan))
+    None with model None: inactive); `consistency_s`: fly.velocity_from_position_s,
+    `accel_consistency_s`: fly.acceleration_from_velocity_s."""
+    extra = (consistency_s, np.zeros((n, 3)), np.full((n, 6), np.nan),
+             accel_consistency_s, np.zeros((n, 3)), np.full((n, 6), np.nan))
     if model is None:
         zero = np.zeros(3)
         return SimNoise(False, zero, zero, 0.0, zero, zero, np.zeros(3, dtype=np.bool_), zero,
@@ -183,33 +191,34 @@ def noise_draws(seed: int, ticks: int, n: int, model: NoiseModel | None = None) 
     return np.random.default_rng([seed, 1]).standard_normal((ticks, n, count))
 
 
-#: gcs fly's bounds on the consistency correction (gcs/fly/consistent.py): |c| per axis, and
-#: the largest p' - v an update takes (an estimator reset is skipped)
+#: gcs fly's bounds on the consistency corrections (gcs/fly/consistent.py): |c| per axis, and
+#: the largest mismatch an update takes (an estimator reset is skipped); of the velocity [m/s]
+#: and of the acceleration [m/s^2]
 CONSISTENCY_MAX_MPS = 0.5
 CONSISTENCY_JUMP_MPS = 5.0
+ACCEL_CONSISTENCY_MAX_MPS2 = 3.0
+ACCEL_CONSISTENCY_JUMP_MPS2 = 30.0
 
 
 @njit(cache=True)
-def _consistent(noise, i, p, v_reported, tick_s, out):
-    """gcs fly's law velocity for vehicle i: v + c, c the reported position's rate minus the
-    reported velocity (trapezoid between ticks) low-passed over consistency_s."""
-    last = noise.last[i]
-    c = noise.consistency[i]
-    if noise.consistency_s > 0.0 and not math.isnan(last[0]):
-        alpha = 1.0 - math.exp(-tick_s / noise.consistency_s)
+def _complementary(time_constant_s, c, last, x, rate, tick_s, max_c, jump_at, out):
+    """gcs fly's consistency filter (gcs/fly/consistent.py) for one vehicle: out = rate + c, c
+    the rate of x minus `rate` (trapezoid between ticks) low-passed over time_constant_s; `last`
+    (6,) holds the previous tick's x and rate."""
+    if time_constant_s > 0.0 and not math.isnan(last[0]):
+        alpha = 1.0 - math.exp(-tick_s / time_constant_s)
         jump = False
         diff = np.empty(3)
         for k in range(3):
-            diff[k] = (p[i, k] - last[k]) / tick_s - 0.5 * (v_reported[k] + last[3 + k])
-            jump = jump or abs(diff[k]) > CONSISTENCY_JUMP_MPS
+            diff[k] = (x[k] - last[k]) / tick_s - 0.5 * (rate[k] + last[3 + k])
+            jump = jump or abs(diff[k]) > jump_at
         if not jump:
             for k in range(3):
-                c[k] = min(max(c[k] + alpha * (diff[k] - c[k]), -CONSISTENCY_MAX_MPS),
-                           CONSISTENCY_MAX_MPS)
+                c[k] = min(max(c[k] + alpha * (diff[k] - c[k]), -max_c), max_c)
     for k in range(3):
-        last[k] = p[i, k]
-        last[3 + k] = v_reported[k]
-        out[i, k] = v_reported[k] + c[k]
+        last[k] = x[k]
+        last[3 + k] = rate[k]
+        out[k] = rate[k] + c[k]
 
 
 @njit(cache=True)
@@ -217,7 +226,7 @@ def add_telemetry_errors(noise, tick, p, v, rot, w, acc, g, tick_s):
     """Advance the processes by one tick and return copies of p, v, R, w, a with the errors on (v as
     gcs fly's law reads it: with its consistency correction; a, the world acceleration, as gcs
     fly computes it: the accelerometer's specific force R^T (a + g e3) plus its noise, turned by
-    the reported R, minus g e3)."""
+    the reported R, minus g e3, with its own consistency correction toward v's rate)."""
     n = v.shape[0]
     p_out, v_out, rot_out, w_out, acc_out = p.copy(), v.copy(), rot.copy(), w.copy(), acc.copy()
     s = noise.state
@@ -256,7 +265,12 @@ def add_telemetry_errors(noise, tick, p, v, rot, w, acc, g, tick_s):
                     + ((1.0 - math.cos(angle)) / (angle * angle)) * (kx @ kx))
             rot_out[i] = rot[i] @ turn
         _reported_acceleration(noise, d, rot[i], rot_out[i], acc[i], g, acc_out[i])
-        _consistent(noise, i, p_out, v_out[i].copy(), tick_s, v_out)
+        _complementary(noise.consistency_s, noise.consistency[i], noise.last[i], p_out[i],
+                       v_out[i].copy(), tick_s, CONSISTENCY_MAX_MPS, CONSISTENCY_JUMP_MPS,
+                       v_out[i])
+        _complementary(noise.accel_consistency_s, noise.accel_consistency[i],
+                       noise.accel_last[i], v_out[i], acc_out[i].copy(), tick_s,
+                       ACCEL_CONSISTENCY_MAX_MPS2, ACCEL_CONSISTENCY_JUMP_MPS2, acc_out[i])
     return p_out, v_out, rot_out, w_out, acc_out
 
 

@@ -110,6 +110,7 @@ class _Loop:
     autopilot: str  # sim.autopilot: the vehicles' own loops
     noise: bool  # the law reads the autopilot's telemetry errors (gcs/sim/noise.py)
     velocity_from_position_s: float  # fly.velocity_from_position_s, with the noise
+    acceleration_from_velocity_s: float  # fly.acceleration_from_velocity_s, with the noise
 
     def same_as(self, other: _Loop) -> bool:
         for f in fields(self):
@@ -187,6 +188,7 @@ def _loop_of(team: TeamConfig, options: SimOptions) -> _Loop:
         autopilot=team.sim.autopilot,
         noise=team.sim.telemetry_noise and team.sim.autopilot in NOISE_MODELS,
         velocity_from_position_s=team.fly.velocity_from_position_s,
+        acceleration_from_velocity_s=team.fly.acceleration_from_velocity_s,
     )
 
 
@@ -282,7 +284,8 @@ def _advance(
     attitude_gain = attitude_gains(loop.autopilot)
     noise = make_noise(NOISE_MODELS[loop.autopilot] if loop.noise else None,
                        team.noise_draws.shape[0], n, loop.ctrl_every / loop.plant_hz,
-                       team.noise_draws, loop.velocity_from_position_s)
+                       team.noise_draws, loop.velocity_from_position_s,
+                       loop.acceleration_from_velocity_s)
     min_uz = math.inf
     ref_c, ref_a, ref_w, ref_ph = loop.reference
     chunk = log_every * max(1, int(loop.plant_hz) // log_every)  # ~1 simulated second per call

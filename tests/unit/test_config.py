@@ -567,6 +567,8 @@ ERRORS = [
     ("fly.predict", "yes", r"fly\.predict: expected true or false, got string 'yes'"),
     ("fly.velocity_from_position_s", -1, r"fly\.velocity_from_position_s: expected a value in "
      r"\[0, 60\], got -1"),
+    ("fly.acceleration_from_velocity_s", float("nan"), r"fly\.acceleration_from_velocity_s: "
+     r"expected a finite number, got nan"),
     ("fly.scheduling", "fast", r"fly\.scheduling: expected one of 'auto', 'realtime', 'raised', "
      r"'normal', got string 'fast'"),
     ("fly.mode", "torque", r"fly\.mode: expected one of 'auto', 'rates', 'actuators', 'attitude', "
@@ -597,6 +599,7 @@ def test_fly_section_is_optional_and_defaults_are_documented():
     assert fly.link_timeout_s == 3.0  # tolerates a 1 Hz HEARTBEAT-only vehicle
     assert fly.predict is True  # delay compensation on (gcs/control/predict.py)
     assert fly.velocity_from_position_s == 0.2  # gcs/fly/consistent.py
+    assert fly.acceleration_from_velocity_s == 0.5  # the same module
     assert fly.scheduling == "auto"  # the best the OS permits (gcs/fly/sched.py)
     assert fly.control_mode == "auto"  # gcs fly picks rates or attitude (gcs/fly/setup.py)
     assert team_from_dict(edit(base(), "fly.mode", "attitude")).fly.control_mode == "attitude"

@@ -68,3 +68,36 @@ def test_off_is_the_reported_velocity():
     feed(f, t, p, np.zeros((len(t), 3)))
     v = np.array([[0.1, 0.2, 0.3]])
     assert f.velocity(v) is v
+
+
+def test_an_acceleration_read_through_a_tilted_estimate_is_corrected_to_the_velocitys_rate():
+    from gcs.fly.consistent import AccelerationConsistency
+
+    # GIVEN a vehicle accelerating as a sine, its velocity reported exactly, and the accelerometer
+    # turned to the world by an attitude estimate 0.03 rad off in roll: g * 0.03 m/s^2 east that
+    # the vehicle does not have
+    t = np.arange(0.0, 6.0, 0.01)
+    a_true = np.column_stack([0.5 * np.sin(t), 0.2 * np.cos(2 * t), 0.0 * t])
+    v = np.column_stack([0.5 * (1 - np.cos(t)), 0.1 * np.sin(2 * t), 0.0 * t])
+    bias = np.array([0.0, 9.81 * 0.03, 0.0])
+    f = AccelerationConsistency(1, 0.5)
+    for k in range(len(t)):
+        f.update(v[k][None], (a_true[k] + bias)[None], np.array([t[k]]), np.array([True]))
+    # THEN after a dozen time constants the law reads the true acceleration, to the trapezoid's
+    # error on these 10 ms samples
+    assert f.corrected((a_true[-1] + bias)[None])[0] == pytest.approx(a_true[-1], abs=2e-3)
+    assert f.resets[0] == 0 and f.clamped[0] == 0
+    assert f.report(0)["correction_last_enu_mps2"][1] == pytest.approx(-bias[1], abs=2e-3)
+
+
+def test_a_velocity_step_is_a_reset_not_an_acceleration():
+    from gcs.fly.consistent import AccelerationConsistency
+
+    f = AccelerationConsistency(1, 0.5)
+    z = np.zeros((1, 3))
+    ok = np.array([True])
+    f.update(z, z, np.array([0.0]), ok)
+    f.update(np.array([[0.5, 0.0, 0.0]]), z, np.array([0.01]), ok)  # 0.5 m/s in 10 ms: 50 m/s^2
+    assert f.resets[0] == 1 and not f.correction.any()
+    f.update(np.array([[0.5, 0.0, 0.0]]), np.array([[np.nan, 0.0, 0.0]]), np.array([0.02]), ok)
+    assert not f.correction.any()  # a NaN reading is not a sample
