@@ -249,15 +249,17 @@ def _cell(x: float, fmt: str) -> str:
     return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, fmt)
 
 
-def kept_real_lines(doc: Path = DOC) -> list[str]:
-    """The real vehicles' rows of the section as the doc has them (flights of real SITL are
-    not rerun by this script: without --records their rows stay as measured)."""
+def kept_real_lines(doc: Path = DOC, replaced: frozenset[str] = frozenset()) -> list[str]:
+    """The real vehicles' rows of the section as the doc has them, but those labelled as one of
+    `replaced` (flights of real SITL are not rerun by this script: rows not given again by
+    --records stay as measured)."""
     text = doc.read_text() if doc.exists() else ""
     if REAL_HEADING not in text:
         return []
     body = text.split(REAL_HEADING, 1)[1].split("\n## ", 1)[0]
     return [line for line in body.splitlines()
-            if line.startswith("| ") and not line.startswith(("| team ", "| px4-sih "))]
+            if line.startswith("| ") and not line.startswith(("| team ", "| px4-sih "))
+            and line.split("|")[1].strip() not in replaced]
 
 
 def real_intro(rows: list[dict], kept: list[str] = ()) -> str:
@@ -280,10 +282,12 @@ def real_intro(rows: list[dict], kept: list[str] = ()) -> str:
         "before the formation (hold: PX4 holding the start position) and in the formation from "
         "10 s on: the heading's drift in 1 s beyond its yaw rate's integral (D(1 s) of "
         "`benchmarks.calibration.fit_heading_estimate`: the estimate's own motion) and the "
-        "roll/pitch rate RMS." + (
-            " The real vehicles' rows were measured by an earlier run with --records and are "
-            "kept as they were (`--team px4-sih` alone flies the personality only)."
-            if kept else ""))
+        "roll/pitch rate RMS. Rows labelled `T_a 0` were flown before "
+        "`fly.acceleration_from_velocity_s` (docs/gcs.md, \"The law's acceleration\"): the law "
+        "read the accelerometer's acceleration alone; every other row flies its default, 0.5 s."
+        + (" The real vehicles' rows not given by --records were measured by an earlier run "
+           "with --records and are kept as they were (`--team px4-sih` alone flies the "
+           "personality only)." if kept else ""))
 
 
 def section(rows: list[dict], duration_s: float, heading: str = HEADING,
@@ -383,7 +387,9 @@ def main() -> None:
                           (REAL_HEADING, [r for r in rows if r["team"] in real])):
         if not part:
             continue
-        kept = kept_real_lines() if heading == REAL_HEADING and not args.records else []
+        kept = (kept_real_lines(replaced=frozenset(spec.partition("=")[0]
+                                                   for spec in args.records))
+                if heading == REAL_HEADING else [])
         text = section(part, args.duration_s, heading, kept)
         print(text)
         if not args.no_write:

@@ -123,6 +123,8 @@ def autopilot_comparison(seeds: tuple[int, ...] = (1, 2, 3)) -> list[str]:
             data["controller"]["gains"].update(
                 {k: rates[k] for k in ("alpha_p", "c_p", "k_eps", "k_eps_yaw")})
             data["fly"]["velocity_from_position_s"] = t_s
+            # as the flights it is compared with read the acceleration
+            data["fly"]["acceleration_from_velocity_s"] = 0.0
             data["sim"].update(controller_rate_hz=100, autopilot="px4", link_seed=seed,
                                link_delay_s=0.004)
             figures.append(_late_error(data))
@@ -133,6 +135,7 @@ def autopilot_comparison(seeds: tuple[int, ...] = (1, 2, 3)) -> list[str]:
         data = copy.deepcopy(base)
         data["controller"]["mode"] = "rates"
         data["controller"]["gains"].update(ARDUPILOT_FLOWN_GAINS)
+        data["fly"]["acceleration_from_velocity_s"] = 0.0
         data["sim"].update(plant_rate_hz=1000, controller_rate_hz=100, autopilot="ardupilot",
                            link_seed=seed, link_delay_s=0.004)
         figures.append(_late_error(data))
@@ -184,7 +187,8 @@ def main() -> int:
               f"{alone_ms:.1f} ms alone, {batch_ms:.1f} ms inside a batch of 32 (best of 3).",
               "", "`gcs sim` on PX4's and ArduPilot's loops, airframes and telemetry errors "
               "(`sim.autopilot`, docs/sweep.md: px4's drag and the law's acceleration from the "
-              "accelerometer and the reported attitude; ardupilot's position estimate error and "
+              "accelerometer and the reported attitude, uncorrected (fly.acceleration_from_"
+              "velocity_s 0, as the flights beside it flew); ardupilot's position estimate error and "
               "the records gcs fly holds a stream period) against what the same gains flew over "
               "MAVLink, formation error for t >= 30 s, Scenario I at 100 Hz (the sim starts at "
               "the initial positions, the flights from the ground or from 10 m, as noted):", "",
