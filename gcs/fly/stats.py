@@ -159,10 +159,10 @@ class AgeStats:
 
 def clock_report(est: ClockEstimate) -> dict[str, Any]:
     """The vehicle clock filter's view at the end: offset [s], drift [ppm], least one-way
-    delay [ms] (half the least recent round trip), restarts."""
+    delay [ms] (half the least recent round trip), restarts, lasting delay rises."""
     return {"synced": est.synced, "offset_s": est.offset_s if est.synced else None,
             "drift_ppm": est.drift_ppm, "least_delay_ms": 1e3 * est.least_delay_s,
-            "restarts": est.resets}
+            "restarts": est.resets, "delay_rises": est.delay_rises}
 
 
 def prediction_report(f: AuditFigures | None) -> dict[str, Any]:

@@ -17,6 +17,11 @@ round-trip measurement no filter can tell a lasting delay from a clock step.
 The least one-way delay comes from TIMESYNC round trips (request ts1 = our send time in ns, the
 vehicle answers with its own time in tc1 and ts1 echoed): half the least round trip of the last
 `RTT_WINDOW` replies. Without replies it is 0, and ages are then lower bounds by that much.
+A lasting rise of the delay (the latest `RECENT_ROUND_TRIPS` round trips all more than
+`LASTING_RISE_S` above the least before them) drops the older ones at once: an old least round
+trip would otherwise outlive the rise by a whole window, and with the envelope lifted the ages
+would read low by the rise. Until the envelope lifts, they read high by it instead: the safe side
+of the delay rules.
 
 The time a sample was taken, on the ground station's clock, is
 
@@ -53,6 +58,9 @@ RTT_WINDOW = 20
 #: TIMESYNC replies whose median is the link's recent round trip (the delay rule's): a lasting
 #: delay shows in every reply, one reply a loaded machine holds up does not move the median.
 RECENT_ROUND_TRIPS = 3
+#: The latest RECENT_ROUND_TRIPS round trips all this far above the least before them are a
+#: lasting rise of the link's delay, not jitter [s].
+LASTING_RISE_S = 0.02
 #: Round trips kept for the flight report (at 2 Hz: over five hours).
 MAX_ROUND_TRIPS = 40_000
 #: Two TIMESYNC replies whose arrivals are closer than this fraction of their requests' spacing
@@ -72,6 +80,7 @@ class ClockEstimate:
     least_delay_s: float  # half the least recent TIMESYNC round trip (0 without replies)
     rtt_samples: int
     resets: int
+    delay_rises: int  # lasting rises of the round trip that restarted the least one
 
 
 class VehicleClock:
@@ -89,7 +98,10 @@ class VehicleClock:
         self._rtt_sent = np.empty(RTT_WINDOW)  # when each round trip's request went out [s]
         self._rtt_link = np.ones(RTT_WINDOW, dtype=bool)  # False: it measured a stop, not the link
         self._nrtt = 0
-        self._rtt_total = 0
+        self._rtt_total = 0  # replies ever
+        self._rtt_head = 0  # the ring's next slot; while not full, the round trips are [0, head)
+        #: lasting rises of the delay, each of which dropped the older round trips
+        self.delay_rises = 0
         self._least_delay_s = 0.0
         #: the newest TIMESYNC round trip [s] (NaN before the first): a request that waits
         #: behind a backlog on its way out waits with the setpoints
@@ -155,16 +167,31 @@ class VehicleClock:
         `last_round_trip_s` leave it out."""
         if not (math.isfinite(rtt_s) and rtt_s >= 0.0):
             return
-        self._rtt[self._rtt_total % RTT_WINDOW] = rtt_s
-        self._rtt_sent[self._rtt_total % RTT_WINDOW] = sent_s
-        self._rtt_link[self._rtt_total % RTT_WINDOW] = of_link
+        self._rtt[self._rtt_head] = rtt_s
+        self._rtt_sent[self._rtt_head] = sent_s
+        self._rtt_link[self._rtt_head] = of_link
+        self._rtt_head = (self._rtt_head + 1) % RTT_WINDOW
         self._rtt_total += 1
         if of_link:
             self.last_round_trip_s = rtt_s
         self._nrtt = min(self._nrtt + 1, RTT_WINDOW)
+        if self._nrtt > RECENT_ROUND_TRIPS:
+            self._drop_before_a_lasting_rise()
         self._update_recent()
         self._least_delay_s = 0.5 * float(self._rtt[: self._nrtt].min())
         self._publish()
+
+    def _drop_before_a_lasting_rise(self) -> None:
+        k = RECENT_ROUND_TRIPS
+        newest_first = (self._rtt_head - 1 - np.arange(self._nrtt)) % RTT_WINDOW
+        latest = newest_first[:k][::-1]  # oldest first
+        if (not self._rtt_link[latest].all()
+                or self._rtt[latest].min() <= self._rtt[newest_first[k:]].min() + LASTING_RISE_S):
+            return
+        for ring in (self._rtt, self._rtt_sent, self._rtt_link):
+            ring[:k] = ring[latest]
+        self._nrtt, self._rtt_head = k, k
+        self.delay_rises += 1
 
     def _close_bin(self) -> None:
         if not math.isfinite(self._cur_o):
@@ -204,7 +231,7 @@ class VehicleClock:
         """The latest round trip measured a stop, not the link (its reply came bunched with the
         next one): `round_trips_s` and `recent_round_trip_s` leave it out from now on."""
         if self._nrtt:
-            self._rtt_link[(self._rtt_total - 1) % RTT_WINDOW] = False
+            self._rtt_link[(self._rtt_head - 1) % RTT_WINDOW] = False
             self._update_recent()
 
     def _update_recent(self) -> None:
@@ -215,7 +242,7 @@ class VehicleClock:
         """The last (up to RTT_WINDOW) round trips of the link, oldest first; with ``since_s``,
         only those whose request went out at or after it (on the clock ``on_round_trip`` was
         given). Round trips that measured a stop (``of_link=False``) are left out."""
-        k = self._rtt_total % RTT_WINDOW if self._nrtt == RTT_WINDOW else 0
+        k = self._rtt_head if self._nrtt == RTT_WINDOW else 0
         trips = np.roll(self._rtt[: self._nrtt], -k)
         keep = np.roll(self._rtt_link[: self._nrtt], -k)
         if since_s != -math.inf:
@@ -234,7 +261,7 @@ class VehicleClock:
         offset = (self._a + self._b * (self._last_t - self._t_ref) - self._least_delay_s
                   if self.synced else math.nan)
         return ClockEstimate(self.synced, offset, 1e6 * self._b, self._least_delay_s,
-                             self._rtt_total, self.resets)
+                             self._rtt_total, self.resets, self.delay_rises)
 
 
 class LinkRoundTrips:

@@ -67,6 +67,41 @@ def test_timesync_round_trip_gives_the_least_one_way_delay():
     assert list(clock.round_trips_s()) == [0.104, 0.101, 0.100, 0.130]
 
 
+def test_a_lasting_rise_of_the_delay_restarts_the_least_round_trip_at_its_third_reply():
+    # GIVEN a loopback link (1 ms round trips, 20 ms jitter apart at most) for 20 replies
+    clock = VehicleClock()
+    for k in range(20):
+        clock.on_round_trip(0.001 + 0.019 * (k % 2))
+    assert clock.least_delay_s == pytest.approx(0.0005)
+    # WHEN 50 ms each way join it for good (a link changed, a fault starts): the old least round
+    # trip would stand for 20 replies, with the envelope lifted ages would read 50 ms low
+    for rtt in (0.101, 0.112):
+        clock.on_round_trip(rtt)
+        assert clock.least_delay_s == pytest.approx(0.0005)  # two slow replies may be jitter
+    clock.on_round_trip(0.105)
+    # THEN the third slow reply in a row restarts it: half the least of the three
+    assert clock.least_delay_s == pytest.approx(0.0505)
+    assert clock.delay_rises == 1
+    assert list(clock.round_trips_s()) == [0.101, 0.112, 0.105]
+    assert clock.estimate().rtt_samples == 23
+    # AND jitter within the rise's margin above the new least one restarts nothing
+    for k in range(30):
+        clock.on_round_trip(0.100 + 0.019 * (k % 3 != 0))
+    assert clock.least_delay_s == pytest.approx(0.050)
+    assert clock.delay_rises == 1
+
+
+def test_slow_replies_that_measured_a_stop_are_no_lasting_rise():
+    # a stop held the last three replies (bunched: the link's record leaves them out)
+    clock = VehicleClock()
+    for _ in range(10):
+        clock.on_round_trip(0.010)
+    for _ in range(3):
+        clock.on_round_trip(0.900, of_link=False)
+    assert clock.least_delay_s == pytest.approx(0.005)
+    assert clock.delay_rises == 0
+
+
 def test_the_recent_round_trip_is_the_median_of_the_latest_three():
     # GIVEN a link whose round trips take 10-12 ms
     clock = VehicleClock()
