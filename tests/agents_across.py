@@ -1,7 +1,7 @@
 """Scenario I flown by agents across a network (tests/netns.py's testbed): two agent processes,
 vehicles 1 and 3 in host 1 and 2 and 4 in host 2, each beside its vehicles' emulator, and the
 supervisor in host 3, Zenoh between them over UDP with mixed reliability. Used by
-tests/integration/test_agents_netns.py and benchmarks/bench_agents.py (`--part network`)."""
+tests/integration/test_agents_netns.py and benchmarks/bench_bus.py ("Flights through it")."""
 
 from __future__ import annotations
 

@@ -8,6 +8,7 @@ import asyncio
 import contextlib
 import json
 import logging
+import os
 import signal
 import subprocess
 import sys
@@ -22,7 +23,13 @@ from gcs.config import ConfigError, TeamConfig, load_team
 from gcs.config.modes import FLY_MODES, as_strings
 from gcs.fly.command import EmulatorFleetError, emulator_fleet
 from gcs.fly.records import TIMESERIES_NAME
-from gcs.fly.sched import SchedulingError, apply_scheduling, leave_realtime, share_with_threads
+from gcs.fly.sched import (
+    POLICIES,
+    SchedulingError,
+    apply_scheduling,
+    leave_realtime,
+    share_with_threads,
+)
 from gcs.fly.setup import FlightSetupError, FlyOptions, prepare
 from gcs.fly.warmup import compile_law
 from gcs.mission.plan import EXIT_ABORTED, EXIT_INTERRUPTED
@@ -63,6 +70,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="live status of the agent's vehicles (default: off)")
     p.add_argument("--log-level", default="WARNING",
                    help="Python logging level on stderr (default: WARNING)")
+    p.add_argument("--scheduling", choices=POLICIES, default=None,
+                   help="as the team file's fly.scheduling, which it overrides")
 
 
 def _options(team: TeamConfig, args: argparse.Namespace, out: Path) -> FlyOptions:
@@ -89,7 +98,7 @@ def run_agent(args: argparse.Namespace) -> int:
     try:
         # the law compiles (first run only) before the process asks for real-time scheduling
         compile_law(force=False)
-        scheduling = apply_scheduling(team.fly.scheduling)
+        scheduling = apply_scheduling(args.scheduling or team.fly.scheduling)
         logging.getLogger("gcs.agent").info("%s", scheduling.detail)
         result = asyncio.run(fly_agent(team, own, options, status, scheduling))
     except (FlightSetupError, BusError, ConfigError, SchedulingError) as exc:
@@ -107,6 +116,17 @@ def run_agent(args: argparse.Namespace) -> int:
 # --- the supervisor -------------------------------------------------------------------------------
 
 
+def local_agents_scheduling(policy: str, agents: int, cores: int | None) -> str | None:
+    """The scheduling `gcs fly --agents` starts `agents` agent processes with on a machine of
+    `cores` (None: the team file's `policy`). `auto` asks for real time, ahead of every normal
+    process; agents that are at least as many as the cores can then fill them all and starve
+    what runs beside them (the vehicles' stand-ins, whose held rate setpoints tilt a vehicle
+    before its late answers show), so they start normally scheduled, competing as equals."""
+    if policy == "auto" and agents >= max(1, cores or 1):
+        return "normal"
+    return None
+
+
 def agent_groups(team: TeamConfig, per_process: int) -> list[tuple[int, ...]]:
     """The team's vehicles in groups of `per_process` (team-file order): one agent each."""
     ids = team.ids()
@@ -117,7 +137,7 @@ class AgentProcesses:
     """The agents `gcs fly --agents` starts: `gcs agent` per group, output to its log file."""
 
     def __init__(self, team_path: Path, groups: list[tuple[int, ...]], out: Path,
-                 args: argparse.Namespace) -> None:
+                 args: argparse.Namespace, scheduling: str | None = None) -> None:
         self.procs: list[subprocess.Popen[bytes]] = []
         self.dirs = [out / "agents" / ("agent-" + "-".join(str(v) for v in g)) for g in groups]
         for g, d in zip(groups, self.dirs, strict=True):
@@ -132,6 +152,8 @@ class AgentProcesses:
                 argv += ["--duration-s", str(args.duration_s)]
             if args.no_figures:
                 argv.append("--no-figures")
+            if scheduling is not None:
+                argv += ["--scheduling", scheduling]
             log = open(d.with_suffix(".log"), "wb")  # noqa: SIM115 (the child keeps its own)
             self.procs.append(subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=log,
                                                stderr=subprocess.STDOUT,
@@ -186,7 +208,14 @@ def run_supervised(args: argparse.Namespace, team: TeamConfig, out: Path) -> int
         return EXIT_SETUP
     groups = agent_groups(team, args.agents_per_process)
     compile_law(force=False)  # once, here: the agents load it from the cache
-    procs = None if args.agents_running else AgentProcesses(args.team, groups, out, args)
+    procs = None
+    if not args.agents_running:
+        local = local_agents_scheduling(team.fly.scheduling, len(groups), os.cpu_count())
+        if local is not None:
+            print(f"gcs fly: {len(groups)} agents on {os.cpu_count()} cores start with "
+                  f"--scheduling {local} (fly.scheduling auto: real-time agents that fill "
+                  "every core starve the vehicles beside them)", file=sys.stderr)
+        procs = AgentProcesses(args.team, groups, out, args, local)
 
     def exits(k: int) -> int | None:
         return None if procs is None else procs.exit_status(k)

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import argparse
 import asyncio
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from gcs.agent.command import AgentProcesses, add_parser, local_agents_scheduling
 from gcs.agent.control import Status
 from gcs.agent.supervise import Supervisor
 from gcs.agent.table import Rows
@@ -160,3 +162,38 @@ def test_the_team_formation_check_is_the_supervisors():
     # THEN after fly.formation_check_s the supervisor stops the team, naming the rule
     assert "do not follow the formation" in w.sup.aborted
     assert "(fly.formation_check)" in w.sup.aborted
+
+
+@pytest.mark.parametrize(("policy", "agents", "cores", "expected"), [
+    ("auto", 4, 2, "normal"),  # four agents fill both cores: none takes real time
+    ("auto", 2, 2, "normal"),
+    ("auto", 1, 2, None),  # one agent process (--agents-per-process 4) leaves a core
+    ("auto", 4, 8, None),
+    ("auto", 1, None, "normal"),  # cores unknown: one
+    ("realtime", 4, 2, None),  # asked for in the file: the file's
+    ("normal", 4, 2, None),
+])
+def test_local_agents_that_fill_the_cores_start_normally_scheduled(policy, agents, cores,
+                                                                   expected):
+    assert local_agents_scheduling(policy, agents, cores) == expected
+
+
+def test_started_agents_are_given_the_scheduling_and_an_agent_takes_it(tmp_path, monkeypatch):
+    started = []
+
+    class Popen:
+        def __init__(self, argv, **_):
+            started.append(argv)
+
+    monkeypatch.setattr("gcs.agent.command.subprocess.Popen", Popen)
+    args = argparse.Namespace(mode=None, duration_s=None, no_figures=True)
+    AgentProcesses(Path("team.yaml"), [(1,), (2,)], tmp_path, args, "normal")
+    AgentProcesses(Path("team.yaml"), [(3,)], tmp_path, args)
+    assert [a[a.index("--scheduling") + 1] for a in started[:2]] == ["normal", "normal"]
+    assert "--scheduling" not in started[2]
+    parser = argparse.ArgumentParser()
+    add_parser(parser.add_subparsers())
+    parsed = parser.parse_args(started[0][3:])
+    assert parsed.scheduling == "normal" and parsed.ids == [1]
+    with pytest.raises(SystemExit):
+        parser.parse_args(["agent", "--team", "t.yaml", "--id", "1", "--scheduling", "fast"])
