@@ -18,10 +18,11 @@ The least one-way delay comes from TIMESYNC round trips (request ts1 = our send 
 vehicle answers with its own time in tc1 and ts1 echoed): half the least round trip of the last
 `RTT_WINDOW` replies. Without replies it is 0, and ages are then lower bounds by that much.
 A lasting rise of the delay (the latest `RECENT_ROUND_TRIPS` round trips all more than
-`LASTING_RISE_S` above the least before them) drops the older ones at once: an old least round
-trip would otherwise outlive the rise by a whole window, and with the envelope lifted the ages
-would read low by the rise. Until the envelope lifts, they read high by it instead: the safe side
-of the delay rules.
+`LASTING_RISE_S` above the least before them) drops the older ones at once, and lifts the
+envelope (every kept bin) by the least delay's rise, so their difference, the clocks' offset,
+stays put and ages stay true through the rise. Otherwise the old least round trip would outlive
+the rise by a whole window while the envelope lifted in a few seconds: ages low by the rise.
+A rise on the uplink alone lifts the envelope too far; the next samples lower it again.
 
 The time a sample was taken, on the ground station's clock, is
 
@@ -175,23 +176,35 @@ class VehicleClock:
         if of_link:
             self.last_round_trip_s = rtt_s
         self._nrtt = min(self._nrtt + 1, RTT_WINDOW)
-        if self._nrtt > RECENT_ROUND_TRIPS:
-            self._drop_before_a_lasting_rise()
+        rose = self._nrtt > RECENT_ROUND_TRIPS and self._drop_before_a_lasting_rise()
         self._update_recent()
-        self._least_delay_s = 0.5 * float(self._rtt[: self._nrtt].min())
+        least = 0.5 * float(self._rtt[: self._nrtt].min())
+        if rose:
+            self._lift_envelope(least - self._least_delay_s)
+        self._least_delay_s = least
         self._publish()
 
-    def _drop_before_a_lasting_rise(self) -> None:
+    def _drop_before_a_lasting_rise(self) -> bool:
         k = RECENT_ROUND_TRIPS
         newest_first = (self._rtt_head - 1 - np.arange(self._nrtt)) % RTT_WINDOW
         latest = newest_first[:k][::-1]  # oldest first
         if (not self._rtt_link[latest].all()
                 or self._rtt[latest].min() <= self._rtt[newest_first[k:]].min() + LASTING_RISE_S):
-            return
+            return False
         for ring in (self._rtt, self._rtt_sent, self._rtt_link):
             ring[:k] = ring[latest]
         self._nrtt, self._rtt_head = k, k
         self.delay_rises += 1
+        return True
+
+    def _lift_envelope(self, rise_s: float) -> None:
+        """The least delay rose by ``rise_s`` for good: the envelope (offset + least delay) with
+        it, every kept bin too, so envelope - least delay, the clocks' offset, stays put."""
+        if not (rise_s > 0.0 and self.synced):
+            return
+        self._bins_o[: self._nbins] += rise_s
+        self._cur_o += rise_s
+        self._a += rise_s
 
     def _close_bin(self) -> None:
         if not math.isfinite(self._cur_o):

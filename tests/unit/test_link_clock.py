@@ -91,6 +91,41 @@ def test_a_lasting_rise_of_the_delay_restarts_the_least_round_trip_at_its_third_
     assert clock.delay_rises == 1
 
 
+@pytest.mark.parametrize("down_share", [0.5, 1.0, 0.0])
+def test_ages_stay_true_through_a_lasting_rise_of_the_delay(down_share):
+    # GIVEN 30 s of a 2 ms link each way (samples at 50 Hz, a TIMESYNC every 0.5 s), then 100 ms
+    # more on the round trip for good: both ways alike, all of it on the downlink (telemetry),
+    # or all on the uplink
+    clock = VehicleClock()
+    offset, errors = 7.0, []
+    for k in range(int(60.0 * RATE_HZ)):
+        t_true = k / RATE_HZ
+        rose = t_true >= 30.0
+        down = 0.002 + (0.100 * down_share if rose else 0.0)
+        rx = t_true + down
+        clock.on_sample(t_true - offset, rx)
+        if k % int(RATE_HZ / 2) == 0:
+            clock.on_round_trip(0.004 + (0.100 if rose else 0.0))
+        if t_true >= 31.5:  # from the third slow reply on
+            errors.append(clock.sample_time_s(t_true - offset, rx) - t_true)
+    errors = np.array(errors)
+    assert clock.delay_rises == 1
+    if down_share == 0.5:
+        # THEN with the rise alike both ways, every sample's time stays within 2 ms of the truth
+        assert np.abs(errors).max() < 2e-3
+    elif down_share == 1.0:
+        # the least delay takes half the round trip each way: once the envelope has the whole
+        # downlink rise, ages read low by the other half (the steady state of any clock that
+        # splits a round trip evenly), the envelope's fit overshooting it by up to 10 ms
+        assert errors.min() > -2e-3 and errors.max() < 0.050 + 10e-3
+        assert abs(errors[-1] - 0.050) < 1e-3
+    else:
+        # an uplink-only rise: the telemetry comes as early as before, so ages never read low,
+        # and high by the round trip's rise at most (+ 10 ms of the fit's), then by half of it
+        assert errors.max() < 2e-3 and errors.min() > -0.100 - 10e-3
+        assert abs(errors[-1] + 0.050) < 1e-3
+
+
 def test_slow_replies_that_measured_a_stop_are_no_lasting_rise():
     # a stop held the last three replies (bunched: the link's record leaves them out)
     clock = VehicleClock()
