@@ -208,14 +208,17 @@ class CommandChannel:
                         return await asyncio.shield(log.first)
                 except TimeoutError:
                     logger.debug("%s: %s attempt %d timed out", self._name, label, attempt + 1)
-            silence = self._silence(sent_s)
-            if silence is None or waited:
+            quiet_since = None if waited else await self._quiet_since(log, sent_s)
+            if log.first.done():  # answered while it was told from a silence
+                return log.first.result()
+            if quiet_since is None:
                 break
-            # alive but silent (compiling, starting, paused): nothing at all came back, so
-            # nothing was refused; wait for it to speak, then ask again (once)
+            # alive but silent (compiling, starting, paused): nothing at all came back since
+            # it fell silent, so nothing was refused; wait for it to speak, then ask again (once)
             waited = True
             self._n["silent_waits"] += 1
-            if not await self._await_voice(label, sent_s, silence):
+            silence = quiet_since - self._liveness.up_since_s()
+            if not await self._await_voice(label, quiet_since, silence):
                 self._n["timeouts"] += 1
                 reason = (f"got no COMMAND_ACK: the vehicle, heard at {silence:.2f} s, sent "
                           f"nothing at all for {self._silent_wait_s:g} s more (alive before, "
@@ -225,21 +228,27 @@ class CommandChannel:
         reason = f"got no COMMAND_ACK in {retries + 1} attempts of {timeout_s:g} s"
         raise CommandTimeoutError(f"{self._name}: {label} {reason}", reason)
 
-    def _silence(self, sent_s: float) -> float | None:
-        """When the vehicle was heard before the command, not since, and nothing for
-        `SILENT_AFTER_S`: the time it was last heard [s after its link came up]; else None (it
-        sent other things, or too little time passed to tell: no excuse)."""
+    async def _quiet_since(self, log: AckLog, sent_s: float) -> float | None:
+        """When the vehicle was last heard, if nothing at all came from it for `SILENT_AFTER_S`
+        since. One heard before the command (sent at ``sent_s``) and not since is judged now;
+        one that spoke after it and then stopped (a stall) is given the rest of that span,
+        which an ACK or any message ends. None: it spoke, or too little time passed to tell, or
+        it was never heard (no excuse)."""
         live = self._liveness
         if live is None or not self._silent_wait_s > 0.0:
             return None
         last = live.last_heard_s()
-        if not math.isfinite(last) or last >= sent_s or live.now_s() - last < SILENT_AFTER_S:
+        if not math.isfinite(last) or (last < sent_s and live.now_s() - last < SILENT_AFTER_S):
             return None
-        return last - live.up_since_s()
+        while live.now_s() - last < SILENT_AFTER_S:
+            if log.first.done() or live.last_heard_s() > last:
+                return None
+            await asyncio.sleep(_VOICE_POLL_S)
+        return last if live.last_heard_s() <= last else None
 
-    async def _await_voice(self, label: str, sent_s: float, heard_at_s: float) -> bool:
-        """Wait, at most `silent_wait_s`, until anything arrives from the vehicle after
-        ``sent_s``; says so when it starts. Returns True if the vehicle spoke."""
+    async def _await_voice(self, label: str, last_s: float, heard_at_s: float) -> bool:
+        """Wait, at most `silent_wait_s`, until anything arrives from the vehicle after the
+        message it sent at ``last_s``; says so when it starts. True if the vehicle spoke."""
         live = self._liveness
         assert live is not None
         logger.warning("%s: %s unanswered: heard at %.2f s, silent since; waiting up to %g s "
@@ -248,12 +257,12 @@ class CommandChannel:
                        self._silent_wait_s)
         deadline = asyncio.get_running_loop().time() + self._silent_wait_s
         while asyncio.get_running_loop().time() < deadline:
-            if live.last_heard_s() >= sent_s:
+            if live.last_heard_s() > last_s:
                 logger.warning("%s: heard again after %.1f s of silence; asking again",
                                self._name, live.now_s() - live.up_since_s() - heard_at_s)
                 return True
             await asyncio.sleep(_VOICE_POLL_S)
-        return live.last_heard_s() >= sent_s
+        return live.last_heard_s() > last_s
 
     async def command_long(self, command: int, params: Sequence[float] = (), *,
                            timeout_s: float = 0.5, retries: int = 2) -> MavResult:

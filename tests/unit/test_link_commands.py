@@ -225,6 +225,54 @@ def test_a_vehicle_silent_since_before_the_command_is_waited_for_then_asked_agai
             "0.13 s, silent since; waiting up to 5 s for it to speak") in caplog.text
 
 
+def test_a_vehicle_that_spoke_after_the_command_then_stalled_is_waited_for_then_asked_again(
+        caplog: pytest.LogCaptureFixture) -> None:
+    # GIVEN a vehicle that sends one more message 0.05 s after the command (in flight when it
+    # stalled), then nothing until 2.0 s later, when it speaks and answers
+    async def scenario() -> tuple[MavResult, float]:
+        vehicle = silent_vehicle(lambda c, n: [], wait_s=5.0)
+        vehicle.heard.start()
+        loop = asyncio.get_running_loop()
+
+        def last_words() -> None:
+            vehicle.heard.last = vehicle.heard.now_s()
+
+        def speaks() -> None:
+            vehicle.heard.last = vehicle.heard.now_s()
+            vehicle.policy = lambda c, n: [MavResult.ACCEPTED]
+        loop.call_later(0.05, last_words)
+        loop.call_later(2.0, speaks)
+        t0 = loop.time()
+        result = await vehicle.channel.command_long(ARM, [1.0], timeout_s=0.05, retries=2)
+        assert [n for _, n, _ in vehicle.sent] == [0, 1, 2, 0]
+        assert vehicle.channel.stats().silent_waits == 1
+        return result, loop.time() - t0
+
+    # WHEN its attempts end 0.1 s into the stall THEN the rest of the silence span is waited
+    # out (nothing came), it is called silent, waited for, asked again, and answers
+    result, took = run(scenario())
+    assert result == MavResult.ACCEPTED and 2.0 <= took < 2.5
+    assert ("vehicle 0 (sysid 1): MAV_CMD_COMPONENT_ARM_DISARM (400) unanswered: heard at "
+            "2.05 s, silent since; waiting up to 5 s") in caplog.text
+
+
+def test_a_vehicle_that_keeps_speaking_without_an_answer_is_not_called_silent() -> None:
+    # GIVEN a vehicle that spoke after the command and again within the silence span (its
+    # HEARTBEAT), never answering
+    async def scenario() -> Vehicle:
+        vehicle = silent_vehicle(lambda c, n: [], wait_s=30.0)
+        vehicle.heard.start()
+        loop = asyncio.get_running_loop()
+        for at in (0.05, 1.0):
+            loop.call_later(at, lambda: setattr(vehicle.heard, "last", vehicle.heard.now_s()))
+        with pytest.raises(CommandTimeoutError, match=r"in 3 attempts of 0\.05 s"):
+            await vehicle.channel.command_long(ARM, [1.0], timeout_s=0.05, retries=2)
+        return vehicle
+
+    # THEN the command fails as unanswered once it speaks, not after a wait for its voice
+    assert run(scenario(), timeout_s=3.0).channel.stats().silent_waits == 0
+
+
 def test_a_vehicle_silent_for_longer_than_the_bound_fails_saying_it_was_silent() -> None:
     async def scenario() -> None:
         vehicle = silent_vehicle(lambda c, n: [], wait_s=0.2)
