@@ -101,7 +101,7 @@ class VehicleClock:
         self._nrtt = 0
         self._rtt_total = 0  # replies ever
         self._rtt_head = 0  # the ring's next slot; while not full, the round trips are [0, head)
-        #: lasting rises of the delay, each of which dropped the older round trips
+        #: lasting rises of the delay: each dropped the older round trips, lifted the envelope
         self.delay_rises = 0
         self._least_delay_s = 0.0
         #: the newest TIMESYNC round trip [s] (NaN before the first): a request that waits
