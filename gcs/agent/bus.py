@@ -223,6 +223,14 @@ class NeighbourBus(BusSession):
         process's clock; -inf before its offset is known."""
         return self.table.to_local(vehicle_id, peer_s)
 
+    def supervisor_instant(self, supervisor_s: float) -> float:
+        """An instant the supervisor names on its clock (the formation start), on this
+        process's clock as every agent converts it: by the median offset, which agents on
+        alike paths to the supervisor share within a fraction of a millisecond where the
+        bounded estimate of `to_local` differs by milliseconds (gcs/agent/clocks.py); -inf
+        before the offset is known."""
+        return self.table.to_local_agreed(SUPERVISOR_ID, supervisor_s)
+
 
 def _floats(values: ArrayLike, n: int) -> tuple[float, ...]:
     out = tuple(float(x) for x in np.asarray(values, dtype=float).reshape(-1))

@@ -16,7 +16,10 @@ legs jitter independently and alike (a radio mesh, netem's normal jitter), the d
 the legs is independent of their sum, so the fastest exchange errs as much as any other (by the
 jitter's standard deviation / sqrt 2), while the median of many converges on the true offset.
 The faster half keeps the median clear of one direction's queueing, where the least round trip
-is the better estimate; the intersection bounds what either may do.
+is the better estimate; the intersection bounds what either may do. Where peers must agree on
+an instant rather than each be within a bound of the truth, the median before the bound
+(`median_offset_s`) is the one to use: on a path whose jitter is all on one leg the bound's
+edge is an extreme of the window, which differs from one peer to the next by milliseconds.
 
 In the agents' exchange, t1 is a sample's `sent_s` that the peer echoes back with
 `held_s = t3 - t2` in its own sample sent at t3, received here at t4. The peer echoes every
@@ -46,7 +49,8 @@ class OffsetEstimator:
         # a ring of the last `window` exchanges: offset, round trip, our time of arrival
         self._ring = np.full((3, window), np.nan)
         self._next = 0
-        self._estimate: tuple[float, float, float] | None = None  # offset, bound, least rtt
+        # offset, bound, least rtt, the faster half's median before it is kept in the bound
+        self._estimate: tuple[float, float, float, float] | None = None
         self._stale = False
         self.total = 0  # exchanges accepted since the start or the last reset
         self.refused = 0  # exchanges refused: not finite, or a negative round trip
@@ -89,7 +93,7 @@ class OffsetEstimator:
             self._stale = False
             offset, rtt, _ = self._window()
             faster = offset[rtt <= np.median(rtt)]
-            estimate = float(np.median(faster))
+            estimate = median = float(np.median(faster))
             low, high = float(np.max(offset - rtt / 2.0)), float(np.min(offset + rtt / 2.0))
             if low <= high:  # clamped into what every exchange allows
                 estimate = min(max(estimate, low), high)
@@ -97,7 +101,8 @@ class OffsetEstimator:
             else:  # exchanges that contradict each other (a clock stepped): the fastest one
                 best = int(np.argmin(rtt))
                 estimate, bound = float(offset[best]), float(rtt[best]) / 2.0
-            self._estimate = (estimate, bound, float(np.min(rtt)))
+                median = estimate
+            self._estimate = (estimate, bound, float(np.min(rtt)), median)
         return self._estimate
 
     @property
@@ -110,6 +115,18 @@ class OffsetEstimator:
         """The peer's clock minus ours [s], None before the first exchange."""
         current = self._current()
         return None if current is None else current[0]
+
+    @property
+    def median_offset_s(self) -> float | None:
+        """The median offset of the window's faster half, before it is kept inside the interval
+        every exchange allows (the peer's clock minus ours [s]; None before the first exchange;
+        the fastest exchange's when the exchanges contradict each other). On a path whose
+        jitter is all on one leg the interval's edge is the least delay of that leg, an extreme
+        of the window that moves by milliseconds from one peer to the next while their medians
+        stay within a fraction of one: use this where peers on alike paths must agree on an
+        instant, `offset_s` where the error to the true offset must stay bounded."""
+        current = self._current()
+        return None if current is None else current[3]
 
     @property
     def rtt_s(self) -> float | None:

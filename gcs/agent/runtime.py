@@ -83,6 +83,8 @@ class TeamWatch:
         self.clock = clock
         self.started_s = clock()
         self.events: list[dict[str, Any]] = []  # what the watch did, for the records
+        # the supervisor's clock minus ours as the formation start was converted (None before)
+        self.start_offset_s: float | None = None
         self._stopped_by_watch = False
         self._last_status_s = -1e9
         self.records: str | None = None
@@ -136,9 +138,10 @@ class TeamWatch:
                 return
             at = None
             if order.name == GATE_FORMATION:
-                at = self.bus.to_local(SUPERVISOR_ID, order.opened_s)
+                at = self.bus.supervisor_instant(order.opened_s)
                 if not math.isfinite(at):  # no clock offset yet: the order's own send time
                     at = now_s + (order.opened_s - order.sent_s)
+                self.start_offset_s = order.opened_s - at
             m.open_gate(order.name, at)
             share_with_threads()  # threads the bus started for new connections since
             self._note(f"gate {order.name} opened by the supervisor",
@@ -239,6 +242,7 @@ class TeamWatch:
                           "bus_traffic": dict(self.bus.traffic),
                           "cpu_s": _cpu_s(), "wall_s": round(self.clock() - self.started_s, 3),
                           "supervisor_offset_s": self.bus.offset(SUPERVISOR_ID),
+                          "formation_start_offset_s": self.start_offset_s,
                           "control_corrupt": self.bus.control_corrupt,
                           "events": self.events}}
 

@@ -173,6 +173,13 @@ class SampleTable:
         offset = self.offset(vid)
         return -np.inf if offset is None else peer_s - offset
 
+    def to_local_agreed(self, vid: int, peer_s: float) -> float:
+        """Time `peer_s` of `vid`'s clock on ours by the median offset (OffsetEstimator's
+        `median_offset_s`): for an instant that every process of the team converts alike (the
+        formation start); -inf before the offset is known."""
+        offset = self._edge(vid).clock.median_offset_s if self.clock_sync else 0.0
+        return -np.inf if offset is None else peer_s - offset
+
     def figures(self, vid: int) -> EdgeFigures:
         e = self._edge(vid)
         return EdgeFigures(vid, e.received, e.lost, e.duplicates, e.corrupt, e.restarts,

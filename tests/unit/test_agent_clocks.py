@@ -144,3 +144,38 @@ def test_the_offset_error_is_within_the_uncertainty(offset, exchanges):
     assert abs(est.offset_s - offset) <= est.uncertainty_s + tolerance
     assert est.uncertainty_s <= est.rtt_s + tolerance
     assert est.rtt_s == pytest.approx(min(u + d for u, _, d in exchanges[-16:]), abs=tolerance)
+
+
+def one_leg_jitter_estimate(seed: int) -> OffsetEstimator:
+    """An agent's estimate of the supervisor's clock (as tests/agents_across.py flies it): its
+    samples go up through 20 ms +- 5 ms (normal), the heartbeats come down in 0.3 ms; one
+    exchange every 0.1 s for 25 s; the supervisor's clock is ours."""
+    rng = np.random.default_rng(seed)
+    est = OffsetEstimator()
+    for k, up in enumerate(rng.normal(0.020, 0.005, size=250).clip(0.0)):
+        exchange(est, 0.1 * k, 0.0, up, 0.05, 0.0003)
+    return est
+
+
+def test_the_median_offset_is_what_peers_on_alike_paths_agree_on():
+    # GIVEN twenty agents, each on its own draw of the same one-leg jitter to one supervisor
+    ests = [one_leg_jitter_estimate(seed) for seed in range(20)]
+    bounded = np.array([e.offset_s for e in ests])
+    median = np.array([e.median_offset_s for e in ests])
+    # THEN a bounded estimate that the interval holds back sits at its edge, the least uplink
+    # of its window (an extreme: a spread of milliseconds), while the medians, biased alike by
+    # half the one leg's faster-half delay, agree within a fraction of a millisecond: the
+    # instant the agents convert by the median is one instant for all of them
+    assert np.ptp(bounded) > 0.003
+    assert np.ptp(median) < 0.001
+    assert np.all(median >= bounded) and np.sum(median > bounded) >= 10
+    # AND the bound still holds the true offset (0) for the bounded estimate alone
+    assert all(abs(e.offset_s) <= e.uncertainty_s + 1e-12 for e in ests)
+
+
+def test_the_median_offset_is_the_estimate_when_the_bound_does_not_bind():
+    est = OffsetEstimator()
+    assert est.median_offset_s is None
+    exchange(est, 100.0, 5.0, 0.001, 0.020, 0.001)
+    exchange(est, 101.0, 5.0, 0.002, 0.020, 0.001)
+    assert est.median_offset_s == est.offset_s

@@ -157,3 +157,22 @@ def test_each_message_is_echoed_once_by_each_publisher():
     # AND a sender that restarted is echoed from its new process's messages on
     table.receive(2, sample(2, 0, sent_s=5.0, epoch=9), 5.01)
     assert [e.sent_s for e in table.echoes(5.02, 3)] == [5.0]
+
+
+def test_an_agreed_instant_is_converted_by_the_median_offset():
+    # GIVEN the supervisor's echoes of two exchanges: one symmetric (offset 3 s exactly, rtt
+    # 2 ms) and one whose uplink took 9 ms (offset 3.004 s, rtt 10 ms)
+    table = SampleTable((SUPERVISOR_ID,), local_ids=(1,), team_ids=(1,))
+    assert table.to_local_agreed(SUPERVISOR_ID, 50.0) == -np.inf
+    for t1, up in ((10.0, 0.001), (11.0, 0.009)):
+        t2 = t1 + up + 3.0
+        table.heard(SUPERVISOR_ID, t2 + 0.05, t2 + 0.05 - 3.0 + 0.001,
+                    (Echo(1, t1, 0.05),))
+    clock = table.clock(SUPERVISOR_ID)
+    # THEN the faster half (the symmetric one) gives both the bounded and the median offset
+    assert clock.offset_s == pytest.approx(3.0) == clock.median_offset_s
+    assert table.to_local_agreed(SUPERVISOR_ID, 50.0) == pytest.approx(47.0)
+    # AND one host's clocks (clock_sync false) convert by 0 whatever was measured
+    one_host = SampleTable((SUPERVISOR_ID,), local_ids=(1,), team_ids=(1,), clock_sync=False)
+    one_host.heard(SUPERVISOR_ID, 13.05, 10.05, (Echo(1, 10.0, 0.05),))
+    assert one_host.to_local_agreed(SUPERVISOR_ID, 50.0) == 50.0
