@@ -176,23 +176,31 @@ class BusSession(abc.ABC):
             raise BusError("the bus is not open: use `async with` around it")
         return self._session
 
-    def publisher(self, key: str, *, express: bool = True,
-                  reliable: bool = True) -> zenoh.Publisher:
+    def publisher(self, key: str, *, express: bool = True, reliable: bool = True,
+                  priority: zenoh.Priority | None = None) -> zenoh.Publisher:
         """A publisher on `key` that never blocks the loop (congestion: the message is
         dropped; the next sample or heartbeat replaces it). `reliable` False marks its messages
         best effort: on a link that carries both (an endpoint with `mixed_rel=1`) they travel
         as datagrams, so a lost one is never resent ahead of newer ones; over TCP both kinds
-        share the one ordered stream."""
+        share the one ordered stream. `priority`: DATA_HIGH unless given; Zenoh numbers each
+        priority's messages apart, and a best-effort message that arrives after a newer one
+        of its priority from the same peer is dropped."""
         reliability = zenoh.Reliability.RELIABLE if reliable else zenoh.Reliability.BEST_EFFORT
-        pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.DROP,
-                                             priority=zenoh.Priority.DATA_HIGH, express=express,
-                                             reliability=reliability)
+        pub = self.session.declare_publisher(
+            key, congestion_control=zenoh.CongestionControl.DROP, express=express,
+            priority=zenoh.Priority.DATA_HIGH if priority is None else priority,
+            reliability=reliability)
         self._entities.append(pub)
         return pub
 
     def reliabilities(self) -> dict[str, zenoh.Reliability]:
         """Each of this side's publishers' key and the reliability its messages carry."""
         return {str(e.key_expr): e.reliability for e in self._entities
+                if isinstance(e, zenoh.Publisher)}
+
+    def priorities(self) -> dict[str, zenoh.Priority]:
+        """Each of this side's publishers' key and the priority its messages carry."""
+        return {str(e.key_expr): e.priority for e in self._entities
                 if isinstance(e, zenoh.Publisher)}
 
     def subscribe(self, key: str, deliver: Deliver) -> None:

@@ -22,7 +22,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from gcs.agent.bus import NeighbourBus
+from gcs.agent.bus import NeighbourBus, state_lanes
 from gcs.agent.control import Abort
 from gcs.agent.session import BusError, Endpoints, zenoh_config
 from gcs.agent.supervisor import SupervisorBus
@@ -367,6 +367,37 @@ def test_over_a_mixed_udp_link_states_go_best_effort_and_control_reliable():
                 assert await asyncio.wait_for(one.control.get(), WAIT_S) == gate
             assert one.stats()[2].corrupt == 0 and sup.statuses[1].phase == "hold"
             beat.cancel()
+
+    run_bounded(scenario(), TEST_S)
+
+
+def test_an_agent_of_several_vehicles_puts_each_state_on_a_priority_of_its_own():
+    async def scenario() -> None:
+        # GIVEN an agent of vehicles 1 and 3 and one of 2 and 4, over mixed UDP
+        network = ring_network(mixed_udp)
+        odd = NeighbourBus(network, TEAM, IDS, [1, 3], [2, 4])
+        even = NeighbourBus(network, TEAM, IDS, [2, 4], [1, 3])
+        async with odd, even:
+            # THEN each own vehicle's state has a priority of its own, the first the one a
+            # single vehicle's agent uses (a best-effort message is dropped when it arrives
+            # after a newer one of its priority: two states sent together and swapped by the
+            # network must not be one priority)
+            lanes = state_lanes()
+            assert len({int(p) for p in lanes}) == len(lanes) == 4
+            assert lanes[0] == zenoh.Priority.DATA_HIGH
+            priorities = odd.priorities()
+            assert (priorities[odd.keys.state(1)], priorities[odd.keys.state(3)]) == lanes[:2]
+            assert odd.reliabilities()[odd.keys.state(3)] == zenoh.Reliability.BEST_EFFORT
+
+            def send() -> None:
+                for bus, ids in ((odd, (1, 3)), (even, (2, 4))):
+                    for vid in ids:
+                        bus.publish(vid, time.monotonic(), **STATE)
+
+            # AND the states of both priorities arrive, each vehicle's in its own row
+            async with publishing(send):
+                await wait_until(lambda: odd.rows([2, 4], time.monotonic()).finite.all()
+                                 and even.rows([1, 3], time.monotonic()).finite.all(), WAIT_S)
 
     run_bounded(scenario(), TEST_S)
 

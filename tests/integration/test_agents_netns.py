@@ -48,9 +48,10 @@ def test_agents_converge_through_a_delayed_lossy_network_and_measure_it(testbed,
     # later, its jitter and the lost samples' gaps on top. The median is the delay later, give
     # or take where the two flights' ticks fall: a sample waits up to a tick in its publisher
     # and up to a tick in its user, and those phases are each flight's own (the plain flight's
-    # medians span 8-32 ms across its edges at 50 Hz). Loss is one sample in ten, more where
-    # two of a host's samples leave together and the jitter swaps them (Zenoh drops a
-    # best-effort frame older than the last it took).
+    # medians span 8-32 ms across its edges at 50 Hz). Loss is one sample in ten: a host's
+    # two vehicles' samples leave together, but each on a priority of its own, so the jitter
+    # that swaps them on the way drops neither (on one priority Zenoh drops a best-effort
+    # frame older than the last it took, and the first vehicle lost 29-38 %).
     tick_ms = 1e3 / AGENT_TICK_RATE_HZ
     delay_ms, jitter_ms = 1e3 * BETWEEN_AGENTS.delay_s, 1e3 * BETWEEN_AGENTS.jitter_s
     edges, plain_edges = impaired["extra"]["edges"], plain["extra"]["edges"]
@@ -65,7 +66,7 @@ def test_agents_converge_through_a_delayed_lossy_network_and_measure_it(testbed,
             assert e["age_p99_ms"] >= p["age_p99_ms"] + delay_ms, (edge, e, p)
             assert (e["age_p50_ms"] - p["age_p50_ms"]
                     <= delay_ms + jitter_ms + 2 * tick_ms), (edge, e, p)
-            assert 0.05 <= e["loss_fraction"] <= 0.45, (edge, e)
+            assert 0.05 <= e["loss_fraction"] <= 0.2, (edge, e)
         assert e["age_used_max_ms"] <= 100.0, (edge, e)
         assert p["age_p50_ms"] < 45.0 and p["age_used_max_ms"] <= 100.0, (edge, p)
         assert p["loss_fraction"] < 0.01, (edge, p)
