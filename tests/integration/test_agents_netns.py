@@ -37,7 +37,7 @@ def test_agents_converge_through_a_delayed_lossy_network_and_measure_it(testbed,
     print(figures)
     # THEN it converges through the impaired network: its mean and its max within 1.5 x the
     # plain flight's, or within 4 / 8 mm. Both fly at a fraction of a millimetre to about a
-    # millimetre (impaired 0.3-1.0 mm mean, 0.8-1.7 mm max in python -m benchmarks.bench_bus
+    # millimetre (impaired 0.5-0.7 mm mean, 1.1-1.7 mm max in python -m benchmarks.bench_bus
     # --flights 3; what the impairment costs is the clock offset estimated under jitter:
     # docs/agents.md, "Measured"), so the floors hold here, with room for two shared cores;
     # the ratio is that benchmark's
