@@ -16,9 +16,10 @@ import asyncio
 import logging
 import time
 from collections.abc import Collection, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
+import zenoh
 
 from gcs.agent.control import (
     Abort,
@@ -39,12 +40,17 @@ from gcs.agent.wire import SUPERVISOR_ID, StateSample, WireError, encode
 from gcs.config.network_schema import NetworkConfig
 from gcs.config.schema import TeamConfig
 
-if TYPE_CHECKING:
-    import zenoh
-
 log = logging.getLogger(__name__)
 
 ArrayLike = Sequence[float] | np.ndarray
+
+#: The priorities an agent's own vehicles' states take, in `own_ids` order: the data
+#: priorities, highest first. Zenoh numbers each priority's best-effort messages apart and drops
+#: one that arrives after a newer one of its priority from the same peer; an agent's vehicles'
+#: samples leave together at every tick, so on one priority a jitter that swaps them costs the
+#: first its sample (docs/agents.md, "Measured").
+STATE_LANES = (zenoh.Priority.DATA_HIGH, zenoh.Priority.DATA, zenoh.Priority.DATA_LOW,
+               zenoh.Priority.BACKGROUND)
 
 
 def graph_neighbours(team: TeamConfig, own_ids: Collection[int]) -> frozenset[int]:
@@ -103,13 +109,12 @@ class NeighbourBus(BusSession):
                    graph_neighbours(team, own_ids), clock=clock, epoch=epoch)
 
     def _declare(self) -> None:
-        lanes = state_lanes()
         for k, vid in enumerate(self.own_ids):
             # latest sample wins: a lost state is replaced by the next, never resent; each own
-            # vehicle's on a priority of its own (up to len(lanes) vehicles), so that the
+            # vehicle's on a priority of its own (up to len(STATE_LANES) vehicles), so that the
             # jitter that swaps two samples sent together on the way does not drop the first
             self._state_pubs[vid] = self.publisher(self.keys.state(vid), reliable=False,
-                                                   priority=lanes[k % len(lanes)])
+                                                   priority=STATE_LANES[k % len(STATE_LANES)])
             self._status_pubs[vid] = self.publisher(self.keys.status(vid), express=False)
         for vid in self.neighbour_ids:
             self.subscribe(self.keys.state(vid),
@@ -234,18 +239,6 @@ class NeighbourBus(BusSession):
         bounded estimate of `to_local` differs by milliseconds (gcs/agent/clocks.py); -inf
         before the offset is known."""
         return self.table.to_local_agreed(SUPERVISOR_ID, supervisor_s)
-
-
-def state_lanes() -> tuple[zenoh.Priority, ...]:
-    """The priorities an agent's own vehicles' states take, in `own_ids` order: the data
-    priorities, highest first. Zenoh numbers each priority's best-effort messages apart and
-    drops one that arrives after a newer one of its priority from the same peer; an agent's
-    vehicles' samples leave together at every tick, so on one priority a jitter that swaps
-    them costs the first its sample (docs/agents.md, "Measured")."""
-    import zenoh
-
-    return (zenoh.Priority.DATA_HIGH, zenoh.Priority.DATA, zenoh.Priority.DATA_LOW,
-            zenoh.Priority.BACKGROUND)
 
 
 def _floats(values: ArrayLike, n: int) -> tuple[float, ...]:

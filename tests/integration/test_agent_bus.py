@@ -22,7 +22,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from gcs.agent.bus import NeighbourBus, state_lanes
+from gcs.agent.bus import STATE_LANES, NeighbourBus
 from gcs.agent.control import Abort
 from gcs.agent.session import BusError, Endpoints, zenoh_config
 from gcs.agent.supervisor import SupervisorBus
@@ -382,7 +382,7 @@ def test_an_agent_of_several_vehicles_puts_each_state_on_a_priority_of_its_own()
             # single vehicle's agent uses (a best-effort message is dropped when it arrives
             # after a newer one of its priority: two states sent together and swapped by the
             # network must not be one priority)
-            lanes = state_lanes()
+            lanes = STATE_LANES
             assert len({int(p) for p in lanes}) == len(lanes) == 4
             assert lanes[0] == zenoh.Priority.DATA_HIGH
             priorities = odd.priorities()
