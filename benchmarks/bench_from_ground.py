@@ -284,7 +284,10 @@ def real_intro(rows: list[dict], kept: list[str] = ()) -> str:
         "`benchmarks.calibration.fit_heading_estimate`: the estimate's own motion) and the "
         "roll/pitch rate RMS. Rows labelled `T_a 0` were flown before "
         "`fly.acceleration_from_velocity_s` (docs/gcs.md, \"The law's acceleration\"): the law "
-        "read the accelerometer's acceleration alone; every other row flies its default, 0.5 s."
+        "read the accelerometer's acceleration alone; every other row flies its default, 0.5 s. "
+        "Rows labelled `phi_h 0` and px4-sih fly the file as it is, with the vertical mass "
+        "estimator (controller.gains.phi_horizontal 0, docs/gcs.md \"What the mass estimate "
+        "reads\"); the other real rows were flown before it, with the paper's (1)."
         + (" The real vehicles' rows not given by --records were measured by an earlier run "
            "with --records and are kept as they were (`--team px4-sih` alone flies the "
            "personality only)." if kept else ""))

@@ -85,11 +85,14 @@ GAIN_NAMES = tuple(name for name in LawGains._fields if name != "gravity_mps2")
 
 def _gains(node: Node, default: Any) -> Gains:
     """controller.gains: every gain of the law > 0; k_eps_yaw (the rates mode's yaw feedback)
-    defaults to k_eps."""
-    own = [name for name in GAIN_NAMES if name != "k_eps_yaw"]
-    node.keys(" ".join(own), "k_eps_yaw")
+    defaults to k_eps; phi_horizontal (the horizontal velocity's weight in the estimator's phi)
+    in [0, 1], default 1 (the paper's)."""
+    optional = ("k_eps_yaw", "phi_horizontal")
+    own = [name for name in GAIN_NAMES if name not in optional]
+    node.keys(" ".join(own), " ".join(optional))
     values = {name: node.child(name).number(gt=0.0) for name in own}
     values["k_eps_yaw"] = node.child("k_eps_yaw").number(values["k_eps"], gt=0.0)
+    values["phi_horizontal"] = node.child("phi_horizontal").number(1.0, ge=0.0, le=1.0)
     return Gains(**values)
 
 
@@ -470,13 +473,16 @@ class TeamConfig:
 
 
 def initial_phi(vehicle: VehicleConfig, gains: Gains) -> float:
-    """phi_i(0) = 2 + (1/(3 sigma_a)) sum_k sat(v_i,k(0)), sat(x) = sigma_a tanh(x / sigma_a).
+    """phi_i(0) = 2 + (1/(3 sigma_a)) sum_k w_k sat(v_i,k(0)), sat(x) = sigma_a tanh(x / sigma_a),
+    w = (phi_horizontal, phi_horizontal, 1).
 
-    (= 2 + sum_k tanh(v_i,k(0)) / 3 for the paper's sigma_a = 1; the law's sat in
+    (= 2 + sum_k tanh(v_i,k(0)) / 3 for the paper's sigma_a = 1 and w = 1; the law's phi in
     gcs/control/position.py.)
     """
     s = gains.sigma_a
-    return 2.0 + sum(s * math.tanh(x / s) for x in vehicle.initial.velocity_enu_mps) / (3.0 * s)
+    w = (gains.phi_horizontal, gains.phi_horizontal, 1.0)
+    return 2.0 + sum(wk * s * math.tanh(x / s)
+                     for wk, x in zip(w, vehicle.initial.velocity_enu_mps, strict=True)) / (3.0 * s)
 
 
 def proposition2_min_mhat(vehicle: VehicleConfig, gains: Gains) -> float | None:

@@ -22,7 +22,7 @@ from numba import njit
 
 from gcs.control.formation import EdgeList
 from gcs.control.gains import LawGains
-from gcs.control.position import PositionStage, ddsat, dsat
+from gcs.control.position import PositionStage, axis_weight, ddsat, dsat
 
 if TYPE_CHECKING:
     from gcs.control.law import TeamMeasurement
@@ -65,6 +65,9 @@ def force_derivatives(
     ve_d = np.empty(3)
     s_d = np.empty(3)
     v_dd = np.empty(3)
+    w = np.empty(3)  # phi's axis weights (position.phi)
+    for k in range(3):
+        w[k] = axis_weight(k, gains.phi_horizontal)
     for i in range(n):
         # First derivatives: ve', s', phi', kappa', a', u'.
         phi_i = phi_values[i]
@@ -78,7 +81,7 @@ def force_derivatives(
                     coupling_d += aij * (velocity_mps[i, k] - velocity_mps[j, k])
             ve_d[k] = acceleration_mps2[i, k] - reference_mps[1, k]
             s_d[k] = gains.c_p * coupling_d + ve_d[k]
-            phi_d += dsat(velocity_mps[i, k], sig) * acceleration_mps2[i, k]
+            phi_d += w[k] * dsat(velocity_mps[i, k], sig) * acceleration_mps2[i, k]
         phi_d /= 3.0 * sig
         if adaptive:
             kap_d = am * (mhat_rate[i] / phi_i - mhat[i] * phi_d / phi_i**2)
@@ -102,15 +105,15 @@ def force_derivatives(
             re3 = rotation[i, k, 2]
             rwe3 = rotation[i, k, 0] * wy - rotation[i, k, 1] * wx  # R (omega x e3)
             v_dd[k] = jerk_gain[i] * (t_d * re3 + t_n * rwe3)
-            zeta = dsat(velocity_mps[i, k], sig)
-            zeta_d = ddsat(velocity_mps[i, k], sig) * acceleration_mps2[i, k]
+            zeta = w[k] * dsat(velocity_mps[i, k], sig)
+            zeta_d = w[k] * ddsat(velocity_mps[i, k], sig) * acceleration_mps2[i, k]
             zeta_re3 += zeta * re3
             zeta_d_re3 += zeta_d * re3
             zeta_rwe3 += zeta * rwe3
         # Second derivatives: phi'', mhat'', kappa'', a'', u''.
         phi_dd = 0.0
         for k in range(3):
-            phi_dd += (
+            phi_dd += w[k] * (
                 ddsat(velocity_mps[i, k], sig) * acceleration_mps2[i, k] ** 2
                 + dsat(velocity_mps[i, k], sig) * v_dd[k]
             )

@@ -15,7 +15,9 @@ class LawGains(NamedTuple):
     attitude and rate feedback of the torque (26) [N m]; c_eps: cross term of (27);
     alpha_rho: inertia adaptation rate (27); k_eps: attitude feedback of the body-rate command
     [1/s] (rates mode; roll and pitch); k_eps_yaw: the same about the yaw axis (an autopilot's
-    yaw is far slower than its roll and pitch); gravity_mps2: g.
+    yaw is far slower than its roll and pitch); gravity_mps2: g; phi_horizontal: the weight
+    w of the horizontal velocity in the estimator's phi_i (1: the paper's; 0: the vertical
+    alone; position.phi).
     """
 
     c_p: float
@@ -29,6 +31,7 @@ class LawGains(NamedTuple):
     k_eps: float
     k_eps_yaw: float
     gravity_mps2: float = GRAVITY_MPS2
+    phi_horizontal: float = 1.0
 
 
 #: The paper's Section V gains (with k_eps for the rates variant).

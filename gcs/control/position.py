@@ -54,14 +54,23 @@ def ddsat(x: float, sigma_a: float) -> float:
 
 
 @njit(cache=True)
-def phi(velocity_mps: np.ndarray, sigma_a: float) -> np.ndarray:
-    """phi_i = 2 + (1/(3 sigma_a)) sum_k sat(v_i,k), in (1, 3); uses the absolute velocity."""
+def axis_weight(k: int, horizontal: float) -> float:
+    """w_k of phi and zeta: `horizontal` for east and north, 1 for up."""
+    return 1.0 if k == 2 else horizontal
+
+
+@njit(cache=True)
+def phi(velocity_mps: np.ndarray, sigma_a: float, horizontal: float = 1.0) -> np.ndarray:
+    """phi_i = 2 + (1/(3 sigma_a)) sum_k w_k sat(v_i,k), uses the absolute velocity; w_k =
+    `horizontal` (gains.phi_horizontal) for east and north, 1 for up. The paper's phi is w = 1,
+    in (1, 3); any w in [0, 1] keeps phi in (1, 3) and the estimator's error dynamics (37)
+    unchanged (mass_estimator_rate)."""
     n = velocity_mps.shape[0]
     out = np.empty(n)
     for i in range(n):
         acc = 0.0
         for k in range(3):
-            acc += sat(velocity_mps[i, k], sigma_a)
+            acc += axis_weight(k, horizontal) * sat(velocity_mps[i, k], sigma_a)
         out[i] = 2.0 + acc / (3.0 * sigma_a)
     return out
 
@@ -150,7 +159,7 @@ def force_law(
     s, ve = sliding_variable(
         position_m, velocity_mps, graph, offsets_m, gains.c_p, reference_mps
     )
-    ph = phi(velocity_mps, sig)
+    ph = phi(velocity_mps, sig, gains.phi_horizontal)
     n = position_m.shape[0]
     kappa = np.empty(n)
     a = np.empty((n, 3))
@@ -189,7 +198,11 @@ def mass_estimator_rate(
     """I&I update mhat_i' of (24), with the sign corrected (docs/control-law.md, "Deviations").
 
     mhat' = -g dsat(v_z) mhat / (3 sigma_a phi) + T zeta^T R e3 / (3 sigma_a alpha_m),
-    zeta = dsat(v) componentwise. Needs no acceleration: alpha_m mhat/phi -> m exponentially.
+    zeta_k = w_k dsat(v_k), the gradient of phi times 3 sigma_a (phi's weights w_k). Needs no
+    acceleration: with m v' = T R e3 - m g e3 the error mt = alpha_m mhat - phi m obeys
+    mt' = -g dsat(v_z) mt / (3 sigma_a phi) whatever w, so alpha_m mhat/phi -> m exponentially.
+    With w = 0 on east and north the update reads the thrust's vertical share alone: an error
+    of the read tilt enters at second order, the horizontal velocity's error not at all.
     """
     sig = gains.sigma_a
     n = velocity_mps.shape[0]
@@ -197,7 +210,8 @@ def mass_estimator_rate(
     for i in range(n):
         zeta_re3 = 0.0
         for k in range(3):
-            zeta_re3 += dsat(velocity_mps[i, k], sig) * rotation[i, k, 2]
+            zeta_re3 += (axis_weight(k, gains.phi_horizontal) * dsat(velocity_mps[i, k], sig)
+                         * rotation[i, k, 2])
         out[i] = -gains.gravity_mps2 * dsat(velocity_mps[i, 2], sig) * mhat[i] / (
             3.0 * sig * phi_values[i]
         ) + thrust_n[i] * zeta_re3 / (3.0 * sig * gains.alpha_m)

@@ -62,7 +62,8 @@ class HoverStart:
         if self.setup.law != "adaptive":
             return True
         g = self.setup.gains
-        phi0_all = phi(np.ascontiguousarray(sample.velocity_mps), g.sigma_a)  # the law's (23)
+        phi0_all = phi(np.ascontiguousarray(sample.velocity_mps), g.sigma_a,
+                        g.phi_horizontal)  # the law's (23)
         for i, v in enumerate(self.team.vehicles):
             if not v.estimates.from_hover:
                 continue

@@ -346,6 +346,8 @@ ERRORS = [
     ("sim.plant_rate_hz", 0, r"sim\.plant_rate_hz: expected > 0, got 0\.0"),
     ("mission.duration_s", -60.0, r"mission\.duration_s: expected > 0, got -60\.0"),
     ("controller.gains.c_eps", 0.0, r"controller\.gains\.c_eps: expected > 0, got 0\.0"),
+    ("controller.gains.phi_horizontal", 1.5,
+     r"controller\.gains\.phi_horizontal: expected a value in \[0, 1\], got 1\.5"),
     (
         "controller.law",
         "adaptiv",

@@ -94,12 +94,16 @@ def _scenario_state():
     return p, v, rot, w, mhat, rhohat, masses, inertia, graph, offsets, ref_c, ref
 
 
-@pytest.mark.parametrize("adaptive", [True, False])
-def test_exact_force_derivatives_match_finite_differences_along_the_closed_loop(adaptive):
-    # GIVEN the closed loop of Scenario I at a generic (non-equilibrium) state
+@pytest.mark.parametrize(("adaptive", "phi_horizontal"), [(True, 1.0), (True, 0.0), (True, 0.3),
+                                                      (False, 1.0)])
+def test_exact_force_derivatives_match_finite_differences_along_the_closed_loop(adaptive,
+                                                                               phi_horizontal):
+    # GIVEN the closed loop of Scenario I at a generic (non-equilibrium) state, the estimator
+    # reading the horizontal velocity with the weight phi_horizontal (1: the paper's)
+    gains = PAPER_GAINS._replace(phi_horizontal=phi_horizontal)
     p, v, rot, w, mhat, rhohat, m, j, adj, off, ref_c, ref = _scenario_state()
     team = TeamState(p, v, rot, w, m, j, np.full(4, -1), np.ones(4), np.zeros(4))
-    law = LawInputs(mhat, rhohat, m.copy(), adj, off, ref_c, ref[1], ref[2], ref[3], PAPER_GAINS,
+    law = LawInputs(mhat, rhohat, m.copy(), adj, off, ref_c, ref[1], ref[2], ref[3], gains,
                     adaptive)
 
     def rates(t, x):
@@ -146,11 +150,11 @@ def test_exact_force_derivatives_match_finite_differences_along_the_closed_loop(
         t_mid += h / 20
     pm, vm, rm, wm, mh, rh = x_mid
     refm = reference_velocity(t_mid, ref_c, ref[1], ref[2], ref[3])
-    stage = position_stage(pm, vm, rm, mh, m, adj, off, refm, PAPER_GAINS, adaptive)
+    stage = position_stage(pm, vm, rm, mh, m, adj, off, refm, gains, adaptive)
     uu = stage.force_n
-    acc = _acceleration(rm, stage.thrust_n, m, PAPER_GAINS.gravity_mps2)
+    acc = _acceleration(rm, stage.thrust_n, m, gains.gravity_mps2)
     du, ddu = force_derivatives(TeamMeasurement(pm, vm, acc, rm, wm), stage, mh, 1.0 / m, adj,
-                                refm, PAPER_GAINS, adaptive)
+                                refm, gains, adaptive)
     assert np.allclose(uu, u[2], atol=1e-12)
     assert np.abs(du - du_fd).max() / np.abs(du_fd).max() < 1e-6
     assert np.abs(ddu - ddu_fd).max() / np.abs(ddu_fd).max() < 1e-3

@@ -59,10 +59,14 @@ def test_force_law_is_translation_invariant_bounded_and_finite(p, v, mhat, shift
 
 
 @settings(max_examples=100, deadline=None)
-@given(vel)
-def test_phi_is_in_1_3(v):
-    values = phi(v, 1.0)
+@given(vel, st.floats(0.0, 1.0))
+def test_phi_is_in_1_3(v, horizontal):
+    values = phi(v, 1.0, horizontal)
     assert ((values > 1.0 - 1e-12) & (values < 3.0 + 1e-12)).all()
+    # AND the horizontal velocity counts with its weight: none at 0, the paper's sum at 1
+    vertical = 2.0 + np.tanh(v[:, 2]) / 3.0
+    paper = 2.0 + np.tanh(v).sum(axis=1) / 3.0
+    np.testing.assert_allclose(values, vertical + horizontal * (paper - vertical), atol=1e-12)
 
 
 def test_sliding_variable_is_the_laplacian_form():
@@ -78,8 +82,12 @@ def test_sliding_variable_is_the_laplacian_form():
     np.testing.assert_allclose(s0, 0.0, atol=1e-12)
 
 
-def test_mass_estimator_invariance_identity_37():
-    # GIVEN a random state and the model v' = -g e3 + T R e3 / m (spec 2.3)
+@pytest.mark.parametrize("horizontal", [1.0, 0.0, 0.3])
+def test_mass_estimator_invariance_identity_37(horizontal):
+    # GIVEN a random state and the model v' = -g e3 + T R e3 / m (spec 2.3), phi weighting the
+    # horizontal velocity by `horizontal` (1: the paper's)
+    gains = PAPER_GAINS._replace(phi_horizontal=horizontal)
+    weight = np.array([horizontal, horizontal, 1.0])
     rng = np.random.default_rng(11)
     m = np.array([0.85, 1.2, 0.35, 3.4])
     p, v = rng.normal(size=(2, 4, 3))
@@ -87,18 +95,47 @@ def test_mass_estimator_invariance_identity_37():
     rot *= np.sign(np.linalg.det(rot))[:, None, None]
     mhat = rng.uniform(0.5, 4.0, size=4)
     u, a, s, ve, ph, kappa, t_n, mhat_rate = position_stage(
-        p, v, rot, mhat, m, RING_EDGES, SQUARE, REF, PAPER_GAINS, True
+        p, v, rot, mhat, m, RING_EDGES, SQUARE, REF, gains, True
     )
+    np.testing.assert_allclose(ph, 2.0 + (weight * np.tanh(v)).sum(axis=1) / 3.0)
     vdot = -9.81 * np.array([0, 0, 1.0]) + t_n[:, None] * rot[:, :, 2] / m[:, None]
-    phidot = ((1 - np.tanh(v) ** 2) * vdot).sum(axis=1) / 3.0
+    phidot = (weight * (1 - np.tanh(v) ** 2) * vdot).sum(axis=1) / 3.0
     # WHEN mt = alpha_m mhat - phi m is differentiated
     mt = mhat - ph * m
     mt_dot = mhat_rate - phidot * m
     # THEN it obeys (37) with the corrected sign of (24)
     expected = -9.81 * (1 - np.tanh(v[:, 2]) ** 2) / (3.0 * ph) * mt
     np.testing.assert_allclose(mt_dot, expected, atol=1e-12)
-    direct = mass_estimator_rate(v, rot, t_n, mhat, ph, PAPER_GAINS)
+    direct = mass_estimator_rate(v, rot, t_n, mhat, ph, gains)
     np.testing.assert_allclose(direct, mhat_rate)
+
+
+@pytest.mark.parametrize("horizontal", [1.0, 0.0])
+def test_the_vertical_estimator_is_blind_to_tilt_and_horizontal_velocity(horizontal):
+    # GIVEN one 1 kg vehicle hovering level and still, its estimate at the truth
+    gains = PAPER_GAINS._replace(phi_horizontal=horizontal)
+    still, level, thrust = np.zeros((1, 3)), np.eye(3)[None], np.array([9.81])
+    phi_true = phi(still, 1.0, horizontal)
+    mhat = phi_true.copy()  # alpha_m mhat / phi = 1 kg
+    assert abs(mass_estimator_rate(still, level, thrust, mhat, phi_true, gains)[0]) < 1e-12
+    # WHEN the estimator reads its attitude 1 deg tilted, or its velocity 0.1 m/s off east and
+    # north (the size of PX4's estimate errors, docs/gcs.md "What the mass estimate reads")
+    tilt = np.deg2rad(1.0)
+    tilted = np.array([[[1.0, 0.0, 0.0],
+                        [0.0, np.cos(tilt), -np.sin(tilt)],
+                        [0.0, np.sin(tilt), np.cos(tilt)]]])
+    moving = np.array([[0.1, 0.1, 0.0]])
+    drift = mass_estimator_rate(still, tilted, thrust, mhat, phi_true, gains)[0] / (9.81 / 3.0)
+    jump = mhat[0] / phi(moving, 1.0, horizontal)[0] - 1.0  # alpha_m mhat / phi, at once
+    # THEN the paper's estimate drifts at sin(tilt) of the scale g / 3 and jumps by the
+    # velocity's share of phi; the vertical one drifts at 1 - cos(tilt) and does not jump
+    if horizontal == 1.0:
+        assert drift == pytest.approx(np.cos(tilt) - np.sin(tilt) - 1.0, rel=1e-9)
+        assert jump == pytest.approx(2.0 / (2.0 + 2.0 * np.tanh(0.1) / 3.0) - 1.0, rel=1e-9)
+        assert abs(drift) > 0.017 and abs(jump) > 0.03
+    else:
+        assert drift == pytest.approx(np.cos(tilt) - 1.0, rel=1e-9)
+        assert abs(drift) < 2e-4 and jump == 0.0
 
 
 def test_baseline_uses_the_nominal_mass_and_does_not_adapt():
