@@ -287,7 +287,10 @@ def real_intro(rows: list[dict], kept: list[str] = ()) -> str:
         "read the accelerometer's acceleration alone; every other row flies its default, 0.5 s. "
         "Rows labelled `phi_h 0` and px4-sih fly the file as it is, with the vertical mass "
         "estimator (controller.gains.phi_horizontal 0, docs/gcs.md \"What the mass estimate "
-        "reads\"); the other real rows were flown before it, with the paper's (1)."
+        "reads\"); the other real rows were flown before it, with the paper's (1). Rows labelled "
+        "`c 0.5` were flown with the law velocity's correction bounded at 0.5 m/s per axis "
+        "(every other row: 1.5 m/s, docs/gcs.md \"The law's velocity\"); earlier real rows "
+        "were too."
         + (" The real vehicles' rows not given by --records were measured by an earlier run "
            "with --records and are kept as they were (`--team px4-sih` alone flies the "
            "personality only)." if kept else ""))

@@ -61,6 +61,19 @@ def test_the_correction_is_bounded():
     assert f.clamped[0] > 0
 
 
+def test_a_disagreement_as_large_as_px4_sihs_is_followed_not_clamped():
+    # GIVEN the reported velocity 0.9 m/s slower east than the position's rate for 3 s, the
+    # largest low-passed disagreement of PX4 v1.16 SIH's estimates in formation flights
+    # (consistent.py, MAX_CORRECTION_MPS), at T = 0.2 s and 100 Hz
+    t = np.arange(0.0, 3.0, 0.01)
+    p = np.column_stack([0.9 * t, 0.0 * t, 0.0 * t])
+    f = VelocityConsistency(1, 0.2)
+    feed(f, t, p, np.zeros((len(t), 3)))
+    # THEN the law's velocity is the position's rate, and no update was clamped
+    assert f.velocity(np.zeros((1, 3)))[0] == pytest.approx([0.9, 0.0, 0.0], abs=1e-3)
+    assert f.clamped[0] == 0
+
+
 def test_off_is_the_reported_velocity():
     f = VelocityConsistency(1, 0.0)
     t = np.arange(0.0, 2.0, 0.01)
