@@ -326,7 +326,10 @@ def section(rows: list[dict], duration_s: float, heading: str = HEADING,
         "vehicles of |mhat - m| / m at 20 s (ArduPilot: of m / 1.069, the thrust-equivalent "
         "mass). From t = 10 s to the formation's end (not the landing): rate limit, the share "
         "of setpoints with the roll/pitch rate command at its limit, worst vehicle; heading, "
-        "the largest |yaw - yaw at the formation start| (ATTITUDE_QUATERNION).",
+        "the largest |yaw - yaw at the formation start| (ATTITUDE_QUATERNION). The file keeps "
+        "the paper's mass estimator (controller.gains.phi_horizontal 1), whose estimate wanders "
+        "with PX4's tilt and velocity errors; the docs' file for real PX4 flies the vertical one "
+        "(\"Real PX4 SIH and the px4 personality\" below).",
         "",
     ] + table(rows)
     return "\n".join(lines) + "\n"
