@@ -1079,3 +1079,20 @@ def test_the_frame_section_defaults_to_own_origins_at_px4_sitl_home_and_checks_i
     raises_at(edit(base(), "frame.origin", [95.0, 4.5, 3.0]),
               r"frame\.origin: \[lat_deg, lon_deg, alt_m\]: latitude 95\.0 outside \[-90, 90\]")
     raises_at(edit(base(), "frame.vehicles", "mine"), r"frame\.vehicles: expected one of")
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.tuples(*(st.floats(-20.0, 20.0),) * 3), st.floats(0.0, 1.0), st.floats(0.5, 2.0))
+def test_proposition2s_phi0_is_the_laws_phi(velocity, horizontal, sigma_a):
+    # GIVEN a vehicle starting at any velocity, any estimator weight and saturation bound
+    from gcs.config.schema import initial_phi
+    from gcs.control.position import phi
+
+    data = base()
+    data["controller"]["gains"].update(phi_horizontal=horizontal, sigma_a=sigma_a, alpha_p=1.0)
+    data["vehicles"][0]["initial"]["velocity_enu_mps"] = list(velocity)
+    data["vehicles"][0]["estimates"]["mhat"] = 10.0  # Proposition 2 holds at any phi(0) < 3
+    team = team_from_dict(data)
+    # THEN the phi(0) the config checks Proposition 2 with is the one the law computes
+    law = phi(np.array([velocity]), sigma_a, horizontal)[0]
+    assert initial_phi(team.vehicles[0], team.controller.gains) == pytest.approx(law, rel=1e-12)
