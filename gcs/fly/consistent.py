@@ -17,9 +17,10 @@ the law is unchanged; the linearised loops of the cascade criterion are unchange
 
 The mismatch is measured between consecutive position samples the ground station read (the
 vehicle's own stamps on the ground station's clock), by the trapezoid rule on the two velocities.
-A pair further apart than MAX_GAP_S, or whose mismatch exceeds MAX_MISMATCH_MPS (an estimator
-reset: the position jumped), updates nothing and is counted; c is bounded to MAX_CORRECTION_MPS
-per axis, so a misbehaving estimator can shift the law's velocity by that much at most.
+A pair further apart than MAX_GAP_S, or whose mismatch exceeds VELOCITY_JUMP_MPS (an estimator
+reset: the position jumped), updates nothing and is counted; c is bounded to VELOCITY_MAX_MPS
+per axis (both bounds in gcs/control/consistency.py, which gcs sim's copy of this filter reads
+too), so a misbehaving estimator can shift the law's velocity by that much at most.
 
 The law's acceleration (its u', u'' of docs/control-law.md) is made consistent with that velocity
 by the same filter one derivative down (`AccelerationConsistency`): gcs fly turns the
@@ -40,18 +41,15 @@ from typing import Any
 
 import numpy as np
 
+from gcs.control.consistency import (
+    ACCELERATION_JUMP_MPS2,
+    ACCELERATION_MAX_MPS2,
+    VELOCITY_JUMP_MPS,
+    VELOCITY_MAX_MPS,
+)
+
 #: Two samples further apart than this [s] measure no mismatch (a gap in the telemetry).
 MAX_GAP_S = 0.25
-#: A mismatch above this [m/s, any axis] is a position reset (a jump), not a rate: skipped.
-MAX_MISMATCH_MPS = 5.0
-#: The largest correction [m/s per axis] the filter applies: above what PX4 v1.16 SIH's estimates
-#: disagree by in formation (its low-passed mismatch reached 0.9 m/s per axis, and passed 0.5 m/s
-#: on 4-13 % of the samples), so the filter follows that estimator and bounds a stranger one.
-MAX_CORRECTION_MPS = 1.5
-#: The acceleration's: a velocity step (an estimator reset) and the largest correction [m/s^2]
-#: (a 0.3 rad attitude error reads as 3 m/s^2)
-MAX_ACCEL_MISMATCH_MPS2 = 30.0
-MAX_ACCEL_CORRECTION_MPS2 = 3.0
 
 
 class Consistency:
@@ -137,7 +135,7 @@ class VelocityConsistency(Consistency):
     above (fly.velocity_from_position_s)."""
 
     def __init__(self, n: int, time_constant_s: float) -> None:
-        super().__init__(n, time_constant_s, MAX_MISMATCH_MPS, MAX_CORRECTION_MPS, "mps")
+        super().__init__(n, time_constant_s, VELOCITY_JUMP_MPS, VELOCITY_MAX_MPS, "mps")
 
     @property
     def correction_mps(self) -> np.ndarray:
@@ -153,5 +151,5 @@ class AccelerationConsistency(Consistency):
     reading (turned by the reported attitude) above (fly.acceleration_from_velocity_s)."""
 
     def __init__(self, n: int, time_constant_s: float) -> None:
-        super().__init__(n, time_constant_s, MAX_ACCEL_MISMATCH_MPS2,
-                         MAX_ACCEL_CORRECTION_MPS2, "mps2")
+        super().__init__(n, time_constant_s, ACCELERATION_JUMP_MPS2,
+                         ACCELERATION_MAX_MPS2, "mps2")

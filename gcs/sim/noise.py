@@ -45,6 +45,13 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from gcs.control.consistency import (
+    ACCELERATION_JUMP_MPS2,
+    ACCELERATION_MAX_MPS2,
+    VELOCITY_JUMP_MPS,
+    VELOCITY_MAX_MPS,
+)
+
 #: Processes per vehicle and tick: 3 gyro, 3 integrated-gyro tilt, 3 slow attitude, 3 fast
 #: velocity, 3 velocity drift, 3 accelerometer.
 DRAWS = 18
@@ -191,15 +198,6 @@ def noise_draws(seed: int, ticks: int, n: int, model: NoiseModel | None = None) 
     return np.random.default_rng([seed, 1]).standard_normal((ticks, n, count))
 
 
-#: gcs fly's bounds on the consistency corrections (gcs/fly/consistent.py): |c| per axis, and
-#: the largest mismatch an update takes (an estimator reset is skipped); of the velocity [m/s]
-#: and of the acceleration [m/s^2]
-CONSISTENCY_MAX_MPS = 0.5
-CONSISTENCY_JUMP_MPS = 5.0
-ACCEL_CONSISTENCY_MAX_MPS2 = 3.0
-ACCEL_CONSISTENCY_JUMP_MPS2 = 30.0
-
-
 @njit(cache=True)
 def _complementary(time_constant_s, c, last, x, rate, tick_s, max_c, jump_at, out):
     """gcs fly's consistency filter (gcs/fly/consistent.py) for one vehicle: out = rate + c, c
@@ -266,11 +264,11 @@ def add_telemetry_errors(noise, tick, p, v, rot, w, acc, g, tick_s):
             rot_out[i] = rot[i] @ turn
         _reported_acceleration(noise, d, rot[i], rot_out[i], acc[i], g, acc_out[i])
         _complementary(noise.consistency_s, noise.consistency[i], noise.last[i], p_out[i],
-                       v_out[i].copy(), tick_s, CONSISTENCY_MAX_MPS, CONSISTENCY_JUMP_MPS,
+                       v_out[i].copy(), tick_s, VELOCITY_MAX_MPS, VELOCITY_JUMP_MPS,
                        v_out[i])
         _complementary(noise.accel_consistency_s, noise.accel_consistency[i],
                        noise.accel_last[i], v_out[i], acc_out[i].copy(), tick_s,
-                       ACCEL_CONSISTENCY_MAX_MPS2, ACCEL_CONSISTENCY_JUMP_MPS2, acc_out[i])
+                       ACCELERATION_MAX_MPS2, ACCELERATION_JUMP_MPS2, acc_out[i])
     return p_out, v_out, rot_out, w_out, acc_out
 
 

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from gcs.fly.consistent import MAX_CORRECTION_MPS, VelocityConsistency
+from gcs.control.consistency import VELOCITY_MAX_MPS
+from gcs.fly.consistent import VelocityConsistency
 
 
 def feed(f: VelocityConsistency, t: np.ndarray, p: np.ndarray, v: np.ndarray) -> None:
@@ -57,14 +58,14 @@ def test_the_correction_is_bounded():
     p = np.column_stack([2.0 * t, 0.0 * t, 0.0 * t])  # the position runs 2 m/s, velocity says 0
     f = VelocityConsistency(1, 1.0)
     feed(f, t, p, v)
-    assert f.correction_mps[0, 0] == MAX_CORRECTION_MPS
+    assert f.correction_mps[0, 0] == VELOCITY_MAX_MPS
     assert f.clamped[0] > 0
 
 
 def test_a_disagreement_as_large_as_px4_sihs_is_followed_not_clamped():
     # GIVEN the reported velocity 0.9 m/s slower east than the position's rate for 3 s, the
     # largest low-passed disagreement of PX4 v1.16 SIH's estimates in formation flights
-    # (consistent.py, MAX_CORRECTION_MPS), at T = 0.2 s and 100 Hz
+    # (gcs/control/consistency.py, VELOCITY_MAX_MPS), at T = 0.2 s and 100 Hz
     t = np.arange(0.0, 3.0, 0.01)
     p = np.column_stack([0.9 * t, 0.0 * t, 0.0 * t])
     f = VelocityConsistency(1, 0.2)
@@ -114,3 +115,22 @@ def test_a_velocity_step_is_a_reset_not_an_acceleration():
     assert f.resets[0] == 1 and not f.correction.any()
     f.update(np.array([[0.5, 0.0, 0.0]]), np.array([[np.nan, 0.0, 0.0]]), np.array([0.02]), ok)
     assert not f.correction.any()  # a NaN reading is not a sample
+
+
+@pytest.mark.parametrize("rate_mps", [0.3, 0.9, 2.0, 6.0])
+def test_gcs_sims_filter_is_gcs_flys_on_the_same_samples(rate_mps):
+    # GIVEN a position running east at rate_mps while the reported velocity says 0: followed
+    # (0.3, 0.9 m/s), clamped (2 m/s) or a jump every pair (6 m/s, above VELOCITY_JUMP_MPS)
+    from gcs.sim.noise import _complementary
+
+    t = np.arange(0.0, 4.0, 0.01)
+    p = np.column_stack([rate_mps * t, 0.0 * t, -0.1 * t])
+    fly = VelocityConsistency(1, 0.2)
+    c, last, out = np.zeros(3), np.full(6, np.nan), np.empty(3)
+    for k in range(len(t)):
+        fly.update(p[k][None], np.zeros((1, 3)), np.array([t[k]]), np.array([True]))
+        _complementary(0.2, c, last, p[k], np.zeros(3), 0.01, VELOCITY_MAX_MPS, 5.0, out)
+        # THEN gcs sim's compiled copy reads the law's velocity as gcs fly does, tick by tick
+        assert out == pytest.approx(fly.velocity(np.zeros((1, 3)))[0], abs=1e-12)
+    assert out[0] == pytest.approx(min(rate_mps, VELOCITY_MAX_MPS) if rate_mps < 5 else 0.0,
+                                   abs=1e-3)
