@@ -51,13 +51,13 @@ def nominal_team(gcs_base: int, bind_base: int, duration_s: float) -> dict:
 
 
 def fly_across(bed: Testbed, tmp: Path, name: str, transport: str = "udp-mixed",
-               clock_sync: bool = True) -> dict:
+               clocks: str = "measured") -> dict:
     """Scenario I (45 s, rates, hold at the end) flown by two agent processes, vehicles 1 and 3
     in host 1 and 2 and 4 in host 2, each beside its vehicles, supervised from host 3; returns
     the merged report (per edge figures under extra.edges); FlightFailed if the supervisor
-    exits non-zero. `clock_sync` False: network.clock_sync false, every process's clock taken
-    as one (true here: the hosts are namespaces of one kernel), so that a flight shows what the
-    network costs without the clock offsets estimated through it."""
+    exits non-zero. `clocks`: network.clocks; disciplined (the hosts' system clocks agree: true
+    here, the hosts are namespaces of one kernel) or one-host (their monotonic clocks are one)
+    show what the network costs without the clock offsets estimated through it."""
     base = tmp / name
     base.mkdir()
     team = base / "team.yaml"
@@ -86,7 +86,7 @@ def fly_across(bed: Testbed, tmp: Path, name: str, transport: str = "udp-mixed",
 
     data["network"] = {
         "agents": {v: {"listen": [endpoint(h)]} for h, vs in HOSTS.items() for v in vs},
-        "supervisor": {"listen": [endpoint(SUPERVISOR_HOST)]}, "clock_sync": clock_sync}
+        "supervisor": {"listen": [endpoint(SUPERVISOR_HOST)]}, "clocks": clocks}
     team.write_text(yaml.safe_dump(data, sort_keys=False))
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     procs = []

@@ -34,6 +34,7 @@ from gcs.agent.session import (
     Clock,
     Keys,
     agent_endpoints,
+    wire_shift,
 )
 from gcs.agent.table import SampleTable
 from gcs.agent.wire import SUPERVISOR_ID, StateSample, WireError, encode
@@ -70,12 +71,12 @@ class NeighbourBus(BusSession):
     `neighbour_ids` (state keys of no other vehicle are subscribed to) and the supervisor.
     `control`: the supervisor's gates (each name once, from a Gate or a heartbeat) and its
     abort (once), in arrival order; `gates`: every gate open so far -> when it opened (the
-    supervisor's clock; `to_local(SUPERVISOR_ID, t)` converts it)."""
+    supervisor's wire clock; `to_local(SUPERVISOR_ID, t)` converts it)."""
 
     def __init__(self, network: NetworkConfig, team_name: str, team_ids: Sequence[int],
                  own_ids: Collection[int], neighbour_ids: Collection[int], *,
-                 clock: Clock = time.monotonic, epoch: int | None = None,
-                 control_queue_size: int = 256) -> None:
+                 clock: Clock = time.monotonic, system_clock: Clock = time.time,
+                 epoch: int | None = None, control_queue_size: int = 256) -> None:
         team_ids = tuple(team_ids)
         strangers = sorted(set(own_ids) - set(team_ids) | set(neighbour_ids) - set(team_ids))
         if not own_ids or strangers:
@@ -86,7 +87,9 @@ class NeighbourBus(BusSession):
         self.own_ids = tuple(sorted(own_ids))
         self.neighbour_ids = tuple(sorted(neighbour_ids))
         table = SampleTable((*self.neighbour_ids, SUPERVISOR_ID), local_ids=self.own_ids,
-                            team_ids=team_ids, clock_sync=network.clock_sync)
+                            team_ids=team_ids, clocks=network.clocks,
+                            tolerance_s=network.clock_tolerance_s,
+                            wire_shift=wire_shift(network.clocks, clock, system_clock))
         super().__init__(agent_endpoints(network, team_ids, self.own_ids),
                          Keys(network.key_root(team_name)), table, clock=clock, epoch=epoch)
         self.team_ids = team_ids
@@ -103,10 +106,12 @@ class NeighbourBus(BusSession):
 
     @classmethod
     def for_team(cls, team: TeamConfig, own_ids: Collection[int], *,
-                 clock: Clock = time.monotonic, epoch: int | None = None) -> NeighbourBus:
+                 clock: Clock = time.monotonic, system_clock: Clock = time.time,
+                 epoch: int | None = None) -> NeighbourBus:
         """The bus of `own_ids` in `team`: its network section, its graph's neighbours."""
         return cls(team.network, team.name, team.ids(), own_ids,
-                   graph_neighbours(team, own_ids), clock=clock, epoch=epoch)
+                   graph_neighbours(team, own_ids), clock=clock, system_clock=system_clock,
+                   epoch=epoch)
 
     def _declare(self) -> None:
         for k, vid in enumerate(self.own_ids):
@@ -127,15 +132,17 @@ class NeighbourBus(BusSession):
     def publish(self, vehicle_id: int, taken_s: float, position_enu_m: ArrayLike,
                 velocity_enu_mps: ArrayLike, acceleration_enu_mps2: ArrayLike,
                 attitude_wxyz: ArrayLike, omega_flu_radps: ArrayLike) -> StateSample:
-        """Publish own vehicle `vehicle_id`'s state, taken at `taken_s` (this process's clock):
+        """Publish own vehicle `vehicle_id`'s state, taken at `taken_s` (this process's clock;
+        the sample carries it and its send time on the wire clock, gcs/agent/table.py):
         world ENU position [m], velocity [m/s], acceleration [m/s^2], the FLU -> ENU attitude
         quaternion (w first) and the FLU body rates [rad/s]. It carries the next seq and an
         echo of every neighbour's (and the supervisor's) latest message. WireError for a value
         that is not finite; returns the sample sent."""
         self._own(vehicle_id)
         now = self.clock()
+        shift = self.table.wire_shift()
         sample = StateSample(
-            vehicle_id, self.epoch, self._seq[vehicle_id], float(taken_s), now,
+            vehicle_id, self.epoch, self._seq[vehicle_id], float(taken_s) + shift, now + shift,
             _floats(position_enu_m, 3), _floats(velocity_enu_mps, 3),
             _floats(acceleration_enu_mps2, 3), _floats(attitude_wxyz, 4),
             _floats(omega_flu_radps, 3), self.table.echoes(now, vehicle_id))
@@ -151,7 +158,7 @@ class NeighbourBus(BusSession):
         Status's other fields, e.g. exit_code, done, records); WireError for a text the
         message cannot carry (empty, over 300 characters)."""
         self._own(vehicle_id)
-        status = Status(vehicle_id, self._status_seq[vehicle_id], self.clock(), phase,
+        status = Status(vehicle_id, self._status_seq[vehicle_id], self.wire_s(self.clock()), phase,
                         waiting_gate, outcome, tuple(self.stats().values()), **more)
         data = encode_control(status)
         self._status_pubs[vehicle_id].put(data)
@@ -228,8 +235,8 @@ class NeighbourBus(BusSession):
         return self.supervisor_age_s(now_s) > self.network.supervisor_lost_after_s
 
     def to_local(self, vehicle_id: int, peer_s: float) -> float:
-        """Time `peer_s` of `vehicle_id`'s clock (SUPERVISOR_ID: the supervisor's) on this
-        process's clock; -inf before its offset is known."""
+        """Time `peer_s` of `vehicle_id`'s wire clock (SUPERVISOR_ID: the supervisor's) on this
+        process's clock; -inf while its offset is not known."""
         return self.table.to_local(vehicle_id, peer_s)
 
     def supervisor_instant(self, supervisor_s: float) -> float:

@@ -49,8 +49,9 @@ class OffsetEstimator:
         # a ring of the last `window` exchanges: offset, round trip, our time of arrival
         self._ring = np.full((3, window), np.nan)
         self._next = 0
-        # offset, bound, least rtt, the faster half's median before it is kept in the bound
-        self._estimate: tuple[float, float, float, float] | None = None
+        # offset, bound, least rtt, the faster half's median before it is kept in the bound,
+        # and the interval's low and high ends
+        self._estimate: tuple[float, float, float, float, float, float] | None = None
         self._stale = False
         self.total = 0  # exchanges accepted since the start or the last reset
         self.refused = 0  # exchanges refused: not finite, or a negative round trip
@@ -88,7 +89,7 @@ class OffsetEstimator:
             return ring
         return ring[:, ring[2] >= np.max(ring[2]) - self.max_age_s]
 
-    def _current(self) -> tuple[float, float, float] | None:
+    def _current(self) -> tuple[float, float, float, float, float, float] | None:
         if self._stale:
             self._stale = False
             offset, rtt, _ = self._window()
@@ -102,7 +103,8 @@ class OffsetEstimator:
                 best = int(np.argmin(rtt))
                 estimate, bound = float(offset[best]), float(rtt[best]) / 2.0
                 median = estimate
-            self._estimate = (estimate, bound, float(np.min(rtt)), median)
+                low, high = estimate - bound, estimate + bound
+            self._estimate = (estimate, bound, float(np.min(rtt)), median, low, high)
         return self._estimate
 
     @property
@@ -141,6 +143,14 @@ class OffsetEstimator:
         before the first exchange."""
         current = self._current()
         return None if current is None else current[1]
+
+    @property
+    def interval_s(self) -> tuple[float, float] | None:
+        """The offsets every exchange in the window allows, (low, high) [s] (the fastest
+        exchange's when they contradict each other); None before the first exchange. The true
+        offset lies inside whatever the paths' asymmetry: only its width depends on it."""
+        current = self._current()
+        return None if current is None else (current[4], current[5])
 
     def to_local(self, peer_s: float) -> float:
         """Time `peer_s` of the peer's clock on ours; LookupError before the first exchange."""

@@ -6,7 +6,7 @@ abort order if any, and an echo of each vehicle's newest state sample for the ag
 offsets), `gate` (a gate opens now) and `abort`. Agent -> supervisor, on
 `<root>/agent/<id>/status`: `status` (phase, the gate it waits at, its outcome, its edges'
 figures). A gate or an abort sent once is repeated in every later heartbeat, so a lost message
-costs one heartbeat period. Times are the sender's monotonic clock [s].
+costs one heartbeat period. Times are the sender's wire clock [s] (gcs/agent/table.py).
 """
 
 from __future__ import annotations
@@ -82,8 +82,9 @@ class Abort:
 class EdgeFigures:
     """What one process received from one neighbour: samples accepted, lost (gaps in seq),
     duplicates or out of order (dropped), corrupt (WireError; the last reason), restarts (a
-    new epoch), and the neighbour's clock offset (its clock - ours) with a bound on its error
-    (gcs/agent/clocks.py), None before the first echo."""
+    new epoch), and the neighbour's clock offset as the echoes measure it (its wire clock -
+    ours, gcs/agent/table.py: with clocks disciplined, how far the two system clocks disagree)
+    with a bound on its error (gcs/agent/clocks.py), None before the first echo."""
 
     neighbour_id: int
     received: int = 0

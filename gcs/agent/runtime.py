@@ -103,7 +103,10 @@ class TeamWatch:
             missing = self.unheard(self.clock())
             if missing:  # not ready for the team until its neighbours' states arrive
                 waiting = None
-                text = f"waiting for neighbours {', '.join(map(str, missing))} on the bus"
+                problems = [p for vid in missing
+                            if (p := self.bus.table.clock_problem(vid)) is not None]
+                text = (problems[0] if problems else
+                        f"waiting for neighbours {', '.join(map(str, missing))} on the bus")
         for vid in self.rows.own_ids:
             self.bus.publish_status(
                 vid, m.phase.value, waiting,
@@ -113,15 +116,17 @@ class TeamWatch:
 
     def unheard(self, now_s: float) -> list[int]:
         """The neighbours whose latest state is older than fly.link_lost_after_s (or never
-        arrived with a known clock offset): the agent does not report itself ready at a
-        gate while there are any."""
+        arrived with a known clock offset), or whose clock is not yet known to agree with
+        ours (network.clocks disciplined): the agent does not report itself ready at a gate
+        while there are any."""
         if not self.rows.neighbour_ids:
             return []
         state = self.bus.rows(self.rows.neighbour_ids, now_s)
         ages = now_s - state.taken_local_s
         bound = self.team.fly.link_lost_after_s
+        table = self.bus.table
         return [vid for vid, a in zip(self.rows.neighbour_ids, ages, strict=True)
-                if not a <= bound]
+                if not a <= bound or not table.clock_known(vid)]
 
     def _note(self, what: str, **kw: Any) -> None:
         self.events.append({"t_since_start_s": round(self.clock() - self.started_s, 3),
@@ -141,7 +146,7 @@ class TeamWatch:
                 at = self.bus.supervisor_instant(order.opened_s)
                 if not math.isfinite(at):  # no clock offset yet: the order's own send time
                     at = now_s + (order.opened_s - order.sent_s)
-                self.start_offset_s = order.opened_s - at
+                self.start_offset_s = order.opened_s - self.bus.wire_s(at)
             m.open_gate(order.name, at)
             share_with_threads()  # threads the bus started for new connections since
             self._note(f"gate {order.name} opened by the supervisor",
@@ -180,11 +185,16 @@ class TeamWatch:
             late = [(vid, float(a)) for vid, a in zip(self.rows.neighbour_ids, ages, strict=True)
                     if not a <= bound]
             if late:
-                words = ", ".join(
-                    f"vehicle {vid} ({f'{a:.2f} s' if math.isfinite(a) else 'never heard'})"
-                    for vid, a in late)
+                words = ", ".join(f"vehicle {vid} ({self._lateness(vid, a)})" for vid, a in late)
                 self._stop(f"neighbour lost: {words} older than {bound:g} s "
                            "(fly.link_lost_after_s)")
+
+    def _lateness(self, vid: int, age_s: float) -> str:
+        """How late neighbour `vid`'s state is, or why it has no time here."""
+        if math.isfinite(age_s):
+            return f"{age_s:.2f} s"
+        problem = self.bus.table.clock_problem(vid)
+        return "never heard" if problem is None else problem
 
     async def run(self, finished: asyncio.Event) -> None:
         """Until the flight is done: the supervisor's orders, the loss rules, the status."""
@@ -241,7 +251,11 @@ class TeamWatch:
                           "unpublished_samples": self.rows.unpublished,
                           "bus_traffic": dict(self.bus.traffic),
                           "cpu_s": _cpu_s(), "wall_s": round(self.clock() - self.started_s, 3),
+                          "clocks": self.bus.table.clocks.value,
                           "supervisor_offset_s": self.bus.offset(SUPERVISOR_ID),
+                          # the echoes' measure of the supervisor's wire clock minus ours
+                          "supervisor_offset_measured_s":
+                              self.bus.table.clock(SUPERVISOR_ID).offset_s,
                           "formation_start_offset_s": self.start_offset_s,
                           "control_corrupt": self.bus.control_corrupt,
                           "events": self.events}}

@@ -23,14 +23,25 @@ from typing import Any, Self
 import zenoh
 
 from gcs.agent.control import EdgeFigures
-from gcs.agent.table import Rows, SampleTable
+from gcs.agent.table import Rows, SampleTable, no_shift
 from gcs.agent.wire import SUPERVISOR_ID
-from gcs.config.modes import NetworkMode
+from gcs.config.modes import ClockMode, NetworkMode
 from gcs.config.network_schema import NetworkConfig
 
 log = logging.getLogger(__name__)
 
 Clock = Callable[[], float]
+
+
+def wire_shift(clocks: ClockMode, clock: Clock = time.monotonic,
+               system_clock: Clock = time.time) -> Clock:
+    """What a process adds to its `clock` to stamp its messages (gcs/agent/table.py, the wire
+    clock): with clocks disciplined the system clock's lead over it (CLOCK_REALTIME, which
+    PTP and chrony discipline), read at each use, so that a slewed system clock is followed;
+    else 0."""
+    if ClockMode(clocks) is not ClockMode.DISCIPLINED:
+        return no_shift
+    return lambda: system_clock() - clock()
 #: A subscriber's delivery on the event loop: (the sample's key, its bytes, receive time).
 Deliver = Callable[[str, bytes, float], None]
 
@@ -226,6 +237,10 @@ class BusSession(abc.ABC):
 
         self._entities.append(self.session.declare_subscriber(key, on_sample))
 
+    def wire_s(self, local_s: float) -> float:
+        """Time `local_s` of this process's clock as its messages carry it (the wire clock)."""
+        return local_s + self.table.wire_shift()
+
     def _on_state(self, vehicle_id: int, data: bytes, received_s: float) -> None:
         if self.table.receive(vehicle_id, data, received_s) is not None:
             self._heard.set()
@@ -244,8 +259,9 @@ class BusSession(abc.ABC):
         return self.table.rows(ids, now_s)
 
     def offset(self, vehicle_id: int) -> float | None:
-        """`vehicle_id`'s clock minus this process's (SUPERVISOR_ID: the supervisor's), as the
-        rows use it: None before the first echo; 0 with network.clock_sync false."""
+        """`vehicle_id`'s wire clock minus this process's (SUPERVISOR_ID: the supervisor's), as
+        the rows use it: None before the first echo (measured) or while its clock has a problem
+        (disciplined); else 0 with network.clocks disciplined or one-host."""
         return self.table.offset(vehicle_id)
 
     def stats(self) -> dict[int, EdgeFigures]:

@@ -28,7 +28,7 @@ from gcs.agent.control import (
     decode_control,
     encode_control,
 )
-from gcs.agent.session import BusSession, Clock, Keys, supervisor_endpoints
+from gcs.agent.session import BusSession, Clock, Keys, supervisor_endpoints, wire_shift
 from gcs.agent.table import SampleTable
 from gcs.agent.wire import SUPERVISOR_ID, WireError
 from gcs.config.modes import FlyAction
@@ -48,12 +48,13 @@ class SupervisorBus(BusSession):
     it, with the last key."""
 
     def __init__(self, network: NetworkConfig, team_name: str, team_ids: Sequence[int], *,
-                 clock: Clock = time.monotonic, epoch: int | None = None,
-                 status_queue_size: int = 4096) -> None:
+                 clock: Clock = time.monotonic, system_clock: Clock = time.time,
+                 epoch: int | None = None, status_queue_size: int = 4096) -> None:
         self.network = network
         self.team_ids = tuple(team_ids)
         table = SampleTable(self.team_ids, local_ids=(SUPERVISOR_ID,), team_ids=self.team_ids,
-                            clock_sync=network.clock_sync)
+                            clocks=network.clocks, tolerance_s=network.clock_tolerance_s,
+                            wire_shift=wire_shift(network.clocks, clock, system_clock))
         super().__init__(supervisor_endpoints(network, self.team_ids),
                          Keys(network.key_root(team_name)), table, clock=clock, epoch=epoch)
         self.statuses: dict[int, Status] = {}
@@ -71,8 +72,9 @@ class SupervisorBus(BusSession):
 
     @classmethod
     def for_team(cls, team: TeamConfig, *, clock: Clock = time.monotonic,
-                 epoch: int | None = None) -> SupervisorBus:
-        return cls(team.network, team.name, team.ids(), clock=clock, epoch=epoch)
+                 system_clock: Clock = time.time, epoch: int | None = None) -> SupervisorBus:
+        return cls(team.network, team.name, team.ids(), clock=clock, system_clock=system_clock,
+                   epoch=epoch)
 
     def _declare(self) -> None:
         self._pub = self.publisher(self.keys.supervisor, express=False)
@@ -129,12 +131,13 @@ class SupervisorBus(BusSession):
     def open_gate(self, name: str, at_s: float | None = None) -> Gate:
         """Open gate `name` now, or at `at_s` (both the supervisor's clock: a formation start
         agreed ahead), and tell the agents; every later heartbeat repeats it. Opening an open
-        gate sends it again with its first time."""
+        gate sends it again with its first time. `gates` and the messages hold the times on
+        the wire clock (gcs/agent/table.py)."""
         opened = {g.name: g.opened_s for g in self.gates}
         if name not in opened:
-            opened[name] = self.clock() if at_s is None else at_s
+            opened[name] = self.wire_s(self.clock() if at_s is None else at_s)
             self.gates = (*self.gates, OpenGate(name, opened[name]))
-        gate = Gate(self._seq, self.clock(), name, opened[name])
+        gate = Gate(self._seq, self.wire_s(self.clock()), name, opened[name])
         self._send(gate)
         return gate
 
@@ -142,9 +145,9 @@ class SupervisorBus(BusSession):
         """Tell every agent to stop the formation and do `action`; later heartbeats repeat
         it. A second abort repeats the first one's reason and action."""
         if self.abort_order is None:
-            self.abort_order = Abort(self._seq, self.clock(), reason, action)
+            self.abort_order = Abort(self._seq, self.wire_s(self.clock()), reason, action)
         order = self.abort_order
-        message = Abort(self._seq, self.clock(), order.reason, order.action)
+        message = Abort(self._seq, self.wire_s(self.clock()), order.reason, order.action)
         self._send(message)
         return message
 
@@ -155,7 +158,7 @@ class SupervisorBus(BusSession):
         a heartbeat stays one echo per vehicle)."""
         now = self.clock()
         order = self.abort_order
-        beat = Heartbeat(self._seq, now, self.gates, order and order.reason,
+        beat = Heartbeat(self._seq, self.wire_s(now), self.gates, order and order.reason,
                          order and order.action, self.table.echoes(now, SUPERVISOR_ID, 1))
         self._send(beat)
         return beat

@@ -1,24 +1,49 @@
 """The latest state sample of each vehicle a process hears, and what it received from each
 (pure: every time is an argument, on this process's monotonic clock): the latest sample wins by
 seq, gaps in seq count as lost, older or repeated ones as duplicates, undecodable ones as
-corrupt with their reason; each sender's clock offset from the echoes it carries."""
+corrupt with their reason; each sender's clock offset from the echoes it carries.
+
+The times a message carries are on its sender's *wire clock*: its monotonic clock, or, with
+network.clocks disciplined, its system clock (the monotonic one plus `wire_shift()`, the
+system clock's lead over it, read when needed). The echoes measure the offset between two
+processes' wire clocks. How a sender's times reach this process's clock (ClockMode):
+
+- measured: by that offset, estimated (gcs/agent/clocks.py);
+- disciplined: by none (the hosts' clocks agree, as PTP or chrony keep them), less our own
+  shift; the exchanges only check it: a sender whose offset every one of at least
+  CHECK_EXCHANGES exchanges puts further than `tolerance_s` from 0 has a `clock_problem`, and
+  its samples get no time here (they are stale, never flown on). The check reads the interval
+  the exchanges allow, not the estimate: a path slower one way than the other moves the
+  estimate by half the difference (the supervisor's link plain and an agent's delayed 20 ms
+  reads as a 10 ms offset), but never moves the true offset out of that interval;
+- one-host: by none (every process's monotonic clock is one).
+"""
 
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Collection, Iterable, Sequence
+from collections.abc import Callable, Collection, Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from gcs.agent.clocks import OffsetEstimator
 from gcs.agent.control import MAX_TEXT, EdgeFigures
-from gcs.agent.wire import Echo, StateSample, WireError, decode
+from gcs.agent.wire import SUPERVISOR_ID, Echo, StateSample, WireError, decode
+from gcs.config.modes import ClockMode
 
 #: Messages of one sender kept to echo. A process echoes each message once per own publisher
 #: (gcs/agent/clocks.py says why every one); one that publishes less often than the sender
 #: echoes only the newest this many.
 ECHO_BACKLOG = 16
+#: With clocks disciplined: the exchanges a sender's clock is checked on before it is judged
+#: (a fraction of a second at the tick rate; the median of fewer is at the mercy of the jitter).
+CHECK_EXCHANGES = 16
+
+
+def no_shift() -> float:
+    """The wire clock is the monotonic one."""
+    return 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,15 +95,20 @@ class SampleTable:
     """The senders `senders` as this process hears them. `local_ids`: the ids whose messages
     this process sends (its own vehicles, or the supervisor's id): an echo naming one of them
     is an exchange with its sender. `team_ids`: the ids a sample's vehicle and echoes may
-    name. `clock_sync` False: every sender's clock is taken as this one's (one host)."""
+    name. `clocks`, `tolerance_s` and `wire_shift`: how senders' times reach this process's
+    clock (module docstring); `wire_shift` is used with clocks disciplined only."""
 
     def __init__(self, senders: Iterable[int], *, local_ids: Collection[int],
-                 team_ids: Collection[int] | None = None, clock_sync: bool = True) -> None:
+                 team_ids: Collection[int] | None = None,
+                 clocks: ClockMode = ClockMode.MEASURED, tolerance_s: float = 0.005,
+                 wire_shift: Callable[[], float] = no_shift) -> None:
         self._edges = {vid: _Edge() for vid in senders}
         self._echoed: dict[int, dict[int, int]] = {}  # publisher -> sender -> last echoed
         self.local_ids = frozenset(local_ids)
         self.team_ids = None if team_ids is None else frozenset(team_ids)
-        self.clock_sync = clock_sync
+        self.clocks = ClockMode(clocks)
+        self.tolerance_s = tolerance_s
+        self.wire_shift = wire_shift if self.clocks is ClockMode.DISCIPLINED else no_shift
 
     @property
     def senders(self) -> tuple[int, ...]:
@@ -127,15 +157,18 @@ class SampleTable:
 
     def heard(self, vid: int, sent_s: float, received_s: float,
               echoes: Sequence[Echo] = ()) -> None:
-        """A message from `vid` sent at `sent_s` (its clock) arrived at `received_s` (ours),
-        carrying `echoes`: each that names one of `local_ids` is a clock exchange."""
+        """A message from `vid` sent at `sent_s` (its wire clock) arrived at `received_s`
+        (ours), carrying `echoes`: each that names one of `local_ids` is a clock exchange
+        between the two wire clocks."""
         edge = self._edge(vid)
         edge.last_received_s = received_s
         edge.heard_count += 1
         edge.backlog.append((edge.heard_count, sent_s, received_s))
-        for e in echoes:
-            if e.peer_id in self.local_ids:
-                edge.clock.add(e.sent_s, sent_s - e.held_s, sent_s, received_s)
+        exchanges = [e for e in echoes if e.peer_id in self.local_ids]
+        if exchanges:
+            received_wire_s = received_s + self.wire_shift()
+            for e in exchanges:
+                edge.clock.add(e.sent_s, sent_s - e.held_s, sent_s, received_wire_s)
 
     def echoes(self, now_s: float, publisher: int,
                per_sender: int = ECHO_BACKLOG) -> tuple[Echo, ...]:
@@ -164,21 +197,64 @@ class SampleTable:
         return self._edge(vid).last_received_s
 
     def offset(self, vid: int) -> float | None:
-        """The offset used to convert `vid`'s times (its clock - ours): the measured one, None
-        before the first exchange; 0 without clock synchronisation."""
-        return self._edge(vid).clock.offset_s if self.clock_sync else 0.0
+        """The offset used to convert `vid`'s times (its wire clock - ours): the measured one
+        (None before the first exchange); 0 with clocks disciplined (None while `vid` has a
+        clock problem) or on one host."""
+        if self.clocks is ClockMode.MEASURED:
+            return self._edge(vid).clock.offset_s
+        if self.clocks is ClockMode.DISCIPLINED and self.clock_problem(vid) is not None:
+            return None
+        return 0.0
 
     def to_local(self, vid: int, peer_s: float) -> float:
-        """Time `peer_s` of `vid`'s clock on ours; -inf before its offset is known."""
+        """Time `peer_s` of `vid`'s wire clock on our monotonic clock; -inf while its offset
+        is not known."""
         offset = self.offset(vid)
-        return -np.inf if offset is None else peer_s - offset
+        return -np.inf if offset is None else peer_s - offset - self.wire_shift()
 
     def to_local_agreed(self, vid: int, peer_s: float) -> float:
-        """Time `peer_s` of `vid`'s clock on ours by the median offset (OffsetEstimator's
-        `median_offset_s`): for an instant that every process of the team converts alike (the
-        formation start); -inf before the offset is known."""
-        offset = self._edge(vid).clock.median_offset_s if self.clock_sync else 0.0
-        return -np.inf if offset is None else peer_s - offset
+        """Time `peer_s` of `vid`'s wire clock on ours by the median offset (OffsetEstimator's
+        `median_offset_s`) where offsets are measured: for an instant that every process of the
+        team converts alike (the formation start); -inf while the offset is not known."""
+        if self.clocks is ClockMode.MEASURED:
+            offset = self._edge(vid).clock.median_offset_s
+        else:
+            offset = self.offset(vid)
+        return -np.inf if offset is None else peer_s - offset - self.wire_shift()
+
+    def clock_problem(self, vid: int) -> str | None:
+        """With clocks disciplined: why `vid`'s clock cannot be taken as ours (at least
+        CHECK_EXCHANGES exchanges, each of which puts its offset further than `tolerance_s`
+        from 0 on the same side), in one line; None when it can, not yet judged, or in another
+        mode."""
+        if self.clocks is not ClockMode.DISCIPLINED:
+            return None
+        clock = self._edge(vid).clock
+        interval = clock.interval_s
+        if clock.samples < CHECK_EXCHANGES or interval is None:
+            return None
+        low, high = interval
+        if low > self.tolerance_s:
+            least, side = low, "ahead of"
+        elif high < -self.tolerance_s:
+            least, side = -high, "behind"
+        else:
+            return None
+        who = "the supervisor's clock" if vid == SUPERVISOR_ID else f"vehicle {vid}'s clock"
+        return (f"{who} is at least {least * 1e3:.1f} ms {side} ours by {clock.samples} echoes "
+                f"(network.clocks disciplined, tolerance {self.tolerance_s * 1e3:g} ms): "
+                "synchronise the hosts' clocks (PTP, chrony) or set network.clocks measured")
+
+    def clock_known(self, vid: int) -> bool:
+        """Whether `vid`'s times can be put on our clock: its offset measured (measured), its
+        clock checked on CHECK_EXCHANGES exchanges and found within the tolerance
+        (disciplined), always on one host."""
+        if self.clocks is ClockMode.MEASURED:
+            return self._edge(vid).clock.offset_s is not None
+        if self.clocks is ClockMode.DISCIPLINED:
+            return (self._edge(vid).clock.samples >= CHECK_EXCHANGES
+                    and self.clock_problem(vid) is None)
+        return True
 
     def figures(self, vid: int) -> EdgeFigures:
         e = self._edge(vid)

@@ -11,7 +11,7 @@ A sample says what one vehicle's state was when its vehicle took it, in the worl
 | vehicle_id            | u32           | the sender's vehicle (>= 1)                            |
 | epoch                 | u32           | the sending process's start: a new one resets seq      |
 | seq                   | u32           | +1 per sample of this vehicle and epoch                |
-| taken_s, sent_s       | f64, f64      | sender's monotonic clock: vehicle took it; published   |
+| taken_s, sent_s       | f64, f64      | sender's wire clock: vehicle took it; published        |
 | position_enu_m        | 3 f64         | world ENU [m]                                          |
 | velocity_enu_mps      | 3 f64         | world ENU [m/s]                                        |
 | acceleration_enu_mps2 | 3 f64         | world ENU [m/s^2]                                      |
@@ -71,7 +71,8 @@ class Echo:
 @dataclass(frozen=True, slots=True)
 class StateSample:
     """One vehicle's state as its agent publishes it (frames and units in the field names;
-    times on the sender's monotonic clock)."""
+    times on the sender's wire clock: its monotonic clock, or its system clock with
+    network.clocks disciplined; gcs/agent/table.py)."""
 
     vehicle_id: int
     epoch: int

@@ -9,7 +9,7 @@ import numpy as np
 from gcs.config.conditions import alpha_p_bound, proposition1_bounds
 from gcs.config.fly_schema import FlyModeConfig
 from gcs.config.fly_section import check_go_to_start
-from gcs.config.modes import ControlMode
+from gcs.config.modes import ClockMode, ControlMode
 from gcs.config.schema import (
     GAIN_NAMES,
     GRAVITY_MPS2,
@@ -236,6 +236,14 @@ def _go_to_start_line(team: TeamConfig) -> str:
     return text
 
 
+_CLOCKS = {
+    ClockMode.MEASURED: "measured (each peer's offset from the echoes)",
+    ClockMode.DISCIPLINED: "disciplined (the hosts' system clocks, checked by the echoes to "
+                           "{tol:g} ms)",
+    ClockMode.ONE_HOST: "one (one host: offsets taken as 0)",
+}
+
+
 def _network_line(team: TeamConfig) -> str:
     """The `network:` section: who listens where, how the processes meet, the clocks."""
     net = team.network
@@ -250,7 +258,7 @@ def _network_line(team: TeamConfig) -> str:
                 f" and router {net.router}" if net.router else ""))
     return (f"network: {net.mode} mode, keys {net.key_root(team.name)}/..., supervisor on "
             f"{', '.join(net.supervisor_listen())}, agents: {'; '.join(where)}; {meet}, "
-            f"multicast scouting {'on' if net.multicast_scouting else 'off'}, clock offsets "
-            f"{'measured' if net.clock_sync else 'taken as 0 (one host)'}; the supervisor "
+            f"multicast scouting {'on' if net.multicast_scouting else 'off'}, clocks "
+            f"{_CLOCKS[net.clocks].format(tol=net.clock_tolerance_s * 1e3)}; the supervisor "
             f"takes a state as stale after {net.stale_after_s:g} s, an agent the supervisor as "
             f"lost after {net.supervisor_lost_after_s:g} s")

@@ -15,7 +15,7 @@ from collections.abc import Iterable
 from gcs.control.modes import ControlMode
 
 # ControlMode is re-exported: the team file's choice
-__all__ = ["ControlMode", "FlyAction", "NetworkMode"]
+__all__ = ["ClockMode", "ControlMode", "FlyAction", "NetworkMode"]
 
 
 class FlyAction(enum.StrEnum):
@@ -30,6 +30,16 @@ class NetworkMode(enum.StrEnum):
 
     PEER = "peer"  # listens on its own endpoints and connects to every other process's
     CLIENT = "client"  # connects to network.router only, which routes every message
+
+
+class ClockMode(enum.StrEnum):
+    """network.clocks: how an agent puts its neighbours' sample times on its own clock
+    (gcs/agent/table.py)."""
+
+    MEASURED = "measured"  # by each peer's clock offset, estimated from the samples' echoes
+    DISCIPLINED = "disciplined"  # the hosts' system clocks agree (PTP, chrony): samples carry
+    #                              them; the echoes only check that they do
+    ONE_HOST = "one-host"  # every process's monotonic clock is one (all on one host)
 
 
 LAWS = ("adaptive", "baseline")

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 from gcs.config.declare import key, read_section
 from gcs.config.errors import ConfigError
-from gcs.config.modes import NetworkMode
+from gcs.config.modes import ClockMode, NetworkMode
 
 if TYPE_CHECKING:
     from gcs.config.yamlnode import Node
@@ -123,9 +123,11 @@ class NetworkConfig:
     stale_after_s: float = key(1.0, gt=0.0)
     # an agent takes the supervisor as lost when it heard nothing from it for this long
     supervisor_lost_after_s: float = key(1.0, gt=0.0)
-    # true: neighbours' sample times are converted by the clock offsets measured from the
-    # samples' echoes; false: every process's monotonic clock is taken as the same (one host)
-    clock_sync: bool = key(True)
+    # how neighbours' sample times reach an agent's clock (ClockMode; docs/agents.md, "Clocks")
+    clocks: ClockMode = key(ClockMode.MEASURED)
+    # with clocks disciplined: a peer whose clock the echoes prove further from ours than this
+    # is not flown with (its samples' ages would be wrong by as much)
+    clock_tolerance_s: float = key(0.005, gt=0.0, le=1.0)
 
     def agent_listen(self, vehicle_id: int) -> tuple[str, ...]:
         """The endpoints vehicle `vehicle_id`'s agent listens on: its `agents` entry, else

@@ -26,8 +26,9 @@ from gcs.agent.bus import STATE_LANES, NeighbourBus
 from gcs.agent.control import Abort
 from gcs.agent.session import BusError, Endpoints, zenoh_config
 from gcs.agent.supervisor import SupervisorBus
+from gcs.agent.table import CHECK_EXCHANGES
 from gcs.agent.wire import SUPERVISOR_ID, StateSample, encode
-from gcs.config.modes import FlyAction, NetworkMode
+from gcs.config.modes import ClockMode, FlyAction, NetworkMode
 from gcs.config.network_schema import AgentNetwork, NetworkConfig, SupervisorNetwork
 from tests.harness import run_bounded, wait_until
 
@@ -265,13 +266,45 @@ def test_clock_offsets_on_one_machine_and_between_shifted_clocks():
             assert rows.taken_local_s[0] == pytest.approx(one.table.latest(2).taken_s - 7.5,
                                                           abs=0.002)
             assert 0.0 <= rows.age_s[0] < 5.0
-        # AND with clock_sync off the same shift goes uncorrected (the one-host setting)
-        network = ring_network(clock_sync=False)
+        # AND with clocks one-host the same shift goes uncorrected
+        network = ring_network(clocks=ClockMode.ONE_HOST)
         async with agent(network, 1) as one, agent(network, 2, clock=shifted) as two:
             await exchange_until(one, two, 5)
             f = one.stats()[2]
             assert one.offset(2) == 0.0 and abs(f.offset_s - 7.5) <= f.uncertainty_s + 1e-9
             assert one.rows([2], time.monotonic()).age_s[0] < -7.0
+
+    run_bounded(scenario(), TEST_S)
+
+
+def test_disciplined_clocks_carry_the_system_clock_and_a_skewed_one_is_refused():
+    async def scenario() -> None:
+        # GIVEN vehicle 2's monotonic clock 7.5 s ahead of vehicle 1's (another host's boot)
+        # and both hosts' system clocks disciplined: the one system clock of this machine
+        shifted = lambda: time.monotonic() + 7.5  # noqa: E731
+        network = ring_network(clocks=ClockMode.DISCIPLINED)
+        async with agent(network, 1) as one, agent(network, 2, clock=shifted) as two:
+            await exchange_until(one, two, CHECK_EXCHANGES)
+            # THEN 2's sample times land on 1's monotonic clock through the system clocks,
+            # with no offset estimated for it, and the echoes find the clocks within 2 ms
+            assert one.offset(2) == 0.0 and one.table.clock_known(2)
+            assert abs(one.table.clock(2).median_offset_s) < 0.002
+            latest = one.table.latest(2)
+            rows = one.rows([2], time.monotonic())
+            assert rows.taken_local_s[0] == pytest.approx(
+                latest.taken_s - (time.time() - time.monotonic()), abs=0.002)
+            assert 0.0 <= rows.age_s[0] < 1.0
+        # GIVEN vehicle 2's system clock 40 ms ahead though clocks are called disciplined
+        network = ring_network(clocks=ClockMode.DISCIPLINED)
+        skewed = lambda: time.time() + 0.040  # noqa: E731
+        async with agent(network, 1) as one, agent(network, 2, system_clock=skewed) as two:
+            await exchange_until(one, two, CHECK_EXCHANGES)
+            # THEN each names the other's clock, and neither gives the other's samples a time
+            assert "vehicle 2's clock is at least 3" in one.table.clock_problem(2)
+            assert "ahead of ours" in one.table.clock_problem(2)
+            assert "vehicle 1's clock is at least 3" in two.table.clock_problem(1)
+            assert "behind ours" in two.table.clock_problem(1)
+            assert one.offset(2) is None and not one.rows([2], time.monotonic()).finite[0]
 
     run_bounded(scenario(), TEST_S)
 

@@ -25,9 +25,10 @@ from tests.harness import free_udp_port_block
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(600)]
 
 
-def with_network(path: Path, duration_s: float | None = None) -> Path:
+def with_network(path: Path, duration_s: float | None = None, clocks: str = "measured"
+                 ) -> Path:
     """The team file with its bus on free TCP ports (supervisor base, agent i base + i), the
-    law at 50 Hz.
+    law at 50 Hz, `clocks` its network.clocks.
 
     Four agents, the vehicles' stand-in and the supervisor share this machine's two cores,
     where a real team gives each agent a companion computer and each autopilot its own
@@ -36,7 +37,8 @@ def with_network(path: Path, duration_s: float | None = None) -> Path:
     TIMESYNC 0.3 s late and the agents rightly stop. At 50 Hz they take about 0.7; both flights
     of a comparison use the same file."""
     data = yaml.safe_load(path.read_text())
-    data["network"] = {"base_port": free_udp_port_block(6, kind=socket.SOCK_STREAM)}
+    data["network"] = {"base_port": free_udp_port_block(6, kind=socket.SOCK_STREAM),
+                       "clocks": clocks}
     data["fly"]["rates"]["tick_rate_hz"] = 50
     if duration_s is not None:
         data["mission"]["duration_s"] = duration_s
@@ -124,9 +126,11 @@ def supervisor_time(log: Path) -> float | None:
 
 @pytest.mark.alone
 def test_an_agent_killed_mid_formation_stops_the_team_on_fresh_data_only(tmp_path):
-    # GIVEN four agents, started by hand, flying Scenario I under a supervisor that finds them
+    # GIVEN four agents, started by hand, flying Scenario I under a supervisor that finds them,
+    # their hosts' clocks disciplined (the samples carry the system clock, the echoes check it)
     bind = free_udp_port_block(4)
-    team = with_network(team_file(tmp_path, bind, duration_s=40.0, autopilot="px4"))
+    team = with_network(team_file(tmp_path, bind, duration_s=40.0, autopilot="px4"),
+                        clocks="disciplined")
     # square4's px4 gains at 50 Hz: the cascade criterion's margin 0.399 < 0.4; alpha_p 1.8
     # passes with 0.43
     data = yaml.safe_load(team.read_text())
@@ -181,6 +185,11 @@ def test_an_agent_killed_mid_formation_stops_the_team_on_fresh_data_only(tmp_pat
         assert edge["stale_ticks"] > 0
         assert edge["age_used_max_ms"] <= 100.0
         assert rep["extra"]["outcome"]["exit_code"] == 1
+        # the ages came through the system clock, which the echoes found within the tolerance
+        # of the agent's (one host: one system clock) and of the supervisor's
+        assert agent["clocks"] == "disciplined" and agent["supervisor_offset_s"] == 0.0
+        assert abs(agent["supervisor_offset_measured_s"]) <= 0.005, agent
+        assert all(abs(e["offset_s"]) <= 0.005 for e in agent["edges"].values()), agent
     rep1 = json.loads((out / "agent-1" / "report.json").read_text())
     assert rep1["extra"]["outcome"]["exit_code"] == 1
     # AND vehicle 3, its agent gone, left OFFBOARD by its own failsafe (PX4: COM_OF_LOSS_T,

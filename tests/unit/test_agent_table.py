@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from gcs.agent.control import MAX_TEXT
-from gcs.agent.table import ECHO_BACKLOG, SampleTable
+from gcs.agent.table import CHECK_EXCHANGES, ECHO_BACKLOG, SampleTable
 from gcs.agent.wire import SUPERVISOR_ID, Echo, StateSample, encode
+from gcs.config.modes import ClockMode
 
 
 def sample(vid: int, seq: int, *, epoch: int = 1, taken_s: float = 0.0, sent_s: float = 0.0,
@@ -20,7 +21,7 @@ def sample(vid: int, seq: int, *, epoch: int = 1, taken_s: float = 0.0, sent_s: 
 
 def test_the_latest_sample_wins_and_older_or_repeated_ones_are_counted():
     # GIVEN vehicle 1's table of its neighbours 2 and 3
-    table = SampleTable((2, 3), local_ids=(1,), team_ids=(1, 2, 3), clock_sync=False)
+    table = SampleTable((2, 3), local_ids=(1,), team_ids=(1, 2, 3), clocks=ClockMode.ONE_HOST)
     # WHEN vehicle 2 sends seq 5, then 5 again, then 4, then 6
     assert table.receive(2, sample(2, 5, x=5.0), 10.0) is not None
     assert table.receive(2, sample(2, 5, x=55.0), 10.1) is None
@@ -68,7 +69,7 @@ def test_corrupt_bytes_are_counted_with_the_last_reason_never_raised():
 
 def test_rows_before_and_after_the_first_sample():
     # GIVEN one process's clock as the others' (one host) and a sample of 2 only
-    table = SampleTable((2, 3), local_ids=(1,), clock_sync=False)
+    table = SampleTable((2, 3), local_ids=(1,), clocks=ClockMode.ONE_HOST)
     table.receive(2, sample(2, 0, taken_s=99.5, sent_s=99.6, x=7.0), 99.7)
     rows = table.rows([3, 2], now_s=100.0)
     # THEN vehicle 3's row is NaN with -inf times and infinite age; vehicle 2's is its sample
@@ -172,7 +173,80 @@ def test_an_agreed_instant_is_converted_by_the_median_offset():
     # THEN the faster half (the symmetric one) gives both the bounded and the median offset
     assert clock.offset_s == pytest.approx(3.0) == clock.median_offset_s
     assert table.to_local_agreed(SUPERVISOR_ID, 50.0) == pytest.approx(47.0)
-    # AND one host's clocks (clock_sync false) convert by 0 whatever was measured
-    one_host = SampleTable((SUPERVISOR_ID,), local_ids=(1,), team_ids=(1,), clock_sync=False)
+    # AND one host's clocks (network.clocks one-host) convert by 0 whatever was measured
+    one_host = SampleTable((SUPERVISOR_ID,), local_ids=(1,), team_ids=(1,),
+                           clocks=ClockMode.ONE_HOST)
     one_host.heard(SUPERVISOR_ID, 13.05, 10.05, (Echo(1, 10.0, 0.05),))
     assert one_host.to_local_agreed(SUPERVISOR_ID, 50.0) == 50.0
+
+
+def exchange_between(here: SampleTable, there: SampleTable, t_s: float, *, skew_s: float,
+                     up_s: float, down_s: float, shift_here: float,
+                     shift_there: float) -> None:
+    """One exchange between vehicle 1 (`here`, monotonic t_s) and vehicle 2 (`there`, whose
+    monotonic clock is ours + 100 s): 1 sends at t_s, 2 holds 5 ms and answers. Each stamps
+    its wire clock, its monotonic one plus its shift; 2's system clock is ours + `skew_s`
+    (so its shift is ours + skew - 100 s)."""
+    mono2 = t_s + 100.0
+    wire1 = t_s + shift_here
+    there.receive(1, sample(1, int(t_s * 1e3), taken_s=wire1, sent_s=wire1), mono2 + up_s)
+    sent2 = mono2 + up_s + 0.005
+    echoes = there.echoes(sent2, 2)
+    wire2 = sent2 + shift_there
+    here.receive(2, sample(2, int(t_s * 1e3), taken_s=wire2 - 0.002, sent_s=wire2,
+                           echoes=echoes), t_s + up_s + 0.005 + down_s)
+
+
+@pytest.mark.parametrize(("skew_s", "up_s", "down_s", "problem"), [
+    (0.0, 0.004, 0.006, None),
+    (0.0015, 0.004, 0.006, None),
+    # the clocks agree but the path is 20 ms slower one way: the estimate reads 10 ms, the
+    # interval every exchange allows still holds 0
+    (0.0, 0.024, 0.004, None),
+    (0.030, 0.004, 0.006, "vehicle 2's clock is at least 24.0 ms ahead of ours by 16 echoes"),
+    (-0.030, 0.004, 0.006, "vehicle 2's clock is at least 26.0 ms behind ours by 16 echoes"),
+])
+def test_disciplined_clocks_convert_by_the_system_clock_and_check_it(skew_s, up_s, down_s,
+                                                                     problem):
+    # GIVEN vehicle 1 and vehicle 2 with monotonic clocks 100 s apart (two hosts' boots) and
+    # system clocks `skew_s` apart, clocks disciplined (tolerance 5 ms), up_s and down_s legs
+    shift_here, shift_there = 1.7e9, 1.7e9 - 100.0 + skew_s
+    here = SampleTable((2,), local_ids=(1,), team_ids=(1, 2), clocks=ClockMode.DISCIPLINED,
+                       wire_shift=lambda: shift_here)
+    there = SampleTable((1,), local_ids=(2,), team_ids=(1, 2), clocks=ClockMode.DISCIPLINED,
+                        wire_shift=lambda: shift_there)
+    legs = {"skew_s": skew_s, "up_s": up_s, "down_s": down_s, "shift_here": shift_here,
+            "shift_there": shift_there}
+    # WHEN the first sample arrives, before any exchange
+    exchange_between(here, there, 10.0, **legs)
+    # THEN its time is on our monotonic clock at once, through the system clocks (2 took it
+    # 2 ms before sending, 5 ms after receiving ours, sent at 10.0, up_s later plus skew)
+    rows = here.rows([2], now_s=10.020)
+    assert rows.taken_local_s[0] == pytest.approx(10.0 + up_s + 0.003 + skew_s, abs=1e-6)
+    # AND the offset used is 0, but the clock is not yet known to agree (too few exchanges)
+    assert here.offset(2) == 0.0 and not here.clock_known(2)
+    for k in range(1, CHECK_EXCHANGES):
+        exchange_between(here, there, 10.0 + 0.02 * k, **legs)
+    # THEN the echoes measure the system clocks' skew, less half the legs' difference
+    assert here.clock(2).median_offset_s == pytest.approx(skew_s + (up_s - down_s) / 2,
+                                                          abs=1e-6)
+    if problem is None:
+        assert here.clock_known(2) and here.clock_problem(2) is None
+        assert here.offset(2) == 0.0 and here.rows([2], 10.4).finite[0]
+    else:
+        # a clock 30 ms off: named, and its samples get no time here (stale, never flown on)
+        assert not here.clock_known(2) and here.offset(2) is None
+        assert here.clock_problem(2) == (
+            f"{problem} (network.clocks disciplined, tolerance 5 ms): synchronise the hosts' "
+            "clocks (PTP, chrony) or set network.clocks measured")
+        assert not here.rows([2], 10.4).finite[0]
+        assert here.to_local_agreed(2, 1.7e9) == -np.inf
+
+
+def test_the_wire_shift_is_ignored_unless_clocks_are_disciplined():
+    # GIVEN a table with a shift given but clocks measured, and one with clocks one-host
+    for mode in (ClockMode.MEASURED, ClockMode.ONE_HOST):
+        table = SampleTable((2,), local_ids=(1,), clocks=mode, wire_shift=lambda: 1e9)
+        # THEN the wire clock is the monotonic one, and nothing is checked
+        assert table.wire_shift() == 0.0 and table.clock_problem(2) is None
+    assert SampleTable((2,), local_ids=(1,), clocks=ClockMode.ONE_HOST).clock_known(2)

@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 
 from gcs.config import ConfigError, describe, load_team, team_from_dict, team_from_yaml
-from gcs.config.modes import NetworkMode
+from gcs.config.modes import ClockMode, NetworkMode
 from gcs.config.network_schema import (
     AgentNetwork,
     NetworkConfig,
@@ -62,7 +62,8 @@ def test_a_full_network_section_reads_and_round_trips():
         "agents": {2: {"listen": ["tcp/192.0.2.2:7000", "udp/[::1]:7001"]},
                    4: {"listen": ["quic/uav4.local:7002"]}},
         "supervisor": {"listen": ["tcp/0.0.0.0:7010"]},
-        "stale_after_s": 0.5, "supervisor_lost_after_s": 2.0, "clock_sync": False,
+        "stale_after_s": 0.5, "supervisor_lost_after_s": 2.0, "clocks": "disciplined",
+        "clock_tolerance_s": 0.002,
     }
     net = team_from_dict(data).network
     # THEN each value is read, the explicit endpoints replace the defaults and the others stay
@@ -72,7 +73,8 @@ def test_a_full_network_section_reads_and_round_trips():
         agents=(AgentNetwork(2, ("tcp/192.0.2.2:7000", "udp/[::1]:7001")),
                 AgentNetwork(4, ("quic/uav4.local:7002",))),
         supervisor=SupervisorNetwork(("tcp/0.0.0.0:7010",)),
-        stale_after_s=0.5, supervisor_lost_after_s=2.0, clock_sync=False)
+        stale_after_s=0.5, supervisor_lost_after_s=2.0, clocks=ClockMode.DISCIPLINED,
+        clock_tolerance_s=0.002)
     assert net.agent_listen(1) == ("tcp/127.0.0.1:9001",)
     assert net.agent_listen(4) == ("quic/uav4.local:7002",)
     assert net.supervisor_listen() == ("tcp/0.0.0.0:7010",)
@@ -148,6 +150,10 @@ NETWORK_ERRORS = [
     ({"supervisor": {"lisen": []}}, r"network\.supervisor\.lisen: unknown key; did you mean "
                                     r"'listen'\?"),
     ({"agnets": {}}, r"network\.agnets: unknown key; did you mean 'agents'\?"),
+    ({"clocks": "synced"}, r"network\.clocks: expected one of 'measured', 'disciplined', 'one-host', "
+                            r"got string 'synced'"),
+    ({"clock_tolerance_s": 0}, r"network\.clock_tolerance_s: expected a value in \(0, 1\]"),
+    ({"clock_sync": False}, r"network\.clock_sync: unknown key"),
 ]
 
 
