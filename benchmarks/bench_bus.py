@@ -12,9 +12,10 @@ impairment), or not impaired at all. Per transport and network: the age at use (
 max), the share of ticks at which the sample is older than fly.stale_after_s (0.1 s, where the
 law drops the edge) and the samples lost. Then K pairs of flights, one through the plain network
 and one through the impaired one in turn (tests/agents_across.py, as
-tests/integration/test_agents_netns.py flies them), over UDP a third through the impaired one
-with network.clock_sync false (one kernel, one clock: the network's cost without the clock
-offsets estimated through it): formation error for t >= 30 s and each edge's figures. Needs root (namespaces); elsewhere it says so and stops.
+tests/integration/test_agents_netns.py flies them), each agent measuring its neighbours' clock
+offsets; over UDP also a pair with network.clocks disciplined (one kernel, one system clock: the
+network's cost without the offsets estimated through it): formation error for t >= 30 s and each
+edge's figures. Needs root (namespaces); elsewhere it says so and stops.
 """
 
 from __future__ import annotations
@@ -40,8 +41,13 @@ PEER = ROOT / "tests" / "integration" / "agent_peer.py"
 RATE_HZ = 100
 STALE_S = 0.1  # fly.stale_after_s's default
 TRANSPORTS = {"TCP": "tcp", "UDP, mixed reliability": "udp-mixed"}
-#: the impaired network flown with network.clock_sync false: the hosts share one kernel's clock
-ONE_CLOCK = "impaired, one clock"
+#: the flights per transport: name -> (impaired, network.clocks); over UDP also both networks
+#: with clocks disciplined (the hosts share one kernel's system clock: the network's cost
+#: without the clock offsets estimated through it); each impaired one is compared with the
+#: plain one of its clocks
+NETWORKS = {"plain": (False, "measured"), "impaired": (True, "measured")}
+DISCIPLINED = {"plain, disciplined clocks": (False, "disciplined"),
+               "impaired, disciplined clocks": (True, "disciplined")}
 
 
 def exchange(endpoint, impaired: bool, seconds: float) -> dict:
@@ -89,19 +95,16 @@ def flights(pairs: int, tmp: Path) -> str:
     the medians."""
     rows, verdicts, failed = [], [], []
     for label, transport in TRANSPORTS.items():
-        runs: dict[str, list[dict]] = {"plain": [], "impaired": []}
-        if transport == "udp-mixed":
-            runs[ONE_CLOCK] = []
+        networks = NETWORKS | (DISCIPLINED if transport == "udp-mixed" else {})
+        runs: dict[str, list[dict]] = {name: [] for name in networks}
         for k in range(pairs):
-            for name in runs:
-                impairment = ([BETWEEN_AGENTS] * len(HOSTS) + [None] if name != "plain"
-                              else None)
+            for name, (impaired, clocks) in networks.items():
+                impairment = [BETWEEN_AGENTS] * len(HOSTS) + [None] if impaired else None
                 try:
                     with Testbed(len(HOSTS) + 1, impairment, mode=Mode.NAMESPACES,
                                  log_dir=tmp) as bed:
                         report = fly_across(bed, tmp, f"{transport}-{name}-{k}".replace(" ", "-")
-                                            .replace(",", ""), transport,
-                                            clock_sync=name != ONE_CLOCK)
+                                            .replace(",", ""), transport, clocks=clocks)
                 except FlightFailed as exc:  # a result too: what the network did to it
                     failed.append(f"{label}, {name} flight {k + 1}: {exc.reason}")
                     print(failed[-1], flush=True)
@@ -122,16 +125,19 @@ def flights(pairs: int, tmp: Path) -> str:
                             f"{r['p50']:.0f} / {r['p99']:.0f} | "
                             f"{100 * min(r['loss']):.0f}-{100 * max(r['loss']):.0f} % | "
                             f"{r['stale']} | {r['used']:.0f} |")
-        if not (runs["plain"] and runs["impaired"]):
-            verdicts.append(f"* {label}: no ratio (no completed flight of one network)")
-            continue
         med = {name: (np.median([r["mean"] for r in rs]), np.median([r["max"] for r in rs]))
                for name, rs in runs.items() if rs}
-        for name in runs:
-            if name != "plain" and runs[name]:
-                verdicts.append(f"* {label}: {name} against plain, medians over the flights: "
-                                f"mean {med[name][0] / med['plain'][0]:.2f}x, max "
-                                f"{med[name][1] / med['plain'][1]:.2f}x")
+        for name, (impaired, clocks) in networks.items():
+            if not impaired:
+                continue
+            plain = next(n for n, (i, c) in networks.items() if not i and c == clocks)
+            if name not in med or plain not in med:
+                verdicts.append(f"* {label}: {name}: no ratio (no completed flight of it or "
+                                f"of {plain})")
+                continue
+            verdicts.append(f"* {label}: {name} against {plain}, medians over the flights: "
+                            f"mean {med[name][0] / med[plain][0]:.2f}x, max "
+                            f"{med[name][1] / med[plain][1]:.2f}x")
     return ("| transport | network | flight | formation error t >= 30 s, mean / max [m] | age "
             "at use p50 / p99 [ms] | samples lost (per edge) | stale ticks (all edges) | "
             "oldest used [ms] |\n|---|---|---|---|---|---|---|---|\n" + "\n".join(rows)
@@ -162,13 +168,15 @@ def main() -> None:
                      f"network), supervised from a third host; per transport "
                      f"{args.flights} flights through the plain network and "
                      f"{args.flights} through the impaired one (each agent host's frames), "
-                     f"in turn, all on this machine's two cores; over UDP also "
-                     f"{args.flights} through the impaired one with `network.clock_sync: "
-                     f"false` (\"{ONE_CLOCK}\": the hosts are namespaces of one kernel, so "
-                     f"their clocks are one; what the network costs without the clock offsets "
-                     f"estimated through it, which every other flight uses). The agents' "
-                     f"formation start is the supervisor's, converted by the median offset "
-                     f"(docs/agents.md, \"Clocks\"). Each record's positions "
+                     f"in turn, all on this machine's two cores, each agent estimating its "
+                     f"neighbours' clock offsets (`network.clocks: measured`); over UDP also "
+                     f"{args.flights} through each with `network.clocks: disciplined` (the "
+                     f"samples carry the hosts' system clocks, the echoes only check them: "
+                     f"the hosts are namespaces of one kernel, so their system clocks are one, "
+                     f"as PTP keeps a mesh's; what the network costs without the offsets "
+                     f"estimated through it). The agents' formation start is the "
+                     f"supervisor's, converted by the median offset where offsets are "
+                     f"measured (docs/agents.md, \"Clocks\"). Each record's positions "
                      f"are carried to its tick's instant, so the merged formation error is "
                      f"the flight's, not the agents' phase (docs/gcs.md, \"Records\").\n\n"
                      + flights(args.flights, Path(d)))
