@@ -20,6 +20,9 @@ is the better estimate; the intersection bounds what either may do. Where peers 
 an instant rather than each be within a bound of the truth, the median before the bound
 (`median_offset_s`) is the one to use: on a path whose jitter is all on one leg the bound's
 edge is an extreme of the window, which differs from one peer to the next by milliseconds.
+Where the window's exchanges contradict each other (no offset lies in every one's interval: a
+clock stepped, or drifted further than the older exchanges allow), the newest exchanges that
+agree make the estimate, so it follows the clock as it is now.
 
 In the agents' exchange, t1 is a sample's `sent_s` that the peer echoes back with
 `held_s = t3 - t2` in its own sample sent at t3, received here at t4. The peer echoes every
@@ -92,19 +95,22 @@ class OffsetEstimator:
     def _current(self) -> tuple[float, float, float, float, float, float] | None:
         if self._stale:
             self._stale = False
-            offset, rtt, _ = self._window()
+            offset, rtt, arrival = self._window()
+            low, high = offset - rtt / 2.0, offset + rtt / 2.0
+            if np.max(low) > np.min(high) + RTT_ROUNDING_S:
+                # exchanges that contradict each other: the peer's clock (or ours) stepped or
+                # drifted past what the older ones allow; keep the newest that agree
+                newest = np.argsort(arrival)[::-1]
+                agree = (np.maximum.accumulate(low[newest])
+                         <= np.minimum.accumulate(high[newest]) + RTT_ROUNDING_S)
+                keep = newest[:int(np.argmin(agree)) if not agree.all() else len(agree)]
+                offset, rtt, low, high = offset[keep], rtt[keep], low[keep], high[keep]
             faster = offset[rtt <= np.median(rtt)]
-            estimate = median = float(np.median(faster))
-            low, high = float(np.max(offset - rtt / 2.0)), float(np.min(offset + rtt / 2.0))
-            if low <= high:  # clamped into what every exchange allows
-                estimate = min(max(estimate, low), high)
-                bound = max(estimate - low, high - estimate)
-            else:  # exchanges that contradict each other (a clock stepped): the fastest one
-                best = int(np.argmin(rtt))
-                estimate, bound = float(offset[best]), float(rtt[best]) / 2.0
-                median = estimate
-                low, high = estimate - bound, estimate + bound
-            self._estimate = (estimate, bound, float(np.min(rtt)), median, low, high)
+            median = float(np.median(faster))
+            lo, hi = float(np.max(low)), float(np.min(high))
+            estimate = min(max(median, lo), hi)  # kept inside what every exchange allows
+            bound = max(estimate - lo, hi - estimate, 0.0)
+            self._estimate = (estimate, bound, float(np.min(rtt)), median, lo, hi)
         return self._estimate
 
     @property
@@ -122,7 +128,7 @@ class OffsetEstimator:
     def median_offset_s(self) -> float | None:
         """The median offset of the window's faster half, before it is kept inside the interval
         every exchange allows (the peer's clock minus ours [s]; None before the first exchange;
-        the fastest exchange's when the exchanges contradict each other). On a path whose
+        newest agreeing exchanges' when the window's contradict each other). On a path whose
         jitter is all on one leg the interval's edge is the least delay of that leg, an extreme
         of the window that moves by milliseconds from one peer to the next while their medians
         stay within a fraction of one: use this where peers on alike paths must agree on an
@@ -132,7 +138,8 @@ class OffsetEstimator:
 
     @property
     def rtt_s(self) -> float | None:
-        """The least round trip in the window [s], None before the first exchange."""
+        """The least round trip in the window (of its newest agreeing exchanges, when they
+        contradict each other) [s], None before the first exchange."""
         current = self._current()
         return None if current is None else current[2]
 
@@ -146,9 +153,10 @@ class OffsetEstimator:
 
     @property
     def interval_s(self) -> tuple[float, float] | None:
-        """The offsets every exchange in the window allows, (low, high) [s] (the fastest
-        exchange's when they contradict each other); None before the first exchange. The true
-        offset lies inside whatever the paths' asymmetry: only its width depends on it."""
+        """The offsets every exchange in the window allows, (low, high) [s] (of the newest
+        exchanges that agree, when the window's contradict each other); None before the first
+        exchange. The true offset lies inside whatever the paths' asymmetry: only its width
+        depends on it."""
         current = self._current()
         return None if current is None else (current[4], current[5])
 

@@ -5,7 +5,8 @@ rows from the neighbour bus (gcs/agent/team.py says which rows are which).
 it publishes the agent's own vehicles' states each tick, and turns the own rows the tick
 measured into the law team's rows. The same rules as `gcs fly` hold for a neighbour's row: it
 counts only while its age at use (now minus when its vehicle took it, on this agent's clock
-through the bus's clock offset) is within `fly.stale_after_s`, and with `fly.predict` it is
+through the bus's clock offset) is within `fly.stale_after_s`, either way (a sample from further
+in the future than that has a wrong time: a clock disagrees), and with `fly.predict` it is
 predicted to the instant this tick's setpoints act, as the agent's own rows are. A neighbour
 never heard, or whose sample is not finite, gets a placeholder row (its formation slot beside
 the agent's first vehicle, at rest) that is stale: the staleness rule removes it from every
@@ -93,7 +94,8 @@ class NeighbourRows:
         self._ok = (state.finite & np.isfinite(state.position_enu_m).all(axis=1)
                     & np.isfinite(state.velocity_enu_mps).all(axis=1)
                     & np.isfinite(state.acceleration_enu_mps2).all(axis=1))
-        self._fresh = self._ok & np.isfinite(age) & (age <= self.stale_after_s)
+        self._fresh = (self._ok & np.isfinite(age) & (age <= self.stale_after_s)
+                       & (age >= -self.stale_after_s))
         out = np.zeros(self.n_law, dtype=bool)
         out[self.own_rows] = own_fresh
         out[self.neighbour_rows] = self._fresh

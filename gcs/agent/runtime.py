@@ -12,8 +12,10 @@ team (gcs/agent/neighbours.py), and `TeamWatch` beside it for the team around it
 * it stops the flight with the team file's link-loss action (fly.link_loss_action) when the
   supervisor falls silent for network.supervisor_lost_after_s once heard, when no supervisor
   is heard within fly.connect_timeout_s, or, from PRIME on, when a neighbour's latest sample
-  is older than fly.link_lost_after_s. Until then the staleness rule (fly.stale_after_s)
-  keeps a late neighbour out of the law, tick by tick, as in `gcs fly`.
+  is older than fly.link_lost_after_s, or stamped further than that in the future (a clock
+  that disagrees; with network.clocks disciplined, also one the echoes prove off). Until then
+  the staleness rule (fly.stale_after_s, either way) keeps a late neighbour out of the law,
+  tick by tick, as in `gcs fly`.
 """
 
 from __future__ import annotations
@@ -183,14 +185,16 @@ class TeamWatch:
             ages = now_s - state.taken_local_s
             bound = self.team.fly.link_lost_after_s
             late = [(vid, float(a)) for vid, a in zip(self.rows.neighbour_ids, ages, strict=True)
-                    if not a <= bound]
+                    if not -bound <= a <= bound]
             if late:
                 words = ", ".join(f"vehicle {vid} ({self._lateness(vid, a)})" for vid, a in late)
-                self._stop(f"neighbour lost: {words} older than {bound:g} s "
+                self._stop(f"neighbour lost: {words}, beyond {bound:g} s "
                            "(fly.link_lost_after_s)")
 
     def _lateness(self, vid: int, age_s: float) -> str:
         """How late neighbour `vid`'s state is, or why it has no time here."""
+        if math.isfinite(age_s) and age_s < 0.0:
+            return f"its sample {-age_s:.2f} s in the future: its clock disagrees with ours"
         if math.isfinite(age_s):
             return f"{age_s:.2f} s"
         problem = self.bus.table.clock_problem(vid)

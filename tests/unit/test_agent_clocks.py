@@ -179,3 +179,25 @@ def test_the_median_offset_is_the_estimate_when_the_bound_does_not_bind():
     exchange(est, 100.0, 5.0, 0.001, 0.020, 0.001)
     exchange(est, 101.0, 5.0, 0.002, 0.020, 0.001)
     assert est.median_offset_s == est.offset_s
+
+
+def test_a_stepped_clock_is_followed_by_the_newest_exchanges_that_agree():
+    # GIVEN 200 exchanges with a peer whose clock agrees with ours (2-3 ms legs), then its
+    # clock steps 0.5 s ahead (a system clock set by hand) and 10 more exchanges arrive
+    est = OffsetEstimator()
+    t1 = 100.0
+    for k in range(200):
+        exchange(est, t1, 0.0, 0.002 + 0.001 * (k % 2), 0.005, 0.002)
+        t1 += 0.02
+    assert est.offset_s == pytest.approx(0.0, abs=0.001)
+    for _ in range(10):
+        exchange(est, t1, 0.5, 0.002, 0.005, 0.003)
+        t1 += 0.02
+    # THEN the window's exchanges contradict each other, and the estimate is the step's, kept
+    # inside what the 10 newest allow (not the oldest or fastest exchange's)
+    assert est.offset_s == pytest.approx(0.4995, abs=1e-9)
+    assert est.median_offset_s == pytest.approx(0.4995, abs=1e-9)
+    low, high = est.interval_s
+    assert low == pytest.approx(0.497, abs=1e-9) and high == pytest.approx(0.502, abs=1e-9)
+    assert est.uncertainty_s == pytest.approx(0.0025, abs=1e-9)
+    assert est.rtt_s == pytest.approx(0.005, abs=1e-9)

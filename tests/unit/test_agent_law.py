@@ -119,16 +119,22 @@ def test_a_stale_or_unheard_neighbour_is_out_of_the_law_and_its_row_stays_finite
     meas = measurement(team, rng)
     src = Exact(team.ids(), meas, taken_s=0.0)
     rows = NeighbourRows(agent, src, stale_after_s=0.1)
-    # neighbour 5 is 0.2 s old, neighbour 7 never heard (NaN, -inf)
+    # neighbour 5 is 0.2 s old, neighbour 7 never heard (NaN, -inf), neighbour 10 stamped
+    # 0.05 s in the future (within the bound), then 0.15 s (a clock that disagrees)
     state = src.rows(agent.neighbours, 0.2)
     state.taken_local_s[:] = 0.15
     state.taken_local_s[1] = 0.0
     state.position_enu_m[2] = np.nan
     state.taken_local_s[2] = -np.inf
     state.finite[2] = False
+    state.taken_local_s[3] = 0.25
     src.rows = lambda ids, now_s: state
     fresh = rows.fresh(np.ones(1, dtype=bool), now_s=0.2)
     assert fresh.tolist() == [True, False, True, False, True]  # law team 2, 5, 6, 7, 10
+    state.taken_local_s[3] = 0.35
+    assert rows.fresh(np.ones(1, dtype=bool), now_s=0.2).tolist() == [True, False, True,
+                                                                        False, False]
+    state.taken_local_s[3] = 0.15
     idx = [team.index_of(6)]
     m = rows.measurement(TeamMeasurement(*(a[idx] for a in meas)), act_s=0.25)
     assert np.isfinite(m.position_m).all() and np.isfinite(m.velocity_mps).all()

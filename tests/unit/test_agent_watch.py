@@ -60,3 +60,10 @@ def test_a_neighbour_whose_clock_disagrees_is_named_and_never_ready():
     hear(measured, CHECK_EXCHANGES, skew_s=0.020)
     assert watch_of(measured).unheard(now) == []
     assert watch_of(measured)._lateness(2, float("inf")) == "never heard"
+
+
+def test_a_sample_from_the_future_is_named_as_a_clock_that_disagrees():
+    watch = watch_of(SampleTable((2,), local_ids=(1,), clocks=ClockMode.MEASURED))
+    assert watch._lateness(2, -1.0) == ("its sample 1.00 s in the future: its clock disagrees "
+                                        "with ours")
+    assert watch._lateness(2, 0.61) == "0.61 s"
