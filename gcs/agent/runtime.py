@@ -102,19 +102,29 @@ class TeamWatch:
                       else self.final_outcome or (None, None))
         waiting = m.waiting_at
         if waiting is not None and text is None:
-            missing = self.unheard(self.clock())
-            if missing:  # not ready for the team until its neighbours' states arrive
-                waiting = None
-                problems = [p for vid in missing
-                            if (p := self.bus.table.clock_problem(vid)) is not None]
-                text = (problems[0] if problems else
-                        f"waiting for neighbours {', '.join(map(str, missing))} on the bus")
+            not_ready = self.not_ready(self.clock())
+            if not_ready is not None:  # not ready for the team, and why
+                waiting, text = None, not_ready
         for vid in self.rows.own_ids:
             self.bus.publish_status(
                 vid, m.phase.value, waiting,
                 None if text is None else " ".join(text.split())[:MAX_TEXT],
                 exit_code=code, done=self.final_outcome is not None, records=self.records,
                 formation_t_s=self.flight.tick.formation_t_s)
+
+    def not_ready(self, now_s: float) -> str | None:
+        """Why the agent may not report itself ready at a gate (None: it may): a clock that
+        the echoes prove off (network.clocks disciplined; the supervisor's, whose formation
+        start the agents would then not agree on, or a neighbour's), or neighbours unheard."""
+        table = self.bus.table
+        if (problem := table.clock_problem(SUPERVISOR_ID)) is not None:
+            return problem
+        missing = self.unheard(now_s)
+        if not missing:
+            return None
+        problems = [p for vid in missing if (p := table.clock_problem(vid)) is not None]
+        return (problems[0] if problems else
+                f"waiting for neighbours {', '.join(map(str, missing))} on the bus")
 
     def unheard(self, now_s: float) -> list[int]:
         """The neighbours whose latest state is older than fly.link_lost_after_s (or never

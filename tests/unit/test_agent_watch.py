@@ -8,7 +8,7 @@ from types import SimpleNamespace
 
 from gcs.agent.runtime import TeamWatch
 from gcs.agent.table import CHECK_EXCHANGES, SampleTable
-from gcs.agent.wire import Echo, StateSample, encode
+from gcs.agent.wire import SUPERVISOR_ID, Echo, StateSample, encode
 from gcs.config.modes import ClockMode
 
 
@@ -67,3 +67,22 @@ def test_a_sample_from_the_future_is_named_as_a_clock_that_disagrees():
     assert watch._lateness(2, -1.0) == ("its sample 1.00 s in the future: its clock disagrees "
                                         "with ours")
     assert watch._lateness(2, 0.61) == "0.61 s"
+
+
+def test_a_supervisor_whose_clock_disagrees_keeps_the_agent_from_every_gate():
+    # GIVEN clocks disciplined, neighbour 2's clock checked and agreeing, and the supervisor's
+    # heartbeats proving its clock 30 ms behind ours (each echoing one of ours, 2 ms each way)
+    table = SampleTable((2, SUPERVISOR_ID), local_ids=(1,), clocks=ClockMode.DISCIPLINED)
+    watch = watch_of(table)
+    hear(table, CHECK_EXCHANGES, skew_s=0.0)
+    now = 1.0 + 0.02 * CHECK_EXCHANGES
+    assert watch.not_ready(now) is None
+    for k in range(CHECK_EXCHANGES):
+        t4 = 2.0 + 0.1 * k
+        table.heard(SUPERVISOR_ID, t4 - 0.002 - 0.030, t4, (Echo(1, t4 - 0.009, 0.005),))
+    # THEN the agent is not ready, and says whose clock and by how much
+    assert watch.not_ready(now).startswith(
+        "the supervisor's clock is at least 28.0 ms behind ours by 16 echoes")
+    # AND neighbours unheard are named when the clocks agree
+    fresh = SampleTable((2, SUPERVISOR_ID), local_ids=(1,), clocks=ClockMode.DISCIPLINED)
+    assert watch_of(fresh).not_ready(now) == "waiting for neighbours 2 on the bus"
