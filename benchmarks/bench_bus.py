@@ -3,6 +3,7 @@ law reads it, over Zenoh on TCP and on UDP with mixed reliability, and what it d
 formation (docs/benchmarks.md, "The agents' bus across a lossy network").
 
     sudo python -m benchmarks.bench_bus [--seconds S] [--flights K] [--no-write]
+    sudo python -m benchmarks.bench_bus --flights K --disciplined-only   # more of those pairs
 
 Two stand-in agents (tests/integration/agent_peer.py: the product's NeighbourBus, no vehicle),
 each in a network namespace of its own on one bridge (tests/netns.py), publish their state at
@@ -90,12 +91,15 @@ def row(name: str, network: str, figures: dict) -> str:
             f"{100 * lost / max(received + lost, 1):.1f} % |")
 
 
-def flights(pairs: int, tmp: Path) -> str:
+def flights(pairs: int, tmp: Path, disciplined_only: bool = False) -> str:
     """Per transport, `pairs` plain and impaired flights in turn; their table and the ratios of
     the medians."""
     rows, verdicts, failed = [], [], []
     for label, transport in TRANSPORTS.items():
-        networks = NETWORKS | (DISCIPLINED if transport == "udp-mixed" else {})
+        if disciplined_only and transport != "udp-mixed":
+            continue
+        networks = ({} if disciplined_only else NETWORKS) | (
+            DISCIPLINED if transport == "udp-mixed" else {})
         runs: dict[str, list[dict]] = {name: [] for name in networks}
         for k in range(pairs):
             for name, (impaired, clocks) in networks.items():
@@ -108,7 +112,7 @@ def flights(pairs: int, tmp: Path) -> str:
                 except FlightFailed as exc:  # a result too: what the network did to it
                     failed.append(f"{label}, {name} flight {k + 1}: {exc.reason}")
                     print(failed[-1], flush=True)
-                    rows.append(f"| {label} | {name} | {k + 1} | stopped (below) | | | | |")
+                    rows.append(f"| {label} | {name} | {k + 1} | stopped (below) | | | | | |")
                     continue
                 e = error_after(report)
                 edges = report["extra"]["edges"].values()
@@ -118,13 +122,17 @@ def flights(pairs: int, tmp: Path) -> str:
                     "p99": max(x["age_p99_ms"] for x in edges),
                     "loss": [x["loss_fraction"] for x in edges],
                     "stale": sum(x["stale_ticks"] for x in edges),
-                    "used": max(x["age_used_max_ms"] for x in edges)})
+                    "used": max(x["age_used_max_ms"] for x in edges),
+                    "offset": max(abs(x["offset_s"]) for x in edges
+                                  if x.get("offset_s") is not None)})
                 r = runs[name][-1]
-                print(f"{transport} {name} {k}: {r['mean']:.4f} / {r['max']:.4f} m", flush=True)
-                rows.append(f"| {label} | {name} | {k + 1} | {r['mean']:.4f} / {r['max']:.4f} | "
+                print(f"{transport} {name} {k}: {1e3 * r['mean']:.2f} / {1e3 * r['max']:.2f} mm",
+                      flush=True)
+                rows.append(f"| {label} | {name} | {k + 1} | {1e3 * r['mean']:.2f} / "
+                            f"{1e3 * r['max']:.2f} | "
                             f"{r['p50']:.0f} / {r['p99']:.0f} | "
                             f"{100 * min(r['loss']):.0f}-{100 * max(r['loss']):.0f} % | "
-                            f"{r['stale']} | {r['used']:.0f} |")
+                            f"{r['stale']} | {r['used']:.0f} | {1e3 * r['offset']:.2f} |")
         med = {name: (np.median([r["mean"] for r in rs]), np.median([r["max"] for r in rs]))
                for name, rs in runs.items() if rs}
         for name, (impaired, clocks) in networks.items():
@@ -138,9 +146,10 @@ def flights(pairs: int, tmp: Path) -> str:
             verdicts.append(f"* {label}: {name} against {plain}, medians over the flights: "
                             f"mean {med[name][0] / med[plain][0]:.2f}x, max "
                             f"{med[name][1] / med[plain][1]:.2f}x")
-    return ("| transport | network | flight | formation error t >= 30 s, mean / max [m] | age "
+    return ("| transport | network | flight | formation error t >= 30 s, mean / max [mm] | age "
             "at use p50 / p99 [ms] | samples lost (per edge) | stale ticks (all edges) | "
-            "oldest used [ms] |\n|---|---|---|---|---|---|---|---|\n" + "\n".join(rows)
+            "oldest used [ms] | clock offset measured, largest edge [ms] |\n"
+            "|---|---|---|---|---|---|---|---|---|\n" + "\n".join(rows)
             + "\n\n" + "\n".join(verdicts) + "\n"
             + "".join(f"\nStopped: {f}" for f in failed) + ("\n" if failed else ""))
 
@@ -150,7 +159,15 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=30.0)
     ap.add_argument("--flights", type=int, default=3, help="pairs of flights (0: none)")
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--disciplined-only", action="store_true",
+                    help="fly only the UDP pairs with clocks disciplined and print their table "
+                         "(more flights of the comparison nearest the noise floor; writes "
+                         "nothing)")
     args = ap.parse_args()
+    if args.disciplined_only:
+        with tempfile.TemporaryDirectory(prefix="bench-bus-") as d:
+            print(flights(args.flights, Path(d), disciplined_only=True))
+        return
     rows = []
     for name, endpoint in TRANSPORTS.items():
         for impaired in (False, True):
@@ -176,7 +193,9 @@ def main() -> None:
                      f"as PTP keeps a mesh's; what the network costs without the offsets "
                      f"estimated through it). The agents' formation start is the "
                      f"supervisor's, converted by the median offset where offsets are "
-                     f"measured (docs/agents.md, \"Clocks\"). Each record's positions "
+                     f"measured (docs/agents.md, \"Clocks\"). The clock offset measured: "
+                     f"the largest |offset| the echoes put on any edge at the end, whichever "
+                     f"mode converts (the true one is 0: one kernel). Each record's positions "
                      f"are carried to its tick's instant, so the merged formation error is "
                      f"the flight's, not the agents' phase (docs/gcs.md, \"Records\").\n\n"
                      + flights(args.flights, Path(d)))
