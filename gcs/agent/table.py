@@ -37,7 +37,7 @@ from gcs.config.modes import ClockMode
 #: echoes only the newest this many.
 ECHO_BACKLOG = 16
 #: With clocks disciplined: the exchanges a sender's clock is checked on before it is judged
-#: (a fraction of a second at the tick rate; the median of fewer is at the mercy of the jitter).
+#: (a fraction of a second at the tick rate; the interval fewer allow is too wide to prove much).
 CHECK_EXCHANGES = 16
 
 
